@@ -1,0 +1,89 @@
+//! Atomic output: write to a temporary file beside the target, then rename.
+//! A failed write leaves no partial file and the old target, if any, intact.
+
+use crate::error::{Result, VolumeError};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// The folder a file lives in ("." for a bare file name).
+fn parent_dir(path: &Path) -> PathBuf {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// Refuses `target` if it is the same file as any of `inputs`.
+pub fn refuse_overwriting_inputs(target: &Path, inputs: &[&Path]) -> Result<()> {
+    let Ok(t) = target.canonicalize() else {
+        return Ok(()); // the target does not exist yet
+    };
+    for input in inputs {
+        if input.canonicalize().is_ok_and(|i| i == t) {
+            return Err(VolumeError::WouldOverwriteInput { path: target.to_path_buf() });
+        }
+    }
+    Ok(())
+}
+
+/// Writes `bytes` produced by `fill` to `path` atomically.
+pub fn write_file_atomically(path: &Path, fill: impl FnOnce(&mut dyn Write) -> std::io::Result<()>) -> Result<()> {
+    let dir = parent_dir(path);
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".mdtf-partial-")
+        .tempfile_in(&dir)
+        .map_err(|e| VolumeError::io(path, e))?;
+    {
+        let mut w = std::io::BufWriter::new(tmp.as_file_mut());
+        fill(&mut w).map_err(|e| VolumeError::io(path, e))?;
+        w.flush().map_err(|e| VolumeError::io(path, e))?;
+    }
+    tmp.persist(path).map_err(|e| VolumeError::io(path, e.error))?;
+    Ok(())
+}
+
+/// Runs `write_to(tmp_path)` for a writer that insists on a path of its own
+/// (keeping `suffix`, e.g. ".nii.gz", so it picks the same format), then
+/// renames the result to `path`. The temporary file is removed on failure.
+pub fn write_path_atomically(path: &Path, suffix: &str, write_to: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    let dir = parent_dir(path);
+    let tmp = tempfile::Builder::new()
+        .prefix(".mdtf-partial-")
+        .suffix(suffix)
+        .tempfile_in(&dir)
+        .map_err(|e| VolumeError::io(path, e))?;
+    write_to(tmp.path())?;
+    tmp.persist(path).map_err(|e| VolumeError::io(path, e.error))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn failed_write_leaves_the_old_file_and_no_temporary() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("out.bin");
+        std::fs::write(&target, b"old").unwrap();
+        let r = write_file_atomically(&target, |w| {
+            w.write_all(b"partial")?;
+            Err(std::io::Error::other("disk full"))
+        });
+        assert!(r.is_err());
+        assert_eq!(std::fs::read(&target).unwrap(), b"old");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+        write_file_atomically(&target, |w| w.write_all(b"new")).unwrap();
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+    }
+
+    #[test]
+    fn an_input_is_never_a_target() {
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("in.nii");
+        std::fs::write(&input, b"x").unwrap();
+        let same = dir.path().join(".").join("in.nii");
+        assert!(refuse_overwriting_inputs(&same, &[&input]).is_err());
+        assert!(refuse_overwriting_inputs(&dir.path().join("new.nii"), &[&input]).is_ok());
+    }
+}

@@ -1,0 +1,153 @@
+//! Typed errors of volume I/O. Every variant names the file it is about.
+
+use std::path::{Path, PathBuf};
+
+/// Everything that can go wrong reading, converting or writing a volume.
+#[derive(Debug, thiserror::Error)]
+pub enum VolumeError {
+    /// The operating system refused to open, read or write the file.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file concerned.
+        path: PathBuf,
+        /// The underlying I/O error.
+        source: std::io::Error,
+    },
+    /// The file has no bytes at all.
+    #[error("{path}: the file is empty")]
+    Empty {
+        /// The file concerned.
+        path: PathBuf,
+    },
+    /// The header is malformed or inconsistent.
+    #[error("{path}: bad header: {message}")]
+    Header {
+        /// The file concerned.
+        path: PathBuf,
+        /// What is wrong, in words.
+        message: String,
+    },
+    /// Fewer sample bytes than the header promises.
+    #[error("{path}: truncated data: the header promises {expected} bytes of samples, the file holds {found}")]
+    Truncated {
+        /// The file concerned.
+        path: PathBuf,
+        /// Bytes the header promises.
+        expected: u64,
+        /// Bytes actually present.
+        found: u64,
+    },
+    /// More sample bytes than the header describes (raw data only).
+    #[error("{path}: header/data size mismatch: the header describes {expected} bytes of samples, the file holds {found}")]
+    SizeMismatch {
+        /// The file concerned.
+        path: PathBuf,
+        /// Bytes the header describes.
+        expected: u64,
+        /// Bytes actually present.
+        found: u64,
+    },
+    /// The sample type is not one mdtf reads or writes.
+    #[error("{path}: unsupported data type {name} (supported: {supported})")]
+    UnsupportedType {
+        /// The file concerned.
+        path: PathBuf,
+        /// The type as the file names it.
+        name: String,
+        /// The types that are supported here.
+        supported: &'static str,
+    },
+    /// NRRD encoding other than raw, gzip or ascii.
+    #[error("{path}: unsupported NRRD encoding '{encoding}' (supported: raw, gzip, ascii)")]
+    UnsupportedEncoding {
+        /// The file concerned.
+        path: PathBuf,
+        /// The encoding the header names.
+        encoding: String,
+    },
+    /// A dimension is zero, negative, or the volume is not 3D / 4D.
+    #[error("{path}: bad dimensions {dims}: {message}")]
+    BadDimensions {
+        /// The file concerned.
+        path: PathBuf,
+        /// The dimensions as read.
+        dims: String,
+        /// Why they are refused.
+        message: String,
+    },
+    /// The volume would not fit in memory.
+    #[error("{path}: the volume {dims} would need {needed} of memory as f32 but only {available} is available")]
+    TooLarge {
+        /// The file concerned.
+        path: PathBuf,
+        /// The dimensions as read.
+        dims: String,
+        /// Bytes needed, human readable.
+        needed: String,
+        /// Bytes available, human readable.
+        available: String,
+    },
+    /// NaN or infinite samples, refused unless the caller asked to zero them.
+    #[error("{path}: {count} samples are NaN or infinite (pass --nan zero to replace them with 0)")]
+    NonFinite {
+        /// The file concerned.
+        path: PathBuf,
+        /// How many samples are not finite.
+        count: u64,
+    },
+    /// The gzip stream is corrupt.
+    #[error("{path}: corrupt gzip data: {source}")]
+    Gzip {
+        /// The file concerned.
+        path: PathBuf,
+        /// What the decompressor reported.
+        source: std::io::Error,
+    },
+    /// The file name does not say which format to use.
+    #[error("{path}: unknown file extension (use .nii, .nii.gz, .nrrd or .nhdr; raw data needs its layout given explicitly)")]
+    UnknownFormat {
+        /// The file concerned.
+        path: PathBuf,
+    },
+    /// Writing would overwrite an input of the run.
+    #[error("{path}: refusing to overwrite an input file")]
+    WouldOverwriteInput {
+        /// The file concerned.
+        path: PathBuf,
+    },
+    /// A sample cannot be stored exactly in the requested integer type.
+    #[error("{path}: sample {value} at index {index} is not exactly representable as {target}; quantise first (mdtf pack) or write f32")]
+    NotRepresentable {
+        /// The file concerned.
+        path: PathBuf,
+        /// The offending value.
+        value: f32,
+        /// Its linear index in x-fastest order.
+        index: usize,
+        /// The requested sample type.
+        target: &'static str,
+    },
+    /// Fields of a multi-field volume differ in geometry, or an operation needs one field.
+    #[error("{0}")]
+    Fields(String),
+    /// The NIfTI library refused the header or the data.
+    #[error("{path}: {source}")]
+    Nifti {
+        /// The file concerned.
+        path: PathBuf,
+        /// The library's error.
+        source: nifti::NiftiError,
+    },
+}
+
+impl VolumeError {
+    pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
+        VolumeError::Io { path: path.to_path_buf(), source }
+    }
+    pub(crate) fn header(path: &Path, message: impl Into<String>) -> Self {
+        VolumeError::Header { path: path.to_path_buf(), message: message.into() }
+    }
+}
+
+/// Result alias of this crate.
+pub type Result<T> = std::result::Result<T, VolumeError>;

@@ -1,0 +1,98 @@
+//! Reading and writing by file name: the extension picks the format.
+
+use crate::atomic::refuse_overwriting_inputs;
+use crate::dtype::SampleType;
+use crate::error::{Result, VolumeError};
+use crate::nifti_io::{read_nifti, write_nifti};
+use crate::nrrd::{Encoding, read_nrrd, write_nrrd};
+use crate::samples::ReadOptions;
+use crate::volume::{MultiField, Volume};
+use std::path::Path;
+
+/// A file format mdtf reads and writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    /// `.nii`
+    Nifti,
+    /// `.nii.gz`
+    NiftiGz,
+    /// `.nrrd` (attached header, raw encoding)
+    Nrrd,
+    /// `.nhdr` + `.raw` (detached header)
+    Nhdr,
+}
+
+impl Format {
+    /// The format a path's extension names, if any.
+    pub fn from_path(path: &Path) -> Option<Format> {
+        let name = path.file_name()?.to_string_lossy().to_ascii_lowercase();
+        if name.ends_with(".nii.gz") {
+            Some(Format::NiftiGz)
+        } else if name.ends_with(".nii") {
+            Some(Format::Nifti)
+        } else if name.ends_with(".nrrd") {
+            Some(Format::Nrrd)
+        } else if name.ends_with(".nhdr") {
+            Some(Format::Nhdr)
+        } else {
+            None
+        }
+    }
+
+    /// The extension including its dot, e.g. ".nii.gz".
+    pub fn extension(self) -> &'static str {
+        match self {
+            Format::Nifti => ".nii",
+            Format::NiftiGz => ".nii.gz",
+            Format::Nrrd => ".nrrd",
+            Format::Nhdr => ".nhdr",
+        }
+    }
+}
+
+/// Reads any supported file (by extension) as a multi-field volume.
+pub fn read(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
+    match Format::from_path(path) {
+        Some(Format::Nifti | Format::NiftiGz) => read_nifti(path, opts),
+        Some(Format::Nrrd | Format::Nhdr) => read_nrrd(path, opts),
+        None => Err(VolumeError::UnknownFormat { path: path.to_path_buf() }),
+    }
+}
+
+/// Reads any supported file as a scalar volume; a multi-field file is an error.
+pub fn read_scalar(path: &Path, opts: &ReadOptions) -> Result<Volume> {
+    read(path, opts)?.into_scalar().map_err(|e| VolumeError::header(path, e.to_string()))
+}
+
+/// How to store samples on write.
+#[derive(Debug, Clone, Copy)]
+pub struct WriteOptions {
+    /// Sample type on disk (f32, u8, u16; integer types need exact values).
+    pub ty: SampleType,
+    /// Gzip the NRRD data (NIfTI compresses by the `.gz` extension instead).
+    pub gzip: bool,
+}
+
+impl Default for WriteOptions {
+    fn default() -> Self {
+        WriteOptions { ty: SampleType::F32, gzip: false }
+    }
+}
+
+/// Writes a (multi-field) volume by extension, atomically, refusing to
+/// overwrite any of `inputs`.
+pub fn write(path: &Path, mf: &MultiField, opts: &WriteOptions, inputs: &[&Path]) -> Result<()> {
+    refuse_overwriting_inputs(path, inputs)?;
+    let encoding = if opts.gzip { Encoding::Gzip } else { Encoding::Raw };
+    match Format::from_path(path) {
+        Some(Format::Nifti | Format::NiftiGz) => write_nifti(path, mf, opts.ty),
+        Some(Format::Nrrd | Format::Nhdr) => write_nrrd(path, mf, opts.ty, encoding),
+        None => Err(VolumeError::UnknownFormat { path: path.to_path_buf() }),
+    }
+}
+
+/// Writes a scalar volume by extension (see [`write`]).
+pub fn write_volume(path: &Path, v: &Volume, opts: &WriteOptions, inputs: &[&Path]) -> Result<()> {
+    let mf = MultiField::from(v.clone());
+    write(path, &mf, opts, inputs)
+}

@@ -1,0 +1,36 @@
+//! The volume type of mdtf and its file I/O.
+//!
+//! * [`Volume`]: f32 samples, x fastest (ndarray shape (nz, ny, nx)), with a
+//!   [`Geometry`] (dims, spacing and origin in world units, axis directions,
+//!   `world_from_voxel`). [`MultiField`]: named fields on one grid.
+//! * Readers: NIfTI-1 (`.nii`, `.nii.gz`, every common type, scl_slope and
+//!   scl_inter applied, sform/qform kept), NRRD (`.nrrd`, `.nhdr`; raw, gzip,
+//!   ascii; both endiannesses), raw with a caller-given [`RawSpec`].
+//! * Writers: NIfTI and NRRD for f32, u8, u16, atomically (temporary file,
+//!   then rename), never over an input.
+//!
+//! Every error is a [`VolumeError`] naming the file; no reader panics on a
+//! malformed file.
+
+mod atomic;
+mod dtype;
+mod error;
+mod geometry;
+mod io;
+mod limits;
+mod nifti_io;
+pub mod nrrd;
+mod raw;
+mod samples;
+mod volume;
+
+pub use atomic::{refuse_overwriting_inputs, write_file_atomically};
+pub use dtype::{Endian, SAMPLE_TYPE_NAMES, SampleType};
+pub use error::{Result, VolumeError};
+pub use geometry::Geometry;
+pub use io::{Format, WriteOptions, read, read_scalar, write, write_volume};
+pub use limits::{available_memory, human_bytes};
+pub use nifti_io::{read_nifti, write_nifti};
+pub use raw::{RawSpec, read_raw};
+pub use samples::{NanPolicy, ReadOptions};
+pub use volume::{Field, MultiField, Volume};

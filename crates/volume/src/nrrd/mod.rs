@@ -1,0 +1,321 @@
+//! NRRD: attached `.nrrd` and detached `.nhdr` + data file; raw, gzip and
+//! ascii encodings; both endiannesses; `spacings` or `space directions`; 3D
+//! scalar volumes and 4D volumes with a field axis (leading, as Teem and
+//! Slicer write vectors, or trailing).
+//!
+//! World space is RAS: a header in left-posterior-superior (Slicer, ITK) has
+//! its x and y negated on read. mdtf writes `space: right-anterior-superior`.
+
+mod header;
+
+pub use header::{Encoding, NrrdHeader, read_header};
+
+use crate::atomic::write_file_atomically;
+use crate::dtype::{Endian, SampleType, encode_samples, first_unrepresentable};
+use crate::error::{Result, VolumeError};
+use crate::geometry::Geometry;
+use crate::limits::check_dims;
+use crate::samples::{FieldAxis, ReadOptions, SampleLayout, decode_fields, drain_rest, read_sample_bytes};
+use crate::volume::{Field, MultiField};
+use header::format_vector;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::path::{Path, PathBuf};
+
+/// Reads a `.nrrd` or `.nhdr` file (with its data file).
+pub fn read_nrrd(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
+    let file = std::fs::File::open(path).map_err(|e| VolumeError::io(path, e))?;
+    if file.metadata().map_err(|e| VolumeError::io(path, e))?.len() == 0 {
+        return Err(VolumeError::Empty { path: path.to_path_buf() });
+    }
+    let mut reader = BufReader::new(file);
+    let h = read_header(path, &mut reader)?;
+    let (layout, geometry) = layout_and_geometry(path, &h)?;
+
+    // Attached data continue in the same file; detached data live beside the header.
+    let (data_path, mut data): (PathBuf, Box<dyn BufRead>) = match &h.data_file {
+        None => (path.to_path_buf(), Box::new(reader)),
+        Some(name) => {
+            if name.starts_with("LIST") || name.contains('%') {
+                return Err(VolumeError::header(path, format!("multi-file data ('data file: {name}') is not supported")));
+            }
+            let dp = path.parent().unwrap_or(Path::new(".")).join(name);
+            let f = std::fs::File::open(&dp).map_err(|e| VolumeError::io(&dp, e))?;
+            (dp, Box::new(BufReader::new(f)))
+        }
+    };
+    for _ in 0..h.line_skip {
+        let mut skipped = Vec::new();
+        if data.read_until(b'\n', &mut skipped).map_err(|e| VolumeError::io(&data_path, e))? == 0 {
+            return Err(VolumeError::Truncated { path: data_path, expected: layout.byte_len(), found: 0 });
+        }
+    }
+    let bytes = match h.encoding {
+        Encoding::Raw => read_raw_encoded(&data_path, data, &h, &layout)?,
+        Encoding::Gzip => {
+            let mut gz = flate2::bufread::MultiGzDecoder::new(data);
+            skip_bytes(&data_path, &mut gz, h.byte_skip as u64, &layout, true)?;
+            let bytes = read_sample_bytes(&data_path, &mut gz, &layout, true)?;
+            let extra = drain_rest(&data_path, &mut gz, true)?;
+            refuse_extra(&data_path, &layout, extra)?;
+            bytes
+        }
+        Encoding::Ascii => read_ascii(&data_path, data, &layout)?,
+    };
+    let arrays = decode_fields(&data_path, &bytes, &layout, opts)?;
+    let names = match &h.field_names {
+        Some(n) if n.len() == arrays.len() => n.clone(),
+        _ if arrays.len() == 1 => vec!["value".to_string()],
+        _ => (0..arrays.len()).map(|i| format!("field{i}")).collect(),
+    };
+    let fields = names.into_iter().zip(arrays).map(|(name, data)| Field { name, data }).collect();
+    MultiField::new(geometry, fields)
+}
+
+fn refuse_extra(path: &Path, layout: &SampleLayout, extra: u64) -> Result<()> {
+    if extra > 0 {
+        return Err(VolumeError::SizeMismatch {
+            path: path.to_path_buf(),
+            expected: layout.byte_len(),
+            found: layout.byte_len() + extra,
+        });
+    }
+    Ok(())
+}
+
+fn skip_bytes(path: &Path, src: &mut dyn Read, n: u64, layout: &SampleLayout, gz: bool) -> Result<()> {
+    let got = std::io::copy(&mut src.take(n), &mut std::io::sink()).map_err(|e| {
+        if gz { VolumeError::Gzip { path: path.to_path_buf(), source: e } } else { VolumeError::io(path, e) }
+    })?;
+    if got < n {
+        return Err(VolumeError::Truncated { path: path.to_path_buf(), expected: layout.byte_len(), found: 0 });
+    }
+    Ok(())
+}
+
+fn read_raw_encoded(path: &Path, mut data: Box<dyn BufRead>, h: &NrrdHeader, layout: &SampleLayout) -> Result<Vec<u8>> {
+    if h.byte_skip == -1 {
+        // The samples are the last bytes of the file.
+        let mut all = Vec::new();
+        data.read_to_end(&mut all).map_err(|e| VolumeError::io(path, e))?;
+        let n = layout.byte_len() as usize;
+        if all.len() < n {
+            return Err(VolumeError::Truncated { path: path.to_path_buf(), expected: n as u64, found: all.len() as u64 });
+        }
+        return Ok(all.split_off(all.len() - n));
+    }
+    skip_bytes(path, &mut data, h.byte_skip as u64, layout, false)?;
+    let bytes = read_sample_bytes(path, &mut data, layout, false)?;
+    let extra = drain_rest(path, &mut data, false)?;
+    refuse_extra(path, layout, extra)?;
+    Ok(bytes)
+}
+
+fn read_ascii(path: &Path, mut data: Box<dyn BufRead>, layout: &SampleLayout) -> Result<Vec<u8>> {
+    let mut text = String::new();
+    data.read_to_string(&mut text).map_err(|e| VolumeError::io(path, e))?;
+    let n = (layout.byte_len() / layout.ty.size() as u64) as usize;
+    let values: Vec<f32> = text
+        .split(|c: char| c.is_whitespace() || c == ',')
+        .filter(|s| !s.is_empty())
+        .map(|s| s.parse::<f64>().map(|v| v as f32))
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|e| VolumeError::header(path, format!("ascii data: {e}")))?;
+    if values.len() != n {
+        let expected = layout.byte_len();
+        let found = (values.len() * layout.ty.size()) as u64;
+        return Err(if values.len() < n {
+            VolumeError::Truncated { path: path.to_path_buf(), expected, found }
+        } else {
+            VolumeError::SizeMismatch { path: path.to_path_buf(), expected, found }
+        });
+    }
+    // Re-encode as little-endian f32 so the common decoder applies.
+    let mut bytes = Vec::new();
+    encode_samples(&values, SampleType::F32, Endian::Little, &mut bytes);
+    Ok(bytes)
+}
+
+/// Works out which axis holds fields and the grid's geometry.
+fn layout_and_geometry(path: &Path, h: &NrrdHeader) -> Result<(SampleLayout, Geometry)> {
+    let dim = h.sizes.len();
+    if !(1..=4).contains(&dim) {
+        return Err(VolumeError::BadDimensions {
+            path: path.to_path_buf(),
+            dims: format!("{:?}", h.sizes),
+            message: "mdtf reads 1D to 3D scalar and 4D multi-field NRRDs".into(),
+        });
+    }
+    let non_spatial = |a: usize| {
+        let by_kind = h.kinds.as_ref().is_some_and(|k| !matches!(k[a].as_str(), "domain" | "space" | "???" | "none"));
+        let by_dir = h.directions.as_ref().is_some_and(|d| d[a].is_none());
+        by_kind || by_dir
+    };
+    let field_axis = if dim == 4 {
+        match (non_spatial(0), non_spatial(3)) {
+            (false, true) => Some(3),
+            (true, false) | (false, false) => Some(0),
+            (true, true) => {
+                return Err(VolumeError::header(path, "two non-spatial axes: only one field axis is supported"));
+            }
+        }
+    } else {
+        None
+    };
+    let spatial: Vec<usize> = (0..dim).filter(|&a| Some(a) != field_axis).collect();
+    let mut dims = [1u64; 3];
+    for (slot, &a) in spatial.iter().enumerate() {
+        dims[slot] = h.sizes[a];
+    }
+    let fields = field_axis.map_or(1, |a| h.sizes[a]);
+    check_dims(path, &h.sizes, fields)?;
+    let dims = dims.map(|d| d as usize);
+
+    // RAS from the header's space: negate the axes that point the other way.
+    let flip = match h.space.as_deref() {
+        Some("left-posterior-superior" | "lps") => [-1.0, -1.0, 1.0],
+        Some("left-anterior-superior" | "las") => [-1.0, 1.0, 1.0],
+        _ => [1.0, 1.0, 1.0],
+    };
+    let origin = h.origin.unwrap_or([0.0; 3]);
+    let origin = [origin[0] * flip[0], origin[1] * flip[1], origin[2] * flip[2]];
+    let mut affine = [[0.0; 4]; 3];
+    for (row, o) in origin.iter().enumerate() {
+        affine[row][3] = *o;
+    }
+    for slot in 0..3 {
+        let column = match (spatial.get(slot), &h.directions, &h.spacings) {
+            (Some(&a), Some(dirs), _) => {
+                let v = dirs[a].ok_or_else(|| {
+                    VolumeError::header(path, format!("spatial axis {a} has no space direction ('none')"))
+                })?;
+                [v[0] * flip[0], v[1] * flip[1], v[2] * flip[2]]
+            }
+            (Some(&a), None, Some(sp)) => {
+                let s = if sp[a].is_finite() { sp[a] } else { 1.0 };
+                if s <= 0.0 {
+                    return Err(VolumeError::header(path, format!("spacing {s} of axis {a} must be positive")));
+                }
+                let mut c = [0.0; 3];
+                c[slot] = s;
+                c
+            }
+            _ => {
+                let mut c = [0.0; 3];
+                c[slot] = 1.0;
+                c
+            }
+        };
+        for row in 0..3 {
+            affine[row][slot] = column[row];
+        }
+    }
+    let geometry = Geometry::from_affine(dims, affine)
+        .ok_or_else(|| VolumeError::header(path, "degenerate space directions (a zero-length axis)"))?;
+    let layout = SampleLayout {
+        ty: h.ty,
+        endian: h.endian.unwrap_or(Endian::Little),
+        dims,
+        fields: fields as usize,
+        field_axis: if field_axis == Some(3) { FieldAxis::Slowest } else { FieldAxis::Fastest },
+        scale: None,
+    };
+    Ok((layout, geometry))
+}
+
+/// Writes `mf` as NRRD with samples stored as `ty`: attached for `.nrrd`,
+/// detached for `.nhdr` (data in `<stem>.raw`, or `.raw.gz` when gzipped).
+/// Several fields go on a leading `list` axis (interleaved per voxel), as
+/// Teem and Slicer expect; their names are kept in an `mdtf_fields:=` line.
+pub fn write_nrrd(path: &Path, mf: &MultiField, ty: SampleType, encoding: Encoding) -> Result<()> {
+    if encoding == Encoding::Ascii {
+        return Err(VolumeError::UnsupportedEncoding { path: path.to_path_buf(), encoding: "ascii (for writing)".into() });
+    }
+    for f in &mf.fields {
+        if let Some((index, value)) = f.data.as_slice().and_then(|s| first_unrepresentable(s, ty)) {
+            return Err(VolumeError::NotRepresentable { path: path.to_path_buf(), value, index, target: ty.name() });
+        }
+    }
+    let detached = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("nhdr"));
+    let data_name = detached.then(|| {
+        let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "data".into());
+        format!("{stem}{}", if encoding == Encoding::Gzip { ".raw.gz" } else { ".raw" })
+    });
+    let header = header_text(mf, ty, encoding, data_name.as_deref());
+    let samples = interleaved_samples(mf);
+    let write_samples = |w: &mut dyn Write| -> std::io::Result<()> {
+        let mut bytes = Vec::new();
+        encode_samples(&samples, ty, Endian::Little, &mut bytes);
+        match encoding {
+            Encoding::Gzip => {
+                let mut gz = flate2::write::GzEncoder::new(w, flate2::Compression::fast());
+                gz.write_all(&bytes)?;
+                gz.finish()?;
+                Ok(())
+            }
+            _ => w.write_all(&bytes),
+        }
+    };
+    match data_name {
+        None => write_file_atomically(path, |w| {
+            w.write_all(header.as_bytes())?;
+            write_samples(w)
+        }),
+        Some(name) => {
+            let data_path = path.parent().unwrap_or(Path::new("")).join(name);
+            write_file_atomically(&data_path, write_samples)?;
+            write_file_atomically(path, |w| w.write_all(header.as_bytes()))
+        }
+    }
+}
+
+fn interleaved_samples(mf: &MultiField) -> Vec<f32> {
+    if mf.fields.len() == 1 {
+        return mf.fields[0].data.iter().copied().collect();
+    }
+    let n = mf.geometry.voxel_count();
+    let mut out = Vec::with_capacity(n * mf.fields.len());
+    let slices: Vec<_> = mf.fields.iter().map(|f| f.data.iter().copied().collect::<Vec<_>>()).collect();
+    for i in 0..n {
+        out.extend(slices.iter().map(|s| s[i]));
+    }
+    out
+}
+
+fn header_text(mf: &MultiField, ty: SampleType, encoding: Encoding, data_file: Option<&str>) -> String {
+    let g = &mf.geometry;
+    let m = (mf.fields.len() > 1).then_some(mf.fields.len());
+    let dirs: Vec<String> = (0..3)
+        .map(|a| format_vector([0, 1, 2].map(|r| g.directions[a][r] * g.spacing[a])))
+        .collect();
+    let mut s = String::from("NRRD0005\n# written by mdtf\n");
+    s += &format!("type: {}\n", header::nrrd_type_name(ty));
+    s += &format!("dimension: {}\n", 3 + usize::from(m.is_some()));
+    s += "space: right-anterior-superior\n";
+    let sizes = format!("{} {} {}", g.dims[0], g.dims[1], g.dims[2]);
+    match m {
+        Some(n) => {
+            s += &format!("sizes: {n} {sizes}\n");
+            s += &format!("space directions: none {}\n", dirs.join(" "));
+            s += "kinds: list domain domain domain\n";
+        }
+        None => {
+            s += &format!("sizes: {sizes}\n");
+            s += &format!("space directions: {}\n", dirs.join(" "));
+            s += "kinds: domain domain domain\n";
+        }
+    }
+    s += "endian: little\n";
+    s += &format!("encoding: {}\n", if encoding == Encoding::Gzip { "gzip" } else { "raw" });
+    s += &format!("space origin: {}\n", format_vector(g.origin));
+    if let Some(df) = data_file {
+        s += &format!("data file: {df}\n");
+    }
+    if mf.fields.len() > 1 || mf.fields[0].name != "value" {
+        let names: Vec<&str> = mf.fields.iter().map(|f| f.name.as_str()).collect();
+        s += &format!("mdtf_fields:={}\n", names.join(" "));
+    }
+    if data_file.is_none() {
+        s += "\n";
+    }
+    s
+}

@@ -1,0 +1,135 @@
+//! Turning a block of file bytes into f32 fields, shared by every reader.
+
+use crate::dtype::{Endian, SampleType, decode_samples};
+use crate::error::{Result, VolumeError};
+use ndarray::Array3;
+use std::io::Read;
+use std::path::Path;
+
+/// What to do with NaN or infinite samples on read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum NanPolicy {
+    /// Refuse the file, reporting how many samples are not finite (the default).
+    #[default]
+    Refuse,
+    /// Replace every NaN or infinite sample with 0.
+    Zero,
+}
+
+/// Options common to every reader.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ReadOptions {
+    /// Policy for NaN / infinite samples.
+    pub nan: NanPolicy,
+}
+
+/// Where the field index sits in the file's sample order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FieldAxis {
+    /// Fields are the slowest axis: each field's 3D block is contiguous (NIfTI 4D).
+    Slowest,
+    /// Fields are the fastest axis: interleaved per voxel (NRRD with a leading field axis).
+    Fastest,
+}
+
+/// How the samples of one file are laid out.
+#[derive(Debug, Clone, Copy)]
+pub struct SampleLayout {
+    /// Sample type on disk.
+    pub ty: SampleType,
+    /// Byte order on disk.
+    pub endian: Endian,
+    /// (nx, ny, nz).
+    pub dims: [usize; 3],
+    /// Number of fields.
+    pub fields: usize,
+    /// Position of the field axis.
+    pub field_axis: FieldAxis,
+    /// Linear map applied after decoding: value = slope * stored + intercept.
+    pub scale: Option<(f64, f64)>,
+}
+
+impl SampleLayout {
+    /// Total bytes of sample data.
+    pub fn byte_len(&self) -> u64 {
+        self.dims.iter().map(|&d| d as u64).product::<u64>() * self.fields as u64 * self.ty.size() as u64
+    }
+}
+
+/// Reads exactly `layout.byte_len()` bytes from `src`, reporting a truncated
+/// file with the counts. `compressed` selects the gzip error for stream failures.
+pub fn read_sample_bytes(path: &Path, src: &mut dyn Read, layout: &SampleLayout, compressed: bool) -> Result<Vec<u8>> {
+    let expected = layout.byte_len();
+    let mut bytes = Vec::new();
+    bytes.try_reserve_exact(expected as usize).map_err(|_| VolumeError::TooLarge {
+        path: path.to_path_buf(),
+        dims: format!("{}x{}x{}", layout.dims[0], layout.dims[1], layout.dims[2]),
+        needed: crate::limits::human_bytes(expected as u128),
+        available: "less".into(),
+    })?;
+    let got = src.take(expected).read_to_end(&mut bytes).map_err(|e| {
+        if compressed { VolumeError::Gzip { path: path.to_path_buf(), source: e } } else { VolumeError::io(path, e) }
+    })?;
+    if (got as u64) < expected {
+        return Err(VolumeError::Truncated { path: path.to_path_buf(), expected, found: got as u64 });
+    }
+    Ok(bytes)
+}
+
+/// Decodes sample bytes into one array per field, applying the scale and the NaN policy.
+pub fn decode_fields(path: &Path, bytes: &[u8], layout: &SampleLayout, opts: &ReadOptions) -> Result<Vec<Array3<f32>>> {
+    let [nx, ny, nz] = layout.dims;
+    let per_field = nx * ny * nz;
+    let mut all = vec![0.0f32; per_field * layout.fields];
+    decode_samples(bytes, layout.ty, layout.endian, &mut all);
+    if let Some((slope, inter)) = layout.scale {
+        for v in &mut all {
+            *v = (*v as f64 * slope + inter) as f32;
+        }
+    }
+    let bad = all.iter().filter(|v| !v.is_finite()).count() as u64;
+    if bad > 0 {
+        match opts.nan {
+            NanPolicy::Refuse => return Err(VolumeError::NonFinite { path: path.to_path_buf(), count: bad }),
+            NanPolicy::Zero => all.iter_mut().filter(|v| !v.is_finite()).for_each(|v| *v = 0.0),
+        }
+    }
+    let shape = (nz, ny, nx);
+    let fields = match layout.field_axis {
+        _ if layout.fields == 1 => vec![all],
+        FieldAxis::Slowest => all.chunks_exact(per_field).map(|c| c.to_vec()).collect(),
+        FieldAxis::Fastest => (0..layout.fields)
+            .map(|f| all.iter().skip(f).step_by(layout.fields).copied().collect())
+            .collect(),
+    };
+    fields
+        .into_iter()
+        .map(|v| Array3::from_shape_vec(shape, v).map_err(|e| VolumeError::header(path, e.to_string())))
+        .collect()
+}
+
+/// Opens a file for reading, transparently un-gzipping it when it starts
+/// with the gzip magic bytes. Returns the reader and whether it is compressed.
+pub fn open_maybe_gz(path: &Path) -> Result<(Box<dyn Read>, bool)> {
+    let file = std::fs::File::open(path).map_err(|e| VolumeError::io(path, e))?;
+    let len = file.metadata().map_err(|e| VolumeError::io(path, e))?.len();
+    if len == 0 {
+        return Err(VolumeError::Empty { path: path.to_path_buf() });
+    }
+    let mut reader = std::io::BufReader::new(file);
+    let head = std::io::BufRead::fill_buf(&mut reader).map_err(|e| VolumeError::io(path, e))?;
+    if head.starts_with(&[0x1f, 0x8b]) {
+        Ok((Box::new(flate2::bufread::MultiGzDecoder::new(reader)), true))
+    } else {
+        Ok((Box::new(reader), false))
+    }
+}
+
+/// Reads whatever follows the samples to the end of the stream and returns
+/// its length. Draining a gzip stream is what checks its CRC, so a corrupt
+/// file is caught even when the samples themselves decompressed.
+pub fn drain_rest(path: &Path, src: &mut dyn Read, compressed: bool) -> Result<u64> {
+    std::io::copy(src, &mut std::io::sink()).map_err(|e| {
+        if compressed { VolumeError::Gzip { path: path.to_path_buf(), source: e } } else { VolumeError::io(path, e) }
+    })
+}

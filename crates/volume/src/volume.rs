@@ -1,0 +1,148 @@
+//! The `Volume` (one scalar field) and `MultiField` (several fields on one grid).
+
+use crate::error::{Result, VolumeError};
+use crate::geometry::Geometry;
+use ndarray::Array3;
+
+/// A scalar volume: f32 samples in x-fastest order, ndarray shape (nz, ny, nx),
+/// index `[[k, j, i]]`, with the geometry that places it in the world.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Volume {
+    /// Where the samples are.
+    pub geometry: Geometry,
+    /// The samples, shape (nz, ny, nx), standard layout.
+    pub data: Array3<f32>,
+}
+
+impl Volume {
+    /// Wraps samples with their geometry; the shapes must agree.
+    pub fn new(geometry: Geometry, data: Array3<f32>) -> Result<Volume> {
+        let (nz, ny, nx) = geometry.shape();
+        if data.dim() != (nz, ny, nx) {
+            return Err(VolumeError::Fields(format!(
+                "sample array of shape {:?} does not match dims {}",
+                data.dim(),
+                geometry.dims_string()
+            )));
+        }
+        let data = if data.is_standard_layout() { data } else { data.as_standard_layout().into_owned() };
+        Ok(Volume { geometry, data })
+    }
+
+    /// A volume of zeros on the given grid.
+    pub fn zeros(geometry: Geometry) -> Volume {
+        let data = Array3::zeros(geometry.shape());
+        Volume { geometry, data }
+    }
+
+    /// The samples as one slice in x-fastest order.
+    pub fn samples(&self) -> &[f32] {
+        // Constructors keep the array in standard layout.
+        self.data.as_slice().unwrap_or(&[])
+    }
+
+    /// Smallest and largest finite sample, or None if there is none.
+    pub fn finite_range(&self) -> Option<(f32, f32)> {
+        let mut lo = f32::INFINITY;
+        let mut hi = f32::NEG_INFINITY;
+        for &v in self.data.iter().filter(|v| v.is_finite()) {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        (lo <= hi).then_some((lo, hi))
+    }
+
+    /// Number of NaN or infinite samples.
+    pub fn non_finite_count(&self) -> u64 {
+        self.data.iter().filter(|v| !v.is_finite()).count() as u64
+    }
+}
+
+/// One named field of a [`MultiField`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Field {
+    /// The field's name (a file's own name, or "field0", "field1" ... when it has none).
+    pub name: String,
+    /// The samples, shape (nz, ny, nx), standard layout.
+    pub data: Array3<f32>,
+}
+
+/// Several scalar fields sampled on one grid (a 4D NIfTI, a NRRD with a field
+/// axis, or a set of co-registered files). A scalar volume is a multi-field
+/// volume with one field.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MultiField {
+    /// The grid every field shares.
+    pub geometry: Geometry,
+    /// The fields, in file order.
+    pub fields: Vec<Field>,
+}
+
+impl MultiField {
+    /// Builds a multi-field volume, checking that every field has the grid's shape.
+    pub fn new(geometry: Geometry, fields: Vec<Field>) -> Result<MultiField> {
+        if fields.is_empty() {
+            return Err(VolumeError::Fields("a multi-field volume needs at least one field".into()));
+        }
+        for f in &fields {
+            Volume::new(geometry.clone(), f.data.clone()).map_err(|_| {
+                VolumeError::Fields(format!(
+                    "field '{}' has shape {:?}, the grid is {}",
+                    f.name,
+                    f.data.dim(),
+                    geometry.dims_string()
+                ))
+            })?;
+        }
+        Ok(MultiField { geometry, fields })
+    }
+
+    /// Joins scalar volumes into one multi-field volume; their grids must match.
+    pub fn from_volumes(named: Vec<(String, Volume)>) -> Result<MultiField> {
+        let Some((_, first)) = named.first() else {
+            return Err(VolumeError::Fields("a multi-field volume needs at least one field".into()));
+        };
+        let geometry = first.geometry.clone();
+        let mut fields = Vec::with_capacity(named.len());
+        for (name, v) in named {
+            if !v.geometry.same_grid(&geometry) {
+                return Err(VolumeError::Fields(format!(
+                    "field '{name}' has geometry {} spacing {:?} origin {:?}, the first field has {} spacing {:?} origin {:?}",
+                    v.geometry.dims_string(),
+                    v.geometry.spacing,
+                    v.geometry.origin,
+                    geometry.dims_string(),
+                    geometry.spacing,
+                    geometry.origin
+                )));
+            }
+            fields.push(Field { name, data: v.data });
+        }
+        Ok(MultiField { geometry, fields })
+    }
+
+    /// The single field as a scalar volume; an error if there are several.
+    pub fn into_scalar(self) -> Result<Volume> {
+        if self.fields.len() != 1 {
+            return Err(VolumeError::Fields(format!(
+                "expected a scalar volume, found {} fields ({})",
+                self.fields.len(),
+                self.fields.iter().map(|f| f.name.as_str()).collect::<Vec<_>>().join(", ")
+            )));
+        }
+        let geometry = self.geometry;
+        let data = self.fields.into_iter().next().map(|f| f.data).unwrap_or_default();
+        Volume::new(geometry, data)
+    }
+
+    /// Field `index` as a scalar volume (a copy).
+    pub fn field_volume(&self, index: usize) -> Option<Volume> {
+        self.fields.get(index).map(|f| Volume { geometry: self.geometry.clone(), data: f.data.clone() })
+    }
+}
+
+impl From<Volume> for MultiField {
+    fn from(v: Volume) -> MultiField {
+        MultiField { geometry: v.geometry, fields: vec![Field { name: "value".into(), data: v.data }] }
+    }
+}
