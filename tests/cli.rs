@@ -1,0 +1,218 @@
+//! The `mdtf` binary end to end: synth, info, convert, and its errors.
+
+use mdtf_e2e::{mdtf_err, mdtf_ok};
+use mdtf_volume::{ReadOptions, read, read_scalar};
+use std::f64::consts::{PI, SQRT_2};
+
+#[test]
+fn synth_truth_files_match_the_closed_forms_of_design_md() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s.nii.gz");
+    let truth = dir.path().join("truth");
+    let (r, s, vmin, vmax) = (9.0, 1.5, 10.0, 210.0);
+    mdtf_ok(&[
+        "synth",
+        "erf-sphere",
+        "-o",
+        out.to_str().unwrap(),
+        "--size",
+        "40,36,20",
+        "--spacing",
+        "0.5,0.5,1.25",
+        "--radius",
+        "9",
+        "--sigma",
+        "1.5",
+        "--vmin",
+        "10",
+        "--vmax",
+        "210",
+        "--origin",
+        "-5,2,7",
+        "--truth",
+        truth.to_str().unwrap(),
+        "-q",
+    ]);
+    let ro = ReadOptions::default();
+    let v = read_scalar(&out, &ro).unwrap();
+    let g = read_scalar(&truth.join("g.nii.gz"), &ro).unwrap();
+    let f2 = read_scalar(&truth.join("f2.nii.gz"), &ro).unwrap();
+    let x = read_scalar(&truth.join("x.nii.gz"), &ro).unwrap();
+    let p = read_scalar(&truth.join("p.nii.gz"), &ro).unwrap();
+    let n = read(&truth.join("normal.nii.gz"), &ro).unwrap();
+    assert_eq!(v.geometry.spacing, [0.5, 0.5, 1.25]);
+    assert_eq!(v.geometry.origin, [-5.0, 2.0, 7.0]);
+    let c = [-5.0 + 19.5 * 0.5, 2.0 + 17.5 * 0.5, 7.0 + 9.5 * 1.25];
+    let a = (vmax - vmin) / (s * (2.0 * PI).sqrt());
+    let mut checked = 0;
+    for ((k, j, i), &val) in v.data.indexed_iter() {
+        let pos = [-5.0 + i as f64 * 0.5, 2.0 + j as f64 * 0.5, 7.0 + k as f64 * 1.25];
+        let d = [pos[0] - c[0], pos[1] - c[1], pos[2] - c[2]];
+        let rho = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        let xx = r - rho;
+        let vv = vmin + (vmax - vmin) * (1.0 + libm_erf(xx / (s * SQRT_2))) / 2.0;
+        let gg = a * (-xx * xx / (2.0 * s * s)).exp();
+        let ff = -xx * gg / (s * s);
+        let tol = |t: f64| 1e-4 * (1.0 + t.abs());
+        assert!((val as f64 - vv).abs() < tol(vv) * 10.0, "v at {i},{j},{k}");
+        assert!((g.data[[k, j, i]] as f64 - gg).abs() < tol(gg));
+        assert!((f2.data[[k, j, i]] as f64 - ff).abs() < tol(ff));
+        assert!((x.data[[k, j, i]] as f64 - xx).abs() < 1e-4);
+        if xx.abs() < 3.0 * s {
+            assert!((p.data[[k, j, i]] as f64 - xx).abs() < 1e-3, "p = x at {i},{j},{k}");
+            // the sign of f'': negative on the high (inside) side
+            if xx.abs() > 0.1 {
+                assert_eq!(f2.data[[k, j, i]] < 0.0, xx > 0.0);
+            }
+            checked += 1;
+        }
+        if rho > 1e-6 {
+            let nx = n.fields[0].data[[k, j, i]] as f64;
+            assert!((nx + d[0] / rho).abs() < 1e-5, "normal points to the centre");
+        }
+    }
+    assert!(checked > 1000);
+}
+
+/// erf by its own series/continued fraction, independent of the generator's libm.
+fn libm_erf(x: f64) -> f64 {
+    // Abramowitz-Stegun 7.1.26 is too coarse; use the Taylor series for |x| < 3
+    // and the asymptotic complement beyond.
+    if x.abs() < 3.0 {
+        let mut sum = x;
+        let mut term = x;
+        for n in 1..200 {
+            term *= -x * x / n as f64;
+            sum += term / (2 * n + 1) as f64;
+        }
+        2.0 / PI.sqrt() * sum
+    } else {
+        let t = 1.0 / (x * x);
+        let tail =
+            (-x * x).exp() / (x.abs() * PI.sqrt()) * (1.0 - t / 2.0 + 3.0 * t * t / 4.0 - 15.0 * t * t * t / 8.0);
+        x.signum() * (1.0 - tail)
+    }
+}
+
+#[test]
+fn synth_is_identical_with_one_and_two_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = dir.path().join("a.nrrd");
+    let b = dir.path().join("b.nrrd");
+    for (threads, out) in [("1", &a), ("2", &b)] {
+        mdtf_ok(&[
+            "--threads",
+            threads,
+            "synth",
+            "shells",
+            "-o",
+            out.to_str().unwrap(),
+            "--size",
+            "48",
+            "--noise",
+            "5",
+            "--seed",
+            "3",
+        ]);
+    }
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+}
+
+#[test]
+fn info_reports_geometry_range_and_non_finite_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("n.nrrd");
+    std::fs::write(
+        &p,
+        [
+            b"NRRD0004\ntype: float\ndimension: 3\nsizes: 2 1 2\nspacings: 0.5 1 2\nendian: little\nencoding: raw\n\n"
+                .as_slice(),
+            &[1.0f32, f32::NAN, 3.0, -2.0].iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<_>>(),
+        ]
+        .concat(),
+    )
+    .unwrap();
+    let text = mdtf_ok(&["info", p.to_str().unwrap()]);
+    assert!(text.contains("dims:        2x1x2"), "{text}");
+    assert!(text.contains("spacing:     0.5 1 2"), "{text}");
+    assert!(text.contains("NaN/Inf:   1"), "{text}");
+    assert!(text.contains("range:     -2 .. 3"), "{text}");
+}
+
+#[test]
+fn convert_refuses_nan_unless_asked_and_never_overwrites_its_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("n.nrrd");
+    std::fs::write(
+        &p,
+        [
+            b"NRRD0004\ntype: float\ndimension: 3\nsizes: 2 1 1\nendian: little\nencoding: raw\n\n".as_slice(),
+            &[1.0f32, f32::INFINITY].iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<_>>(),
+        ]
+        .concat(),
+    )
+    .unwrap();
+    let out = dir.path().join("o.nii");
+    let e = mdtf_err(&["convert", p.to_str().unwrap(), out.to_str().unwrap()]);
+    assert!(e.contains("1 samples are NaN or infinite") && e.contains("n.nrrd"), "{e}");
+    assert!(!out.exists());
+    mdtf_ok(&["convert", p.to_str().unwrap(), out.to_str().unwrap(), "--nan", "zero", "-q"]);
+    let v = read_scalar(&out, &ReadOptions::default()).unwrap();
+    assert_eq!(v.samples(), &[1.0, 0.0]);
+    let before = std::fs::read(&p).unwrap();
+    let e = mdtf_err(&["convert", p.to_str().unwrap(), p.to_str().unwrap(), "--nan", "zero"]);
+    assert!(e.contains("refusing to overwrite an input"), "{e}");
+    assert_eq!(std::fs::read(&p).unwrap(), before);
+}
+
+#[test]
+fn bad_inputs_fail_with_the_file_named_and_leave_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = dir.path().join("g.nii");
+    mdtf_ok(&["synth", "erf-sphere", "-o", good.to_str().unwrap(), "--size", "8", "-q"]);
+    let bytes = std::fs::read(&good).unwrap();
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("empty.nii", vec![], "empty"),
+        ("trunc.nii", bytes[..bytes.len() - 100].to_vec(), "truncated"),
+        ("zero.nrrd", b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 0 4 4\nencoding: raw\n\n".to_vec(), "at least 1"),
+        (
+            "huge.nrrd",
+            b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 90000 90000 90000\nencoding: raw\n\n".to_vec(),
+            "would need",
+        ),
+        ("enc.nrrd", b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 1 1 1\nencoding: hex\n\n00".to_vec(), "encoding"),
+        (
+            "type.nrrd",
+            b"NRRD0004\ntype: block\ndimension: 3\nsizes: 1 1 1\nencoding: raw\n\n0".to_vec(),
+            "unsupported data type",
+        ),
+        ("gz.nii.gz", vec![0x1f, 0x8b, 8, 0, 0, 0, 0, 0, 0, 3, 1, 2, 3, 4, 5], "gzip"),
+    ];
+    for (name, content, expect) in cases {
+        let p = dir.path().join(name);
+        std::fs::write(&p, &content).unwrap();
+        let out = dir.path().join(format!("out-{name}.nrrd"));
+        let e = mdtf_err(&["convert", p.to_str().unwrap(), out.to_str().unwrap()]);
+        assert!(e.contains(name) && e.to_lowercase().contains(expect), "{name}: {e}");
+        assert!(!out.exists(), "{name}: output written");
+    }
+    let e = mdtf_err(&["info", dir.path().join("missing.nii").to_str().unwrap()]);
+    assert!(e.contains("missing.nii") && e.contains("No such file"), "{e}");
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with(".mdtf-partial"))
+        .collect();
+    assert!(left.is_empty(), "temporary files left behind");
+}
+
+#[test]
+fn bad_parameters_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = dir.path().join("x.nii");
+    let o = o.to_str().unwrap();
+    assert!(mdtf_err(&["synth", "erf-sphere", "-o", o, "--spacing", "1,0,1"]).contains("--spacing"));
+    assert!(mdtf_err(&["synth", "erf-sphere", "-o", o, "--sigma", "-1"]).contains("--sigma"));
+    assert!(mdtf_err(&["synth", "erf-sphere", "-o", o, "--size", "4,4"]).contains("--size"));
+    assert!(mdtf_err(&["synth", "erf-sphere", "-o", "x.png"]).contains("unknown extension"));
+}

@@ -1,0 +1,248 @@
+//! Cross-tool interop: files written by mdtf read by nibabel and pynrrd, and
+//! files written by them read by mdtf, value for value, geometry included.
+//! Also Teem's header conventions (`space directions`, `kinds`, `spacings`).
+
+use mdtf_e2e::{mdtf_ok, run_python};
+use mdtf_volume::{Field, Geometry, MultiField, ReadOptions, SampleType, WriteOptions, read, write};
+use ndarray::Array3;
+use serde_json::Value;
+use std::path::Path;
+
+const DUMP_NIBABEL: &str = r#"
+import sys, json, nibabel as nib, numpy as np
+img = nib.load(sys.argv[1])
+data = np.asanyarray(img.dataobj).astype(np.float64) if img.header.get_slope_inter() == (None, None) else img.get_fdata()
+if data.ndim == 3: data = data[..., None]
+fields = [data[..., f].flatten(order='F').tolist() for f in range(data.shape[3])]
+print(json.dumps({"shape": list(img.shape), "affine": img.affine.tolist(), "qform": img.get_qform().tolist(),
+  "zooms": [float(z) for z in img.header.get_zooms()[:3]], "dtype": str(img.get_data_dtype()), "fields": fields}))
+"#;
+
+const DUMP_PYNRRD: &str = r#"
+import sys, json, nrrd, numpy as np
+data, h = nrrd.read(sys.argv[1])
+kinds = h.get('kinds', [])
+if data.ndim == 4:
+    fields = [data[f].flatten(order='F').astype(np.float64).tolist() for f in range(data.shape[0])]
+else:
+    fields = [data.flatten(order='F').astype(np.float64).tolist()]
+dirs = h.get('space directions')
+dirs = None if dirs is None else [[None if np.isnan(v).any() else [float(x) for x in v]][0] for v in dirs]
+print(json.dumps({"sizes": [int(s) for s in h['sizes']], "type": str(data.dtype), "space": h.get('space'),
+  "directions": dirs, "origin": None if h.get('space origin') is None else [float(x) for x in h['space origin']],
+  "kinds": kinds, "fields": fields}))
+"#;
+
+fn dump(script: &str, path: &Path) -> Value {
+    serde_json::from_str(&run_python(script, &[path.to_str().unwrap()])).unwrap()
+}
+
+fn floats(v: &Value) -> Vec<f64> {
+    v.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect()
+}
+
+fn test_geometry() -> Geometry {
+    Geometry {
+        dims: [5, 4, 3],
+        spacing: [0.5, 0.75, 2.0],
+        origin: [-12.5, 3.25, 100.0],
+        directions: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+    }
+}
+
+fn field(ty: SampleType, salt: f32) -> Array3<f32> {
+    let g = test_geometry();
+    Array3::from_shape_fn(g.shape(), |(k, j, i)| {
+        let n = (i + 5 * j + 20 * k) as f32;
+        match ty {
+            SampleType::F32 => n * 0.37 - 5.125 + salt,
+            SampleType::U8 => (n * 4.0 + salt) % 256.0,
+            _ => (n * 1000.0 + salt) % 65536.0,
+        }
+    })
+}
+
+#[test]
+fn nibabel_reads_what_mdtf_writes() {
+    let dir = tempfile::tempdir().unwrap();
+    for ty in [SampleType::F32, SampleType::U8, SampleType::U16] {
+        for ext in ["nii", "nii.gz"] {
+            let fields: Vec<Field> = (0..if ty == SampleType::F32 { 2 } else { 1 })
+                .map(|f| Field { name: format!("f{f}"), data: field(ty, f as f32) })
+                .collect();
+            let mf = MultiField::new(test_geometry(), fields).unwrap();
+            let p = dir.path().join(format!("m_{ty}.{ext}"));
+            write(&p, &mf, &WriteOptions { ty, gzip: false }, &[]).unwrap();
+            let d = dump(DUMP_NIBABEL, &p);
+            assert_eq!(
+                d["dtype"],
+                ["float32", "uint8", "uint16"]
+                    [[SampleType::F32, SampleType::U8, SampleType::U16].iter().position(|t| *t == ty).unwrap()]
+            );
+            assert_eq!(floats(&d["zooms"]), vec![0.5, 0.75, 2.0]);
+            let aff: Vec<Vec<f64>> = d["affine"].as_array().unwrap().iter().map(floats).collect();
+            assert_eq!(aff[0], vec![0.5, 0.0, 0.0, -12.5]);
+            assert_eq!(aff[1], vec![0.0, 0.75, 0.0, 3.25]);
+            assert_eq!(aff[2], vec![0.0, 0.0, 2.0, 100.0]);
+            assert_eq!(d["qform"], d["affine"], "qform and sform agree");
+            for (f, mine) in mf.fields.iter().enumerate() {
+                let theirs = floats(&d["fields"][f]);
+                let ours: Vec<f64> = mine.data.iter().map(|&v| v as f64).collect();
+                assert_eq!(theirs, ours, "{ty} {ext} field {f}");
+            }
+        }
+    }
+}
+
+#[test]
+fn pynrrd_reads_what_mdtf_writes() {
+    let dir = tempfile::tempdir().unwrap();
+    for (ext, gzip) in [("nrrd", false), ("nrrd", true), ("nhdr", false), ("nhdr", true)] {
+        for nfields in [1, 3] {
+            let fields: Vec<Field> =
+                (0..nfields).map(|f| Field { name: format!("f{f}"), data: field(SampleType::U16, f as f32) }).collect();
+            let mf = MultiField::new(test_geometry(), fields).unwrap();
+            let p = dir.path().join(format!("m{nfields}_{gzip}.{ext}"));
+            write(&p, &mf, &WriteOptions { ty: SampleType::U16, gzip }, &[]).unwrap();
+            let d = dump(DUMP_PYNRRD, &p);
+            assert_eq!(d["type"], "uint16");
+            assert_eq!(d["space"], "right-anterior-superior");
+            assert_eq!(floats(&d["origin"]), vec![-12.5, 3.25, 100.0]);
+            let dirs = d["directions"].as_array().unwrap();
+            let offset = if nfields > 1 { 1 } else { 0 };
+            if nfields > 1 {
+                assert!(dirs[0].is_null());
+                assert_eq!(d["kinds"][0], "list");
+            }
+            assert_eq!(floats(&dirs[offset]), vec![0.5, 0.0, 0.0]);
+            assert_eq!(floats(&dirs[offset + 2]), vec![0.0, 0.0, 2.0]);
+            for (f, mine) in mf.fields.iter().enumerate() {
+                let ours: Vec<f64> = mine.data.iter().map(|&v| v as f64).collect();
+                assert_eq!(floats(&d["fields"][f]), ours, "{ext} gzip {gzip} field {f}");
+            }
+        }
+    }
+}
+
+const WRITE_NIBABEL: &str = r#"
+import sys, nibabel as nib, numpy as np
+out = sys.argv[1]
+data = (np.arange(5*4*3).reshape((5, 4, 3), order='F') * 3 - 50).astype(np.int16)
+aff = np.array([[0, -0.8, 0, 10.0], [0.9, 0, 0, -20.0], [0, 0, 1.5, 5.0], [0, 0, 0, 1]])
+img = nib.Nifti1Image(data, aff)
+img.header.set_slope_inter(0.5, 7.0)
+img.set_qform(aff, code=1)
+img.set_sform(aff, code=2)
+nib.save(img, out)
+# 4D float64 with only a qform (sform code 0)
+d4 = np.random.default_rng(4).normal(size=(3, 2, 2, 3))
+img4 = nib.Nifti1Image(d4, np.diag([2.0, 3.0, 4.0, 1.0]))
+img4.set_sform(None, code=0)
+img4.set_qform(np.diag([2.0, 3.0, 4.0, 1.0]), code=1)
+nib.save(img4, out.replace('.nii', '_4d.nii'))
+np.save(out.replace('.nii.gz', '_4d.npy'), d4)
+"#;
+
+#[test]
+fn mdtf_reads_what_nibabel_writes() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("nib.nii.gz");
+    run_python(WRITE_NIBABEL, &[p.to_str().unwrap()]);
+    let v = read(&p, &ReadOptions::default()).unwrap().into_scalar().unwrap();
+    assert_eq!(v.geometry.dims, [5, 4, 3]);
+    for ((k, j, i), &got) in v.data.indexed_iter() {
+        let stored = (i + 5 * j + 20 * k) as f32 * 3.0 - 50.0;
+        assert_eq!(got, stored * 0.5 + 7.0, "scl_slope/scl_inter applied at {i},{j},{k}");
+    }
+    // world = affine * (i, j, k): column 0 goes to +y (0.9), column 1 to -x (0.8)
+    let m = v.geometry.world_from_voxel();
+    let close = |a: f64, b: f64| (a - b).abs() < 1e-6;
+    assert!(close(m[1][0], 0.9) && close(m[0][1], -0.8) && close(m[2][2], 1.5));
+    assert!(close(m[0][3], 10.0) && close(m[1][3], -20.0) && close(m[2][3], 5.0));
+    assert!(close(v.geometry.spacing[0], 0.9) && close(v.geometry.spacing[1], 0.8));
+
+    let p4 = dir.path().join("nib_4d.nii.gz");
+    let mf = read(&p4, &ReadOptions::default()).unwrap();
+    assert_eq!(mf.fields.len(), 3);
+    assert_eq!(mf.geometry.spacing, [2.0, 3.0, 4.0]);
+    // Compare with the values numpy saved (x-fastest within each field).
+    let truth = run_python(
+        "import sys, numpy as np; d = np.load(sys.argv[1]); print(' '.join(repr(float(np.float32(x))) for f in range(3) for x in d[..., f].flatten(order='F')))",
+        &[dir.path().join("nib_4d.npy").to_str().unwrap()],
+    );
+    let want: Vec<f32> = truth.split_whitespace().map(|s| s.parse().unwrap()).collect();
+    let got: Vec<f32> = mf.fields.iter().flat_map(|f| f.data.iter().copied()).collect();
+    assert_eq!(got, want);
+}
+
+const WRITE_PYNRRD: &str = r#"
+import sys, nrrd, numpy as np
+d = sys.argv[1]
+vol = (np.arange(4*3*2).reshape((4, 3, 2), order='F') * 1000 - 7000).astype('>i4')
+# Slicer/ITK style: LPS, space directions, kinds, big endian, gzip, attached
+nrrd.write(d + '/lps.nrrd', vol, {'space': 'left-posterior-superior', 'kinds': ['domain'] * 3,
+  'space directions': np.array([[-0.5, 0, 0], [0, -0.5, 0], [0, 0, 1.25]]), 'space origin': np.array([4.0, 5.0, -6.0]),
+  'encoding': 'gzip', 'endian': 'big'})
+# Teem style detached header with spacings only, raw little endian float
+f = (np.arange(4*3*2).reshape((4, 3, 2), order='F') / 8.0).astype('<f4')
+nrrd.write(d + '/teem.nhdr', f, {'spacings': [0.25, 0.5, 2.0], 'kinds': ['space'] * 3, 'encoding': 'raw'}, detached_header=True)
+# 4D with a leading vector axis, as Teem writes gradients
+g = np.stack([f, 2 * f, 3 * f]).astype('<f4')
+nrrd.write(d + '/vec.nrrd', g, {'kinds': ['3-vector', 'domain', 'domain', 'domain'], 'space': 'right-anterior-superior',
+  'space directions': np.array([[np.nan] * 3, [1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]]), 'encoding': 'raw'})
+"#;
+
+#[test]
+fn mdtf_reads_what_pynrrd_writes_with_teem_conventions() {
+    let dir = tempfile::tempdir().unwrap();
+    run_python(WRITE_PYNRRD, &[dir.path().to_str().unwrap()]);
+    let ro = ReadOptions::default();
+    let v = read(&dir.path().join("lps.nrrd"), &ro).unwrap().into_scalar().unwrap();
+    for ((k, j, i), &got) in v.data.indexed_iter() {
+        assert_eq!(got, ((i + 4 * j + 12 * k) * 1000) as f32 - 7000.0);
+    }
+    // LPS (-0.5 along L = +0.5 along R): RAS directions are +x, +y; origin flips x and y.
+    assert_eq!(v.geometry.spacing, [0.5, 0.5, 1.25]);
+    assert_eq!(v.geometry.directions[0], [1.0, 0.0, 0.0]);
+    assert_eq!(v.geometry.origin, [-4.0, -5.0, -6.0]);
+
+    let t = read(&dir.path().join("teem.nhdr"), &ro).unwrap().into_scalar().unwrap();
+    assert_eq!(t.geometry.spacing, [0.25, 0.5, 2.0]);
+    assert_eq!(t.data[[1, 2, 3]], (3 + 4 * 2 + 12) as f32 / 8.0);
+
+    let g = read(&dir.path().join("vec.nrrd"), &ro).unwrap();
+    assert_eq!(g.fields.len(), 3);
+    for (f, field) in g.fields.iter().enumerate() {
+        assert_eq!(field.data, t.data.mapv(|x| x * (f + 1) as f32), "field {f}");
+    }
+}
+
+#[test]
+fn synth_and_convert_output_open_in_both_python_readers() {
+    let dir = tempfile::tempdir().unwrap();
+    let nii = dir.path().join("s.nii.gz");
+    let nrrd = dir.path().join("s.nhdr");
+    mdtf_ok(&[
+        "synth",
+        "erf-sphere",
+        "-o",
+        nii.to_str().unwrap(),
+        "--size",
+        "12,10,8",
+        "--spacing",
+        "1,1,2",
+        "--sigma",
+        "0.5",
+        "--type",
+        "u8",
+        "-q",
+    ]);
+    mdtf_ok(&["convert", nii.to_str().unwrap(), nrrd.to_str().unwrap(), "--type", "u8", "-q"]);
+    let a = dump(DUMP_NIBABEL, &nii);
+    let b = dump(DUMP_PYNRRD, &nrrd);
+    assert_eq!(a["fields"][0], b["fields"][0]);
+    let ours = read(&nii, &ReadOptions::default()).unwrap();
+    let mine: Vec<f64> = ours.fields[0].data.iter().map(|&v| v as f64).collect();
+    assert_eq!(floats(&a["fields"][0]), mine);
+    assert!(mine.contains(&255.0) && mine.contains(&0.0));
+}

@@ -1,1 +1,75 @@
-//! tmp
+//! Helpers of the end-to-end tests: the `mdtf` binary and a Python with
+//! nibabel and pynrrd for cross-tool checks.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+/// Path of the `mdtf` binary of this build, building it if `cargo test` has not.
+pub fn mdtf_path() -> PathBuf {
+    static PATH: OnceLock<PathBuf> = OnceLock::new();
+    PATH.get_or_init(|| {
+        // target/<profile>/deps/<test-binary> -> target/<profile>/mdtf
+        let exe = std::env::current_exe().expect("test binary path");
+        let dir = exe.parent().and_then(|d| d.parent()).expect("target profile folder").to_path_buf();
+        let bin = dir.join(format!("mdtf{}", std::env::consts::EXE_SUFFIX));
+        // Always ask cargo: a no-op when the binary is current, a rebuild when
+        // only this test crate was asked for and the binary is stale.
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let profile = if dir.ends_with("release") { vec!["--release"] } else { vec![] };
+        let status = Command::new(cargo)
+            .args(["build", "--quiet", "-p", "mdtf-cli", "--bin", "mdtf"])
+            .args(profile)
+            .status()
+            .expect("run cargo build for the mdtf binary");
+        assert!(status.success(), "building the mdtf binary failed");
+        assert!(bin.exists(), "no mdtf binary at {}", bin.display());
+        bin
+    })
+    .clone()
+}
+
+/// Runs `mdtf` with `args`.
+pub fn mdtf(args: &[&str]) -> Output {
+    Command::new(mdtf_path()).args(args).output().expect("run mdtf")
+}
+
+/// Runs `mdtf` and asserts success, returning stdout.
+pub fn mdtf_ok(args: &[&str]) -> String {
+    let out = mdtf(args);
+    assert!(out.status.success(), "mdtf {args:?} failed:\n{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// Runs `mdtf`, asserts it failed with exit code 1, and returns stderr.
+pub fn mdtf_err(args: &[&str]) -> String {
+    let out = mdtf(args);
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "mdtf {args:?} should fail; stdout: {}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// The Python interpreter for interop tests: `$MDTF_PYTHON`, else `python3`.
+/// Panics with instructions if nibabel or pynrrd is missing: the interop
+/// tests must run, not skip (CI installs both).
+pub fn python() -> String {
+    let py = std::env::var("MDTF_PYTHON").unwrap_or_else(|_| "python3".into());
+    let ok = Command::new(&py).args(["-c", "import nibabel, nrrd, numpy"]).output();
+    match ok {
+        Ok(o) if o.status.success() => py,
+        _ => panic!(
+            "{py} lacks nibabel/pynrrd/numpy: run `{py} -m pip install nibabel pynrrd numpy` (or set MDTF_PYTHON)"
+        ),
+    }
+}
+
+/// Runs a Python script with arguments and returns its stdout, asserting success.
+pub fn run_python(script: &str, args: &[&str]) -> String {
+    let out = Command::new(python()).arg("-c").arg(script).args(args).output().expect("run python");
+    assert!(out.status.success(), "python failed:\n{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}

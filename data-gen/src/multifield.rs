@@ -51,7 +51,14 @@ impl MultiFieldPhantom {
             .iter()
             .map(|&(name, d, r, vmin, vmax)| SphereField {
                 name: name.into(),
-                sphere: erf_sphere(geometry.clone(), r * e, sigma, vmin, vmax, Some([c[0] + d[0], c[1] + d[1], c[2] + d[2]])),
+                sphere: erf_sphere(
+                    geometry.clone(),
+                    r * e,
+                    sigma,
+                    vmin,
+                    vmax,
+                    Some([c[0] + d[0], c[1] + d[1], c[2] + d[2]]),
+                ),
             })
             .collect();
         MultiFieldPhantom { geometry, fields }
@@ -70,7 +77,8 @@ impl MultiFieldPhantom {
             .fields
             .iter()
             .map(|f| {
-                let (lo, hi) = f.data.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+                let (lo, hi) =
+                    f.data.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
                 ((hi - lo) as f64).max(f64::MIN_POSITIVE)
             })
             .collect();

@@ -9,7 +9,9 @@ use rand_distr::{Distribution, Normal};
 /// the same seed gives the same noise on every machine and thread count.
 /// A non-positive or non-finite `std` leaves the volume unchanged.
 pub fn add_gaussian_noise(volume: &mut Volume, std: f64, seed: u64) {
-    let Ok(normal) = Normal::new(0.0f64, std) else { return };
+    let Ok(normal) = Normal::new(0.0f64, std) else {
+        return;
+    };
     if std <= 0.0 {
         return;
     }

@@ -148,9 +148,8 @@ impl RadialPhantom {
     /// The analytic fields on every voxel.
     pub fn truth(&self) -> RadialTruth {
         let vol = |data| Volume { geometry: self.geometry.clone(), data };
-        let normal = (0..3)
-            .map(|c| Field { name: ["nx", "ny", "nz"][c].into(), data: self.sample(|t| t.normal[c]) })
-            .collect();
+        let normal =
+            (0..3).map(|c| Field { name: ["nx", "ny", "nz"][c].into(), data: self.sample(|t| t.normal[c]) }).collect();
         RadialTruth {
             v: vol(self.sample(|t| t.v)),
             g: vol(self.sample(|t| t.g)),
@@ -181,7 +180,7 @@ mod tests {
         let c = crate::grid_centre(&geo);
         for &(dx, dy, dz) in &[(1.0, 0.0, 0.0), (0.0, 8.0, 0.0), (6.0, 6.0, 3.0), (0.0, 0.0, 11.0), (-3.0, 9.5, 0.1)] {
             let p = [c[0] + dx, c[1] + dy, c[2] + dz];
-            let rho = ((dx * dx + dy * dy + dz * dz) as f64).sqrt();
+            let rho: f64 = (dx * dx + dy * dy + dz * dz).sqrt();
             let x = 9.0 - rho;
             let t = ph.at(p);
             let (v, g, f2) = design_formulas(x, 1.5, 0.0, 255.0);
@@ -216,7 +215,8 @@ mod tests {
         let ph = erf_sphere(Geometry::new([48; 3], [1.0; 3]), 15.0, 3.0, 0.0, 255.0, None);
         let t = ph.truth();
         let (p, x) = (t.p.data, t.x.data);
-        let worst = p.iter().zip(x.iter()).filter(|(_, x)| x.abs() < 6.0).map(|(p, x)| (p - x).abs()).fold(0.0, f32::max);
+        let worst =
+            p.iter().zip(x.iter()).filter(|(_, x)| x.abs() < 6.0).map(|(p, x)| (p - x).abs()).fold(0.0, f32::max);
         assert!(worst < 1e-4, "{worst}");
     }
 

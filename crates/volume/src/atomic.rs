@@ -29,10 +29,8 @@ pub fn refuse_overwriting_inputs(target: &Path, inputs: &[&Path]) -> Result<()> 
 /// Writes `bytes` produced by `fill` to `path` atomically.
 pub fn write_file_atomically(path: &Path, fill: impl FnOnce(&mut dyn Write) -> std::io::Result<()>) -> Result<()> {
     let dir = parent_dir(path);
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".mdtf-partial-")
-        .tempfile_in(&dir)
-        .map_err(|e| VolumeError::io(path, e))?;
+    let mut tmp =
+        tempfile::Builder::new().prefix(".mdtf-partial-").tempfile_in(&dir).map_err(|e| VolumeError::io(path, e))?;
     {
         let mut w = std::io::BufWriter::new(tmp.as_file_mut());
         fill(&mut w).map_err(|e| VolumeError::io(path, e))?;

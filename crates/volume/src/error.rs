@@ -6,12 +6,12 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, thiserror::Error)]
 pub enum VolumeError {
     /// The operating system refused to open, read or write the file.
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Io {
         /// The file concerned.
         path: PathBuf,
         /// The underlying I/O error.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// The file has no bytes at all.
     #[error("{path}: the file is empty")]
@@ -38,7 +38,9 @@ pub enum VolumeError {
         found: u64,
     },
     /// More sample bytes than the header describes (raw data only).
-    #[error("{path}: header/data size mismatch: the header describes {expected} bytes of samples, the file holds {found}")]
+    #[error(
+        "{path}: header/data size mismatch: the header describes {expected} bytes of samples, the file holds {found}"
+    )]
     SizeMismatch {
         /// The file concerned.
         path: PathBuf,
@@ -96,15 +98,17 @@ pub enum VolumeError {
         count: u64,
     },
     /// The gzip stream is corrupt.
-    #[error("{path}: corrupt gzip data: {source}")]
+    #[error("{path}: corrupt gzip data: {cause}")]
     Gzip {
         /// The file concerned.
         path: PathBuf,
         /// What the decompressor reported.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// The file name does not say which format to use.
-    #[error("{path}: unknown file extension (use .nii, .nii.gz, .nrrd or .nhdr; raw data needs its layout given explicitly)")]
+    #[error(
+        "{path}: unknown file extension (use .nii, .nii.gz, .nrrd or .nhdr; raw data needs its layout given explicitly)"
+    )]
     UnknownFormat {
         /// The file concerned.
         path: PathBuf,
@@ -116,7 +120,9 @@ pub enum VolumeError {
         path: PathBuf,
     },
     /// A sample cannot be stored exactly in the requested integer type.
-    #[error("{path}: sample {value} at index {index} is not exactly representable as {target}; quantise first (mdtf pack) or write f32")]
+    #[error(
+        "{path}: sample {value} at index {index} is not exactly representable as {target}; quantise first (mdtf pack) or write f32"
+    )]
     NotRepresentable {
         /// The file concerned.
         path: PathBuf,
@@ -131,18 +137,18 @@ pub enum VolumeError {
     #[error("{0}")]
     Fields(String),
     /// The NIfTI library refused the header or the data.
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Nifti {
         /// The file concerned.
         path: PathBuf,
         /// The library's error.
-        source: nifti::NiftiError,
+        cause: nifti::NiftiError,
     },
 }
 
 impl VolumeError {
     pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
-        VolumeError::Io { path: path.to_path_buf(), source }
+        VolumeError::Io { path: path.to_path_buf(), cause: source }
     }
     pub(crate) fn header(path: &Path, message: impl Into<String>) -> Self {
         VolumeError::Header { path: path.to_path_buf(), message: message.into() }

@@ -5,7 +5,6 @@
 //! directions (node-centred samples, the NIfTI/NRRD convention). World space
 //! is RAS (NIfTI's); NRRD files in LPS are converted on read.
 
-
 /// Geometry of a regular 3D grid.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Geometry {
@@ -22,12 +21,7 @@ pub struct Geometry {
 impl Geometry {
     /// Axis-aligned grid with the given dims and spacing, origin at 0.
     pub fn new(dims: [usize; 3], spacing: [f64; 3]) -> Geometry {
-        Geometry {
-            dims,
-            spacing,
-            origin: [0.0; 3],
-            directions: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-        }
+        Geometry { dims, spacing, origin: [0.0; 3], directions: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] }
     }
 
     /// Same geometry with another origin.

@@ -3,9 +3,9 @@
 use crate::atomic::refuse_overwriting_inputs;
 use crate::dtype::SampleType;
 use crate::error::{Result, VolumeError};
-use crate::nifti_io::{read_nifti, write_nifti};
-use crate::nrrd::{Encoding, read_nrrd, write_nrrd};
-use crate::samples::ReadOptions;
+use crate::nifti_io::{read_nifti_with_info, write_nifti};
+use crate::nrrd::{Encoding, read_nrrd_with_info, write_nrrd};
+use crate::samples::{FileInfo, ReadOptions};
 use crate::volume::{MultiField, Volume};
 use std::path::Path;
 
@@ -52,9 +52,14 @@ impl Format {
 
 /// Reads any supported file (by extension) as a multi-field volume.
 pub fn read(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
+    read_with_info(path, opts).map(|(mf, _)| mf)
+}
+
+/// [`read`], also returning how the file stores its samples.
+pub fn read_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiField, FileInfo)> {
     match Format::from_path(path) {
-        Some(Format::Nifti | Format::NiftiGz) => read_nifti(path, opts),
-        Some(Format::Nrrd | Format::Nhdr) => read_nrrd(path, opts),
+        Some(Format::Nifti | Format::NiftiGz) => read_nifti_with_info(path, opts),
+        Some(Format::Nrrd | Format::Nhdr) => read_nrrd_with_info(path, opts),
         None => Err(VolumeError::UnknownFormat { path: path.to_path_buf() }),
     }
 }

@@ -11,7 +11,9 @@ use crate::dtype::{Endian, SampleType, first_unrepresentable};
 use crate::error::{Result, VolumeError};
 use crate::geometry::Geometry;
 use crate::limits::check_dims;
-use crate::samples::{FieldAxis, ReadOptions, SampleLayout, decode_fields, drain_rest, open_maybe_gz, read_sample_bytes};
+use crate::samples::{
+    FieldAxis, FileInfo, ReadOptions, SampleLayout, decode_fields, drain_rest, open_maybe_gz, read_sample_bytes,
+};
 use crate::volume::{Field, MultiField};
 use ndarray::{Array3, Array4, Axis};
 use nifti::NiftiHeader;
@@ -39,6 +41,11 @@ fn sample_type_of(code: i16) -> Option<SampleType> {
 /// Reads a `.nii` or `.nii.gz` file. A 3D file gives one field; the 4th (and
 /// higher) dimensions become fields named field0, field1 ...
 pub fn read_nifti(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
+    read_nifti_with_info(path, opts).map(|(mf, _)| mf)
+}
+
+/// [`read_nifti`], also returning how the file stores its samples.
+pub fn read_nifti_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiField, FileInfo)> {
     let (mut src, compressed) = open_maybe_gz(path)?;
     let mut head = vec![0u8; HEADER_BYTES];
     let got = read_up_to(&mut src, &mut head).map_err(|e| stream_error(path, e, compressed))?;
@@ -46,7 +53,7 @@ pub fn read_nifti(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
         return Err(VolumeError::header(path, format!("only {got} bytes, a NIfTI-1 header needs 348")));
     }
     let header =
-        NiftiHeader::from_reader(&head[..]).map_err(|e| VolumeError::Nifti { path: path.to_path_buf(), source: e })?;
+        NiftiHeader::from_reader(&head[..]).map_err(|e| VolumeError::Nifti { path: path.to_path_buf(), cause: e })?;
     if &header.magic != b"n+1\0" {
         return Err(VolumeError::header(
             path,
@@ -64,11 +71,7 @@ pub fn read_nifti(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
     let skipped = std::io::copy(&mut (&mut src).take(skip), &mut std::io::sink())
         .map_err(|e| stream_error(path, e, compressed))?;
     if skipped < skip {
-        return Err(VolumeError::Truncated {
-            path: path.to_path_buf(),
-            expected: layout.byte_len(),
-            found: 0,
-        });
+        return Err(VolumeError::Truncated { path: path.to_path_buf(), expected: layout.byte_len(), found: 0 });
     }
     let bytes = read_sample_bytes(path, &mut src, &layout, compressed)?;
     // Trailing bytes are allowed in NIfTI; draining still checks a gzip CRC.
@@ -79,7 +82,8 @@ pub fn read_nifti(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
         .enumerate()
         .map(|(i, data)| Field { name: if layout.fields == 1 { "value".into() } else { format!("field{i}") }, data })
         .collect();
-    MultiField::new(geometry, fields)
+    let info = FileInfo::new("NIfTI-1", &layout, compressed);
+    Ok((MultiField::new(geometry, fields)?, info))
 }
 
 fn read_up_to(src: &mut dyn Read, buf: &mut [u8]) -> std::io::Result<usize> {
@@ -94,7 +98,7 @@ fn read_up_to(src: &mut dyn Read, buf: &mut [u8]) -> std::io::Result<usize> {
 }
 
 fn stream_error(path: &Path, e: std::io::Error, compressed: bool) -> VolumeError {
-    if compressed { VolumeError::Gzip { path: path.to_path_buf(), source: e } } else { VolumeError::io(path, e) }
+    if compressed { VolumeError::Gzip { path: path.to_path_buf(), cause: e } } else { VolumeError::io(path, e) }
 }
 
 fn layout_of(path: &Path, h: &NiftiHeader) -> Result<SampleLayout> {
@@ -154,7 +158,10 @@ fn geometry_of(path: &Path, h: &NiftiHeader, dims: [usize; 3]) -> Result<Geometr
         [[s[0], 0.0, 0.0, 0.0], [0.0, s[1], 0.0, 0.0], [0.0, 0.0, s[2], 0.0]]
     };
     Geometry::from_affine(dims, affine).ok_or_else(|| {
-        VolumeError::header(path, format!("degenerate voxel-to-world transform {affine:?} (a zero or non-finite spacing)"))
+        VolumeError::header(
+            path,
+            format!("degenerate voxel-to-world transform {affine:?} (a zero or non-finite spacing)"),
+        )
     })
 }
 
@@ -233,8 +240,7 @@ fn rotation_to_quaternion(dirs: &[[f64; 3]; 3]) -> ([f64; 3], f64) {
 fn header_for(geometry: &Geometry) -> NiftiHeader {
     let m = geometry.world_from_voxel();
     let ([b, c, d], qfac) = rotation_to_quaternion(&geometry.directions);
-    let mut h = NiftiHeader::default();
-    h.pixdim = [qfac as f32, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0];
+    let mut h = NiftiHeader { pixdim: [qfac as f32, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0], ..Default::default() };
     for a in 0..3 {
         h.pixdim[a + 1] = geometry.spacing[a] as f32;
     }
@@ -274,7 +280,7 @@ pub fn write_nifti(path: &Path, mf: &MultiField, ty: SampleType) -> Result<()> {
     };
     write_path_atomically(path, suffix, |tmp| {
         let opts = WriterOptions::new(tmp).reference_header(&header);
-        let nifti_err = |e| VolumeError::Nifti { path: path.to_path_buf(), source: e };
+        let nifti_err = |e| VolumeError::Nifti { path: path.to_path_buf(), cause: e };
         // The nifti crate takes the logical (x, y, z[, field]) shape; .t() of
         // our (field, z, y, x) array is exactly that, without a copy.
         macro_rules! write_as {

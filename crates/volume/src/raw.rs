@@ -4,7 +4,9 @@ use crate::dtype::{Endian, SampleType};
 use crate::error::{Result, VolumeError};
 use crate::geometry::Geometry;
 use crate::limits::check_dims;
-use crate::samples::{FieldAxis, ReadOptions, SampleLayout, decode_fields, drain_rest, open_maybe_gz, read_sample_bytes};
+use crate::samples::{
+    FieldAxis, ReadOptions, SampleLayout, decode_fields, drain_rest, open_maybe_gz, read_sample_bytes,
+};
 use crate::volume::Volume;
 use std::io::Read;
 use std::path::Path;

@@ -14,6 +14,8 @@ pub enum NanPolicy {
     Refuse,
     /// Replace every NaN or infinite sample with 0.
     Zero,
+    /// Keep them as they are (for inspection, e.g. `mdtf info`; stages refuse them).
+    Keep,
 }
 
 /// Options common to every reader.
@@ -21,6 +23,33 @@ pub enum NanPolicy {
 pub struct ReadOptions {
     /// Policy for NaN / infinite samples.
     pub nan: NanPolicy,
+}
+
+/// What a file says about how it stores its samples (for `mdtf info`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FileInfo {
+    /// Format name, e.g. "NIfTI-1" or "NRRD (detached)".
+    pub format: String,
+    /// Sample type on disk.
+    pub sample_type: SampleType,
+    /// Byte order on disk.
+    pub endian: Endian,
+    /// Whether the samples are gzip-compressed.
+    pub compressed: bool,
+    /// Linear scaling applied on read (slope, intercept), if any.
+    pub scale: Option<(f64, f64)>,
+}
+
+impl FileInfo {
+    pub(crate) fn new(format: &str, layout: &SampleLayout, compressed: bool) -> FileInfo {
+        FileInfo {
+            format: format.to_string(),
+            sample_type: layout.ty,
+            endian: layout.endian,
+            compressed,
+            scale: layout.scale,
+        }
+    }
 }
 
 /// Where the field index sits in the file's sample order.
@@ -68,7 +97,7 @@ pub fn read_sample_bytes(path: &Path, src: &mut dyn Read, layout: &SampleLayout,
         available: "less".into(),
     })?;
     let got = src.take(expected).read_to_end(&mut bytes).map_err(|e| {
-        if compressed { VolumeError::Gzip { path: path.to_path_buf(), source: e } } else { VolumeError::io(path, e) }
+        if compressed { VolumeError::Gzip { path: path.to_path_buf(), cause: e } } else { VolumeError::io(path, e) }
     })?;
     if (got as u64) < expected {
         return Err(VolumeError::Truncated { path: path.to_path_buf(), expected, found: got as u64 });
@@ -90,17 +119,20 @@ pub fn decode_fields(path: &Path, bytes: &[u8], layout: &SampleLayout, opts: &Re
     let bad = all.iter().filter(|v| !v.is_finite()).count() as u64;
     if bad > 0 {
         match opts.nan {
-            NanPolicy::Refuse => return Err(VolumeError::NonFinite { path: path.to_path_buf(), count: bad }),
+            NanPolicy::Refuse => {
+                return Err(VolumeError::NonFinite { path: path.to_path_buf(), count: bad });
+            }
             NanPolicy::Zero => all.iter_mut().filter(|v| !v.is_finite()).for_each(|v| *v = 0.0),
+            NanPolicy::Keep => {}
         }
     }
     let shape = (nz, ny, nx);
     let fields = match layout.field_axis {
         _ if layout.fields == 1 => vec![all],
         FieldAxis::Slowest => all.chunks_exact(per_field).map(|c| c.to_vec()).collect(),
-        FieldAxis::Fastest => (0..layout.fields)
-            .map(|f| all.iter().skip(f).step_by(layout.fields).copied().collect())
-            .collect(),
+        FieldAxis::Fastest => {
+            (0..layout.fields).map(|f| all.iter().skip(f).step_by(layout.fields).copied().collect()).collect()
+        }
     };
     fields
         .into_iter()
@@ -130,6 +162,6 @@ pub fn open_maybe_gz(path: &Path) -> Result<(Box<dyn Read>, bool)> {
 /// file is caught even when the samples themselves decompressed.
 pub fn drain_rest(path: &Path, src: &mut dyn Read, compressed: bool) -> Result<u64> {
     std::io::copy(src, &mut std::io::sink()).map_err(|e| {
-        if compressed { VolumeError::Gzip { path: path.to_path_buf(), source: e } } else { VolumeError::io(path, e) }
+        if compressed { VolumeError::Gzip { path: path.to_path_buf(), cause: e } } else { VolumeError::io(path, e) }
     })
 }

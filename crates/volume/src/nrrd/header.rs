@@ -116,10 +116,10 @@ fn split_vectors(s: &str) -> Vec<&str> {
             }
             ')' => {
                 depth -= 1;
-                if depth == 0 {
-                    if let Some(st) = start.take() {
-                        items.push(&s[st..=i]);
-                    }
+                if depth == 0
+                    && let Some(st) = start.take()
+                {
+                    items.push(&s[st..=i]);
                 }
             }
             c if c.is_whitespace() && depth == 0 => {
@@ -250,16 +250,16 @@ fn parse_header(path: &Path, lines: &[String]) -> Result<NrrdHeader> {
                 )
             }
             "space directions" => {
-                h.directions = Some(
-                    split_vectors(value).into_iter().map(|v| parse_vector(path, v)).collect::<Result<Vec<_>>>()?,
-                )
+                h.directions =
+                    Some(split_vectors(value).into_iter().map(|v| parse_vector(path, v)).collect::<Result<Vec<_>>>()?)
             }
             "space origin" => h.origin = parse_vector(path, value)?,
             "space" => h.space = Some(value.to_ascii_lowercase()),
-            "space dimension" => {
-                if value != "3" {
-                    return Err(VolumeError::header(path, format!("space dimension {value}: only 3D spaces are supported")));
-                }
+            "space dimension" if value != "3" => {
+                return Err(VolumeError::header(
+                    path,
+                    format!("space dimension {value}: only 3D spaces are supported"),
+                ));
             }
             "kinds" => h.kinds = Some(value.split_whitespace().map(|s| s.to_ascii_lowercase()).collect()),
             "data file" | "datafile" => h.data_file = Some(value.to_string()),
@@ -282,10 +282,10 @@ fn parse_header(path: &Path, lines: &[String]) -> Result<NrrdHeader> {
         ("space directions", h.directions.as_ref().map(Vec::len)),
         ("kinds", h.kinds.as_ref().map(Vec::len)),
     ] {
-        if let Some(n) = n {
-            if n != dimension {
-                return Err(VolumeError::header(path, format!("'{what}' lists {n} axes but dimension is {dimension}")));
-            }
+        if let Some(n) = n
+            && n != dimension
+        {
+            return Err(VolumeError::header(path, format!("'{what}' lists {n} axes but dimension is {dimension}")));
         }
     }
     if h.byte_skip < -1 {

@@ -15,7 +15,7 @@ use crate::dtype::{Endian, SampleType, encode_samples, first_unrepresentable};
 use crate::error::{Result, VolumeError};
 use crate::geometry::Geometry;
 use crate::limits::check_dims;
-use crate::samples::{FieldAxis, ReadOptions, SampleLayout, decode_fields, drain_rest, read_sample_bytes};
+use crate::samples::{FieldAxis, FileInfo, ReadOptions, SampleLayout, decode_fields, drain_rest, read_sample_bytes};
 use crate::volume::{Field, MultiField};
 use header::format_vector;
 use std::io::{BufRead, BufReader, Read, Write};
@@ -23,6 +23,11 @@ use std::path::{Path, PathBuf};
 
 /// Reads a `.nrrd` or `.nhdr` file (with its data file).
 pub fn read_nrrd(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
+    read_nrrd_with_info(path, opts).map(|(mf, _)| mf)
+}
+
+/// [`read_nrrd`], also returning how the file stores its samples.
+pub fn read_nrrd_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiField, FileInfo)> {
     let file = std::fs::File::open(path).map_err(|e| VolumeError::io(path, e))?;
     if file.metadata().map_err(|e| VolumeError::io(path, e))?.len() == 0 {
         return Err(VolumeError::Empty { path: path.to_path_buf() });
@@ -36,7 +41,10 @@ pub fn read_nrrd(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
         None => (path.to_path_buf(), Box::new(reader)),
         Some(name) => {
             if name.starts_with("LIST") || name.contains('%') {
-                return Err(VolumeError::header(path, format!("multi-file data ('data file: {name}') is not supported")));
+                return Err(VolumeError::header(
+                    path,
+                    format!("multi-file data ('data file: {name}') is not supported"),
+                ));
             }
             let dp = path.parent().unwrap_or(Path::new(".")).join(name);
             let f = std::fs::File::open(&dp).map_err(|e| VolumeError::io(&dp, e))?;
@@ -68,7 +76,9 @@ pub fn read_nrrd(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
         _ => (0..arrays.len()).map(|i| format!("field{i}")).collect(),
     };
     let fields = names.into_iter().zip(arrays).map(|(name, data)| Field { name, data }).collect();
-    MultiField::new(geometry, fields)
+    let format = if h.data_file.is_some() { "NRRD (detached header)" } else { "NRRD" };
+    let info = FileInfo::new(format, &layout, h.encoding == Encoding::Gzip);
+    Ok((MultiField::new(geometry, fields)?, info))
 }
 
 fn refuse_extra(path: &Path, layout: &SampleLayout, extra: u64) -> Result<()> {
@@ -84,7 +94,7 @@ fn refuse_extra(path: &Path, layout: &SampleLayout, extra: u64) -> Result<()> {
 
 fn skip_bytes(path: &Path, src: &mut dyn Read, n: u64, layout: &SampleLayout, gz: bool) -> Result<()> {
     let got = std::io::copy(&mut src.take(n), &mut std::io::sink()).map_err(|e| {
-        if gz { VolumeError::Gzip { path: path.to_path_buf(), source: e } } else { VolumeError::io(path, e) }
+        if gz { VolumeError::Gzip { path: path.to_path_buf(), cause: e } } else { VolumeError::io(path, e) }
     })?;
     if got < n {
         return Err(VolumeError::Truncated { path: path.to_path_buf(), expected: layout.byte_len(), found: 0 });
@@ -99,7 +109,11 @@ fn read_raw_encoded(path: &Path, mut data: Box<dyn BufRead>, h: &NrrdHeader, lay
         data.read_to_end(&mut all).map_err(|e| VolumeError::io(path, e))?;
         let n = layout.byte_len() as usize;
         if all.len() < n {
-            return Err(VolumeError::Truncated { path: path.to_path_buf(), expected: n as u64, found: all.len() as u64 });
+            return Err(VolumeError::Truncated {
+                path: path.to_path_buf(),
+                expected: n as u64,
+                found: all.len() as u64,
+            });
         }
         return Ok(all.split_off(all.len() - n));
     }
@@ -228,7 +242,10 @@ fn layout_and_geometry(path: &Path, h: &NrrdHeader) -> Result<(SampleLayout, Geo
 /// Teem and Slicer expect; their names are kept in an `mdtf_fields:=` line.
 pub fn write_nrrd(path: &Path, mf: &MultiField, ty: SampleType, encoding: Encoding) -> Result<()> {
     if encoding == Encoding::Ascii {
-        return Err(VolumeError::UnsupportedEncoding { path: path.to_path_buf(), encoding: "ascii (for writing)".into() });
+        return Err(VolumeError::UnsupportedEncoding {
+            path: path.to_path_buf(),
+            encoding: "ascii (for writing)".into(),
+        });
     }
     for f in &mf.fields {
         if let Some((index, value)) = f.data.as_slice().and_then(|s| first_unrepresentable(s, ty)) {
@@ -284,9 +301,8 @@ fn interleaved_samples(mf: &MultiField) -> Vec<f32> {
 fn header_text(mf: &MultiField, ty: SampleType, encoding: Encoding, data_file: Option<&str>) -> String {
     let g = &mf.geometry;
     let m = (mf.fields.len() > 1).then_some(mf.fields.len());
-    let dirs: Vec<String> = (0..3)
-        .map(|a| format_vector([0, 1, 2].map(|r| g.directions[a][r] * g.spacing[a])))
-        .collect();
+    let dirs: Vec<String> =
+        (0..3).map(|a| format_vector([0, 1, 2].map(|r| g.directions[a][r] * g.spacing[a]))).collect();
     let mut s = String::from("NRRD0005\n# written by mdtf\n");
     s += &format!("type: {}\n", header::nrrd_type_name(ty));
     s += &format!("dimension: {}\n", 3 + usize::from(m.is_some()));

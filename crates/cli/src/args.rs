@@ -1,0 +1,194 @@
+//! Command-line arguments (clap derive). Every option says its unit and default.
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+/// mdtf prepares volume data for direct volume rendering with
+/// multidimensional transfer functions: it reads CT/MRI or simulation volumes
+/// (NIfTI, NRRD, raw), measures derivatives, filters, traces boundaries,
+/// builds histograms and packs textures for renderers.
+#[derive(Debug, Parser)]
+#[command(name = "mdtf", version, propagate_version = true, max_term_width = 100)]
+pub struct Cli {
+    #[command(flatten)]
+    pub global: GlobalArgs,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Options of every subcommand.
+#[derive(Debug, Args)]
+pub struct GlobalArgs {
+    /// Worker threads (default: one per core). Results are identical for any count.
+    #[arg(long, global = true, value_name = "N", value_parser = clap::value_parser!(u16).range(1..=4096))]
+    pub threads: Option<u16>,
+    /// No progress or summary on stderr (errors are still printed).
+    #[arg(long, short, global = true)]
+    pub quiet: bool,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Generate a synthetic volume with analytic ground truth (erf sphere, nested shells, multi-field).
+    Synth(SynthArgs),
+    /// Describe a volume file: dims, stored type, geometry, value range, NaN/Inf count, histogram.
+    Info(InfoArgs),
+    /// Convert a volume between formats, chosen by the file extensions (.nii, .nii.gz, .nrrd, .nhdr).
+    Convert(ConvertArgs),
+}
+
+/// Which phantom to generate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Phantom {
+    /// One erf-blurred sphere: v = vmin + (vmax - vmin)(1 + erf(x / (sigma sqrt 2)))/2, x = radius - |P - centre|.
+    ErfSphere,
+    /// Tooth-like nested shells: enamel 230 (radius 0.40 E), dentin 140 (0.33 E), pulp 60 (0.16 E) in
+    /// background 20, where E is the smallest grid extent.
+    Shells,
+    /// Three overlapping erf spheres as a 3-field volume (for multi-field gradients, ||G||).
+    Multifield,
+}
+
+/// Sample type of written volumes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum OutType {
+    /// 32-bit float (exact).
+    F32,
+    /// 8-bit unsigned; values are rounded and clamped to 0..255.
+    U8,
+    /// 16-bit unsigned; values are rounded and clamped to 0..65535.
+    U16,
+}
+
+/// `mdtf synth`.
+#[derive(Debug, Args)]
+#[command(after_help = "Examples:\n  mdtf synth erf-sphere -o sphere.nii.gz --truth truth/\n  \
+    mdtf synth erf-sphere -o noisy.nrrd --size 128 --radius 38.4 --sigma 3 --noise 20 --seed 7\n  \
+    mdtf synth shells -o tooth.nhdr --spacing 0.5,0.5,1.0\n\n\
+    With --truth DIR the analytic fields are written next to each other in DIR, with OUT's extension:\n  \
+    erf-sphere, shells: v (noise-free), g, f2 (f''), x (signed distance, + on the high side), normal (3 fields), p\n  \
+    multifield: jacobian (9 fields, of the [0,1]-normalised fields), gnorm (||Df^T Df||, Frobenius)")]
+pub struct SynthArgs {
+    /// Which phantom.
+    #[arg(value_enum)]
+    pub phantom: Phantom,
+    /// Output volume (.nii, .nii.gz, .nrrd or .nhdr).
+    #[arg(short, long, value_name = "OUT")]
+    pub output: PathBuf,
+    /// Grid size: N for N^3, or NX,NY,NZ.
+    #[arg(long, default_value = "128", value_name = "N|NX,NY,NZ")]
+    pub size: String,
+    /// Sphere radius in world units (erf-sphere only). Default: 0.3 of the smallest extent (38.4 at 128^3).
+    #[arg(long, value_name = "R", allow_negative_numbers = true)]
+    pub radius: Option<f64>,
+    /// Boundary blur: standard deviation of the Gaussian, world units.
+    #[arg(long, default_value_t = 3.0, value_name = "S", allow_negative_numbers = true)]
+    pub sigma: f64,
+    /// Value outside the sphere (erf-sphere only).
+    #[arg(long, default_value_t = 0.0, value_name = "A", allow_negative_numbers = true)]
+    pub vmin: f64,
+    /// Value inside the sphere (erf-sphere only).
+    #[arg(long, default_value_t = 255.0, value_name = "B", allow_negative_numbers = true)]
+    pub vmax: f64,
+    /// Voxel spacing SX,SY,SZ in world units.
+    #[arg(long, default_value = "1,1,1", value_name = "SX,SY,SZ")]
+    pub spacing: String,
+    /// World position of voxel (0,0,0).
+    #[arg(long, default_value = "0,0,0", value_name = "OX,OY,OZ", allow_hyphen_values = true)]
+    pub origin: String,
+    /// Sphere centre in world units (erf-sphere only). Default: the grid centre, index (n-1)/2.
+    #[arg(long, value_name = "CX,CY,CZ", allow_hyphen_values = true)]
+    pub centre: Option<String>,
+    /// Add Gaussian noise of this standard deviation (value units).
+    #[arg(long, value_name = "STD", allow_negative_numbers = true)]
+    pub noise: Option<f64>,
+    /// Seed of the noise (same seed, same noise on every machine).
+    #[arg(long, default_value_t = 1, value_name = "K")]
+    pub seed: u64,
+    /// Write the analytic fields into this folder (see below).
+    #[arg(long, value_name = "DIR")]
+    pub truth: Option<PathBuf>,
+    /// Sample type of the written volume (truth is always f32).
+    #[arg(long = "type", value_enum, default_value_t = OutType::F32)]
+    pub out_type: OutType,
+    /// Gzip NRRD data (NIfTI is compressed by naming it .nii.gz).
+    #[arg(long)]
+    pub gzip: bool,
+}
+
+/// How to read an input: format by extension, or raw with an explicit layout.
+#[derive(Debug, Args)]
+pub struct InputArgs {
+    /// What to do with NaN/Inf samples: refuse the file (default) or replace them with 0.
+    #[arg(long, value_enum, default_value_t = NanArg::Refuse)]
+    pub nan: NanArg,
+    /// Read the input as raw samples of this grid size NX,NY,NZ (no header).
+    #[arg(long, value_name = "NX,NY,NZ", help_heading = "Raw input")]
+    pub raw_dims: Option<String>,
+    /// Raw sample type: u8, i8, u16, i16, u32, i32, f32, f64.
+    #[arg(long, default_value = "u8", value_name = "TYPE", help_heading = "Raw input")]
+    pub raw_type: String,
+    /// Raw byte order.
+    #[arg(long, value_enum, default_value_t = EndianArg::Little, help_heading = "Raw input")]
+    pub raw_endian: EndianArg,
+    /// Raw voxel spacing SX,SY,SZ in world units.
+    #[arg(long, default_value = "1,1,1", value_name = "SX,SY,SZ", help_heading = "Raw input")]
+    pub raw_spacing: String,
+    /// Bytes to skip at the start of a raw file.
+    #[arg(long, default_value_t = 0, value_name = "BYTES", help_heading = "Raw input")]
+    pub raw_skip: u64,
+}
+
+/// `--nan` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum NanArg {
+    /// Refuse a file with NaN or infinite samples, reporting how many.
+    Refuse,
+    /// Replace NaN and infinite samples with 0.
+    Zero,
+}
+
+/// `--raw-endian` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum EndianArg {
+    /// Least significant byte first.
+    Little,
+    /// Most significant byte first.
+    Big,
+}
+
+/// `mdtf info`.
+#[derive(Debug, Args)]
+#[command(
+    after_help = "Example:\n  mdtf info sphere.nii.gz\n  mdtf info scan.raw --raw-dims 256,256,128 --raw-type u16 --raw-spacing 0.5,0.5,1"
+)]
+pub struct InfoArgs {
+    /// The volume file.
+    pub input: PathBuf,
+    /// Bins of the text histogram.
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=200))]
+    pub bins: u32,
+    #[command(flatten)]
+    pub read: InputArgs,
+}
+
+/// `mdtf convert`.
+#[derive(Debug, Args)]
+#[command(after_help = "Examples:\n  mdtf convert scan.nii.gz scan.nrrd\n  mdtf convert ct.nhdr ct.nii --type u16\n  \
+    mdtf convert scan.raw scan.nii.gz --raw-dims 256,256,128 --raw-type i16 --raw-endian big")]
+pub struct ConvertArgs {
+    /// Input volume.
+    pub input: PathBuf,
+    /// Output volume; its extension picks the format. Never the input itself.
+    pub output: PathBuf,
+    /// Sample type to write. Default: f32. Integer types need integer values in range
+    /// (they are refused otherwise; quantisation is the pack stage's job).
+    #[arg(long = "type", value_enum, default_value_t = OutType::F32)]
+    pub out_type: OutType,
+    /// Gzip NRRD data.
+    #[arg(long)]
+    pub gzip: bool,
+    #[command(flatten)]
+    pub read: InputArgs,
+}

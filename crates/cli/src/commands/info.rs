@@ -1,0 +1,94 @@
+//! `mdtf info FILE`: what a volume holds, on stdout.
+
+use crate::args::InfoArgs;
+use crate::input::read_input;
+use crate::progress::Progress;
+use anyhow::Result;
+use mdtf_volume::{FileInfo, MultiField, NanPolicy, ReadOptions};
+use std::fmt::Write;
+
+/// Prints the description of one file.
+pub fn run(args: &InfoArgs, progress: &Progress) -> Result<()> {
+    // Keep NaN/Inf so they can be counted; info never passes them on.
+    let opts = ReadOptions { nan: NanPolicy::Keep };
+    let (mf, info) = progress.step("reading", || read_input(&args.input, &args.read, &opts))?;
+    progress.clear();
+    print!("{}", describe(&args.input.display().to_string(), &mf, &info, args.bins as usize));
+    Ok(())
+}
+
+fn describe(name: &str, mf: &MultiField, info: &FileInfo, bins: usize) -> String {
+    let g = &mf.geometry;
+    let mut s = String::new();
+    let _ = writeln!(s, "file:        {name}");
+    let endian =
+        if info.sample_type.size() > 1 { format!(", {:?} endian", info.endian).to_lowercase() } else { String::new() };
+    let gz = if info.compressed { ", gzip" } else { "" };
+    let _ = writeln!(s, "format:      {}{gz}", info.format);
+    let _ = writeln!(s, "stored type: {}{endian}", info.sample_type);
+    if let Some((slope, inter)) = info.scale {
+        let _ = writeln!(s, "scaling:     value = {slope} * stored + {inter}");
+    }
+    let _ = writeln!(s, "dims:        {} ({} voxels)", g.dims_string(), g.voxel_count());
+    let _ = writeln!(s, "spacing:     {} {} {} (world units)", g.spacing[0], g.spacing[1], g.spacing[2]);
+    let _ = writeln!(s, "origin:      {} {} {}", g.origin[0], g.origin[1], g.origin[2]);
+    let m = g.world_from_voxel();
+    let _ = writeln!(s, "world_from_voxel (RAS):");
+    for row in &m[..3] {
+        let _ = writeln!(s, "  [{:>10.4} {:>10.4} {:>10.4} {:>12.4}]", row[0], row[1], row[2], row[3]);
+    }
+    let _ = writeln!(s, "fields:      {}", mf.fields.len());
+    for f in &mf.fields {
+        let values = f.data.iter().copied();
+        let non_finite = f.data.iter().filter(|v| !v.is_finite()).count();
+        let finite: Vec<f32> = values.filter(|v| v.is_finite()).collect();
+        let _ = writeln!(s, "\nfield '{}':", f.name);
+        let _ = writeln!(s, "  NaN/Inf:   {non_finite}");
+        if finite.is_empty() {
+            let _ = writeln!(s, "  no finite samples");
+            continue;
+        }
+        let (lo, hi) = finite.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+        let mean = finite.iter().map(|&v| v as f64).sum::<f64>() / finite.len() as f64;
+        let _ = writeln!(s, "  range:     {lo} .. {hi}");
+        let _ = writeln!(s, "  mean:      {mean:.6}");
+        s += &text_histogram(&finite, lo, hi, bins);
+    }
+    s
+}
+
+/// Counts per bin with a bar of '#' (linear, 40 characters for the fullest bin).
+fn text_histogram(values: &[f32], lo: f32, hi: f32, bins: usize) -> String {
+    let mut counts = vec![0u64; bins];
+    let width = (hi as f64 - lo as f64) / bins as f64;
+    for &v in values {
+        let b = if width > 0.0 { ((v as f64 - lo as f64) / width) as usize } else { 0 };
+        counts[b.min(bins - 1)] += 1;
+    }
+    let max = counts.iter().copied().max().unwrap_or(1).max(1);
+    let mut s = String::from("  histogram:\n");
+    for (b, &c) in counts.iter().enumerate() {
+        let from = lo as f64 + b as f64 * width;
+        let bar = "#".repeat(((c as f64 / max as f64) * 40.0).ceil() as usize);
+        let _ = writeln!(s, "  {from:>12.4} | {c:>10} {bar}");
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn histogram_counts_every_value_once() {
+        let v: Vec<f32> = (0..100).map(|i| i as f32).collect();
+        let h = text_histogram(&v, 0.0, 99.0, 4);
+        let total: u64 = h
+            .lines()
+            .skip(1)
+            .map(|l| l.split('|').nth(1).unwrap().split_whitespace().next().unwrap().parse::<u64>().unwrap())
+            .sum();
+        assert_eq!(total, 100);
+        assert!(h.lines().nth(1).unwrap().contains(" 25 "));
+    }
+}

@@ -1,0 +1,18 @@
+//! One module per subcommand.
+
+mod convert;
+mod info;
+mod synth;
+
+use crate::args::Command;
+use crate::progress::Progress;
+use anyhow::Result;
+
+/// Runs a parsed subcommand.
+pub fn run(command: Command, progress: &Progress) -> Result<()> {
+    match command {
+        Command::Synth(a) => synth::run(&a, progress),
+        Command::Info(a) => info::run(&a, progress),
+        Command::Convert(a) => convert::run(&a, progress),
+    }
+}

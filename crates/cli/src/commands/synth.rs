@@ -1,0 +1,112 @@
+//! `mdtf synth`: phantoms with analytic ground truth.
+
+use crate::args::{OutType, Phantom, SynthArgs};
+use crate::input::{parse_size, parse_spacing, parse_triple, sample_type};
+use crate::progress::Progress;
+use anyhow::{Context, Result, bail};
+use mdtf_datagen::{MultiFieldPhantom, RadialPhantom, add_gaussian_noise, erf_sphere, min_extent};
+use mdtf_volume::{Format, Geometry, MultiField, SampleType, Volume, WriteOptions, write, write_volume};
+use std::path::{Path, PathBuf};
+
+/// Generates the phantom and, if asked, its truth.
+pub fn run(args: &SynthArgs, progress: &Progress) -> Result<()> {
+    let format = Format::from_path(&args.output)
+        .with_context(|| format!("{}: unknown extension (use .nii, .nii.gz, .nrrd or .nhdr)", args.output.display()))?;
+    let dims = parse_size(&args.size, "--size")?;
+    let spacing = parse_spacing(&args.spacing, "--spacing")?;
+    let origin = parse_triple(&args.origin, "--origin")?;
+    if !(args.sigma.is_finite() && args.sigma > 0.0) {
+        bail!("--sigma must be positive (world units), got {}", args.sigma);
+    }
+    let geometry = Geometry::new(dims, spacing).with_origin(origin);
+    let opts = WriteOptions { ty: sample_type(args.out_type), gzip: args.gzip };
+    let truth_dir = args.truth.as_deref();
+    if let Some(dir) = truth_dir {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create truth folder {}", dir.display()))?;
+    }
+    let truth_path = |dir: &Path, name: &str| -> PathBuf { dir.join(format!("{name}{}", format.extension())) };
+    let write_truth = |name: &str, mf: MultiField| -> Result<()> {
+        if let Some(dir) = truth_dir {
+            let p = truth_path(dir, name);
+            write(&p, &mf, &WriteOptions { ty: SampleType::F32, gzip: args.gzip }, &[])
+                .context("cannot write the truth")?;
+        }
+        Ok(())
+    };
+
+    match args.phantom {
+        Phantom::ErfSphere | Phantom::Shells => {
+            let ph = if args.phantom == Phantom::ErfSphere {
+                let radius = args.radius.unwrap_or(0.3 * min_extent(&geometry));
+                if !(radius.is_finite() && radius > 0.0) {
+                    bail!("--radius must be positive (world units), got {radius}");
+                }
+                let centre = args.centre.as_deref().map(|c| parse_triple(c, "--centre")).transpose()?;
+                erf_sphere(geometry, radius, args.sigma, args.vmin, args.vmax, centre)
+            } else {
+                RadialPhantom::tooth(geometry, args.sigma)
+            };
+            let mut vol = progress.step("generating", || ph.volume());
+            add_noise(&mut vol, args)?;
+            quantise(&mut vol, args.out_type);
+            progress
+                .step("writing", || write_volume(&args.output, &vol, &opts, &[]))
+                .context("cannot write the output")?;
+            if truth_dir.is_some() {
+                let t = progress.step("computing truth", || ph.truth());
+                progress.step("writing truth", || -> Result<()> {
+                    for (name, v) in [("v", t.v), ("g", t.g), ("f2", t.f2), ("x", t.x), ("p", t.p)] {
+                        write_truth(name, MultiField::from(v))?;
+                    }
+                    write_truth("normal", t.normal)
+                })?;
+            }
+        }
+        Phantom::Multifield => {
+            let ph = MultiFieldPhantom::new(geometry, args.sigma);
+            let mut mf = progress.step("generating", || ph.volume());
+            if truth_dir.is_some() {
+                // Truth belongs to the noise-free fields' ranges.
+                let t = progress.step("computing truth", || ph.truth(&mf));
+                write_truth("jacobian", t.jacobian)?;
+                write_truth("gnorm", MultiField::from(t.gnorm))?;
+            }
+            for (n, f) in mf.fields.iter_mut().enumerate() {
+                let mut v = Volume { geometry: ph.geometry.clone(), data: std::mem::take(&mut f.data) };
+                add_noise_seeded(&mut v, args, n as u64)?;
+                quantise(&mut v, args.out_type);
+                f.data = v.data;
+            }
+            progress.step("writing", || write(&args.output, &mf, &opts, &[])).context("cannot write the output")?;
+        }
+    }
+    progress.note(&format!("wrote {}", args.output.display()));
+    if let Some(dir) = truth_dir {
+        progress.note(&format!("wrote analytic truth into {}", dir.display()));
+    }
+    Ok(())
+}
+
+fn add_noise(v: &mut Volume, args: &SynthArgs) -> Result<()> {
+    add_noise_seeded(v, args, 0)
+}
+
+fn add_noise_seeded(v: &mut Volume, args: &SynthArgs, stream: u64) -> Result<()> {
+    if let Some(std) = args.noise {
+        if !(std.is_finite() && std >= 0.0) {
+            bail!("--noise must be a non-negative standard deviation, got {std}");
+        }
+        add_gaussian_noise(v, std, args.seed.wrapping_add(stream.wrapping_mul(0x9E37_79B9_7F4A_7C15)));
+    }
+    Ok(())
+}
+
+/// Rounds and clamps to the integer output type, as an 8/16-bit scanner would store it.
+fn quantise(v: &mut Volume, t: OutType) {
+    let max = match t {
+        OutType::F32 => return,
+        OutType::U8 => 255.0,
+        OutType::U16 => 65535.0,
+    };
+    v.data.mapv_inplace(|x| x.round().clamp(0.0, max));
+}

@@ -1,0 +1,65 @@
+//! Progress on stderr: a spinner per step when stderr is a terminal and
+//! `--quiet` is not given, nothing otherwise (logs of batch jobs stay clean).
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::io::IsTerminal;
+use std::time::{Duration, Instant};
+
+/// Reports the steps of one command.
+pub struct Progress {
+    bar: Option<ProgressBar>,
+    quiet: bool,
+}
+
+impl Progress {
+    /// A reporter; silent when `quiet` or when stderr is not a terminal.
+    pub fn new(quiet: bool) -> Progress {
+        let bar = (!quiet && std::io::stderr().is_terminal()).then(|| {
+            let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
+            bar.set_style(
+                ProgressStyle::with_template("{spinner} {msg} [{elapsed}]")
+                    .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+            );
+            bar.enable_steady_tick(Duration::from_millis(120));
+            bar
+        });
+        Progress { bar, quiet }
+    }
+
+    /// Runs `work` as a named step, showing it while it runs.
+    pub fn step<T>(&self, name: &str, work: impl FnOnce() -> T) -> T {
+        let start = Instant::now();
+        if let Some(bar) = &self.bar {
+            bar.set_message(name.to_string());
+        }
+        let out = work();
+        if let Some(bar) = &self.bar {
+            bar.println(format!("  {name} ({:.2} s)", start.elapsed().as_secs_f64()));
+        }
+        out
+    }
+
+    /// Prints a line of results on stderr unless quiet.
+    pub fn note(&self, line: &str) {
+        if self.quiet {
+            return;
+        }
+        match &self.bar {
+            Some(bar) => bar.println(line),
+            None => eprintln!("{line}"),
+        }
+    }
+
+    /// Removes the spinner (before an error message or at the end).
+    pub fn clear(&self) {
+        if let Some(bar) = &self.bar {
+            bar.finish_and_clear();
+        }
+    }
+}
+
+impl Drop for Progress {
+    fn drop(&mut self) {
+        self.clear();
+    }
+}
