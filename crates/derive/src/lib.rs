@@ -1,4 +1,244 @@
-//! Derivative stage of mdtf: reconstruction kernels and derivative measures
-//! (gradient, g, Hessian, f'', Laplacian, normals, multi-field ||G||).
+//! Derivative stage of mdtf: reconstruction kernels and the measures that
+//! multidimensional transfer functions are built on.
 //!
-//! Placeholder: filled by the derive issue. It holds no functions yet.
+//! [`run`] computes any set of [`Item`]s (value, gradient, g, normal,
+//! Hessian, f'', Laplacian, 1/g, shading weight, and for multi-field input
+//! the Jacobian and ||G||) in one fused separable pass over the volume, with
+//! the [`Kernel`] family and [`Border`] policy of [`DeriveParams`].
+//! Derivatives are per world unit along the grid axes (spacing applied);
+//! outputs keep the input geometry.
+//!
+//! f'' is n^T H n with n = grad f / g (Kindlmann's second directional
+//! derivative; Teem's `2ndDD`), 0 where g < epsilon. Multi-field measures
+//! normalise each field to [0, 1] over its range first, so fields of
+//! different units weigh alike (Kniss et al. 9.3.2).
+
+mod border;
+mod engine;
+mod items;
+mod kernel;
+mod measures;
+
+pub use border::{BORDER_NAMES, Border};
+pub use items::{ITEM_NAMES, Item, Needs, UnknownItem};
+pub use kernel::{AxisTaps, DEFAULT_KERNEL, GAUSS_CUT, KERNEL_NAMES, Kernel, UnknownKernel};
+
+use engine::{Engine, FieldInput, Stencil};
+use mdtf_volume::{Field, MultiField};
+use measures::{Layout, finish_shade};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// Parameters of the derive stage (shared by `mdtf derive` and pipeline files).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DeriveParams {
+    /// Items to compute. Default: g and f2.
+    pub items: Vec<Item>,
+    /// Kernel family. Default: central4, the most accurate on the erf sphere.
+    pub kernel: Kernel,
+    /// Border policy. Default: clamp.
+    pub border: Border,
+    /// g below this counts as zero for normal, f2 and inv_g (value units per world unit).
+    /// Default (None): 1e-6 x value range / smallest spacing.
+    pub epsilon: Option<f32>,
+}
+
+impl Default for DeriveParams {
+    fn default() -> Self {
+        DeriveParams { items: vec![Item::G, Item::F2], kernel: DEFAULT_KERNEL, border: Border::Clamp, epsilon: None }
+    }
+}
+
+/// Errors of the derive stage.
+#[derive(Debug, thiserror::Error)]
+pub enum DeriveError {
+    /// No items were requested.
+    #[error("no items requested (valid: {ITEM_NAMES})")]
+    NoItems,
+    /// A multi-field item on one field, or a single-field item on several.
+    #[error("{0}")]
+    FieldCount(String),
+    /// The volume is smaller than the kernel support along an axis.
+    #[error("the volume is {dims} but kernel {kernel} needs at least {need} samples along {axis}")]
+    TooSmall {
+        /// Volume dims.
+        dims: String,
+        /// Kernel name.
+        kernel: Kernel,
+        /// Samples needed.
+        need: usize,
+        /// Axis name.
+        axis: char,
+    },
+    /// A spacing is zero, negative or not finite.
+    #[error("spacing {0:?} must be positive and finite")]
+    BadSpacing([f64; 3]),
+    /// The input holds NaN or infinite samples.
+    #[error("field '{0}' holds NaN or infinite samples")]
+    NonFinite(String),
+    /// A parameter is out of range.
+    #[error("{0}")]
+    BadParameter(String),
+}
+
+/// The computed items, in the order requested, each a multi-field volume of
+/// its components (e.g. normal: nx, ny, nz) with the input geometry.
+#[derive(Debug, Clone)]
+pub struct DeriveOutput {
+    /// (item, its components).
+    pub items: Vec<(Item, MultiField)>,
+}
+
+impl DeriveOutput {
+    /// The output of one item, if it was requested.
+    pub fn get(&self, item: Item) -> Option<&MultiField> {
+        self.items.iter().find(|(i, _)| *i == item).map(|(_, m)| m)
+    }
+}
+
+/// Runs the derive stage on `input`.
+pub fn run(input: &MultiField, params: &DeriveParams) -> Result<DeriveOutput, DeriveError> {
+    run_with_progress(input, params, &|_, _| {})
+}
+
+/// [`run`], calling `progress(done, total)` as z-slices complete (from worker threads).
+pub fn run_with_progress(
+    input: &MultiField,
+    params: &DeriveParams,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<DeriveOutput, DeriveError> {
+    let items = dedup(&params.items);
+    if items.is_empty() {
+        return Err(DeriveError::NoItems);
+    }
+    let g = &input.geometry;
+    let m = input.fields.len();
+    let multi: Vec<Item> = items.iter().copied().filter(|i| i.is_multi_field()).collect();
+    let single: Vec<Item> = items.iter().copied().filter(|i| !i.is_multi_field()).collect();
+    if !multi.is_empty() && !single.is_empty() {
+        return Err(DeriveError::FieldCount(format!(
+            "multi-field items ({}) and single-field items ({}) cannot be requested together",
+            names(&multi),
+            names(&single)
+        )));
+    }
+    if !single.is_empty() && m != 1 {
+        return Err(DeriveError::FieldCount(format!(
+            "items {} need one field, the input has {m}; pick one field",
+            names(&single)
+        )));
+    }
+    if g.spacing.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+        return Err(DeriveError::BadSpacing(g.spacing));
+    }
+    if let Some(e) = params.epsilon
+        && !(e.is_finite() && e >= 0.0)
+    {
+        return Err(DeriveError::BadParameter(format!("epsilon must be a non-negative number, got {e}")));
+    }
+    if let Kernel::Gauss { sigma } = params.kernel
+        && !(sigma.is_finite() && sigma > 0.0)
+    {
+        return Err(DeriveError::BadParameter(format!("gauss sigma must be positive, got {sigma}")));
+    }
+
+    let ranges: Vec<(f32, f32)> = input
+        .fields
+        .iter()
+        .map(|f| {
+            if f.data.iter().any(|v| !v.is_finite()) {
+                return Err(DeriveError::NonFinite(f.name.clone()));
+            }
+            Ok(f.data.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v))))
+        })
+        .collect::<Result<_, _>>()?;
+    let base = [0, 1, 2].map(|a| params.kernel.axis_taps(g.spacing[a]));
+    for (a, taps) in base.iter().enumerate() {
+        let need = 2 * taps.radius() + 1;
+        if g.dims[a] < need {
+            return Err(DeriveError::TooSmall { dims: g.dims_string(), kernel: params.kernel, need, axis: ['x', 'y', 'z'][a] });
+        }
+    }
+
+    let normalise = !multi.is_empty();
+    let fields: Vec<FieldInput> = input
+        .fields
+        .iter()
+        .zip(&ranges)
+        .map(|(f, &(lo, hi))| {
+            let factor = if normalise { if hi > lo { 1.0 / (hi as f64 - lo as f64) } else { 0.0 } } else { 1.0 };
+            // Every derivative is a product of one x, one y and one z tap: scaling z's taps scales them all once.
+            let [x, y, z] = base.clone();
+            let z = z.scaled(factor);
+            FieldInput { data: f.data.as_slice().unwrap_or(&[]), stencil: Stencil { x, y, z } }
+        })
+        .collect();
+    let epsilon = params.epsilon.unwrap_or_else(|| {
+        let span = ranges.iter().map(|(l, h)| h - l).fold(0.0f32, f32::max);
+        if normalise { 1e-6 / g.min_spacing() as f32 } else { 1e-6 * span / g.min_spacing() as f32 }
+    });
+
+    let layout = Layout::new(&items, m, epsilon);
+    let engine = Engine::new(fields, g.dims, params.border, Needs::of(&items));
+    let [nx, ny, nz] = g.dims;
+    let plane = nx * ny;
+    let mut buffers: Vec<Vec<f32>> = (0..layout.components()).map(|_| vec![0.0f32; plane * nz]).collect();
+    {
+        let mut per_slice: Vec<Vec<&mut [f32]>> = (0..nz).map(|_| Vec::with_capacity(buffers.len())).collect();
+        for buf in buffers.iter_mut() {
+            for (k, chunk) in buf.chunks_mut(plane).enumerate() {
+                per_slice[k].push(chunk);
+            }
+        }
+        let done = AtomicUsize::new(0);
+        per_slice.into_par_iter().enumerate().for_each_init(
+            || engine.scratch(),
+            |scratch, (k, mut outs)| {
+                engine.slice(k, scratch, |j, s| layout.write_row(s, j, &mut outs));
+                progress(done.fetch_add(1, Ordering::Relaxed) + 1, nz);
+            },
+        );
+    }
+
+    let mut buffers = buffers.into_iter();
+    let mut out = Vec::with_capacity(items.len());
+    for &(item, _, n) in &layout.items {
+        let names: Vec<String> = if item == Item::Jacobian {
+            input
+                .fields
+                .iter()
+                .flat_map(|f| ["x", "y", "z"].map(|a| format!("d{}/d{a}", f.name)))
+                .collect()
+        } else {
+            item.components().iter().map(|s| s.to_string()).collect()
+        };
+        let mut comps = Vec::with_capacity(n);
+        for name in names {
+            let mut data = buffers.next().unwrap_or_default();
+            if item == Item::Shade {
+                finish_shade(&mut data);
+            }
+            let array = ndarray::Array3::from_shape_vec(g.shape(), data)
+                .map_err(|e| DeriveError::BadParameter(format!("internal shape error: {e}")))?;
+            comps.push(Field { name, data: array });
+        }
+        out.push((item, MultiField { geometry: g.clone(), fields: comps }));
+    }
+    Ok(DeriveOutput { items: out })
+}
+
+fn dedup(items: &[Item]) -> Vec<Item> {
+    let mut out: Vec<Item> = Vec::new();
+    for &i in items {
+        if !out.contains(&i) {
+            out.push(i);
+        }
+    }
+    out
+}
+
+fn names(items: &[Item]) -> String {
+    items.iter().map(|i| i.name()).collect::<Vec<_>>().join(", ")
+}
