@@ -216,3 +216,76 @@ fn bad_parameters_are_named() {
     assert!(mdtf_err(&["synth", "erf-sphere", "-o", o, "--size", "4,4"]).contains("--size"));
     assert!(mdtf_err(&["synth", "erf-sphere", "-o", "x.png"]).contains("unknown extension"));
 }
+
+#[test]
+fn derive_writes_one_file_per_item_matching_the_analytic_truth() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = dir.path().join("s.nrrd");
+    let truth = dir.path().join("truth");
+    let out = dir.path().join("d");
+    mdtf_ok(&[
+        "synth",
+        "erf-sphere",
+        "-o",
+        s.to_str().unwrap(),
+        "--size",
+        "64",
+        "--radius",
+        "19.2",
+        "--sigma",
+        "3",
+        "--truth",
+        truth.to_str().unwrap(),
+        "-q",
+    ]);
+    mdtf_ok(&[
+        "derive",
+        s.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--items",
+        "g,f2,normal",
+        "--format",
+        "nrrd",
+        "-q",
+    ]);
+    let ro = ReadOptions::default();
+    let g = read_scalar(&out.join("g.nrrd"), &ro).unwrap();
+    let tg = read_scalar(&truth.join("g.nrrd"), &ro).unwrap();
+    let x = read_scalar(&truth.join("x.nrrd"), &ro).unwrap();
+    let n = read(&out.join("normal.nrrd"), &ro).unwrap();
+    assert_eq!(n.fields.len(), 3);
+    assert_eq!(g.geometry, tg.geometry);
+    let peak = 255.0 / (3.0 * (2.0 * PI).sqrt());
+    let (mut err, mut count) = (0.0, 0);
+    for (idx, &xv) in x.data.indexed_iter() {
+        if xv.abs() < 6.0 {
+            err += (g.data[idx] - tg.data[idx]).abs() as f64;
+            count += 1;
+        }
+    }
+    let mean = err / count as f64 / peak;
+    assert!(mean < 1e-3, "mean g error {mean:e}");
+}
+
+#[test]
+fn derive_refuses_bad_requests_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = dir.path().join("a.nii");
+    let b = dir.path().join("b.nii");
+    mdtf_ok(&["synth", "erf-sphere", "-o", a.to_str().unwrap(), "--size", "16", "-q"]);
+    mdtf_ok(&["synth", "erf-sphere", "-o", b.to_str().unwrap(), "--size", "16", "--spacing", "1,1,2", "-q"]);
+    let out = dir.path().join("out");
+    let o = out.to_str().unwrap();
+    let e = mdtf_err(&["derive", a.to_str().unwrap(), "-o", o, "--items", "g,fpp"]);
+    assert!(e.contains("unknown item 'fpp'") && e.contains("f2, laplacian"), "{e}");
+    let e = mdtf_err(&["derive", a.to_str().unwrap(), "-o", o, "--kernel", "cubic"]);
+    assert!(e.contains("unknown kernel 'cubic'") && e.contains("gauss:SIGMA"), "{e}");
+    let e = mdtf_err(&["derive", a.to_str().unwrap(), b.to_str().unwrap(), "-o", o, "--items", "gnorm"]);
+    assert!(e.contains("spacing"), "{e}");
+    let tiny = dir.path().join("t.nii");
+    mdtf_ok(&["synth", "erf-sphere", "-o", tiny.to_str().unwrap(), "--size", "3,8,8", "-q"]);
+    let e = mdtf_err(&["derive", tiny.to_str().unwrap(), "-o", o]);
+    assert!(e.contains("needs at least 5 samples along x"), "{e}");
+    assert!(!out.exists() || std::fs::read_dir(&out).unwrap().count() == 0);
+}

@@ -39,6 +39,30 @@ impl Progress {
         out
     }
 
+    /// Runs `work` as a named step with a bar counting to `total`; `work`
+    /// receives a callback `(done, total)` that is safe to call from worker threads.
+    pub fn counted<T>(&self, name: &str, total: u64, work: impl FnOnce(&(dyn Fn(usize, usize) + Sync)) -> T) -> T {
+        let start = Instant::now();
+        let Some(bar) = &self.bar else {
+            return work(&|_, _| {});
+        };
+        bar.set_message(name.to_string());
+        bar.set_length(total);
+        bar.set_position(0);
+        bar.set_style(
+            ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} [{elapsed}]")
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        let out = work(&|done, _| bar.set_position(done as u64));
+        bar.set_style(
+            ProgressStyle::with_template("{spinner} {msg} [{elapsed}]")
+                .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+        );
+        bar.set_length(0);
+        bar.println(format!("  {name} ({:.2} s)", start.elapsed().as_secs_f64()));
+        out
+    }
+
     /// Prints a line of results on stderr unless quiet.
     pub fn note(&self, line: &str) {
         if self.quiet {

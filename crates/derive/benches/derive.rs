@@ -4,7 +4,7 @@
 
 use divan::counter::ItemsCount;
 use mdtf_datagen::erf_sphere;
-use mdtf_derive::{DeriveParams, Item, Kernel, run};
+use mdtf_derive::{DeriveParams, Item, Kernel, run, run_with_progress};
 use mdtf_volume::{Geometry, MultiField};
 
 fn main() {
@@ -44,4 +44,19 @@ fn g_central_256(bencher: divan::Bencher) {
     let input = sphere(256);
     let params = DeriveParams { items: vec![Item::G], kernel: Kernel::Central, ..DeriveParams::default() };
     bencher.counter(ItemsCount::new(256usize.pow(3))).bench(|| run(&input, &params));
+}
+
+/// g + f'' + normal into reused output memory (no page faults), central and default kernels, 256^3.
+#[divan::bench(args = ["central", "central4"], sample_count = 5, sample_size = 1)]
+fn g_f2_normal_256_reused(bencher: divan::Bencher, kernel: &str) {
+    let input = sphere(256);
+    let params = DeriveParams {
+        items: vec![Item::G, Item::F2, Item::Normal],
+        kernel: kernel.parse::<Kernel>().unwrap_or(Kernel::Central),
+        ..DeriveParams::default()
+    };
+    let mut previous = run(&input, &params).ok();
+    bencher.counter(ItemsCount::new(256usize.pow(3))).bench_local(|| {
+        previous = run_with_progress(&input, &params, previous.take(), &|_, _| {}).ok();
+    });
 }

@@ -1,15 +1,17 @@
-//! The fused separable pass: for one output z-slice at a time, filter along
-//! z into whole planes, then along y and x row by row, producing every
-//! derivative the requested items need in one sweep over the data.
+//! The fused separable pass: for one output z-slice at a time, row by row,
+//! filter along z into a small ring of rows, then along y and x, producing
+//! every derivative the requested items need in one sweep over the data.
 //!
-//! Per output slice and field the working set is at most three z-filtered
-//! planes plus a few rows, so there are no full-volume temporaries. Every
+//! Per thread and field the working set is a ring of 3 x (2 R_y + 1)
+//! z-filtered rows plus a few padded rows (a few tens of KiB: it stays in
+//! L1/L2), so there are no full-volume or even full-plane temporaries. Every
 //! voxel's arithmetic is the same whatever slice order or thread runs it, so
 //! results are bit-identical for any thread count.
 
 use crate::border::Border;
 use crate::items::Needs;
 use crate::kernel::{AxisTaps, Taps};
+use crate::measures::Layout;
 
 /// Taps along x, y and z (in world units) for one field.
 #[derive(Debug, Clone)]
@@ -34,6 +36,8 @@ pub(crate) struct Rows {
     pub gy: Vec<f32>,
     pub gz: Vec<f32>,
     pub g: Vec<f32>,
+    /// 1 / g where g >= epsilon, else 0 (so normals and f'' are 0 there).
+    pub g_inv: Vec<f32>,
     pub hxx: Vec<f32>,
     pub hyy: Vec<f32>,
     pub hzz: Vec<f32>,
@@ -42,10 +46,31 @@ pub(crate) struct Rows {
     pub hyz: Vec<f32>,
 }
 
+/// Borrowed derivative rows of one field at the current output row (each nx
+/// samples; empty where not needed). Where the x value kernel is the
+/// identity, value, gy, gz, hyy, hzz and hyz are views of the y-filtered
+/// rows instead of copies.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct RowsView<'s> {
+    pub value: &'s [f32],
+    pub gx: &'s [f32],
+    pub gy: &'s [f32],
+    pub gz: &'s [f32],
+    pub g: &'s [f32],
+    pub g_inv: &'s [f32],
+    pub hxx: &'s [f32],
+    pub hyy: &'s [f32],
+    pub hzz: &'s [f32],
+    pub hxy: &'s [f32],
+    pub hxz: &'s [f32],
+    pub hyz: &'s [f32],
+}
+
 /// Per-thread working memory for one field.
 struct FieldScratch {
-    /// z-filtered planes: value, first and second derivative along z.
-    z: [Vec<f32>; 3],
+    /// Ring of z-filtered rows (value, first, second derivative along z):
+    /// row position p (j + dy, unclamped) lives in slot (p + R_y) mod (2 R_y + 1).
+    z: [Vec<Vec<f32>>; 3],
     /// y-then-z combinations as padded rows: 00, 01, 10, 02, 20, 11 (z order, y order).
     c: [Vec<f32>; 6],
     rows: Rows,
@@ -54,13 +79,44 @@ struct FieldScratch {
 /// Per-thread working memory of the engine.
 pub(crate) struct Scratch {
     fields: Vec<FieldScratch>,
+    pad: usize,
+    x_identity: bool,
 }
 
 impl Scratch {
     /// Derivative rows of field `f` for the row just computed.
-    pub fn rows(&self, f: usize) -> &Rows {
-        &self.fields[f].rows
+    pub fn rows(&self, f: usize) -> RowsView<'_> {
+        self.fields[f].view(self.pad, self.x_identity)
     }
+}
+
+impl FieldScratch {
+    fn view(&self, pad: usize, x_identity: bool) -> RowsView<'_> {
+        let (r, c) = (&self.rows, &self.c);
+        let mid = |k: usize, own| x0_row(c, k, own, pad, x_identity);
+        RowsView {
+            value: mid(C00, &r.value),
+            gx: &r.gx,
+            gy: mid(C01, &r.gy),
+            gz: mid(C10, &r.gz),
+            g: &r.g,
+            g_inv: &r.g_inv,
+            hxx: &r.hxx,
+            hyy: mid(C02, &r.hyy),
+            hzz: mid(C20, &r.hzz),
+            hxy: &r.hxy,
+            hxz: &r.hxz,
+            hyz: mid(C11, &r.hyz),
+        }
+    }
+}
+
+/// The x0-filtered row of combination `k`: the middle of the padded row when
+/// the x value kernel is the identity, else the row computed into `own`.
+#[inline(always)]
+fn x0_row<'s>(c: &'s [Vec<f32>; 6], k: usize, own: &'s [f32], pad: usize, x_identity: bool) -> &'s [f32] {
+    let row = &c[k];
+    if x_identity && !row.is_empty() { &row[pad..row.len() - pad] } else { own }
 }
 
 /// The fused derivative pass over a volume of dims (nx, ny, nz).
@@ -69,7 +125,11 @@ pub(crate) struct Engine<'a> {
     dims: [usize; 3],
     border: Border,
     needs: Needs,
+    epsilon: f32,
     pad: usize,
+    ry: usize,
+    /// Every field's x value kernel is the identity (interpolating kernels).
+    x_identity: bool,
 }
 
 const C00: usize = 0;
@@ -79,29 +139,78 @@ const C02: usize = 3;
 const C20: usize = 4;
 const C11: usize = 5;
 
-/// out = sum of w * src[offset-shifted] over taps; `src_at(o)` gives the source for offset o.
-#[inline]
+/// out = sum of w * src_at(o) over the taps (o, w), in tap order. Up to five
+/// taps are summed in one loop (one store per sample instead of one per tap);
+/// longer kernels (Gaussians) accumulate five taps at a time.
+#[inline(always)]
 fn combine<'s>(out: &mut [f32], taps: &Taps, src_at: impl Fn(isize) -> &'s [f32]) {
-    let mut first = true;
-    for &(o, w) in taps {
-        let src = &src_at(o)[..out.len()];
-        if first {
-            out.iter_mut().zip(src).for_each(|(d, s)| *d = w * s);
-            first = false;
-        } else {
-            out.iter_mut().zip(src).for_each(|(d, s)| *d += w * s);
+    let n = out.len();
+    let src = |t: usize| &src_at(taps[t].0)[..n];
+    let w = |t: usize| taps[t].1;
+    match taps.len() {
+        0 => out.fill(0.0),
+        1 => {
+            let (s0, w0) = (src(0), w(0));
+            for (o, a) in out.iter_mut().zip(s0) {
+                *o = w0 * a;
+            }
+        }
+        2 => {
+            let (s0, s1, w0, w1) = (src(0), src(1), w(0), w(1));
+            for ((o, a), b) in out.iter_mut().zip(s0).zip(s1) {
+                *o = w0 * a + w1 * b;
+            }
+        }
+        3 => {
+            let (s0, s1, s2) = (src(0), src(1), src(2));
+            let (w0, w1, w2) = (w(0), w(1), w(2));
+            for (((o, a), b), c) in out.iter_mut().zip(s0).zip(s1).zip(s2) {
+                *o = w0 * a + w1 * b + w2 * c;
+            }
+        }
+        4 => {
+            let (s0, s1, s2, s3) = (src(0), src(1), src(2), src(3));
+            let (w0, w1, w2, w3) = (w(0), w(1), w(2), w(3));
+            for ((((o, a), b), c), d) in out.iter_mut().zip(s0).zip(s1).zip(s2).zip(s3) {
+                *o = w0 * a + w1 * b + w2 * c + w3 * d;
+            }
+        }
+        len => {
+            let (s0, s1, s2, s3, s4) = (src(0), src(1), src(2), src(3), src(4));
+            let (w0, w1, w2, w3, w4) = (w(0), w(1), w(2), w(3), w(4));
+            for (((((o, a), b), c), d), e) in out.iter_mut().zip(s0).zip(s1).zip(s2).zip(s3).zip(s4) {
+                *o = w0 * a + w1 * b + w2 * c + w3 * d + w4 * e;
+            }
+            for t in 5..len {
+                let (st, wt) = (src(t), w(t));
+                for (o, a) in out.iter_mut().zip(st) {
+                    *o += wt * a;
+                }
+            }
         }
     }
-    if first {
-        out.fill(0.0);
-    }
+}
+
+/// x-filters a padded row (`pad` border samples each side) into `dst`.
+#[inline(always)]
+fn x_pass(dst: &mut [f32], src: &[f32], xtaps: &Taps, pad: usize) {
+    combine(dst, xtaps, |o| &src[(pad as isize + o) as usize..]);
 }
 
 impl<'a> Engine<'a> {
     /// An engine for these fields (all of dims `dims`) computing what `needs` asks.
-    pub fn new(fields: Vec<FieldInput<'a>>, dims: [usize; 3], border: Border, needs: Needs) -> Engine<'a> {
+    /// `epsilon`: g below it counts as 0 for the inverse gradient row.
+    pub fn new(
+        fields: Vec<FieldInput<'a>>,
+        dims: [usize; 3],
+        border: Border,
+        needs: Needs,
+        epsilon: f32,
+    ) -> Engine<'a> {
         let pad = fields.iter().map(|f| f.stencil.x.radius()).max().unwrap_or(0);
-        Engine { fields, dims, border, needs, pad }
+        let ry = fields.iter().map(|f| f.stencil.y.radius()).max().unwrap_or(0);
+        let x_identity = fields.iter().all(|f| f.stencil.x.d0 == [(0, 1.0)]);
+        Engine { fields, dims, border, needs, epsilon, pad, ry, x_identity }
     }
 
     fn z_types(&self) -> usize {
@@ -116,8 +225,8 @@ impl<'a> Engine<'a> {
 
     /// Fresh working memory for one thread.
     pub fn scratch(&self) -> Scratch {
-        let [nx, ny, _] = self.dims;
-        let plane = nx * ny;
+        let nx = self.dims[0];
+        let ring = 2 * self.ry + 1;
         let padded = nx + 2 * self.pad;
         let n = self.needs;
         let row = |needed: bool| if needed { vec![0.0f32; nx] } else { Vec::new() };
@@ -125,7 +234,7 @@ impl<'a> Engine<'a> {
             .fields
             .iter()
             .map(|_| FieldScratch {
-                z: std::array::from_fn(|t| if t < self.z_types() { vec![0.0; plane] } else { Vec::new() }),
+                z: std::array::from_fn(|t| if t < self.z_types() { vec![vec![0.0; nx]; ring] } else { Vec::new() }),
                 c: std::array::from_fn(|c| {
                     let needed = match c {
                         C00 => true,
@@ -140,6 +249,7 @@ impl<'a> Engine<'a> {
                     gy: row(n.grad),
                     gz: row(n.grad),
                     g: row(n.grad),
+                    g_inv: row(n.grad),
                     hxx: row(n.hessian),
                     hyy: row(n.hessian),
                     hzz: row(n.hessian),
@@ -149,86 +259,129 @@ impl<'a> Engine<'a> {
                 },
             })
             .collect();
-        Scratch { fields }
+        Scratch { fields, pad: self.pad, x_identity: self.x_identity }
     }
 
     /// Computes output slice `k`, calling `emit(j, scratch)` after each row j.
+    /// Always inlined, so that it is compiled for the caller's target features.
+    #[inline(always)]
     pub fn slice(&self, k: usize, scratch: &mut Scratch, mut emit: impl FnMut(usize, &Scratch)) {
-        let [nx, ny, nz] = self.dims;
-        let plane = nx * ny;
-        let border = self.border;
+        let ny = self.dims[1];
+        let ry = self.ry as isize;
         for (field, fs) in self.fields.iter().zip(scratch.fields.iter_mut()) {
-            let st = &field.stencil;
-            let ztaps = [&st.z.d0, &st.z.d1, &st.z.d2];
-            for t in 0..self.z_types() {
-                let at = |o: isize| {
-                    let kk = border.index(k as isize + o, nz);
-                    &field.data[kk * plane..(kk + 1) * plane]
-                };
-                combine(&mut fs.z[t], ztaps[t], at);
+            for p in -ry..ry {
+                self.z_row(field, fs, k, p);
             }
         }
         for j in 0..ny {
             for (field, fs) in self.fields.iter().zip(scratch.fields.iter_mut()) {
+                self.z_row(field, fs, k, j as isize + ry);
                 self.row(field, fs, j);
             }
             emit(j, scratch);
         }
     }
 
+    /// Ring slot of row position p.
+    #[inline]
+    fn slot(&self, p: isize) -> usize {
+        (p + self.ry as isize).rem_euclid(2 * self.ry as isize + 1) as usize
+    }
+
+    /// z-filters source row position p (clamped by the border policy) of slice k into its ring slot.
+    #[inline(always)]
+    fn z_row(&self, field: &FieldInput, fs: &mut FieldScratch, k: usize, p: isize) {
+        let [nx, ny, nz] = self.dims;
+        let border = self.border;
+        let jj = border.index(p, ny);
+        let slot = self.slot(p);
+        let st = &field.stencil;
+        let ztaps = [&st.z.d0, &st.z.d1, &st.z.d2];
+        for t in 0..self.z_types() {
+            let at = |o: isize| {
+                let kk = border.index(k as isize + o, nz);
+                let start = (kk * ny + jj) * nx;
+                &field.data[start..start + nx]
+            };
+            combine(&mut fs.z[t][slot], ztaps[t], at);
+        }
+    }
+
+    /// y-filters the ring rows around row j into a padded row (border values in the padding).
+    #[inline(always)]
+    fn y_pass(&self, dst: &mut [f32], ring: &[Vec<f32>], ytaps: &Taps, j: usize) {
+        let (nx, pad, border) = (self.dims[0], self.pad, self.border);
+        combine(&mut dst[pad..pad + nx], ytaps, |o| ring[self.slot(j as isize + o)].as_slice());
+        for p in 0..pad {
+            dst[pad - 1 - p] = dst[pad + border.index(-1 - p as isize, nx)];
+            dst[pad + nx + p] = dst[pad + border.index((nx + p) as isize, nx)];
+        }
+    }
+
     /// Fills the derivative rows of output row j from the z-filtered planes.
+    #[inline(always)]
     fn row(&self, field: &FieldInput, fs: &mut FieldScratch, j: usize) {
-        let [nx, ny, _] = self.dims;
-        let (pad, border, n) = (self.pad, self.border, self.needs);
+        let (pad, n) = (self.pad, self.needs);
         let st = &field.stencil;
         let FieldScratch { z, c, rows } = fs;
         // y pass: combination (z order, y order) as a padded row.
-        let ypass = |dst: &mut Vec<f32>, zt: usize, ytaps: &Taps| {
-            let plane = &z[zt];
-            let at = |o: isize| {
-                let jj = border.index(j as isize + o, ny);
-                &plane[jj * nx..(jj + 1) * nx]
-            };
-            combine(&mut dst[pad..pad + nx], ytaps, at);
-            for p in 0..pad {
-                dst[pad - 1 - p] = dst[pad + border.index(-1 - p as isize, nx)];
-                dst[pad + nx + p] = dst[pad + border.index((nx + p) as isize, nx)];
-            }
-        };
-        ypass(&mut c[C00], 0, &st.y.d0);
+        self.y_pass(&mut c[C00], &z[0], &st.y.d0, j);
         if n.grad || n.hessian {
-            ypass(&mut c[C01], 0, &st.y.d1);
-            ypass(&mut c[C10], 1, &st.y.d0);
+            self.y_pass(&mut c[C01], &z[0], &st.y.d1, j);
+            self.y_pass(&mut c[C10], &z[1], &st.y.d0, j);
         }
         if n.hessian {
-            ypass(&mut c[C02], 0, &st.y.d2);
-            ypass(&mut c[C20], 2, &st.y.d0);
-            ypass(&mut c[C11], 1, &st.y.d1);
+            self.y_pass(&mut c[C02], &z[0], &st.y.d2, j);
+            self.y_pass(&mut c[C20], &z[2], &st.y.d0, j);
+            self.y_pass(&mut c[C11], &z[1], &st.y.d1, j);
         }
-        // x pass: shifted reads of the padded rows.
-        let xpass = |dst: &mut [f32], src: &[f32], xtaps: &Taps| {
-            combine(dst, xtaps, |o| &src[(pad as isize + o) as usize..]);
-        };
-        if n.value {
-            xpass(&mut rows.value, &c[C00], &st.x.d0);
+        // x pass: shifted reads of the padded rows. With an identity x value
+        // kernel the x0 rows are the middles of the padded rows (see `view`).
+        let copy_x0 = !self.x_identity;
+        if n.value && copy_x0 {
+            x_pass(&mut rows.value, &c[C00], &st.x.d0, pad);
         }
-        if n.grad || n.hessian {
-            if n.grad {
-                xpass(&mut rows.gx, &c[C00], &st.x.d1);
-                xpass(&mut rows.gy, &c[C01], &st.x.d0);
-                xpass(&mut rows.gz, &c[C10], &st.x.d0);
-                for (((g, x), y), zz) in rows.g.iter_mut().zip(&rows.gx).zip(&rows.gy).zip(&rows.gz) {
-                    *g = (x * x + y * y + zz * zz).sqrt();
-                }
+        if n.grad {
+            x_pass(&mut rows.gx, &c[C00], &st.x.d1, pad);
+            if copy_x0 {
+                x_pass(&mut rows.gy, &c[C01], &st.x.d0, pad);
+                x_pass(&mut rows.gz, &c[C10], &st.x.d0, pad);
             }
-            if n.hessian {
-                xpass(&mut rows.hxx, &c[C00], &st.x.d2);
-                xpass(&mut rows.hxy, &c[C01], &st.x.d1);
-                xpass(&mut rows.hxz, &c[C10], &st.x.d1);
-                xpass(&mut rows.hyy, &c[C02], &st.x.d0);
-                xpass(&mut rows.hzz, &c[C20], &st.x.d0);
-                xpass(&mut rows.hyz, &c[C11], &st.x.d0);
+        }
+        if n.hessian {
+            x_pass(&mut rows.hxx, &c[C00], &st.x.d2, pad);
+            x_pass(&mut rows.hxy, &c[C01], &st.x.d1, pad);
+            x_pass(&mut rows.hxz, &c[C10], &st.x.d1, pad);
+            if copy_x0 {
+                x_pass(&mut rows.hyy, &c[C02], &st.x.d0, pad);
+                x_pass(&mut rows.hzz, &c[C20], &st.x.d0, pad);
+                x_pass(&mut rows.hyz, &c[C11], &st.x.d0, pad);
+            }
+        }
+        if n.grad {
+            let Rows { g, g_inv, gx, gy, gz, .. } = rows;
+            let gy = x0_row(c, C01, gy, pad, self.x_identity);
+            let gz = x0_row(c, C10, gz, pad, self.x_identity);
+            let eps = self.epsilon;
+            for ((((g, gi), x), y), zz) in g.iter_mut().zip(g_inv.iter_mut()).zip(gx.iter()).zip(gy).zip(gz) {
+                *g = (x * x + y * y + zz * zz).sqrt();
+                // a select, not a branch, so the loop vectorises
+                *gi = if *g >= eps { 1.0 / *g } else { 0.0 };
             }
         }
     }
+}
+
+/// Computes slice `k` of every requested item into `outs` (one z-slice per
+/// component). Compiled for AVX2 as well as the baseline instruction set and
+/// picked at run time; no FMA is enabled, so both paths give the same bits.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+avx2", "x86_64+avx2"))]
+pub(crate) fn compute_slice(
+    engine: &Engine,
+    layout: &Layout,
+    k: usize,
+    scratch: &mut Scratch,
+    outs: &mut [&mut [f32]],
+) {
+    engine.slice(k, scratch, |j, s| layout.write_row(s, j, outs));
 }

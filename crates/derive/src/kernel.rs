@@ -69,7 +69,12 @@ impl AxisTaps {
 }
 
 fn sparse(center: isize, dense: &[f64], scale: f64) -> Taps {
-    dense.iter().enumerate().filter(|(_, w)| **w != 0.0).map(|(i, w)| (i as isize - center, (w * scale) as f32)).collect()
+    dense
+        .iter()
+        .enumerate()
+        .filter(|(_, w)| **w != 0.0)
+        .map(|(i, w)| (i as isize - center, (w * scale) as f32))
+        .collect()
 }
 
 impl Kernel {

@@ -100,13 +100,18 @@ impl DeriveOutput {
 
 /// Runs the derive stage on `input`.
 pub fn run(input: &MultiField, params: &DeriveParams) -> Result<DeriveOutput, DeriveError> {
-    run_with_progress(input, params, &|_, _| {})
+    run_with_progress(input, params, None, &|_, _| {})
 }
 
-/// [`run`], calling `progress(done, total)` as z-slices complete (from worker threads).
+/// [`run`], reusing the memory of a `previous` output when its components
+/// have the same count and size (slab-by-slab or repeated runs then skip
+/// allocating and page-faulting fresh output memory, which on this class of
+/// machine costs about as much as the pass itself), and calling
+/// `progress(done, total)` as z-slices complete (from worker threads).
 pub fn run_with_progress(
     input: &MultiField,
     params: &DeriveParams,
+    previous: Option<DeriveOutput>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<DeriveOutput, DeriveError> {
     let items = dedup(&params.items);
@@ -147,18 +152,18 @@ pub fn run_with_progress(
     let ranges: Vec<(f32, f32)> = input
         .fields
         .iter()
-        .map(|f| {
-            if f.data.iter().any(|v| !v.is_finite()) {
-                return Err(DeriveError::NonFinite(f.name.clone()));
-            }
-            Ok(f.data.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v))))
-        })
+        .map(|f| finite_range(f.data.as_slice().unwrap_or(&[])).ok_or_else(|| DeriveError::NonFinite(f.name.clone())))
         .collect::<Result<_, _>>()?;
     let base = [0, 1, 2].map(|a| params.kernel.axis_taps(g.spacing[a]));
     for (a, taps) in base.iter().enumerate() {
         let need = 2 * taps.radius() + 1;
         if g.dims[a] < need {
-            return Err(DeriveError::TooSmall { dims: g.dims_string(), kernel: params.kernel, need, axis: ['x', 'y', 'z'][a] });
+            return Err(DeriveError::TooSmall {
+                dims: g.dims_string(),
+                kernel: params.kernel,
+                need,
+                axis: ['x', 'y', 'z'][a],
+            });
         }
     }
 
@@ -181,10 +186,10 @@ pub fn run_with_progress(
     });
 
     let layout = Layout::new(&items, m, epsilon);
-    let engine = Engine::new(fields, g.dims, params.border, Needs::of(&items));
+    let engine = Engine::new(fields, g.dims, params.border, Needs::of(&items), epsilon);
     let [nx, ny, nz] = g.dims;
     let plane = nx * ny;
-    let mut buffers: Vec<Vec<f32>> = (0..layout.components()).map(|_| vec![0.0f32; plane * nz]).collect();
+    let mut buffers = reuse_buffers(previous, layout.components(), plane * nz);
     {
         let mut per_slice: Vec<Vec<&mut [f32]>> = (0..nz).map(|_| Vec::with_capacity(buffers.len())).collect();
         for buf in buffers.iter_mut() {
@@ -196,7 +201,7 @@ pub fn run_with_progress(
         per_slice.into_par_iter().enumerate().for_each_init(
             || engine.scratch(),
             |scratch, (k, mut outs)| {
-                engine.slice(k, scratch, |j, s| layout.write_row(s, j, &mut outs));
+                engine::compute_slice(&engine, &layout, k, scratch, &mut outs);
                 progress(done.fetch_add(1, Ordering::Relaxed) + 1, nz);
             },
         );
@@ -206,11 +211,7 @@ pub fn run_with_progress(
     let mut out = Vec::with_capacity(items.len());
     for &(item, _, n) in &layout.items {
         let names: Vec<String> = if item == Item::Jacobian {
-            input
-                .fields
-                .iter()
-                .flat_map(|f| ["x", "y", "z"].map(|a| format!("d{}/d{a}", f.name)))
-                .collect()
+            input.fields.iter().flat_map(|f| ["x", "y", "z"].map(|a| format!("d{}/d{a}", f.name))).collect()
         } else {
             item.components().iter().map(|s| s.to_string()).collect()
         };
@@ -227,6 +228,57 @@ pub fn run_with_progress(
         out.push((item, MultiField { geometry: g.clone(), fields: comps }));
     }
     Ok(DeriveOutput { items: out })
+}
+
+/// (min, max) of the samples, or None if any is NaN or infinite; in parallel
+/// over blocks (min and max do not depend on the order, so neither does the result).
+fn finite_range(data: &[f32]) -> Option<(f32, f32)> {
+    data.par_chunks(1 << 16)
+        .map(block_range)
+        .reduce(|| Some((f32::INFINITY, f32::NEG_INFINITY)), |a, b| Some((a?.0.min(b?.0), a?.1.max(b?.1))))
+}
+
+/// [`finite_range`] of one block, in eight lanes so that the loop vectorises.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+avx2", "x86_64+avx2"))]
+fn block_range(data: &[f32]) -> Option<(f32, f32)> {
+    let mut lo = [f32::INFINITY; 8];
+    let mut hi = [f32::NEG_INFINITY; 8];
+    let mut poison = [0.0f32; 8]; // v * 0 is NaN exactly for NaN and infinities
+    let (chunks, tail) = data.as_chunks::<8>();
+    for c in chunks {
+        for l in 0..8 {
+            lo[l] = if c[l] < lo[l] { c[l] } else { lo[l] };
+            hi[l] = if c[l] > hi[l] { c[l] } else { hi[l] };
+            poison[l] += c[l] * 0.0;
+        }
+    }
+    for &v in tail {
+        lo[0] = lo[0].min(v);
+        hi[0] = hi[0].max(v);
+        poison[0] += v * 0.0;
+    }
+    if poison.iter().any(|p| p.is_nan()) {
+        return None;
+    }
+    Some((lo.iter().copied().fold(f32::INFINITY, f32::min), hi.iter().copied().fold(f32::NEG_INFINITY, f32::max)))
+}
+
+/// `count` buffers of `len` samples, taken from `previous` when it has exactly
+/// that many of that size (their contents are overwritten), else fresh.
+fn reuse_buffers(previous: Option<DeriveOutput>, count: usize, len: usize) -> Vec<Vec<f32>> {
+    let old: Vec<Vec<f32>> = previous
+        .map(|p| {
+            p.items
+                .into_iter()
+                .flat_map(|(_, mf)| mf.fields.into_iter().map(|f| f.data.into_raw_vec_and_offset().0))
+                .collect()
+        })
+        .unwrap_or_default();
+    if old.len() == count && old.iter().all(|b| b.len() == len) {
+        old
+    } else {
+        (0..count).map(|_| vec![0.0f32; len]).collect()
+    }
 }
 
 fn dedup(items: &[Item]) -> Vec<Item> {

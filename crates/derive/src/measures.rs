@@ -36,6 +36,7 @@ impl Layout {
     }
 
     /// Writes row `j` of every item into `outs` (one slice per component, each one z-slice).
+    #[inline(always)]
     pub fn write_row(&self, scratch: &Scratch, j: usize, outs: &mut [&mut [f32]]) {
         let eps = self.epsilon;
         let r = scratch.rows(0);
@@ -43,47 +44,50 @@ impl Layout {
         let span = j * nx..(j + 1) * nx;
         for &(item, first, n) in &self.items {
             match item {
-                Item::Value => outs[first][span.clone()].copy_from_slice(&r.value),
+                Item::Value => outs[first][span.clone()].copy_from_slice(r.value),
                 Item::Grad => {
-                    outs[first][span.clone()].copy_from_slice(&r.gx);
-                    outs[first + 1][span.clone()].copy_from_slice(&r.gy);
-                    outs[first + 2][span.clone()].copy_from_slice(&r.gz);
+                    outs[first][span.clone()].copy_from_slice(r.gx);
+                    outs[first + 1][span.clone()].copy_from_slice(r.gy);
+                    outs[first + 2][span.clone()].copy_from_slice(r.gz);
                 }
                 // shade holds g until the whole volume is done (it needs g_max).
-                Item::G | Item::Shade => outs[first][span.clone()].copy_from_slice(&r.g),
+                Item::G | Item::Shade => outs[first][span.clone()].copy_from_slice(r.g),
                 Item::Normal => {
-                    for (c, d) in [&r.gx, &r.gy, &r.gz].into_iter().enumerate() {
-                        let out = &mut outs[first + c][span.clone()];
-                        for ((o, &d), &g) in out.iter_mut().zip(d).zip(&r.g) {
-                            *o = if g >= eps { d / g } else { 0.0 };
+                    for (c, d) in [r.gx, r.gy, r.gz].into_iter().enumerate() {
+                        for ((o, &d), &gi) in outs[first + c][span.clone()].iter_mut().zip(d).zip(r.g_inv) {
+                            *o = d * gi;
                         }
                     }
                 }
                 Item::Hessian => {
-                    for (c, h) in [&r.hxx, &r.hxy, &r.hxz, &r.hyy, &r.hyz, &r.hzz].into_iter().enumerate() {
+                    for (c, h) in [r.hxx, r.hxy, r.hxz, r.hyy, r.hyz, r.hzz].into_iter().enumerate() {
                         outs[first + c][span.clone()].copy_from_slice(h);
                     }
                 }
                 Item::F2 => {
                     let out = &mut outs[first][span.clone()];
-                    for i in 0..nx {
-                        let (x, y, z, g) = (r.gx[i], r.gy[i], r.gz[i], r.g[i]);
-                        let q = x * x * r.hxx[i]
-                            + y * y * r.hyy[i]
-                            + z * z * r.hzz[i]
-                            + 2.0 * (x * y * r.hxy[i] + x * z * r.hxz[i] + y * z * r.hyz[i]);
-                        out[i] = if g >= eps { q / (g * g) } else { 0.0 };
+                    // Slices of one length let the compiler drop bounds checks and vectorise.
+                    let (gx, gy, gz, gi) = (&r.gx[..nx], &r.gy[..nx], &r.gz[..nx], &r.g_inv[..nx]);
+                    let (hxx, hyy, hzz) = (&r.hxx[..nx], &r.hyy[..nx], &r.hzz[..nx]);
+                    let (hxy, hxz, hyz) = (&r.hxy[..nx], &r.hxz[..nx], &r.hyz[..nx]);
+                    for i in 0..out.len().min(nx) {
+                        let (x, y, z) = (gx[i], gy[i], gz[i]);
+                        let q = x * x * hxx[i]
+                            + y * y * hyy[i]
+                            + z * z * hzz[i]
+                            + 2.0 * (x * y * hxy[i] + x * z * hxz[i] + y * z * hyz[i]);
+                        out[i] = q * gi[i] * gi[i];
                     }
                 }
                 Item::Laplacian => {
                     let out = &mut outs[first][span.clone()];
-                    for i in 0..nx {
-                        out[i] = r.hxx[i] + r.hyy[i] + r.hzz[i];
+                    for (o, ((a, b), c)) in out.iter_mut().zip(r.hxx.iter().zip(r.hyy).zip(r.hzz)) {
+                        *o = a + b + c;
                     }
                 }
                 Item::InvG => {
-                    for (o, &g) in outs[first][span.clone()].iter_mut().zip(&r.g) {
-                        *o = 1.0 / g.max(eps);
+                    for (o, &g) in outs[first][span.clone()].iter_mut().zip(r.g) {
+                        *o = 1.0 / if g > eps { g } else { eps };
                     }
                 }
                 Item::Gnorm => {
@@ -100,16 +104,17 @@ impl Layout {
                             m[4] += y * z;
                             m[5] += z * z;
                         }
-                        *o = (m[0] * m[0] + m[3] * m[3] + m[5] * m[5] + 2.0 * (m[1] * m[1] + m[2] * m[2] + m[4] * m[4]))
-                            .sqrt();
+                        *o =
+                            (m[0] * m[0] + m[3] * m[3] + m[5] * m[5] + 2.0 * (m[1] * m[1] + m[2] * m[2] + m[4] * m[4]))
+                                .sqrt();
                     }
                 }
                 Item::Jacobian => {
                     for f in 0..n / 3 {
                         let rf = scratch.rows(f);
-                        outs[first + 3 * f][span.clone()].copy_from_slice(&rf.gx);
-                        outs[first + 3 * f + 1][span.clone()].copy_from_slice(&rf.gy);
-                        outs[first + 3 * f + 2][span.clone()].copy_from_slice(&rf.gz);
+                        outs[first + 3 * f][span.clone()].copy_from_slice(rf.gx);
+                        outs[first + 3 * f + 1][span.clone()].copy_from_slice(rf.gy);
+                        outs[first + 3 * f + 2][span.clone()].copy_from_slice(rf.gz);
                     }
                 }
             }

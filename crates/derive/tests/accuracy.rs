@@ -131,7 +131,9 @@ fn stencils(kernel: &str) -> [Vec<f64>; 3] {
             vec![-1.0 / 12.0, 4.0 / 3.0, -2.5, 4.0 / 3.0, -1.0 / 12.0],
         ],
         "bspline3" => [vec![1.0 / 6.0, 2.0 / 3.0, 1.0 / 6.0], vec![-0.5, 0.0, 0.5], vec![1.0, -2.0, 1.0]],
-        "catmull-rom" => [vec![0.0, 0.0, 1.0, 0.0, 0.0], vec![0.0, -0.5, 0.0, 0.5, 0.0], vec![-0.5, 3.0, -5.0, 3.0, -0.5]],
+        "catmull-rom" => {
+            [vec![0.0, 0.0, 1.0, 0.0, 0.0], vec![0.0, -0.5, 0.0, 0.5, 0.0], vec![-0.5, 3.0, -5.0, 3.0, -0.5]]
+        }
         _ => unreachable!(),
     }
 }
@@ -144,7 +146,9 @@ fn brute(v: &Volume, st: &[Vec<f64>; 3], orders: [usize; 3], at: [usize; 3]) -> 
     for dz in -r..=r {
         for dy in -r..=r {
             for dx in -r..=r {
-                let w = st[orders[0]][(dx + r) as usize] * st[orders[1]][(dy + r) as usize] * st[orders[2]][(dz + r) as usize];
+                let w = st[orders[0]][(dx + r) as usize]
+                    * st[orders[1]][(dy + r) as usize]
+                    * st[orders[2]][(dz + r) as usize];
                 let i = (at[0] as isize + dx).clamp(0, nx as isize - 1) as usize;
                 let j = (at[1] as isize + dy).clamp(0, ny as isize - 1) as usize;
                 let k = (at[2] as isize + dz).clamp(0, nz as isize - 1) as usize;
@@ -162,8 +166,9 @@ fn every_kernel_equals_a_brute_force_convolution() {
     let input = MultiField::from(v.clone());
     let items = vec![Item::Value, Item::Grad, Item::Hessian, Item::F2, Item::Laplacian];
     for name in ["central", "central4", "bspline3", "catmull-rom"] {
-        let out = run(&input, &DeriveParams { items: items.clone(), kernel: name.parse().unwrap(), ..Default::default() })
-            .unwrap();
+        let out =
+            run(&input, &DeriveParams { items: items.clone(), kernel: name.parse().unwrap(), ..Default::default() })
+                .unwrap();
         let st = stencils(name);
         let value = &out.get(Item::Value).unwrap().fields;
         let grad = &out.get(Item::Grad).unwrap().fields;
@@ -188,7 +193,9 @@ fn every_kernel_equals_a_brute_force_convolution() {
                     }
                     worst_d2 = worst_d2.max(rel(lap[[k, j, i]] as f64, h[0] + h[3] + h[5], 1000.0));
                     let gg = g[0] * g[0] + g[1] * g[1] + g[2] * g[2];
-                    let q = g[0] * g[0] * h[0] + g[1] * g[1] * h[3] + g[2] * g[2] * h[5]
+                    let q = g[0] * g[0] * h[0]
+                        + g[1] * g[1] * h[3]
+                        + g[2] * g[2] * h[5]
                         + 2.0 * (g[0] * g[1] * h[1] + g[0] * g[2] * h[2] + g[1] * g[2] * h[4]);
                     if gg > 1.0 {
                         worst_f2 = worst_f2.max(rel(f2[[k, j, i]] as f64, q / gg, 1000.0));
@@ -196,7 +203,10 @@ fn every_kernel_equals_a_brute_force_convolution() {
                 }
             }
         }
-        assert!(worst_d1 < 1e-5 && worst_d2 < 1e-5 && worst_f2 < 1e-5, "{name}: {worst_d1:e} {worst_d2:e} {worst_f2:e}");
+        assert!(
+            worst_d1 < 1e-5 && worst_d2 < 1e-5 && worst_f2 < 1e-5,
+            "{name}: {worst_d1:e} {worst_d2:e} {worst_f2:e}"
+        );
     }
 }
 
@@ -205,7 +215,8 @@ fn gauss_equals_a_brute_force_convolution_with_its_own_taps() {
     let v = random_volume([16, 16, 12], [1.0, 0.8, 1.5], 7);
     let input = MultiField::from(v.clone());
     let kernel: Kernel = "gauss:1.2".parse().unwrap();
-    let out = run(&input, &DeriveParams { items: vec![Item::Grad, Item::Hessian], kernel, ..Default::default() }).unwrap();
+    let out =
+        run(&input, &DeriveParams { items: vec![Item::Grad, Item::Hessian], kernel, ..Default::default() }).unwrap();
     let taps: Vec<_> = (0..3).map(|a| kernel.axis_taps(v.geometry.spacing[a])).collect();
     let [nx, ny, nz] = v.geometry.dims;
     let order_taps = |a: usize, o: usize| match o {
@@ -246,8 +257,15 @@ fn linear_and_quadratic_ramps_are_exact_in_world_units() {
     });
     let input = MultiField::from(Volume::new(g, ramp).unwrap());
     for name in ["central", "central4", "bspline3", "catmull-rom", "gauss:0.8"] {
-        let out = run(&input, &DeriveParams { items: vec![Item::Grad, Item::Hessian], kernel: name.parse().unwrap(), ..Default::default() })
-            .unwrap();
+        let out = run(
+            &input,
+            &DeriveParams {
+                items: vec![Item::Grad, Item::Hessian],
+                kernel: name.parse().unwrap(),
+                ..Default::default()
+            },
+        )
+        .unwrap();
         let (i, j, k) = (12usize, 8usize, 6usize);
         let (x, y, z) = (6.0, 6.0, 12.0);
         let want_g = [3.0 + 0.5 * x + 0.5 * y, 2.0 + 0.5 * x, -1.0 - 0.25 * z];
@@ -256,10 +274,18 @@ fn linear_and_quadratic_ramps_are_exact_in_world_units() {
         let he = &out.get(Item::Hessian).unwrap().fields;
         let tol = 1e-3;
         for c in 0..3 {
-            assert!((gr[c].data[[k, j, i]] as f64 - want_g[c]).abs() < tol, "{name} grad {c}: {}", gr[c].data[[k, j, i]]);
+            assert!(
+                (gr[c].data[[k, j, i]] as f64 - want_g[c]).abs() < tol,
+                "{name} grad {c}: {}",
+                gr[c].data[[k, j, i]]
+            );
         }
         for c in 0..6 {
-            assert!((he[c].data[[k, j, i]] as f64 - want_h[c]).abs() < tol, "{name} hessian {c}: {}", he[c].data[[k, j, i]]);
+            assert!(
+                (he[c].data[[k, j, i]] as f64 - want_h[c]).abs() < tol,
+                "{name} hessian {c}: {}",
+                he[c].data[[k, j, i]]
+            );
         }
     }
 }
@@ -353,7 +379,8 @@ fn border_policies_differ_only_at_the_border() {
     let v = random_volume([10, 10, 10], [1.0; 3], 3);
     let input = MultiField::from(v);
     let grad = |border| {
-        run(&input, &DeriveParams { items: vec![Item::Grad], kernel: Kernel::Central, border, ..Default::default() }).unwrap()
+        run(&input, &DeriveParams { items: vec![Item::Grad], kernel: Kernel::Central, border, ..Default::default() })
+            .unwrap()
     };
     let (c, m, w) = (grad(Border::Clamp), grad(Border::Mirror), grad(Border::Wrap));
     let gx = |o: &mdtf_derive::DeriveOutput| o.get(Item::Grad).unwrap().fields[0].data.clone();

@@ -36,23 +36,30 @@ pub fn write_file_atomically(path: &Path, fill: impl FnOnce(&mut dyn Write) -> s
         fill(&mut w).map_err(|e| VolumeError::io(path, e))?;
         w.flush().map_err(|e| VolumeError::io(path, e))?;
     }
+    publish_permissions(tmp.path(), path);
     tmp.persist(path).map_err(|e| VolumeError::io(path, e.error))?;
     Ok(())
 }
 
-/// Runs `write_to(tmp_path)` for a writer that insists on a path of its own
-/// (keeping `suffix`, e.g. ".nii.gz", so it picks the same format), then
-/// renames the result to `path`. The temporary file is removed on failure.
-pub fn write_path_atomically(path: &Path, suffix: &str, write_to: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
-    let dir = parent_dir(path);
-    let tmp = tempfile::Builder::new()
-        .prefix(".mdtf-partial-")
-        .suffix(suffix)
-        .tempfile_in(&dir)
-        .map_err(|e| VolumeError::io(path, e))?;
-    write_to(tmp.path())?;
-    tmp.persist(path).map_err(|e| VolumeError::io(path, e.error))?;
-    Ok(())
+/// Temporary files are created private (0600); give the output the
+/// permissions of the file it replaces, or the usual 0644 for a new one.
+fn publish_permissions(tmp: &Path, target: &Path) {
+    let perms = match std::fs::metadata(target) {
+        Ok(m) => m.permissions(),
+        Err(_) => {
+            #[cfg(unix)]
+            {
+                use std::os::unix::fs::PermissionsExt;
+                std::fs::Permissions::from_mode(0o644)
+            }
+            #[cfg(not(unix))]
+            {
+                return;
+            }
+        }
+    };
+    // Best effort: a file system without permissions still gets the data.
+    let _ = std::fs::set_permissions(tmp, perms);
 }
 
 #[cfg(test)]
@@ -73,6 +80,16 @@ mod tests {
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
         write_file_atomically(&target, |w| w.write_all(b"new")).unwrap();
         assert_eq!(std::fs::read(&target).unwrap(), b"new");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn outputs_are_readable_by_others_like_any_new_file() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("new.bin");
+        write_file_atomically(&target, |w| w.write_all(b"x")).unwrap();
+        assert_eq!(std::fs::metadata(&target).unwrap().permissions().mode() & 0o777, 0o644);
     }
 
     #[test]

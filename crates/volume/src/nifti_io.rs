@@ -6,19 +6,17 @@
 //! read and decoded here, so that a truncated or hostile file is an error
 //! with numbers rather than an allocation or a panic.
 
-use crate::atomic::write_path_atomically;
+use crate::atomic::write_file_atomically;
 use crate::dtype::{Endian, SampleType, first_unrepresentable};
 use crate::error::{Result, VolumeError};
 use crate::geometry::Geometry;
 use crate::limits::check_dims;
 use crate::samples::{
-    FieldAxis, FileInfo, ReadOptions, SampleLayout, decode_fields, drain_rest, open_maybe_gz, read_sample_bytes,
+    FieldAxis, FileInfo, ReadOptions, SampleLayout, drain_rest, open_maybe_gz, read_decoded, write_fields,
 };
 use crate::volume::{Field, MultiField};
-use ndarray::{Array3, Array4, Axis};
 use nifti::NiftiHeader;
-use nifti::writer::WriterOptions;
-use std::io::Read;
+use std::io::{Read, Write};
 use std::path::Path;
 
 const HEADER_BYTES: usize = 348;
@@ -73,10 +71,9 @@ pub fn read_nifti_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiFie
     if skipped < skip {
         return Err(VolumeError::Truncated { path: path.to_path_buf(), expected: layout.byte_len(), found: 0 });
     }
-    let bytes = read_sample_bytes(path, &mut src, &layout, compressed)?;
+    let arrays = read_decoded(path, &mut src, &layout, compressed, opts)?;
     // Trailing bytes are allowed in NIfTI; draining still checks a gzip CRC.
     drain_rest(path, &mut src, compressed)?;
-    let arrays = decode_fields(path, &bytes, &layout, opts)?;
     let fields = arrays
         .into_iter()
         .enumerate()
@@ -258,53 +255,96 @@ fn header_for(geometry: &Geometry) -> NiftiHeader {
     h
 }
 
+/// NIfTI-1 datatype code and bits per sample of the types mdtf writes.
+fn datatype_code(ty: SampleType) -> Option<(i16, i16)> {
+    Some(match ty {
+        SampleType::U8 => (2, 8),
+        SampleType::I16 => (4, 16),
+        SampleType::U16 => (512, 16),
+        SampleType::F32 => (16, 32),
+        _ => return None,
+    })
+}
+
+/// The 348-byte header plus the 4-byte empty extension flag, little-endian,
+/// laid out as nifti1.h defines it.
+fn header_bytes(h: &NiftiHeader, dims: &[usize], ty: SampleType) -> Option<Vec<u8>> {
+    let (code, bitpix) = datatype_code(ty)?;
+    let mut b = vec![0u8; 352];
+    let put_i16 = |b: &mut Vec<u8>, at: usize, v: i16| b[at..at + 2].copy_from_slice(&v.to_le_bytes());
+    let put_f32 = |b: &mut Vec<u8>, at: usize, v: f32| b[at..at + 4].copy_from_slice(&v.to_le_bytes());
+    b[0..4].copy_from_slice(&348i32.to_le_bytes());
+    b[38] = b'r'; // "regular", as nibabel writes it
+    put_i16(&mut b, 40, dims.len() as i16);
+    for (n, &d) in dims.iter().enumerate() {
+        put_i16(&mut b, 42 + 2 * n, i16::try_from(d).ok()?);
+    }
+    for n in dims.len() + 1..8 {
+        put_i16(&mut b, 40 + 2 * n, 1);
+    }
+    put_i16(&mut b, 70, code);
+    put_i16(&mut b, 72, bitpix);
+    for (n, &p) in h.pixdim.iter().enumerate() {
+        put_f32(&mut b, 76 + 4 * n, p);
+    }
+    put_f32(&mut b, 108, 352.0); // vox_offset
+    put_f32(&mut b, 112, 1.0); // scl_slope
+    b[123] = h.xyzt_units;
+    let descrip = &h.descrip[..h.descrip.len().min(79)];
+    b[148..148 + descrip.len()].copy_from_slice(descrip);
+    put_i16(&mut b, 252, h.qform_code);
+    put_i16(&mut b, 254, h.sform_code);
+    for (n, v) in [h.quatern_b, h.quatern_c, h.quatern_d, h.quatern_x, h.quatern_y, h.quatern_z].into_iter().enumerate()
+    {
+        put_f32(&mut b, 256 + 4 * n, v);
+    }
+    for (r, row) in [h.srow_x, h.srow_y, h.srow_z].iter().enumerate() {
+        for (c, &v) in row.iter().enumerate() {
+            put_f32(&mut b, 280 + 16 * r + 4 * c, v);
+        }
+    }
+    b[344..348].copy_from_slice(b"n+1\0");
+    Some(b)
+}
+
 /// Writes `mf` as `.nii` or `.nii.gz` (by the path's extension) with samples
-/// stored as `ty` (f32, u8 or u16). One field gives a 3D file, several a 4D
-/// file with one volume per field. Integer targets require exactly
-/// representable values. Atomic: the target appears only when complete.
+/// stored as `ty` (f32, u8, u16 or i16). One field gives a 3D file, several a
+/// 4D file with one volume per field. Integer targets require exactly
+/// representable values. Streams the samples (no copy of the volume) and is
+/// atomic: the target appears only when complete.
 pub fn write_nifti(path: &Path, mf: &MultiField, ty: SampleType) -> Result<()> {
-    let header = header_for(&mf.geometry);
-    let gz = path.to_string_lossy().ends_with(".gz");
-    let suffix = if gz { ".nii.gz" } else { ".nii" };
     for f in &mf.fields {
         if let Some((index, value)) = f.data.as_slice().and_then(|s| first_unrepresentable(s, ty)) {
             return Err(VolumeError::NotRepresentable { path: path.to_path_buf(), value, index, target: ty.name() });
         }
     }
-    let (nz, ny, nx) = mf.geometry.shape();
-    let stacked: Array4<f32> = if mf.fields.len() == 1 {
-        mf.fields[0].data.clone().insert_axis(Axis(0))
-    } else {
-        let views: Vec<_> = mf.fields.iter().map(|f| f.data.view()).collect();
-        ndarray::stack(Axis(0), &views).map_err(|e| VolumeError::Fields(e.to_string()))?
-    };
-    write_path_atomically(path, suffix, |tmp| {
-        let opts = WriterOptions::new(tmp).reference_header(&header);
-        let nifti_err = |e| VolumeError::Nifti { path: path.to_path_buf(), cause: e };
-        // The nifti crate takes the logical (x, y, z[, field]) shape; .t() of
-        // our (field, z, y, x) array is exactly that, without a copy.
-        macro_rules! write_as {
-            ($t:ty) => {{
-                let a = stacked.mapv(|v| v as $t);
-                if mf.fields.len() == 1 {
-                    let a3: Array3<$t> =
-                        a.into_shape_with_order((nz, ny, nx)).map_err(|e| VolumeError::Fields(e.to_string()))?;
-                    opts.write_nifti(&a3.t()).map_err(nifti_err)
-                } else {
-                    opts.write_nifti(&a.t()).map_err(nifti_err)
-                }
-            }};
-        }
-        match ty {
-            SampleType::F32 => write_as!(f32),
-            SampleType::U8 => write_as!(u8),
-            SampleType::U16 => write_as!(u16),
-            SampleType::I16 => write_as!(i16),
-            other => Err(VolumeError::UnsupportedType {
+    let mut dims = mf.geometry.dims.to_vec();
+    if mf.fields.len() > 1 {
+        dims.push(mf.fields.len());
+    }
+    let header = header_bytes(&header_for(&mf.geometry), &dims, ty).ok_or_else(|| {
+        if datatype_code(ty).is_none() {
+            VolumeError::UnsupportedType {
                 path: path.to_path_buf(),
-                name: other.name().into(),
+                name: ty.name().into(),
                 supported: "f32, u8, u16, i16 for writing",
-            }),
+            }
+        } else {
+            VolumeError::header(path, format!("dims {dims:?} exceed NIfTI-1's limit of 32767 per axis"))
+        }
+    })?;
+    let fields: Vec<&[f32]> = mf.fields.iter().map(|f| f.data.as_slice().unwrap_or(&[])).collect();
+    let gz = path.to_string_lossy().to_ascii_lowercase().ends_with(".gz");
+    write_file_atomically(path, |w| {
+        if gz {
+            let mut enc = flate2::write::GzEncoder::new(w, flate2::Compression::fast());
+            enc.write_all(&header)?;
+            write_fields(&mut enc, &fields, FieldAxis::Slowest, ty)?;
+            enc.finish()?;
+            Ok(())
+        } else {
+            w.write_all(&header)?;
+            write_fields(w, &fields, FieldAxis::Slowest, ty)
         }
     })
 }

@@ -4,9 +4,7 @@ use crate::dtype::{Endian, SampleType};
 use crate::error::{Result, VolumeError};
 use crate::geometry::Geometry;
 use crate::limits::check_dims;
-use crate::samples::{
-    FieldAxis, ReadOptions, SampleLayout, decode_fields, drain_rest, open_maybe_gz, read_sample_bytes,
-};
+use crate::samples::{FieldAxis, ReadOptions, SampleLayout, drain_rest, open_maybe_gz, read_decoded};
 use crate::volume::Volume;
 use std::io::Read;
 use std::path::Path;
@@ -50,7 +48,7 @@ pub fn read_raw(path: &Path, spec: &RawSpec, opts: &ReadOptions) -> Result<Volum
     if skipped < spec.byte_skip {
         return Err(VolumeError::Truncated { path: path.to_path_buf(), expected: layout.byte_len(), found: 0 });
     }
-    let bytes = read_sample_bytes(path, &mut src, &layout, gz)?;
+    let mut arrays = read_decoded(path, &mut src, &layout, gz, opts)?;
     let extra = drain_rest(path, &mut src, gz)?;
     if extra > 0 {
         return Err(VolumeError::SizeMismatch {
@@ -59,7 +57,6 @@ pub fn read_raw(path: &Path, spec: &RawSpec, opts: &ReadOptions) -> Result<Volum
             found: layout.byte_len() + extra,
         });
     }
-    let mut arrays = decode_fields(path, &bytes, &layout, opts)?;
     let geometry = Geometry::new(spec.dims, spec.spacing).with_origin(spec.origin);
     Volume::new(geometry, arrays.pop().unwrap_or_default())
 }

@@ -85,32 +85,81 @@ impl SampleLayout {
     }
 }
 
-/// Reads exactly `layout.byte_len()` bytes from `src`, reporting a truncated
-/// file with the counts. `compressed` selects the gzip error for stream failures.
-pub fn read_sample_bytes(path: &Path, src: &mut dyn Read, layout: &SampleLayout, compressed: bool) -> Result<Vec<u8>> {
-    let expected = layout.byte_len();
-    let mut bytes = Vec::new();
-    bytes.try_reserve_exact(expected as usize).map_err(|_| VolumeError::TooLarge {
+/// Reads exactly the samples of `layout` from `src` and decodes them, in
+/// chunks (no second copy of the volume as bytes), into one array per field
+/// with the scale and the NaN policy applied. A short stream is reported as
+/// truncated with the counts.
+pub fn read_decoded(
+    path: &Path,
+    src: &mut dyn Read,
+    layout: &SampleLayout,
+    compressed: bool,
+    opts: &ReadOptions,
+) -> Result<Vec<Array3<f32>>> {
+    let [nx, ny, nz] = layout.dims;
+    let total = nx * ny * nz * layout.fields;
+    let mut all = Vec::new();
+    all.try_reserve_exact(total).map_err(|_| VolumeError::TooLarge {
         path: path.to_path_buf(),
-        dims: format!("{}x{}x{}", layout.dims[0], layout.dims[1], layout.dims[2]),
-        needed: crate::limits::human_bytes(expected as u128),
+        dims: format!("{nx}x{ny}x{nz}"),
+        needed: crate::limits::human_bytes(total as u128 * 4),
         available: "less".into(),
     })?;
-    let got = src.take(expected).read_to_end(&mut bytes).map_err(|e| {
-        if compressed { VolumeError::Gzip { path: path.to_path_buf(), cause: e } } else { VolumeError::io(path, e) }
-    })?;
-    if (got as u64) < expected {
-        return Err(VolumeError::Truncated { path: path.to_path_buf(), expected, found: got as u64 });
+    all.resize(total, 0.0f32);
+    let size = layout.ty.size();
+    let chunk = 1 << 16;
+    let mut buf = vec![0u8; chunk * size];
+    let mut done = 0usize;
+    while done < total {
+        let n = chunk.min(total - done);
+        let bytes = &mut buf[..n * size];
+        let got = read_fully(src, bytes).map_err(|e| {
+            if compressed { VolumeError::Gzip { path: path.to_path_buf(), cause: e } } else { VolumeError::io(path, e) }
+        })?;
+        if got < bytes.len() {
+            return Err(VolumeError::Truncated {
+                path: path.to_path_buf(),
+                expected: layout.byte_len(),
+                found: (done * size + got) as u64,
+            });
+        }
+        decode_samples(bytes, layout.ty, layout.endian, &mut all[done..done + n]);
+        done += n;
     }
-    Ok(bytes)
+    finish_fields(path, all, layout, opts)
+}
+
+/// Reads until `buf` is full or the stream ends; returns the bytes read.
+fn read_fully(src: &mut dyn Read, buf: &mut [u8]) -> std::io::Result<usize> {
+    let mut n = 0;
+    while n < buf.len() {
+        match src.read(&mut buf[n..]) {
+            Ok(0) => break,
+            Ok(k) => n += k,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(n)
 }
 
 /// Decodes sample bytes into one array per field, applying the scale and the NaN policy.
 pub fn decode_fields(path: &Path, bytes: &[u8], layout: &SampleLayout, opts: &ReadOptions) -> Result<Vec<Array3<f32>>> {
     let [nx, ny, nz] = layout.dims;
-    let per_field = nx * ny * nz;
-    let mut all = vec![0.0f32; per_field * layout.fields];
+    let mut all = vec![0.0f32; nx * ny * nz * layout.fields];
     decode_samples(bytes, layout.ty, layout.endian, &mut all);
+    finish_fields(path, all, layout, opts)
+}
+
+/// Applies scale and NaN policy to decoded samples and splits them into fields.
+fn finish_fields(
+    path: &Path,
+    mut all: Vec<f32>,
+    layout: &SampleLayout,
+    opts: &ReadOptions,
+) -> Result<Vec<Array3<f32>>> {
+    let [nx, ny, nz] = layout.dims;
+    let per_field = nx * ny * nz;
     if let Some((slope, inter)) = layout.scale {
         for v in &mut all {
             *v = (*v as f64 * slope + inter) as f32;
@@ -164,4 +213,46 @@ pub fn drain_rest(path: &Path, src: &mut dyn Read, compressed: bool) -> Result<u
     std::io::copy(src, &mut std::io::sink()).map_err(|e| {
         if compressed { VolumeError::Gzip { path: path.to_path_buf(), cause: e } } else { VolumeError::io(path, e) }
     })
+}
+
+/// Streams the samples of `fields` (each x-fastest, all the same length) to
+/// `w` encoded as `ty`, little-endian: one field after another (`Slowest`) or
+/// interleaved per voxel (`Fastest`). Encodes through a small buffer, so
+/// writing never copies a whole volume.
+pub fn write_fields(
+    w: &mut dyn std::io::Write,
+    fields: &[&[f32]],
+    axis: FieldAxis,
+    ty: SampleType,
+) -> std::io::Result<()> {
+    const CHUNK: usize = 1 << 14;
+    let mut bytes = Vec::with_capacity(CHUNK * ty.size() * fields.len().max(1));
+    let mut staged = Vec::with_capacity(CHUNK * fields.len().max(1));
+    match axis {
+        FieldAxis::Slowest => {
+            for f in fields {
+                for c in f.chunks(CHUNK) {
+                    bytes.clear();
+                    crate::dtype::encode_samples(c, ty, Endian::Little, &mut bytes);
+                    w.write_all(&bytes)?;
+                }
+            }
+        }
+        FieldAxis::Fastest => {
+            let n = fields.first().map_or(0, |f| f.len());
+            let mut start = 0;
+            while start < n {
+                let end = (start + CHUNK).min(n);
+                staged.clear();
+                for i in start..end {
+                    staged.extend(fields.iter().map(|f| f[i]));
+                }
+                bytes.clear();
+                crate::dtype::encode_samples(&staged, ty, Endian::Little, &mut bytes);
+                w.write_all(&bytes)?;
+                start = end;
+            }
+        }
+    }
+    Ok(())
 }

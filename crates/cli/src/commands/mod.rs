@@ -1,6 +1,7 @@
 //! One module per subcommand.
 
 mod convert;
+mod derive;
 mod info;
 mod synth;
 
@@ -14,5 +15,6 @@ pub fn run(command: Command, progress: &Progress) -> Result<()> {
         Command::Synth(a) => synth::run(&a, progress),
         Command::Info(a) => info::run(&a, progress),
         Command::Convert(a) => convert::run(&a, progress),
+        Command::Derive(a) => derive::run(&a, progress),
     }
 }

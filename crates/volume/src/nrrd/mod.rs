@@ -15,7 +15,9 @@ use crate::dtype::{Endian, SampleType, encode_samples, first_unrepresentable};
 use crate::error::{Result, VolumeError};
 use crate::geometry::Geometry;
 use crate::limits::check_dims;
-use crate::samples::{FieldAxis, FileInfo, ReadOptions, SampleLayout, decode_fields, drain_rest, read_sample_bytes};
+use crate::samples::{
+    FieldAxis, FileInfo, ReadOptions, SampleLayout, decode_fields, drain_rest, read_decoded, write_fields,
+};
 use crate::volume::{Field, MultiField};
 use header::format_vector;
 use std::io::{BufRead, BufReader, Read, Write};
@@ -57,19 +59,21 @@ pub fn read_nrrd_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiFiel
             return Err(VolumeError::Truncated { path: data_path, expected: layout.byte_len(), found: 0 });
         }
     }
-    let bytes = match h.encoding {
-        Encoding::Raw => read_raw_encoded(&data_path, data, &h, &layout)?,
+    let arrays = match h.encoding {
+        Encoding::Raw => read_raw_encoded(&data_path, data, &h, &layout, opts)?,
         Encoding::Gzip => {
             let mut gz = flate2::bufread::MultiGzDecoder::new(data);
             skip_bytes(&data_path, &mut gz, h.byte_skip as u64, &layout, true)?;
-            let bytes = read_sample_bytes(&data_path, &mut gz, &layout, true)?;
+            let arrays = read_decoded(&data_path, &mut gz, &layout, true, opts)?;
             let extra = drain_rest(&data_path, &mut gz, true)?;
             refuse_extra(&data_path, &layout, extra)?;
-            bytes
+            arrays
         }
-        Encoding::Ascii => read_ascii(&data_path, data, &layout)?,
+        Encoding::Ascii => {
+            let (bytes, ascii_layout) = read_ascii(&data_path, data, &layout)?;
+            decode_fields(&data_path, &bytes, &ascii_layout, opts)?
+        }
     };
-    let arrays = decode_fields(&data_path, &bytes, &layout, opts)?;
     let names = match &h.field_names {
         Some(n) if n.len() == arrays.len() => n.clone(),
         _ if arrays.len() == 1 => vec!["value".to_string()],
@@ -102,7 +106,13 @@ fn skip_bytes(path: &Path, src: &mut dyn Read, n: u64, layout: &SampleLayout, gz
     Ok(())
 }
 
-fn read_raw_encoded(path: &Path, mut data: Box<dyn BufRead>, h: &NrrdHeader, layout: &SampleLayout) -> Result<Vec<u8>> {
+fn read_raw_encoded(
+    path: &Path,
+    mut data: Box<dyn BufRead>,
+    h: &NrrdHeader,
+    layout: &SampleLayout,
+    opts: &ReadOptions,
+) -> Result<Vec<ndarray::Array3<f32>>> {
     if h.byte_skip == -1 {
         // The samples are the last bytes of the file.
         let mut all = Vec::new();
@@ -115,16 +125,17 @@ fn read_raw_encoded(path: &Path, mut data: Box<dyn BufRead>, h: &NrrdHeader, lay
                 found: all.len() as u64,
             });
         }
-        return Ok(all.split_off(all.len() - n));
+        return decode_fields(path, &all[all.len() - n..], layout, opts);
     }
     skip_bytes(path, &mut data, h.byte_skip as u64, layout, false)?;
-    let bytes = read_sample_bytes(path, &mut data, layout, false)?;
+    let arrays = read_decoded(path, &mut data, layout, false, opts)?;
     let extra = drain_rest(path, &mut data, false)?;
     refuse_extra(path, layout, extra)?;
-    Ok(bytes)
+    Ok(arrays)
 }
 
-fn read_ascii(path: &Path, mut data: Box<dyn BufRead>, layout: &SampleLayout) -> Result<Vec<u8>> {
+/// Parses ascii samples; returns them as little-endian f32 bytes and the layout that decodes them.
+fn read_ascii(path: &Path, mut data: Box<dyn BufRead>, layout: &SampleLayout) -> Result<(Vec<u8>, SampleLayout)> {
     let mut text = String::new();
     data.read_to_string(&mut text).map_err(|e| VolumeError::io(path, e))?;
     let n = (layout.byte_len() / layout.ty.size() as u64) as usize;
@@ -146,7 +157,7 @@ fn read_ascii(path: &Path, mut data: Box<dyn BufRead>, layout: &SampleLayout) ->
     // Re-encode as little-endian f32 so the common decoder applies.
     let mut bytes = Vec::new();
     encode_samples(&values, SampleType::F32, Endian::Little, &mut bytes);
-    Ok(bytes)
+    Ok((bytes, SampleLayout { ty: SampleType::F32, endian: Endian::Little, ..*layout }))
 }
 
 /// Works out which axis holds fields and the grid's geometry.
@@ -258,18 +269,16 @@ pub fn write_nrrd(path: &Path, mf: &MultiField, ty: SampleType, encoding: Encodi
         format!("{stem}{}", if encoding == Encoding::Gzip { ".raw.gz" } else { ".raw" })
     });
     let header = header_text(mf, ty, encoding, data_name.as_deref());
-    let samples = interleaved_samples(mf);
+    let slices: Vec<&[f32]> = mf.fields.iter().map(|f| f.data.as_slice().unwrap_or(&[])).collect();
     let write_samples = |w: &mut dyn Write| -> std::io::Result<()> {
-        let mut bytes = Vec::new();
-        encode_samples(&samples, ty, Endian::Little, &mut bytes);
         match encoding {
             Encoding::Gzip => {
                 let mut gz = flate2::write::GzEncoder::new(w, flate2::Compression::fast());
-                gz.write_all(&bytes)?;
+                write_fields(&mut gz, &slices, FieldAxis::Fastest, ty)?;
                 gz.finish()?;
                 Ok(())
             }
-            _ => w.write_all(&bytes),
+            _ => write_fields(w, &slices, FieldAxis::Fastest, ty),
         }
     };
     match data_name {
@@ -283,19 +292,6 @@ pub fn write_nrrd(path: &Path, mf: &MultiField, ty: SampleType, encoding: Encodi
             write_file_atomically(path, |w| w.write_all(header.as_bytes()))
         }
     }
-}
-
-fn interleaved_samples(mf: &MultiField) -> Vec<f32> {
-    if mf.fields.len() == 1 {
-        return mf.fields[0].data.iter().copied().collect();
-    }
-    let n = mf.geometry.voxel_count();
-    let mut out = Vec::with_capacity(n * mf.fields.len());
-    let slices: Vec<_> = mf.fields.iter().map(|f| f.data.iter().copied().collect::<Vec<_>>()).collect();
-    for i in 0..n {
-        out.extend(slices.iter().map(|s| s[i]));
-    }
-    out
 }
 
 fn header_text(mf: &MultiField, ty: SampleType, encoding: Encoding, data_file: Option<&str>) -> String {

@@ -1,0 +1,96 @@
+//! `mdtf derive`: derivative measures, one file per item.
+
+use crate::args::DeriveArgs;
+use crate::input::{read_input, read_options};
+use crate::progress::Progress;
+use anyhow::{Context, Result, bail};
+use mdtf_derive::{BORDER_NAMES, Border, DeriveParams, Item, Kernel, run_with_progress};
+use mdtf_volume::{MultiField, WriteOptions, write};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Parses the command line into the stage's parameters.
+pub fn params(args: &DeriveArgs) -> Result<DeriveParams> {
+    let items = args.items.iter().map(|s| s.parse::<Item>()).collect::<Result<Vec<_>, _>>()?;
+    let kernel: Kernel = args.kernel.parse()?;
+    let border = match args.border.as_str() {
+        "clamp" => Border::Clamp,
+        "mirror" => Border::Mirror,
+        "wrap" => Border::Wrap,
+        other => bail!("unknown border policy '{other}' (valid: {BORDER_NAMES})"),
+    };
+    Ok(DeriveParams { items, kernel, border, epsilon: args.epsilon })
+}
+
+/// Reads the inputs, derives, writes one file per item.
+pub fn run(args: &DeriveArgs, progress: &Progress) -> Result<()> {
+    let params = params(args)?;
+    let opts = read_options(&args.read);
+    let input = progress.step("reading", || read_inputs(args, &opts))?;
+    let input = select_field(input, args.field.as_deref())?;
+    let voxels = input.geometry.voxel_count();
+    let start = Instant::now();
+    let nz = input.geometry.dims[2] as u64;
+    let out = progress
+        .counted("deriving", nz, |tick| run_with_progress(&input, &params, None, tick))
+        .context("cannot derive")?;
+    let seconds = start.elapsed().as_secs_f64();
+
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("cannot create output folder {}", args.output.display()))?;
+    let inputs: Vec<&Path> = args.inputs.iter().map(PathBuf::as_path).collect();
+    let mut written: Vec<PathBuf> = Vec::new();
+    let result = progress.step("writing", || -> Result<()> {
+        for (item, mf) in &out.items {
+            let path = args.output.join(format!("{}{}", item.name(), args.format.extension()));
+            write(&path, mf, &WriteOptions::default(), &inputs).context("cannot write the output")?;
+            written.push(path);
+        }
+        Ok(())
+    });
+    if let Err(e) = result {
+        // Leave no half set of outputs behind.
+        for p in &written {
+            let _ = std::fs::remove_file(p);
+        }
+        return Err(e);
+    }
+    progress.note(&format!(
+        "derived {} with {} in {:.2} s ({:.0} Mvoxel/s) into {}",
+        out.items.iter().map(|(i, _)| i.name()).collect::<Vec<_>>().join(", "),
+        params.kernel,
+        seconds,
+        voxels as f64 / seconds / 1e6,
+        args.output.display()
+    ));
+    Ok(())
+}
+
+fn read_inputs(args: &DeriveArgs, opts: &mdtf_volume::ReadOptions) -> Result<MultiField> {
+    if args.inputs.len() == 1 {
+        return Ok(read_input(&args.inputs[0], &args.read, opts)?.0);
+    }
+    let mut named = Vec::new();
+    for path in &args.inputs {
+        let mf = read_input(path, &args.read, opts)?.0;
+        let stem = path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let stem = stem.split('.').next().unwrap_or("field").to_string();
+        for (n, f) in mf.fields.into_iter().enumerate() {
+            let name = if n == 0 { stem.clone() } else { format!("{stem}{n}") };
+            named.push((name, mdtf_volume::Volume { geometry: mf.geometry.clone(), data: f.data }));
+        }
+    }
+    MultiField::from_volumes(named).context("the input files do not form one multi-field volume")
+}
+
+fn select_field(input: MultiField, field: Option<&str>) -> Result<MultiField> {
+    let Some(want) = field else { return Ok(input) };
+    let names: Vec<String> = input.fields.iter().map(|f| f.name.clone()).collect();
+    let index =
+        names.iter().position(|n| n == want).or_else(|| want.parse::<usize>().ok().filter(|&i| i < names.len()));
+    let Some(index) = index else {
+        bail!("--field {want}: no such field (the input has {})", names.join(", "));
+    };
+    let v = input.field_volume(index).context("field index")?;
+    Ok(MultiField::from(v))
+}
