@@ -289,3 +289,35 @@ fn derive_refuses_bad_requests_and_writes_nothing() {
     assert!(e.contains("needs at least 5 samples along x"), "{e}");
     assert!(!out.exists() || std::fs::read_dir(&out).unwrap().count() == 0);
 }
+
+#[test]
+fn bilateral_filters_and_names_bad_parameters() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = dir.path().join("n.nii.gz");
+    let o = dir.path().join("o.nrrd");
+    mdtf_ok(&["synth", "erf-sphere", "-o", n.to_str().unwrap(), "--size", "32", "--noise", "20", "-q"]);
+    mdtf_ok(&[
+        "bilateral",
+        n.to_str().unwrap(),
+        "-o",
+        o.to_str().unwrap(),
+        "--sigma-r",
+        "50",
+        "--range-units",
+        "value",
+        "-q",
+    ]);
+    let a = read_scalar(&n, &ReadOptions::default()).unwrap();
+    let b = read_scalar(&o, &ReadOptions::default()).unwrap();
+    assert_eq!(a.geometry, b.geometry);
+    let var = |v: &mdtf_volume::Volume| {
+        // local roughness: mean squared difference of x-neighbours
+        let s = v.samples();
+        s.windows(2).map(|w| ((w[1] - w[0]) as f64).powi(2)).sum::<f64>() / s.len() as f64
+    };
+    assert!(var(&b) < var(&a) / 4.0);
+    let e = mdtf_err(&["bilateral", n.to_str().unwrap(), "-o", o.to_str().unwrap(), "--sigma-r", "0"]);
+    assert!(e.contains("--sigma-r must be a positive number"), "{e}");
+    let e = mdtf_err(&["bilateral", n.to_str().unwrap(), "-o", o.to_str().unwrap(), "--sigma-d", "40"]);
+    assert!(e.contains("--sigma-d 40 gives a radius of 100 voxels"), "{e}");
+}

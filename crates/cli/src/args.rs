@@ -38,6 +38,8 @@ pub enum Command {
     Convert(ConvertArgs),
     /// Measure derivatives: gradient, g, normal, Hessian, f'', Laplacian, 1/g, shading weight, multi-field ||G||.
     Derive(DeriveArgs),
+    /// Edge-preserving 3D bilateral filter (exact, or fast with a truncated neighbourhood).
+    Bilateral(BilateralArgs),
 }
 
 /// Which phantom to generate.
@@ -273,6 +275,59 @@ pub struct DeriveArgs {
     /// Output format.
     #[arg(long, value_enum, default_value_t = OutFormat::NiiGz)]
     pub format: OutFormat,
+    #[command(flatten)]
+    pub read: InputArgs,
+}
+
+/// `--range-units` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum RangeUnitsArg {
+    /// --sigma-r is a fraction of the input's value range (max - min).
+    Fraction,
+    /// --sigma-r is in the input's value units.
+    Value,
+}
+
+/// `--mode` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum BilateralModeArg {
+    /// Every neighbour in the box of radius ceil(2.5 sigma_d / spacing) (ITK's BilateralImageFilter neighbourhood).
+    Exact,
+    /// Neighbours within 1.5 sigma_d only: about 10x faster, 43.6 dB PSNR from exact on the noisy erf sphere.
+    Fast,
+}
+
+/// `mdtf bilateral`.
+#[derive(Debug, Args)]
+#[command(
+    after_help = "f~(x) = sum W_d W_r f(x_i) / sum W_d W_r with W_d = exp(-|x_i - x|^2 / (2 sigma_d^2)) (world units)\n\
+and W_r = exp(-(f(x_i) - f(x))^2 / (2 sigma_r^2)); borders clamp to the edge. For noise of standard\n\
+deviation s, sigma_r of 2 to 3 s removes most of it and keeps edges (on the erf sphere with noise 20,\n\
+--sigma-r 50 --range-units value cuts the RMSE 4x and moves the f'' zero crossing by < 0.1 voxel).\n\n\
+Examples:\n  mdtf bilateral noisy.nii.gz -o smooth.nii.gz\n  \
+    mdtf bilateral ct.nrrd -o ct-bf.nrrd --sigma-d 0.8 --sigma-r 40 --range-units value --mode fast"
+)]
+pub struct BilateralArgs {
+    /// Input volume (one field).
+    pub input: PathBuf,
+    /// Output volume; its extension picks the format.
+    #[arg(short, long, value_name = "OUT")]
+    pub output: PathBuf,
+    /// Spatial standard deviation, world units.
+    #[arg(long, default_value_t = 1.0, value_name = "S", allow_negative_numbers = true)]
+    pub sigma_d: f64,
+    /// Range standard deviation, in --range-units.
+    #[arg(long, default_value_t = 0.05, value_name = "S", allow_negative_numbers = true)]
+    pub sigma_r: f64,
+    /// Units of --sigma-r.
+    #[arg(long, value_enum, default_value_t = RangeUnitsArg::Fraction)]
+    pub range_units: RangeUnitsArg,
+    /// Exact or fast.
+    #[arg(long, value_enum, default_value_t = BilateralModeArg::Exact)]
+    pub mode: BilateralModeArg,
+    /// Gzip NRRD data.
+    #[arg(long)]
+    pub gzip: bool,
     #[command(flatten)]
     pub read: InputArgs,
 }

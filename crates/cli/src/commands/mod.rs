@@ -1,5 +1,6 @@
 //! One module per subcommand.
 
+mod bilateral;
 mod convert;
 mod derive;
 mod info;
@@ -16,5 +17,6 @@ pub fn run(command: Command, progress: &Progress) -> Result<()> {
         Command::Info(a) => info::run(&a, progress),
         Command::Convert(a) => convert::run(&a, progress),
         Command::Derive(a) => derive::run(&a, progress),
+        Command::Bilateral(a) => bilateral::run(&a, progress),
     }
 }
