@@ -143,13 +143,15 @@ impl Report {
             (x, y)
         };
         let (dmax, gmax) = (self.max_distance(), self.max_g());
-        let series: [(Box<dyn Fn(&ReportBin) -> f64>, [u8; 3]); 3] = [
-            (Box::new(|b: &ReportBin| b.cumulative_percent / 100.0), [0, 0, 0]),
-            (Box::new(move |b: &ReportBin| b.mean_distance / dmax), [200, 30, 30]),
-            (Box::new(move |b: &ReportBin| b.mean_g / gmax), [30, 60, 200]),
-        ];
-        for (f, colour) in &series {
-            let pts: Vec<(f64, f64)> = self.bins.iter().map(|b| to_px(b.dot_x100 as f64, f(b))).collect();
+        // (height fraction of a bin, colour) per curve
+        let value = |curve: usize, b: &ReportBin| match curve {
+            0 => b.cumulative_percent / 100.0,
+            1 => b.mean_distance / dmax,
+            _ => b.mean_g / gmax,
+        };
+        let colours = [[0u8, 0, 0], [200, 30, 30], [30, 60, 200]];
+        for (curve, colour) in colours.iter().enumerate() {
+            let pts: Vec<(f64, f64)> = self.bins.iter().map(|b| to_px(b.dot_x100 as f64, value(curve, b))).collect();
             for pair in pts.windows(2) {
                 let ((xa, ya), (xb, yb)) = (pair[0], pair[1]);
                 let steps = ((xb - xa).abs().max((yb - ya).abs()).ceil() as usize).max(1);

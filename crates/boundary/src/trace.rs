@@ -59,12 +59,12 @@ pub(crate) fn trace(f: &Fields, s: &TraceSettings, i: usize, j: usize, k: usize)
     let dims = f.g.dims;
     let index = (k * dims[1] + j) * dims[0] + i;
     let g0 = f.g.data[index];
-    if !(g0 >= s.g_min) {
+    if g0.is_nan() || g0 < s.g_min {
         return Trace::miss(HitCode::NotTraced);
     }
     let n = [f.n[0].data[index], f.n[1].data[index], f.n[2].data[index]];
     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-    if !(len > 0.0) {
+    if len.is_nan() || len <= 0.0 {
         return Trace::miss(HitCode::NotTraced);
     }
     let n = n.map(|c| c / len);

@@ -109,9 +109,9 @@ fn alpha_maps_follow_equations_9_to_11() {
         .collect();
     let out = trace(&d, &BoundaryParams { alpha: maps, flipped: true, ..Default::default() });
     // Eqs. 9-11 written out again here.
-    let linear = |x: f64| (-1.0 * x / 3.0 + 1.0).max(0.0);
+    let linear = |x: f64| (1.0 - x / 3.0).max(0.0); // a = 1, dc = 3
     let concave = |x: f64| if x < 3.0 { 0.4 / 3f64.powi(9) * (x - 3.0).abs().powi(9) } else { 0.0 };
-    let convex = |x: f64| (-1.0 * x.powi(3) / 27.0 + 1.0).max(0.0);
+    let convex = |x: f64| (1.0 - x.powi(3) / 27.0).max(0.0); // a = 1, dc = 3, n = 3
     let flipped = out.flipped.as_ref().unwrap();
     let mut checked = 0;
     for (i, &h) in out.hit.samples().iter().enumerate() {
