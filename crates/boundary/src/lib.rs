@@ -264,10 +264,12 @@ pub fn run(input: &BoundaryInput, params: &BoundaryParams) -> Result<BoundaryOut
             .zip(dt.par_chunks_mut(plane))
             .enumerate()
             .for_each(|(k, (((d, gh), h), dt))| {
-                for j in 0..ny {
-                    for i in 0..nx {
-                        let t = trace(&fields, &settings, i, j, k);
-                        let o = j * nx + i;
+                // Untraced voxels keep these values; only voxels with g >= g_min are visited.
+                d.fill(NO_BOUNDARY);
+                let g_plane = &fields.g.data[k * plane..(k + 1) * plane];
+                for (o, &gv) in g_plane.iter().enumerate() {
+                    if gv >= settings.g_min {
+                        let t = trace(&fields, &settings, o % nx, o / nx, k);
                         d[o] = t.distance;
                         gh[o] = t.g_hit;
                         h[o] = t.code as u8 as f32;

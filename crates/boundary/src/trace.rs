@@ -1,7 +1,7 @@
 //! Tracing one voxel to its boundary: the zero crossing of f'' along the
 //! gradient direction in which g increases (distance paper, section 3).
 
-use crate::sample::Grid;
+use crate::sample::{CellCache, Grid};
 
 /// What happened at a voxel (the `hit` output).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -76,7 +76,7 @@ pub(crate) fn trace(f: &Fields, s: &TraceSettings, i: usize, j: usize, k: usize)
 
     // Follow the direction in which g increases.
     let sign = if f.g.trilinear(at(s.step)) >= f.g.trilinear(at(-s.step)) { 1.0 } else { -1.0 };
-    let phi = |t: f32| f.f2.trilinear(at(sign * t));
+    let mut ray = CellCache::new(f.f2);
 
     let mut t_prev = 0.0f32;
     let mut f_prev = f.f2.data[index];
@@ -89,9 +89,10 @@ pub(crate) fn trace(f: &Fields, s: &TraceSettings, i: usize, j: usize, k: usize)
             if !inside(at(sign * t)) {
                 break;
             }
-            let ft = phi(t);
+            let ft = ray.sample(at(sign * t));
             if ft == 0.0 || (ft > 0.0) != (f_prev > 0.0) {
-                root = Some(refine(&phi, t_prev, f_prev, t, ft, s.tolerance));
+                let mut phi = |t: f32| ray.sample(at(sign * t));
+                root = Some(refine(&mut phi, t_prev, f_prev, t, ft, s.tolerance));
                 break;
             }
             t_prev = t;
@@ -115,7 +116,7 @@ pub(crate) fn trace(f: &Fields, s: &TraceSettings, i: usize, j: usize, k: usize)
 
 /// The root of phi in [a, b] (phi(a) and phi(b) of opposite signs, or phi(b) = 0)
 /// by the Illinois variant of regula falsi, to `tolerance` (world units).
-fn refine(phi: &impl Fn(f32) -> f32, mut a: f32, mut fa: f32, mut b: f32, mut fb: f32, tolerance: f32) -> f32 {
+fn refine(phi: &mut impl FnMut(f32) -> f32, mut a: f32, mut fa: f32, mut b: f32, mut fb: f32, tolerance: f32) -> f32 {
     if fb == 0.0 {
         return b;
     }
@@ -158,9 +159,10 @@ mod tests {
     #[test]
     fn illinois_finds_roots_to_the_tolerance() {
         let phi = |t: f32| (t - 0.737).powi(3) + 0.1 * (t - 0.737);
-        let r = refine(&phi, 0.0, phi(0.0), 2.0, phi(2.0), 1e-5);
+        let (f0, f2) = (phi(0.0), phi(2.0));
+        let r = refine(&mut { phi }, 0.0, f0, 2.0, f2, 1e-5);
         assert!((r - 0.737).abs() < 2e-5, "{r}");
-        let r = refine(&|t: f32| 1.0 - t, 0.0, 1.0, 3.0, -2.0, 1e-6);
+        let r = refine(&mut |t: f32| 1.0 - t, 0.0, 1.0, 3.0, -2.0, 1e-6);
         assert!((r - 1.0).abs() < 1e-5);
     }
 }
