@@ -321,3 +321,89 @@ fn bilateral_filters_and_names_bad_parameters() {
     let e = mdtf_err(&["bilateral", n.to_str().unwrap(), "-o", o.to_str().unwrap(), "--sigma-d", "40"]);
     assert!(e.contains("--sigma-d 40 gives a radius of 100 voxels"), "{e}");
 }
+
+#[test]
+fn boundary_from_a_value_volume_and_from_derived_volumes_agree() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = dir.path().join("s.nii.gz");
+    mdtf_ok(&[
+        "synth",
+        "erf-sphere",
+        "-o",
+        s.to_str().unwrap(),
+        "--size",
+        "48",
+        "--radius",
+        "15",
+        "--sigma",
+        "2",
+        "-q",
+    ]);
+    let a = dir.path().join("a");
+    let rep = dir.path().join("rep");
+    mdtf_ok(&[
+        "boundary",
+        s.to_str().unwrap(),
+        "-o",
+        a.to_str().unwrap(),
+        "--report",
+        rep.to_str().unwrap(),
+        "--alpha",
+        "convex:a=1,dc=3,n=3",
+        "-q",
+    ]);
+    let d = dir.path().join("d");
+    mdtf_ok(&["derive", s.to_str().unwrap(), "-o", d.to_str().unwrap(), "--items", "g,f2,normal", "-q"]);
+    let b = dir.path().join("b");
+    let (g, f2, n) = (d.join("g.nii.gz"), d.join("f2.nii.gz"), d.join("normal.nii.gz"));
+    mdtf_ok(&[
+        "boundary",
+        "--g",
+        g.to_str().unwrap(),
+        "--f2",
+        f2.to_str().unwrap(),
+        "--normal",
+        n.to_str().unwrap(),
+        "-o",
+        b.to_str().unwrap(),
+        "--value-range",
+        "255",
+        "-q",
+    ]);
+    let ro = ReadOptions::default();
+    for name in ["distance", "g_hit", "hit", "dot"] {
+        let x = read_scalar(&a.join(format!("{name}.nii.gz")), &ro).unwrap();
+        let y = read_scalar(&b.join(format!("{name}.nii.gz")), &ro).unwrap();
+        assert_eq!(x.data, y.data, "{name}");
+    }
+    let dist = read_scalar(&a.join("distance.nii.gz"), &ro).unwrap();
+    let alpha = read_scalar(&a.join("alpha_convex.nii.gz"), &ro).unwrap();
+    for (d, al) in dist.samples().iter().zip(alpha.samples()) {
+        let want = if *d >= 0.0 { (1.0 - (*d as f64).powi(3) / 27.0).max(0.0) } else { 0.0 };
+        assert!((*al as f64 - want).abs() < 1e-6);
+    }
+    let csv = std::fs::read_to_string(rep.join("boundary_report.csv")).unwrap();
+    assert!(csv.starts_with("# mean dot product 1.0000") || csv.starts_with("# mean dot product 0.9999"), "{csv}");
+    assert!(rep.join("boundary_report.png").exists());
+
+    let e = mdtf_err(&["boundary", s.to_str().unwrap(), "-o", a.to_str().unwrap(), "--d-max", "500"]);
+    assert!(e.contains("--d-max 500 is larger than the volume"), "{e}");
+    let e = mdtf_err(&["boundary", s.to_str().unwrap(), "-o", a.to_str().unwrap(), "--step", "0"]);
+    assert!(e.contains("--step must be positive"), "{e}");
+    let other = dir.path().join("o.nii.gz");
+    mdtf_ok(&["synth", "erf-sphere", "-o", other.to_str().unwrap(), "--size", "48", "--spacing", "1,1,2", "-q"]);
+    let out = dir.path().join("never");
+    let e = mdtf_err(&[
+        "boundary",
+        "--g",
+        other.to_str().unwrap(),
+        "--f2",
+        f2.to_str().unwrap(),
+        "--normal",
+        n.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(e.contains("must share one grid"), "{e}");
+    assert!(!out.exists());
+}

@@ -9,7 +9,7 @@ use std::path::Path;
 /// One dot-product bin.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ReportBin {
-    /// floor(dot x 100), -100 ..= 100.
+    /// dot x 100 rounded to the nearest integer, -100 ..= 100.
     pub dot_x100: i32,
     /// Voxels with a kept hit in this bin.
     pub voxels: u64,
@@ -46,7 +46,7 @@ impl Report {
             if hit[i] != 1.0 {
                 continue;
             }
-            let b = ((dot[i] as f64 * 100.0).floor().clamp(-100.0, 100.0) as i32 + 100) as usize;
+            let b = ((dot[i] as f64 * 100.0).round().clamp(-100.0, 100.0) as i32 + 100) as usize;
             count[b] += 1;
             sum_d[b] += distance[i] as f64;
             sum_g[b] += g[i] as f64;
@@ -194,10 +194,10 @@ mod tests {
         let g = [10.0, 20.0, 30.0, 99.0, 40.0];
         let r = Report::new(&hit, &dot, &dist, &g);
         assert_eq!(r.hits, 4);
-        assert_eq!(r.bins.iter().map(|b| b.dot_x100).collect::<Vec<_>>(), vec![50, 99, 100]);
+        assert_eq!(r.bins.iter().map(|b| b.dot_x100).collect::<Vec<_>>(), vec![50, 100]);
         assert!((r.bins.last().unwrap().cumulative_percent - 100.0).abs() < 1e-9);
-        assert_eq!(r.bins[1].voxels, 2);
-        assert!((r.bins[1].mean_distance - 1.5).abs() < 1e-9);
+        assert_eq!(r.bins[1].voxels, 3);
+        assert!((r.bins[1].mean_distance - 7.0 / 3.0).abs() < 1e-9);
         assert!((r.mean_dot - (0.995 + 0.999 + 0.5 + 1.0) / 4.0).abs() < 1e-6);
         assert!(r.csv().lines().nth(2).unwrap().starts_with("50,1,25.0"));
     }

@@ -40,6 +40,8 @@ pub enum Command {
     Derive(DeriveArgs),
     /// Edge-preserving 3D bilateral filter (exact, or fast with a truncated neighbourhood).
     Bilateral(BilateralArgs),
+    /// Distance from every voxel to its nearest boundary (zero crossing of f''), g at the hit, alpha maps.
+    Boundary(BoundaryArgs),
 }
 
 /// Which phantom to generate.
@@ -328,6 +330,78 @@ pub struct BilateralArgs {
     /// Gzip NRRD data.
     #[arg(long)]
     pub gzip: bool,
+    #[command(flatten)]
+    pub read: InputArgs,
+}
+
+/// `mdtf boundary`.
+#[derive(Debug, Args)]
+#[command(
+    after_help = "From every voxel with g >= --g-min, steps along +n and -n (n = grad f / g) by --step up to --d-max,\n\
+sampling g and f'' trilinearly, follows the direction in which g increases, and at the first sign change\n\
+of f'' finds the zero crossing to --tolerance. Hits whose g (tricubic) is below --g-hit-min are rejected.\n\n\
+Outputs in DIR, named after them: distance (world units; -1 where no boundary was kept), g_hit (g at the\n\
+zero crossing; the stretched-histogram axis), hit (0 not traced, 1 hit, 2 no zero crossing within d_max,\n\
+3 rejected: g at the crossing below --g-hit-min), dot (unit gradient at the voxel . at the hit), and with\n\
+--flipped the display image d_max - d, with --alpha the alpha maps of distance (0 where no hit):\n  \
+linear:a=1,dc=3       max(-a d / dc + a, 0)                      (eq. 9)\n  \
+concave:a=0.4,dc=3,n=9  a / dc^n |d - dc|^n for d < dc, else 0    (eq. 10)\n  \
+convex:a=1,dc=3,n=3   max(-a d^n / dc^n + a, 0)                  (eq. 11)\n\n\
+Examples:\n  mdtf boundary sphere.nii.gz -o bnd/ --report bnd/\n  \
+    mdtf boundary noisy.nrrd -o bnd/ --kernel gauss:1 --prefilter 1,0.1 --alpha linear:a=1,dc=3\n  \
+    mdtf boundary --g d/g.nii.gz --f2 d/f2.nii.gz --normal d/normal.nii.gz -o bnd/ --value-range 255"
+)]
+pub struct BoundaryArgs {
+    /// Value volume: derive (g, f'', normal) runs in process first. Omit when giving --g, --f2 and --normal.
+    pub input: Option<PathBuf>,
+    /// Output folder (created if missing).
+    #[arg(short, long, value_name = "DIR")]
+    pub output: PathBuf,
+    /// Precomputed gradient magnitude (with --f2 and --normal instead of a value volume).
+    #[arg(long, value_name = "FILE", requires_all = ["f2", "normal"], conflicts_with = "input")]
+    pub g: Option<PathBuf>,
+    /// Precomputed f''.
+    #[arg(long, value_name = "FILE", requires_all = ["g", "normal"])]
+    pub f2: Option<PathBuf>,
+    /// Precomputed unit normal (3 fields).
+    #[arg(long, value_name = "FILE", requires_all = ["g", "f2"])]
+    pub normal: Option<PathBuf>,
+    /// Value range of the data behind --g/--f2 (scales the default thresholds). Default 255; with a value volume, its range.
+    #[arg(long, value_name = "R")]
+    pub value_range: Option<f64>,
+    /// Derivative kernel when deriving from a value volume (gauss:1 or bspline3 for noisy data).
+    #[arg(long, value_name = "K")]
+    pub kernel: Option<String>,
+    /// Bilateral pre-filter of g and f'': SIGMA_D (world units),SIGMA_R (fraction of each channel's range).
+    #[arg(long, value_name = "SD,SR")]
+    pub prefilter: Option<String>,
+    /// Trace voxels with g at least this. Default: 5 x value range / 255 (the paper's 5.0 on 8-bit data).
+    #[arg(long, value_name = "G")]
+    pub g_min: Option<f64>,
+    /// Keep hits with g at least this. Default: 20 x value range / 255 (the paper's 20.0).
+    #[arg(long, value_name = "G")]
+    pub g_hit_min: Option<f64>,
+    /// Step along the ray, world units. Default: L_min / 5.
+    #[arg(long, value_name = "S", allow_negative_numbers = true)]
+    pub step: Option<f64>,
+    /// Longest traced distance, world units. Default: 15 L_min.
+    #[arg(long, value_name = "D", allow_negative_numbers = true)]
+    pub d_max: Option<f64>,
+    /// Zero-crossing tolerance, voxels.
+    #[arg(long, default_value_t = 1e-3, value_name = "T")]
+    pub tolerance: f64,
+    /// Also write `flipped` = d_max - d (the paper's display image).
+    #[arg(long)]
+    pub flipped: bool,
+    /// Alpha map(s) of distance to write (repeatable), e.g. linear:a=1,dc=3.
+    #[arg(long, value_name = "SPEC")]
+    pub alpha: Vec<String>,
+    /// Write the Fig. 2 validation report (boundary_report.csv and .png) into this folder.
+    #[arg(long, value_name = "DIR")]
+    pub report: Option<PathBuf>,
+    /// Output format.
+    #[arg(long, value_enum, default_value_t = OutFormat::NiiGz)]
+    pub format: OutFormat,
     #[command(flatten)]
     pub read: InputArgs,
 }

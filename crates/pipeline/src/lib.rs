@@ -1,3 +1,5 @@
-//! Pipeline files and the in-process runner of mdtf.
-//!
-//! Placeholder: filled by the pipelines issue. It holds no functions yet.
+//! Composition of mdtf stages, run in process without intermediate files.
+//! The stage crates never call each other; chains live here (and, with the
+//! pipelines issue, pipeline files and their runner).
+
+pub mod boundary_chain;

@@ -1,6 +1,7 @@
 //! One module per subcommand.
 
 mod bilateral;
+mod boundary;
 mod convert;
 mod derive;
 mod info;
@@ -18,5 +19,6 @@ pub fn run(command: Command, progress: &Progress) -> Result<()> {
         Command::Convert(a) => convert::run(&a, progress),
         Command::Derive(a) => derive::run(&a, progress),
         Command::Bilateral(a) => bilateral::run(&a, progress),
+        Command::Boundary(a) => boundary::run(&a, progress),
     }
 }

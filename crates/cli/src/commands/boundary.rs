@@ -1,0 +1,139 @@
+//! `mdtf boundary`: distance to the nearest boundary.
+
+use crate::args::BoundaryArgs;
+use crate::input::{read_input, read_options};
+use crate::progress::Progress;
+use anyhow::{Context, Result, bail};
+use mdtf_boundary::{AlphaMap, BoundaryInput, BoundaryOutput, BoundaryParams};
+use mdtf_pipeline::boundary_chain::{self, BoundaryChainParams, Prefilter};
+use mdtf_volume::{MultiField, Volume, WriteOptions, write};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+fn params(args: &BoundaryArgs) -> Result<BoundaryParams> {
+    let alpha = args.alpha.iter().map(|s| s.parse::<AlphaMap>().map_err(anyhow::Error::msg)).collect::<Result<_>>()?;
+    Ok(BoundaryParams {
+        g_min: args.g_min,
+        g_hit_min: args.g_hit_min,
+        step: args.step,
+        d_max: args.d_max,
+        tolerance: args.tolerance,
+        flipped: args.flipped,
+        alpha,
+    })
+}
+
+fn prefilter(text: &str) -> Result<Prefilter> {
+    let parts: Vec<f64> = text
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("--prefilter: expected SIGMA_D,SIGMA_R like 1,0.1, got '{text}'"))?;
+    match parts.as_slice() {
+        [d, r] if *d > 0.0 && *r > 0.0 => Ok(Prefilter { sigma_d: *d, sigma_r: *r }),
+        _ => bail!("--prefilter: expected two positive numbers SIGMA_D,SIGMA_R like 1,0.1, got '{text}'"),
+    }
+}
+
+fn scalar(path: &Path, args: &BoundaryArgs) -> Result<Volume> {
+    let (mf, _) = read_input(path, &args.read, &read_options(&args.read))?;
+    mf.into_scalar().with_context(|| format!("{} must hold one field", path.display()))
+}
+
+/// Runs the chain (or tracing alone on given g, f'', normal) and writes the outputs.
+pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
+    let p = params(args)?;
+    let start = Instant::now();
+    let mut inputs: Vec<PathBuf> = Vec::new();
+    let (out, g) = match (&args.input, &args.g, &args.f2, &args.normal) {
+        (Some(input), None, None, None) => {
+            inputs.push(input.clone());
+            let value = progress.step("reading", || scalar(input, args))?;
+            let chain = BoundaryChainParams {
+                kernel: args.kernel.as_deref().map(str::parse).transpose()?,
+                prefilter: args.prefilter.as_deref().map(prefilter).transpose()?,
+                boundary: p,
+            };
+            let r = progress.step("deriving and tracing", || boundary_chain::run(&value, &chain))?;
+            (r.boundary, r.g)
+        }
+        (None, Some(g), Some(f2), Some(normal)) => {
+            if args.kernel.is_some() || args.prefilter.is_some() {
+                bail!(
+                    "--kernel and --prefilter apply when deriving from a value volume, not to given --g/--f2/--normal"
+                );
+            }
+            inputs.extend([g.clone(), f2.clone(), normal.clone()]);
+            let (gv, f2v) = progress.step("reading", || -> Result<_> { Ok((scalar(g, args)?, scalar(f2, args)?)) })?;
+            let nv = read_input(normal, &args.read, &read_options(&args.read))?.0;
+            let input = BoundaryInput { g: &gv, f2: &f2v, normal: &nv, value_range: args.value_range.unwrap_or(255.0) };
+            let out = progress.step("tracing", || mdtf_boundary::run(&input, &p))?;
+            (out, gv)
+        }
+        _ => bail!("give either a value volume, or all of --g, --f2 and --normal"),
+    };
+    let seconds = start.elapsed().as_secs_f64();
+    write_outputs(args, &out, &g, &inputs, progress)?;
+    let c = out.counts;
+    progress.note(&format!(
+        "traced {} voxels in {seconds:.2} s: {} boundaries kept, {} rejected (g at the hit < {:.3}), {} without a zero crossing within {:.3}; \
+         {} below g_min {:.3} not traced",
+        c.traced(),
+        c.hits,
+        c.rejected,
+        out.resolved.g_hit_min,
+        c.no_crossing,
+        out.resolved.d_max,
+        c.not_traced,
+        out.resolved.g_min
+    ));
+    Ok(())
+}
+
+fn write_outputs(
+    args: &BoundaryArgs,
+    out: &BoundaryOutput,
+    g: &Volume,
+    inputs: &[PathBuf],
+    progress: &Progress,
+) -> Result<()> {
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("cannot create output folder {}", args.output.display()))?;
+    let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+    let mut files: Vec<(String, &Volume)> = vec![
+        ("distance".into(), &out.distance),
+        ("g_hit".into(), &out.g_hit),
+        ("hit".into(), &out.hit),
+        ("dot".into(), &out.dot),
+    ];
+    if let Some(f) = &out.flipped {
+        files.push(("flipped".into(), f));
+    }
+    for (name, v) in &out.alpha {
+        files.push((name.clone(), v));
+    }
+    let mut written = Vec::new();
+    let result = progress.step("writing", || -> Result<()> {
+        for (name, v) in &files {
+            let path = args.output.join(format!("{name}{}", args.format.extension()));
+            write(&path, &MultiField::from((*v).clone()), &WriteOptions::default(), &inputs)
+                .context("cannot write the output")?;
+            written.push(path);
+        }
+        if let Some(dir) = &args.report {
+            std::fs::create_dir_all(dir).with_context(|| format!("cannot create report folder {}", dir.display()))?;
+            let report = out.report(g);
+            report.write(dir).context("cannot write the report")?;
+            progress
+                .note(&format!("mean dot product {:.6} over {} voxels with a boundary", report.mean_dot, report.hits));
+        }
+        Ok(())
+    });
+    if let Err(e) = result {
+        for p in &written {
+            let _ = std::fs::remove_file(p);
+        }
+        return Err(e);
+    }
+    Ok(())
+}

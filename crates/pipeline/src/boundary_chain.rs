@@ -1,0 +1,128 @@
+//! value volume -> derive (g, f'', normal) -> optional bilateral pre-filter
+//! of g and f'' (as the distance paper does) -> boundary tracing.
+
+use mdtf_bilateral::{BilateralError, BilateralParams, RangeUnits};
+use mdtf_boundary::{BoundaryError, BoundaryInput, BoundaryOutput, BoundaryParams};
+use mdtf_derive::{DeriveError, DeriveParams, Item, Kernel};
+use mdtf_volume::{MultiField, Volume};
+use serde::{Deserialize, Serialize};
+
+/// The bilateral pre-filter applied to g and f''.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Prefilter {
+    /// Spatial sigma, world units.
+    pub sigma_d: f64,
+    /// Range sigma as a fraction of each channel's own range (g's, f'''s).
+    pub sigma_r: f64,
+}
+
+/// Parameters of the chain.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct BoundaryChainParams {
+    /// Derivative kernel (default: derive's default; use gauss:1 or bspline3 on noisy data).
+    pub kernel: Option<Kernel>,
+    /// Optional pre-filter of g and f''.
+    pub prefilter: Option<Prefilter>,
+    /// Tracing parameters.
+    pub boundary: BoundaryParams,
+}
+
+/// Everything the chain computed.
+#[derive(Debug, Clone)]
+pub struct BoundaryChainOutput {
+    /// g (pre-filtered if asked).
+    pub g: Volume,
+    /// f'' (pre-filtered if asked).
+    pub f2: Volume,
+    /// Unit normal.
+    pub normal: MultiField,
+    /// The tracing results.
+    pub boundary: BoundaryOutput,
+}
+
+/// Errors of the chain, by stage.
+#[derive(Debug, thiserror::Error)]
+pub enum ChainError {
+    /// The derive stage failed.
+    #[error("derive: {0}")]
+    Derive(#[from] DeriveError),
+    /// The pre-filter failed.
+    #[error("pre-filter: {0}")]
+    Bilateral(#[from] BilateralError),
+    /// Tracing failed.
+    #[error("boundary: {0}")]
+    Boundary(#[from] BoundaryError),
+}
+
+/// Runs derive, the optional pre-filter and tracing on a value volume.
+pub fn run(value: &Volume, params: &BoundaryChainParams) -> Result<BoundaryChainOutput, ChainError> {
+    let value_range = value.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
+    // Check the tracing parameters before the expensive stages.
+    mdtf_boundary::resolve(&params.boundary, &value.geometry, value_range)?;
+    let d = DeriveParams {
+        items: vec![Item::G, Item::F2, Item::Normal],
+        kernel: params.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
+        ..DeriveParams::default()
+    };
+    let mut out = mdtf_derive::run(&MultiField::from(value.clone()), &d)?;
+    let take = |out: &mut mdtf_derive::DeriveOutput, item| {
+        let i = out.items.iter().position(|(it, _)| *it == item).unwrap_or(0);
+        out.items.remove(i).1
+    };
+    let normal = take(&mut out, Item::Normal);
+    let mut f2 = first_field(take(&mut out, Item::F2));
+    let mut g = first_field(take(&mut out, Item::G));
+    if let Some(p) = params.prefilter {
+        let filter = |v: &Volume| {
+            let range = v.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
+            let bp = BilateralParams {
+                sigma_d: p.sigma_d,
+                sigma_r: p.sigma_r * range.max(f64::MIN_POSITIVE),
+                range_units: RangeUnits::Value,
+                ..BilateralParams::default()
+            };
+            mdtf_bilateral::run(v, &bp)
+        };
+        g = filter(&g)?;
+        f2 = filter(&f2)?;
+    }
+    let boundary =
+        mdtf_boundary::run(&BoundaryInput { g: &g, f2: &f2, normal: &normal, value_range }, &params.boundary)?;
+    Ok(BoundaryChainOutput { g, f2, normal, boundary })
+}
+
+fn first_field(mf: MultiField) -> Volume {
+    let geometry = mf.geometry;
+    let data = mf.fields.into_iter().next().map(|f| f.data).unwrap_or_default();
+    Volume { geometry, data }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mdtf_datagen::erf_sphere;
+    use mdtf_volume::Geometry;
+
+    #[test]
+    fn chain_traces_the_sphere_and_checks_parameters_first() {
+        let ph = erf_sphere(Geometry::new([48; 3], [1.0; 3]), 15.0, 2.0, 0.0, 255.0, None);
+        let v = ph.volume();
+        let out = run(&v, &BoundaryChainParams::default()).unwrap();
+        assert!(out.boundary.counts.hits > 1000);
+        let truth = ph.truth();
+        let (mut err, mut n) = (0.0, 0);
+        for (i, &h) in out.boundary.hit.samples().iter().enumerate() {
+            if h == 1.0 && truth.x.samples()[i].abs() < 4.0 {
+                err += (out.boundary.distance.samples()[i] - truth.x.samples()[i].abs()).abs();
+                n += 1;
+            }
+        }
+        assert!(err / (n as f32) < 0.05);
+        let bad = BoundaryChainParams {
+            boundary: BoundaryParams { d_max: Some(1000.0), ..Default::default() },
+            ..Default::default()
+        };
+        assert!(matches!(run(&v, &bad), Err(ChainError::Boundary(_))));
+    }
+}
