@@ -407,3 +407,38 @@ fn boundary_from_a_value_volume_and_from_derived_volumes_agree() {
     assert!(e.contains("must share one grid"), "{e}");
     assert!(!out.exists());
 }
+
+#[test]
+fn histogram_writes_pictures_counts_and_the_histogram_volume() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = dir.path().join("s.nii.gz");
+    mdtf_ok(&["synth", "erf-sphere", "-o", s.to_str().unwrap(), "--size", "64", "--radius", "19.2", "-q"]);
+    let out = dir.path().join("h");
+    mdtf_ok(&["histogram", s.to_str().unwrap(), "-o", out.to_str().unwrap(), "--stretched", "--hvol", "-q"]);
+    for f in [
+        "hist_v_g.png",
+        "hist_v_g.nrrd",
+        "hist_v_g.json",
+        "hist_v_g_hit.png",
+        "normal_vs_stretched.png",
+        "hvol.nrrd",
+        "opacity.png",
+        "position.nrrd",
+        "hvol_per_v.csv",
+    ] {
+        assert!(out.join(f).exists(), "{f}");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("hvol.json")).unwrap()).unwrap();
+    let sigma = json["sigma"].as_f64().unwrap();
+    assert!((sigma - 3.0).abs() < 0.06, "{sigma}");
+    let counts: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("hist_v_g.json")).unwrap()).unwrap();
+    assert!(counts["total"].as_u64().unwrap() > 250_000);
+    let e = mdtf_err(&["histogram", s.to_str().unwrap(), "-o", out.to_str().unwrap(), "--axes", "v,gg"]);
+    assert!(e.contains("unknown channel 'gg'"), "{e}");
+    let e = mdtf_err(&["histogram", s.to_str().unwrap(), "-o", out.to_str().unwrap(), "--range", "0:255,3:3"]);
+    assert!(e.contains("degenerate"), "{e}");
+    let e = mdtf_err(&["histogram", s.to_str().unwrap(), "-o", out.to_str().unwrap(), "--bins", "0"]);
+    assert!(e.contains("zero bins"), "{e}");
+}

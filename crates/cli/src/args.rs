@@ -42,6 +42,8 @@ pub enum Command {
     Bilateral(BilateralArgs),
     /// Distance from every voxel to its nearest boundary (zero crossing of f''), g at the hit, alpha maps.
     Boundary(BoundaryArgs),
+    /// Joint and stretched histograms with PNG pictures, and the Kindlmann-Durkin histogram volume (--hvol).
+    Histogram(HistogramArgs),
 }
 
 /// Which phantom to generate.
@@ -402,6 +404,70 @@ pub struct BoundaryArgs {
     /// Output format.
     #[arg(long, value_enum, default_value_t = OutFormat::NiiGz)]
     pub format: OutFormat,
+    #[command(flatten)]
+    pub read: InputArgs,
+}
+
+/// `--scale` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ScaleArg {
+    /// 255 log(1 + count) / log(1 + max).
+    Log,
+    /// 255 count / max.
+    Linear,
+}
+
+/// `mdtf histogram`.
+#[derive(Debug, Args)]
+#[command(
+    after_help = "Channels: v (the value; field 0), g and f2 (derived in process, --kernel), g_hit, hit and distance\n\
+(traced in process by the boundary stage), or the field names of a multi-field input.\n\n\
+Bins: value exactly at an axis maximum goes to the last bin; values outside the range are not counted.\n\
+Automatic ranges clip 0 / 0.002 / 0.004 percent at each end of v / g / f2 (Teem qbert's defaults);\n\
+integer data spanning at most 4096 values get one bin per value.\n\n\
+Outputs in DIR: hist_A_B.png (A to the right, B upward; axis ranges in the PNG text chunk), hist_A_B.nrrd\n\
+(counts), hist_A_B.json (axes, total); 3 axes add the three projections. --stretched adds hist_v_g_hit.*\n\
+(traced voxels only) and normal_vs_stretched.png (the distance paper's Fig. 5). --hvol writes hvol.nrrd,\n\
+hvol_per_v.csv (mean g and f'' per v bin), position.nrrd (p(v,g)), opacity.png/.nrrd and hvol.json (sigma).\n\n\
+Examples:\n  mdtf histogram ct.nii.gz -o hist/ --axes v,g\n  mdtf histogram sphere.nii.gz -o hist/ --stretched\n  \
+    mdtf histogram sphere.nii.gz -o hist/ --hvol\n  mdtf histogram fields.nii.gz -o hist/ --axes a,b,c --bins 64,64,64"
+)]
+pub struct HistogramArgs {
+    /// Input volume (value, or a multi-field volume whose fields are channels).
+    pub input: PathBuf,
+    /// Output folder.
+    #[arg(short, long, value_name = "DIR")]
+    pub output: PathBuf,
+    /// Channels on the axes, 1 to 3, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "v,g", value_name = "A,B[,C]")]
+    pub axes: Vec<String>,
+    /// Bins per axis (one number for all). Default: automatic (256, or one per integer).
+    #[arg(long, value_delimiter = ',', value_name = "N[,N..]")]
+    pub bins: Vec<usize>,
+    /// Range per axis: MIN:MAX or auto, comma-separated.
+    #[arg(long, value_delimiter = ',', value_name = "R[,R..]", allow_hyphen_values = true)]
+    pub range: Vec<String>,
+    /// Count only voxels where this volume is non-zero.
+    #[arg(long, value_name = "FILE")]
+    pub mask: Option<PathBuf>,
+    /// Grey-level mapping of the PNGs.
+    #[arg(long, value_enum, default_value_t = ScaleArg::Log)]
+    pub scale: ScaleArg,
+    /// Also the stretched (v, g_hit) histogram of traced voxels, and normal | stretched side by side.
+    #[arg(long)]
+    pub stretched: bool,
+    /// The histogram volume (v, g, f'') with sigma, p(v, g) and the default opacity.
+    #[arg(long)]
+    pub hvol: bool,
+    /// g threshold of p(v, g). Default: 4% of the largest mean g.
+    #[arg(long, value_name = "G")]
+    pub g_thresh: Option<f64>,
+    /// Half-width of the opacity tent in p, world units. Default: the estimated sigma.
+    #[arg(long, value_name = "W")]
+    pub tent_width: Option<f64>,
+    /// Derivative kernel for g and f2.
+    #[arg(long, value_name = "K")]
+    pub kernel: Option<String>,
     #[command(flatten)]
     pub read: InputArgs,
 }

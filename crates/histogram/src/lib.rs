@@ -1,4 +1,36 @@
-//! Histogram stage of mdtf: joint and stretched histograms, histogram volume
-//! and position function, images of them.
+//! Histogram stage of mdtf: joint histograms of 1 to 3 channels (v, g, f'',
+//! the stretched (v, g_hit), pairs of fields), their pictures, and the
+//! histogram volume of Kindlmann and Durkin with the position function and a
+//! default opacity transfer function.
 //!
-//! Placeholder: filled by the histogram issue. It holds no functions yet.
+//! Counts are integers and parts are summed in a fixed order, so results do
+//! not depend on the thread count. Bin rule: [`Axis::bin`].
+
+mod axis;
+mod count;
+mod hvol;
+mod image;
+
+pub use axis::{Axis, AxisSpec, DEFAULT_BINS, MAX_INTEGER_BINS};
+pub use count::{Histogram, count};
+pub use hvol::{HistogramVolume, HvolParams, histogram_volume};
+pub use image::{Grey, Scale, grey_level, side_by_side, write_png};
+
+/// Errors of the histogram stage.
+#[derive(Debug, thiserror::Error)]
+pub enum HistogramError {
+    /// Zero bins, an inverted, degenerate or non-finite range, or an all-NaN channel.
+    #[error("{0}")]
+    BadAxis(String),
+    /// Channels of different sizes or geometry.
+    #[error("{0}")]
+    Geometry(String),
+    /// The data hold nothing to measure.
+    #[error("{0}")]
+    Degenerate(String),
+}
+
+/// Voxels whose boundary tracing kept a hit (`hit` == 1), the mask of the stretched histogram.
+pub fn hit_mask(hit: &[f32]) -> Vec<bool> {
+    hit.iter().map(|&h| h == 1.0).collect()
+}

@@ -53,6 +53,9 @@ pub enum ChainError {
     /// Tracing failed.
     #[error("boundary: {0}")]
     Boundary(#[from] BoundaryError),
+    /// A request the chain does not know.
+    #[error("{0}")]
+    Unknown(String),
 }
 
 /// Runs derive, the optional pre-filter and tracing on a value volume.

@@ -3,3 +3,4 @@
 //! pipelines issue, pipeline files and their runner).
 
 pub mod boundary_chain;
+pub mod channels;

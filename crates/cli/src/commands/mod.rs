@@ -4,6 +4,7 @@ mod bilateral;
 mod boundary;
 mod convert;
 mod derive;
+mod histogram;
 mod info;
 mod synth;
 
@@ -20,5 +21,6 @@ pub fn run(command: Command, progress: &Progress) -> Result<()> {
         Command::Derive(a) => derive::run(&a, progress),
         Command::Bilateral(a) => bilateral::run(&a, progress),
         Command::Boundary(a) => boundary::run(&a, progress),
+        Command::Histogram(a) => histogram::run(&a, progress),
     }
 }

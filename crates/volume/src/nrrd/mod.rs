@@ -7,8 +7,10 @@
 //! its x and y negated on read. mdtf writes `space: right-anterior-superior`.
 
 mod header;
+mod table;
 
 pub use header::{Encoding, NrrdHeader, read_header};
+pub use table::{TableAxis, write_counts_nrrd, write_table_nrrd};
 
 use crate::atomic::write_file_atomically;
 use crate::dtype::{Endian, SampleType, encode_samples, first_unrepresentable};

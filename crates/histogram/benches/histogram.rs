@@ -1,0 +1,46 @@
+//! Histogram throughput (voxels/s). Run: `cargo bench -p mdtf-histogram`.
+
+use divan::counter::ItemsCount;
+use mdtf_datagen::erf_sphere;
+use mdtf_derive::{DeriveParams, Item};
+use mdtf_histogram::{Axis, HvolParams, count, histogram_volume};
+use mdtf_volume::{Geometry, MultiField};
+
+fn main() {
+    divan::main();
+}
+
+fn sphere_channels(n: usize) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+    let v = erf_sphere(Geometry::new([n; 3], [1.0; 3]), 0.3 * n as f64, 3.0, 0.0, 255.0, None).volume();
+    let d = DeriveParams { items: vec![Item::G, Item::F2], ..DeriveParams::default() };
+    let out = mdtf_derive::run(&MultiField::from(v.clone()), &d).expect("derive");
+    let g = out.items[0].1.fields[0].data.iter().copied().collect();
+    let h = out.items[1].1.fields[0].data.iter().copied().collect();
+    (v.data.iter().copied().collect(), g, h)
+}
+
+/// Joint (v, g) histogram, 256 x 256 bins, of a 256^3 volume.
+#[divan::bench(sample_count = 5, sample_size = 1)]
+fn joint_256x256_of_256_cubed(bencher: divan::Bencher) {
+    let (v, g, _) = sphere_channels(256);
+    let axes = vec![
+        Axis::new("v", 0.0, 255.0, 256).unwrap_or_else(|e| panic!("{e}")),
+        Axis::new("g", 0.0, 35.0, 256).unwrap_or_else(|e| panic!("{e}")),
+    ];
+    bencher.counter(ItemsCount::new(v.len())).bench(|| count(&[&v, &g], axes.clone(), None));
+}
+
+/// Histogram volume including the derivative pass (g and f'' with the default kernel), 256^3.
+#[divan::bench(sample_count = 3, sample_size = 1)]
+fn hvol_with_derive_256_cubed(bencher: divan::Bencher) {
+    let n = 256;
+    let vol = erf_sphere(Geometry::new([n; 3], [1.0; 3]), 0.3 * n as f64, 3.0, 0.0, 255.0, None).volume();
+    let input = MultiField::from(vol.clone());
+    let d = DeriveParams { items: vec![Item::G, Item::F2], ..DeriveParams::default() };
+    bencher.counter(ItemsCount::new(n * n * n)).bench(|| {
+        let out = mdtf_derive::run(&input, &d).expect("derive");
+        let g = out.items[0].1.fields[0].data.as_slice().unwrap_or(&[]);
+        let h = out.items[1].1.fields[0].data.as_slice().unwrap_or(&[]);
+        histogram_volume(vol.samples(), g, h, &HvolParams::default()).map(|hv| hv.sigma)
+    });
+}

@@ -1,0 +1,232 @@
+//! Histogram axes: value ranges, bin counts and the binning rule.
+
+use crate::HistogramError;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// One axis: `bins` equal cells over [min, max]. A value v goes to bin
+/// floor((v - min) / (max - min) * bins); v == max goes to the last bin;
+/// values outside [min, max] (and NaN) are not counted.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Axis {
+    /// Channel name, e.g. "v", "g", "f2", "g_hit".
+    pub name: String,
+    /// Lower edge of the first bin.
+    pub min: f64,
+    /// Upper edge of the last bin.
+    pub max: f64,
+    /// Number of bins.
+    pub bins: usize,
+}
+
+impl Axis {
+    /// A checked axis.
+    pub fn new(name: &str, min: f64, max: f64, bins: usize) -> Result<Axis, HistogramError> {
+        if bins == 0 {
+            return Err(HistogramError::BadAxis(format!("axis {name}: zero bins")));
+        }
+        if !(min.is_finite() && max.is_finite() && max > min) {
+            return Err(HistogramError::BadAxis(format!(
+                "axis {name}: range [{min}, {max}] is inverted, degenerate or not finite"
+            )));
+        }
+        Ok(Axis { name: name.to_string(), min, max, bins })
+    }
+
+    /// The bin of `v`, or None outside the range: floor((v - min) * (bins / (max - min))),
+    /// the maximum itself in the last bin.
+    #[inline(always)]
+    pub fn bin(&self, v: f32) -> Option<usize> {
+        self.binner().bin(v)
+    }
+
+    /// The bin rule with its constants precomputed, for counting loops.
+    pub fn binner(&self) -> Binner {
+        Binner { min: self.min, max: self.max, scale: self.bins as f64 / (self.max - self.min), last: self.bins - 1 }
+    }
+
+    /// Centre of bin `b`.
+    pub fn centre(&self, b: usize) -> f64 {
+        self.min + (b as f64 + 0.5) * (self.max - self.min) / self.bins as f64
+    }
+
+    /// Width of one bin.
+    pub fn width(&self) -> f64 {
+        (self.max - self.min) / self.bins as f64
+    }
+}
+
+/// [`Axis::bin`] with precomputed constants.
+#[derive(Debug, Clone, Copy)]
+pub struct Binner {
+    min: f64,
+    max: f64,
+    scale: f64,
+    last: usize,
+}
+
+impl Binner {
+    /// The bin of `v`, or None outside [min, max] (or NaN).
+    #[inline(always)]
+    pub fn bin(&self, v: f32) -> Option<usize> {
+        let v = v as f64;
+        if v >= self.min && v <= self.max {
+            Some((((v - self.min) * self.scale) as usize).min(self.last))
+        } else {
+            None
+        }
+    }
+}
+
+/// How to choose an axis's range and bins.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AxisSpec {
+    /// Explicit [min, max], or None to take it from the data.
+    pub range: Option<(f64, f64)>,
+    /// Percent of the samples clipped off each end when the range comes from the data (low, high).
+    pub clip_percent: (f64, f64),
+    /// Number of bins, or None: one bin per integer for integer data spanning at most
+    /// [`MAX_INTEGER_BINS`] values, else [`DEFAULT_BINS`].
+    pub bins: Option<usize>,
+}
+
+/// Default bin count.
+pub const DEFAULT_BINS: usize = 256;
+/// Integer data spanning at most this many values get one bin per value.
+pub const MAX_INTEGER_BINS: usize = 4096;
+
+impl AxisSpec {
+    /// Teem qbert's percentile clipping for a channel: 0 % for v, 0.002 % for
+    /// g, 0.004 % for f'' (each end); 0 for anything else.
+    pub fn qbert(channel: &str) -> AxisSpec {
+        let p = match channel {
+            "g" | "g_hit" => 0.002,
+            "f2" => 0.004,
+            _ => 0.0,
+        };
+        AxisSpec { range: None, clip_percent: (p, p), bins: None }
+    }
+
+    /// Resolves the axis for `data` (NaN and infinities ignored).
+    pub fn resolve(&self, name: &str, data: &[f32]) -> Result<Axis, HistogramError> {
+        let (lo, hi) = match mdtf_volume::finite_range(data) {
+            Some(r) => r,
+            None => {
+                // some samples are NaN or infinite: the slow pass that skips them
+                let finite = data.iter().copied().filter(|v| v.is_finite());
+                finite.fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), v| (l.min(v), h.max(v)))
+            }
+        };
+        if lo > hi {
+            return Err(HistogramError::BadAxis(format!("channel {name} has no finite samples")));
+        }
+        let integer = self.bins.is_none()
+            && self.range.is_none()
+            && data.par_chunks(1 << 16).all(|c| c.iter().all(|v| !v.is_finite() || v.fract() == 0.0));
+        let (min, max) = match self.range {
+            Some(r) => r,
+            None => percentile_range(data, lo as f64, hi as f64, self.clip_percent),
+        };
+        let span = max - min;
+        let bins = match self.bins {
+            Some(b) => b,
+            None if integer && self.range.is_none() && span < MAX_INTEGER_BINS as f64 => {
+                // one bin per integer: cells centred on the integers
+                return Axis::new(name, min.floor() - 0.5, max.ceil() + 0.5, (max.ceil() - min.floor()) as usize + 1);
+            }
+            None => DEFAULT_BINS,
+        };
+        if span == 0.0 && self.range.is_none() {
+            return Axis::new(name, min - 0.5, max + 0.5, bins);
+        }
+        Axis::new(name, min, max, bins)
+    }
+}
+
+/// [lo, hi] with `clip` percent of the samples removed at each end, from a
+/// fine 65536-bin histogram of [lo, hi] (resolution 1/65536 of the range).
+fn percentile_range(data: &[f32], lo: f64, hi: f64, clip: (f64, f64)) -> (f64, f64) {
+    if clip.0 <= 0.0 && clip.1 <= 0.0 || hi <= lo {
+        return (lo, hi);
+    }
+    const FINE: usize = 1 << 16;
+    let scale = FINE as f64 / (hi - lo);
+    let parts: Vec<Vec<u32>> = data
+        .par_chunks(1 << 22)
+        .map(|c| {
+            let mut local = vec![0u32; FINE];
+            for &v in c.iter().filter(|v| v.is_finite()) {
+                local[(((v as f64 - lo) * scale) as usize).min(FINE - 1)] += 1;
+            }
+            local
+        })
+        .collect();
+    let mut counts = vec![0u64; FINE];
+    for p in &parts {
+        counts.iter_mut().zip(p).for_each(|(c, &l)| *c += l as u64);
+    }
+    let n: u64 = counts.iter().sum();
+    let cut = |p: f64| (p / 100.0 * n as f64).floor() as u64;
+    let (skip_lo, skip_hi) = (cut(clip.0), cut(clip.1));
+    let mut acc = 0;
+    let mut first = 0;
+    for (b, &c) in counts.iter().enumerate() {
+        acc += c;
+        if acc > skip_lo {
+            first = b;
+            break;
+        }
+    }
+    acc = 0;
+    let mut last = FINE - 1;
+    for (b, &c) in counts.iter().enumerate().rev() {
+        acc += c;
+        if acc > skip_hi {
+            last = b;
+            break;
+        }
+    }
+    let edge = |b: usize| lo + b as f64 / scale;
+    let min = if clip.0 > 0.0 { edge(first) } else { lo };
+    let max = if clip.1 > 0.0 { edge(last + 1).min(hi) } else { hi };
+    if max > min { (min, max) } else { (lo, hi) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn edges_follow_the_documented_rule() {
+        let a = Axis::new("v", 0.0, 10.0, 5).unwrap();
+        assert_eq!(a.bin(0.0), Some(0));
+        assert_eq!(a.bin(1.999), Some(0));
+        assert_eq!(a.bin(2.0), Some(1));
+        assert_eq!(a.bin(10.0), Some(4), "the maximum goes to the last bin");
+        assert_eq!(a.bin(10.001), None);
+        assert_eq!(a.bin(-0.001), None);
+        assert_eq!(a.bin(f32::NAN), None);
+        assert!(Axis::new("v", 1.0, 1.0, 4).is_err());
+        assert!(Axis::new("v", 2.0, 1.0, 4).is_err());
+        assert!(Axis::new("v", 0.0, 1.0, 0).is_err());
+    }
+
+    #[test]
+    fn integer_data_gets_one_bin_per_value() {
+        let data: Vec<f32> = (0..1000).map(|i| (i % 17) as f32 + 3.0).collect();
+        let a = AxisSpec::qbert("v").resolve("v", &data).unwrap();
+        assert_eq!((a.min, a.max, a.bins), (2.5, 19.5, 17));
+        assert_eq!(a.bin(3.0), Some(0));
+        assert_eq!(a.bin(19.0), Some(16));
+    }
+
+    #[test]
+    fn percentile_clipping_drops_the_tails() {
+        let mut data: Vec<f32> = (0..100_000).map(|i| (i % 1000) as f32 * 0.01).collect();
+        data.push(1e6);
+        let spec = AxisSpec { range: None, clip_percent: (0.0, 0.002), bins: Some(64) };
+        let a = spec.resolve("g", &data).unwrap();
+        assert!(a.max < 20.0 && a.max > 9.9, "{}", a.max);
+        assert_eq!(a.min, 0.0);
+    }
+}

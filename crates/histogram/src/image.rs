@@ -1,0 +1,116 @@
+//! Pictures of histograms: 8-bit grey PNGs with log or linear scaling, the
+//! first axis horizontal and the second increasing upward, axis ranges in
+//! the PNG's text chunk.
+
+use crate::count::Histogram;
+use mdtf_volume::{VolumeError, write_file_atomically};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// How counts map to grey levels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Scale {
+    /// 255 log(1 + c) / log(1 + max) (Inviwo, Voreen).
+    #[default]
+    Log,
+    /// 255 c / max.
+    Linear,
+}
+
+/// An 8-bit grey image, rows top to bottom.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Grey {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Pixels, row-major from the top row.
+    pub pixels: Vec<u8>,
+}
+
+/// Grey level of count c for the largest count `max`.
+pub fn grey_level(c: u64, max: u64, scale: Scale) -> u8 {
+    if max == 0 {
+        return 0;
+    }
+    let f = match scale {
+        Scale::Log => (1.0 + c as f64).ln() / (1.0 + max as f64).ln(),
+        Scale::Linear => c as f64 / max as f64,
+    };
+    (255.0 * f).round().clamp(0.0, 255.0) as u8
+}
+
+impl Histogram {
+    /// The picture of a 2D histogram (one pixel per bin; axis 0 to the right,
+    /// axis 1 upward) or of a 1D histogram (bars 128 pixels tall).
+    pub fn image(&self, scale: Scale) -> Grey {
+        let max = self.max();
+        if self.axes.len() == 1 {
+            let (w, h) = (self.axes[0].bins, 128usize);
+            let mut pixels = vec![0u8; w * h];
+            for (x, &c) in self.counts.iter().enumerate() {
+                let height = (grey_level(c, max, scale) as usize * h).div_ceil(255);
+                for y in 0..height {
+                    pixels[(h - 1 - y) * w + x] = 255;
+                }
+            }
+            return Grey { width: w, height: h, pixels };
+        }
+        let (w, h) = (self.axes[0].bins, self.axes[1].bins);
+        let mut pixels = vec![0u8; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                pixels[(h - 1 - y) * w + x] = grey_level(self.counts[y * w + x], max, scale);
+            }
+        }
+        Grey { width: w, height: h, pixels }
+    }
+
+    /// Text describing the axes, for the PNG text chunk and the sidecar.
+    pub fn describe(&self, scale: Scale) -> String {
+        let axes: Vec<String> = self
+            .axes
+            .iter()
+            .enumerate()
+            .map(|(i, a)| {
+                let dir = ["horizontal", "vertical (up)", "depth"][i.min(2)];
+                format!("{} {dir}: [{}, {}] in {} bins", a.name, a.min, a.max, a.bins)
+            })
+            .collect();
+        format!("{}; {:?} scale; max count {}", axes.join("; "), scale, self.max())
+    }
+}
+
+/// Two images side by side with a 4-pixel grey gap (heights padded at the bottom).
+pub fn side_by_side(a: &Grey, b: &Grey) -> Grey {
+    let gap = 4;
+    let (w, h) = (a.width + gap + b.width, a.height.max(b.height));
+    let mut pixels = vec![0u8; w * h];
+    for y in 0..h {
+        for x in 0..gap {
+            pixels[y * w + a.width + x] = 128;
+        }
+        if y < a.height {
+            pixels[y * w..y * w + a.width].copy_from_slice(&a.pixels[y * a.width..(y + 1) * a.width]);
+        }
+        if y < b.height {
+            let o = y * w + a.width + gap;
+            pixels[o..o + b.width].copy_from_slice(&b.pixels[y * b.width..(y + 1) * b.width]);
+        }
+    }
+    Grey { width: w, height: h, pixels }
+}
+
+/// Writes a grey PNG with `description` in a tEXt chunk ("Description"). Atomic.
+pub fn write_png(path: &Path, img: &Grey, description: &str) -> Result<(), VolumeError> {
+    write_file_atomically(path, |out| {
+        let mut enc = png::Encoder::new(out, img.width as u32, img.height as u32);
+        enc.set_color(png::ColorType::Grayscale);
+        enc.set_depth(png::BitDepth::Eight);
+        enc.add_text_chunk("Description".into(), description.to_string()).map_err(std::io::Error::other)?;
+        let mut writer = enc.write_header().map_err(std::io::Error::other)?;
+        writer.write_image_data(&img.pixels).map_err(std::io::Error::other)?;
+        writer.finish().map_err(std::io::Error::other)
+    })
+}

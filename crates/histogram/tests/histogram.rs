@@ -1,0 +1,220 @@
+//! Histograms against a brute-force count, the erf sphere's analytic
+//! position function and sigma, and the stretched histogram of the paper's Fig. 5.
+
+use mdtf_boundary::{BoundaryInput, BoundaryParams};
+use mdtf_datagen::{RadialPhantom, erf_sphere};
+use mdtf_derive::{DeriveParams, Item};
+use mdtf_histogram::{Axis, AxisSpec, HvolParams, Scale, count, grey_level, histogram_volume, hit_mask, write_png};
+use mdtf_volume::{Geometry, MultiField, Volume};
+use std::f64::consts::PI;
+
+struct Channels {
+    v: Volume,
+    g: Volume,
+    f2: Volume,
+    normal: MultiField,
+}
+
+fn channels(v: Volume) -> Channels {
+    let d = DeriveParams { items: vec![Item::G, Item::F2, Item::Normal], ..DeriveParams::default() };
+    let mut out = mdtf_derive::run(&MultiField::from(v.clone()), &d).unwrap();
+    let normal = out.items.remove(2).1;
+    let f2 = out.items.remove(1).1.into_scalar().unwrap();
+    let g = out.items.remove(0).1.into_scalar().unwrap();
+    Channels { v, g, f2, normal }
+}
+
+#[test]
+fn joint_counts_equal_a_brute_force_count() {
+    let mut state = 99u64;
+    let mut rnd = || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 40) as f32 / (1u64 << 24) as f32 * 12.0 - 1.0
+    };
+    let a: Vec<f32> = (0..50_000).map(|_| rnd()).collect();
+    let mut b: Vec<f32> = (0..50_000).map(|_| rnd()).collect();
+    b[7] = 10.0; // exactly the maximum of the axis
+    b[8] = f32::NAN;
+    let axes = vec![Axis::new("a", 0.0, 10.0, 17).unwrap(), Axis::new("b", 0.0, 10.0, 9).unwrap()];
+    let mask: Vec<bool> = (0..50_000).map(|i| i % 7 != 3).collect();
+    let h = count(&[&a, &b], axes.clone(), Some(&mask)).unwrap();
+    // brute force written here: floor((x - min) / width), max in the last bin
+    let mut want = vec![0u64; 17 * 9];
+    let mut inside = 0u64;
+    for i in 0..a.len() {
+        let (x, y) = (a[i] as f64, b[i] as f64);
+        if !mask[i] || !(0.0..=10.0).contains(&x) || !(0.0..=10.0).contains(&y) {
+            continue;
+        }
+        let bx = ((x / (10.0 / 17.0)) as usize).min(16);
+        let by = ((y / (10.0 / 9.0)) as usize).min(8);
+        want[by * 17 + bx] += 1;
+        inside += 1;
+    }
+    assert_eq!(h.counts, want);
+    assert_eq!(h.total(), inside);
+    assert!(h.counts[h.index(&[axes[0].bin(a[7]).unwrap(), 8])] > 0, "b = max lands in the last bin");
+    // same counts whatever the thread count
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap()
+        .install(|| count(&[&a, &b], axes, Some(&mask)).unwrap());
+    assert_eq!(one.counts, h.counts);
+}
+
+#[test]
+fn position_function_recovers_the_signed_distance_and_sigma() {
+    let sigma = 3.0;
+    let ph = erf_sphere(Geometry::new([128; 3], [1.0; 3]), 38.4, sigma, 0.0, 255.0, None);
+    let c = channels(ph.volume());
+    let params = HvolParams { g_thresh: Some(0.0), ..HvolParams::default() };
+    let hv = histogram_volume(c.v.samples(), c.g.samples(), c.f2.samples(), &params).unwrap();
+    eprintln!("sigma estimate {:.4} (true {sigma})", hv.sigma);
+    assert!((hv.sigma - sigma).abs() <= 0.02 * sigma, "{}", hv.sigma);
+    // x as a function of v: v = 255 (1 + erf(x / (sigma sqrt 2))) / 2; compare each bin's p with
+    // the mean x of its voxels (independent of the histogram code).
+    let truth = ph.truth();
+    let [av, ag] = &hv.vg_axes;
+    let mut sum_x = vec![0.0f64; av.bins * ag.bins];
+    let mut n_x = vec![0u64; av.bins * ag.bins];
+    for i in 0..c.v.samples().len() {
+        if let (Some(bv), Some(bg)) = (av.bin(c.v.samples()[i]), ag.bin(c.g.samples()[i])) {
+            sum_x[bg * av.bins + bv] += truth.x.samples()[i] as f64;
+            n_x[bg * av.bins + bv] += 1;
+        }
+    }
+    let (mut checked, mut worst) = (0, 0.0f64);
+    for i in 0..sum_x.len() {
+        let x = sum_x[i] / n_x[i].max(1) as f64;
+        // the boundary shell |x| <= 2 sigma, bins with at least 50 voxels
+        if hv.count_vg[i] >= 50 && x.abs() <= 2.0 * sigma {
+            worst = worst.max((hv.position[i] as f64 - x).abs());
+            checked += 1;
+        }
+    }
+    eprintln!("p(v,g) vs x: worst {worst:.4} voxel over {checked} bins");
+    assert!(checked > 50);
+    assert!(worst <= 0.1, "{worst}");
+    // the default opacity is the tent of p
+    for i in 0..hv.opacity.len() {
+        if hv.count_vg[i] > 0 && ag.centre(i / av.bins) > 1.0 {
+            let want = (1.0 - (hv.position[i] as f64).abs() / hv.sigma).max(0.0);
+            assert!((hv.opacity[i] as f64 - want).abs() < 1e-5);
+        }
+    }
+}
+
+fn g_hit_and_mask(c: &Channels, value_range: f64, params: &BoundaryParams) -> (Vec<f32>, Vec<bool>) {
+    let out =
+        mdtf_boundary::run(&BoundaryInput { g: &c.g, f2: &c.f2, normal: &c.normal, value_range }, params).unwrap();
+    (out.g_hit.samples().to_vec(), hit_mask(out.hit.samples()))
+}
+
+#[test]
+fn stretched_histogram_collapses_the_arch_to_a_line() {
+    let sigma = 3.0;
+    let ph = erf_sphere(Geometry::new([128; 3], [1.0; 3]), 38.4, sigma, 0.0, 255.0, None);
+    let c = channels(ph.volume());
+    let (g_hit, mask) = g_hit_and_mask(&c, 255.0, &BoundaryParams::default());
+    let a = 255.0 / (sigma * (2.0 * PI).sqrt());
+    let axes = vec![Axis::new("v", 0.0, 255.0, 256).unwrap(), Axis::new("g", 0.0, 1.2 * a, 256).unwrap()];
+    let stretched = count(&[c.v.samples(), &g_hit], axes.clone(), Some(&mask)).unwrap();
+    let normal = count(&[c.v.samples(), c.g.samples()], axes.clone(), Some(&mask)).unwrap();
+    let share_near_a = |h: &mdtf_histogram::Histogram| {
+        let mut near = 0;
+        for bg in 0..256 {
+            if ((axes[1].centre(bg) - a) / a).abs() <= 0.01 + axes[1].width() / a {
+                near += (0..256).map(|bv| h.counts[bg * 256 + bv]).sum::<u64>();
+            }
+        }
+        near as f64 / h.total() as f64
+    };
+    let (s, n) = (share_near_a(&stretched), share_near_a(&normal));
+    eprintln!("share of traced voxels in the g bins within 1% of A: stretched {s:.4}, normal {n:.4}");
+    assert!(s >= 0.95, "{s}");
+    assert!(n < 0.3, "{n}");
+}
+
+#[test]
+fn nested_shells_separate_into_rows_when_stretched() {
+    let sigma = 1.5;
+    let ph = RadialPhantom::tooth(Geometry::new([128; 3], [1.0; 3]), sigma);
+    let c = channels(ph.volume());
+    let (g_hit, mask) = g_hit_and_mask(&c, 255.0, &BoundaryParams::default());
+    let peak = |jump: f64| jump / (sigma * (2.0 * PI).sqrt());
+    // jumps: background->enamel 210, enamel->dentin 90, dentin->pulp 80
+    let gmax = 1.1 * peak(210.0);
+    let axes = vec![Axis::new("v", 0.0, 255.0, 256).unwrap(), Axis::new("g_hit", 0.0, gmax, 256).unwrap()];
+    let h = count(&[c.v.samples(), &g_hit], axes.clone(), Some(&mask)).unwrap();
+    // In the normal (v, g) histogram the arches of the enamel/dentin (90) and dentin/pulp (80)
+    // boundaries overlap; stretched, the voxels of each boundary (the one nearest to them)
+    // gather in the g row of that boundary's peak.
+    let [nx, ny, _] = ph.geometry.dims;
+    let c0 = ph.centre;
+    let mode_row = |radius: f64| {
+        let mut rows = vec![0u64; 256];
+        for i in 0..g_hit.len() {
+            let (x, y, z) = ((i % nx) as f64, ((i / nx) % ny) as f64, (i / (nx * ny)) as f64);
+            let rho = ((x - c0[0]).powi(2) + (y - c0[1]).powi(2) + (z - c0[2]).powi(2)).sqrt();
+            let nearest =
+                ph.boundaries.iter().map(|b| b.radius).min_by(|a, b| (a - rho).abs().total_cmp(&(b - rho).abs()));
+            if mask[i]
+                && nearest == Some(radius)
+                && let Some(bg) = axes[1].bin(g_hit[i])
+            {
+                rows[bg] += 1;
+            }
+        }
+        (0..256).max_by_key(|&r| rows[r]).unwrap_or(0)
+    };
+    let (r_dentin, r_pulp) = (mode_row(ph.boundaries[1].radius), mode_row(ph.boundaries[2].radius));
+    let expect = |jump: f64| peak(jump) / gmax * 256.0;
+    eprintln!(
+        "rows: enamel/dentin {r_dentin} (expected {:.1}), dentin/pulp {r_pulp} (expected {:.1})",
+        expect(90.0),
+        expect(80.0)
+    );
+    assert!(r_dentin.abs_diff(r_pulp) > 2, "{r_dentin} {r_pulp}");
+    assert!((r_dentin as f64 - expect(90.0)).abs() <= 2.0 && (r_pulp as f64 - expect(80.0)).abs() <= 2.0);
+    let _ = h.total();
+}
+
+#[test]
+fn png_decodes_and_follows_the_log_mapping() {
+    let v: Vec<f32> = (0..1000).map(|i| (i % 10) as f32).collect();
+    let g: Vec<f32> = (0..1000).map(|i| ((i * i) % 7) as f32).collect();
+    let axes = vec![Axis::new("v", 0.0, 10.0, 10).unwrap(), Axis::new("g", 0.0, 7.0, 7).unwrap()];
+    let h = count(&[&v, &g], axes, None).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("h.png");
+    write_png(&p, &h.image(Scale::Log), &h.describe(Scale::Log)).unwrap();
+    let dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&p).unwrap()));
+    let mut reader = dec.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!((info.width, info.height), (10, 7));
+    let text = reader.info().uncompressed_latin1_text.iter().map(|t| t.text.clone()).collect::<String>();
+    assert!(text.contains("v horizontal: [0, 10]") && text.contains("g vertical (up): [0, 7]"), "{text}");
+    let max = h.max();
+    for y in 0..7 {
+        for x in 0..10 {
+            let c = h.counts[y * 10 + x];
+            let want = (255.0 * (1.0 + c as f64).ln() / (1.0 + max as f64).ln()).round() as u8;
+            assert_eq!(buf[(6 - y) * 10 + x], want, "g row {y} is drawn upward");
+            assert_eq!(grey_level(c, max, Scale::Log), want);
+        }
+    }
+}
+
+#[test]
+fn bad_axes_are_refused() {
+    let d = [1.0f32, 2.0, 3.0];
+    assert!(Axis::new("v", 0.0, 0.0, 10).is_err());
+    assert!(Axis::new("v", 0.0, 1.0, 0).is_err());
+    let nan = [f32::NAN; 3];
+    let e = AxisSpec::qbert("v").resolve("v", &nan).unwrap_err().to_string();
+    assert!(e.contains("no finite samples"), "{e}");
+    let axes = vec![Axis::new("a", 0.0, 4.0, 4).unwrap(), Axis::new("b", 0.0, 4.0, 4).unwrap()];
+    assert!(count(&[&d, &d[..2]], axes, None).is_err());
+}

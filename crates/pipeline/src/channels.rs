@@ -1,0 +1,61 @@
+//! Named per-voxel channels computed in process from a value volume: what
+//! `mdtf histogram` and later the pack stage ask for by name.
+
+use crate::boundary_chain::{self, BoundaryChainParams, ChainError};
+use mdtf_derive::{DeriveParams, Item, Kernel};
+use mdtf_volume::{MultiField, Volume};
+
+/// Channel names computed from a value volume (fields of a multi-field input are channels too).
+pub const CHANNEL_NAMES: &str = "v, g, f2, g_hit, hit, distance";
+
+/// Computes the named channels of `input`: its fields by name (`v` is the
+/// first field), `g` and `f2` by the derive stage, `g_hit`, `hit` and
+/// `distance` by the boundary chain. Unknown names are an error listing the valid ones.
+pub fn compute(
+    input: &MultiField,
+    names: &[String],
+    kernel: Option<Kernel>,
+) -> Result<Vec<(String, Volume)>, ChainError> {
+    let value = input.field_volume(0).ok_or_else(|| ChainError::Unknown("the input has no fields".into()))?;
+    let needs = |n: &str| names.iter().any(|x| x == n);
+    let derived = if needs("g") || needs("f2") {
+        let d = DeriveParams {
+            items: vec![Item::G, Item::F2],
+            kernel: kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
+            ..Default::default()
+        };
+        Some(mdtf_derive::run(&MultiField::from(value.clone()), &d)?)
+    } else {
+        None
+    };
+    let traced = if needs("g_hit") || needs("hit") || needs("distance") {
+        Some(boundary_chain::run(&value, &BoundaryChainParams { kernel, ..Default::default() })?)
+    } else {
+        None
+    };
+    let mut out = Vec::new();
+    for name in names {
+        let v = if let Some(i) = input.fields.iter().position(|f| &f.name == name) {
+            input.field_volume(i)
+        } else {
+            match (name.as_str(), &derived, &traced) {
+                ("v", _, _) => Some(value.clone()),
+                ("g", Some(d), _) => d.get(Item::G).and_then(|m| m.field_volume(0)),
+                ("f2", Some(d), _) => d.get(Item::F2).and_then(|m| m.field_volume(0)),
+                ("g_hit", _, Some(t)) => Some(t.boundary.g_hit.clone()),
+                ("hit", _, Some(t)) => Some(t.boundary.hit.clone()),
+                ("distance", _, Some(t)) => Some(t.boundary.distance.clone()),
+                _ => None,
+            }
+        };
+        let fields: Vec<&str> = input.fields.iter().map(|f| f.name.as_str()).collect();
+        let v = v.ok_or_else(|| {
+            ChainError::Unknown(format!(
+                "unknown channel '{name}' (valid: {CHANNEL_NAMES}, or a field: {})",
+                fields.join(", ")
+            ))
+        })?;
+        out.push((name.clone(), v));
+    }
+    Ok(out)
+}
