@@ -4,8 +4,9 @@
 //! From every voxel whose g is at least `g_min`, [`run`] steps along +n and
 //! -n (n = grad f / g) with step L_min/5 up to d_max = 15 L_min, sampling g
 //! and f'' by trilinear interpolation, follows the direction in which g
-//! increases, and at the first sign change of f'' refines the zero crossing
-//! (Illinois regula falsi, tolerance 1e-3 voxel by default). g at the hit is
+//! increases (the sign of f'' at the voxel: f'' = n^T H n is the derivative
+//! of g along n), and at the first sign change of f'' refines the zero
+//! crossing (Illinois regula falsi, tolerance 1e-3 voxel by default). g at the hit is
 //! read by tricubic (Catmull-Rom) interpolation, since trilinear
 //! interpolation flattens g's peak by up to 4 % at sigma = 3 voxels; hits
 //! whose g is below `g_hit_min` (noise, phantom edges) are rejected.

@@ -49,6 +49,14 @@ impl Grid<'_> {
         lerp_cell(&self.corners(self.base(i0)), t)
     }
 
+    /// Trilinear interpolation of three grids of the same dims at p (one cell lookup).
+    #[inline]
+    pub fn trilinear3(grids: &[Grid; 3], p: [f32; 3]) -> [f32; 3] {
+        let (i0, t) = grids[0].cell(p);
+        let b = grids[0].base(i0);
+        [0, 1, 2].map(|c| lerp_cell(&grids[c].corners(b), t))
+    }
+
     /// Tricubic Catmull-Rom interpolation at voxel position p (indices clamped).
     /// Exact on quadratics, so a smooth peak is not flattened the way
     /// trilinear interpolation flattens it.
