@@ -43,7 +43,7 @@ impl Grid<'_> {
     }
 
     /// Trilinear interpolation at voxel position p (clamped to the grid).
-    #[inline]
+    #[cfg(test)]
     pub fn trilinear(&self, p: [f32; 3]) -> f32 {
         let (i0, t) = self.cell(p);
         lerp_cell(&self.corners(self.base(i0)), t)

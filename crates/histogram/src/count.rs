@@ -11,8 +11,8 @@ use serde::Serialize;
 pub struct Histogram {
     /// The axes, in order.
     pub axes: Vec<Axis>,
-    /// Counts, length = product of the bin counts.
-    pub counts: Vec<u64>,
+    /// Counts, length = product of the bin counts (u32: inputs hold fewer than 2^32 voxels).
+    pub counts: Vec<u32>,
 }
 
 impl Histogram {
@@ -27,19 +27,19 @@ impl Histogram {
 
     /// Sum of all counts (the voxels inside every axis range, within the mask).
     pub fn total(&self) -> u64 {
-        self.counts.iter().sum()
+        self.counts.iter().map(|&c| c as u64).sum()
     }
 
     /// Largest count.
     pub fn max(&self) -> u64 {
-        self.counts.iter().copied().max().unwrap_or(0)
+        self.counts.iter().copied().max().unwrap_or(0) as u64
     }
 
     /// The 2D projection onto axes (a, b) of a 3D histogram (summing the third).
     pub fn project(&self, a: usize, b: usize) -> Histogram {
         let c = 3 - a - b;
         let (na, nb, nc) = (self.axes[a].bins, self.axes[b].bins, self.axes[c].bins);
-        let mut counts = vec![0u64; na * nb];
+        let mut counts = vec![0u32; na * nb];
         let mut t = [0usize; 3];
         for ia in 0..na {
             for ib in 0..nb {
@@ -73,13 +73,12 @@ pub fn count(channels: &[&[f32]], axes: Vec<Axis>, mask: Option<&[bool]>) -> Res
         return Err(HistogramError::Geometry("channels (and mask) must have the same number of voxels".into()));
     }
     let total_bins: usize = axes.iter().map(|a| a.bins).product();
+    if n as u64 >= u32::MAX as u64 {
+        return Err(HistogramError::Geometry(format!("{n} voxels: histograms count at most 2^32 - 1")));
+    }
     if total_bins > 1 << 28 {
         return Err(HistogramError::BadAxis(format!("{total_bins} bins is too many (at most 2^28)")));
     }
-    // One contiguous part per worker, each with its own u32 counts (fits
-    // any part of up to 4 G voxels), summed in a fixed order.
-    let parts = rayon::current_num_threads().clamp(1, 64);
-    let part_len = n.div_ceil(parts).max(1);
     let strides: Vec<usize> = axes
         .iter()
         .scan(1usize, |s, a| {
@@ -89,36 +88,54 @@ pub fn count(channels: &[&[f32]], axes: Vec<Axis>, mask: Option<&[bool]>) -> Res
         })
         .collect();
     let binners: Vec<_> = axes.iter().map(Axis::binner).collect();
-    let partial: Vec<Vec<u32>> = (0..parts)
+    let parts = rayon::current_num_threads().clamp(1, 64);
+    let part_len = n.div_ceil(parts).max(1);
+    let range_of = |p: usize| (p * part_len).min(n)..((p + 1) * part_len).min(n);
+    // One private table per worker (faulted in by that worker, written
+    // before it is read so each page faults once), summed in a fixed order.
+    let mut partial: Vec<Vec<u32>> = (0..parts)
         .into_par_iter()
         .map(|p| {
-            let range = (p * part_len).min(n)..((p + 1) * part_len).min(n);
-            let mut local = vec![0u32; total_bins];
-            match channels.len() {
-                1 => count_part::<1>(channels, &binners, &strides, mask, range, &mut local),
-                2 => count_part::<2>(channels, &binners, &strides, mask, range, &mut local),
-                _ => count_part::<3>(channels, &binners, &strides, mask, range, &mut local),
-            }
+            let mut local = Vec::with_capacity(total_bins);
+            local.resize(total_bins, 0u32);
+            let mut add = |idx: usize| local[idx] += 1;
+            count_part(channels, &binners, &strides, mask, range_of(p), &mut add);
             local
         })
         .collect();
-    let mut counts = vec![0u64; total_bins];
+    let mut counts = partial.swap_remove(0);
     for local in &partial {
-        for (c, &l) in counts.iter_mut().zip(local) {
-            *c += l as u64;
-        }
+        counts.par_chunks_mut(1 << 16).zip(local.par_chunks(1 << 16)).for_each(|(c, l)| {
+            c.iter_mut().zip(l).for_each(|(c, &l)| *c += l);
+        });
     }
     Ok(Histogram { axes, counts })
 }
 
-/// Counts voxels `range` of N channels into `local` (monomorphised per N so the axis loop unrolls).
-fn count_part<const N: usize>(
+/// Calls `add(bin index)` for every counted voxel of `range`.
+fn count_part(
     channels: &[&[f32]],
     binners: &[crate::axis::Binner],
     strides: &[usize],
     mask: Option<&[bool]>,
     range: std::ops::Range<usize>,
-    local: &mut [u32],
+    add: &mut impl FnMut(usize),
+) {
+    match channels.len() {
+        1 => count_n::<1>(channels, binners, strides, mask, range, add),
+        2 => count_n::<2>(channels, binners, strides, mask, range, add),
+        _ => count_n::<3>(channels, binners, strides, mask, range, add),
+    }
+}
+
+/// [`count_part`] monomorphised per channel count so the axis loop unrolls.
+fn count_n<const N: usize>(
+    channels: &[&[f32]],
+    binners: &[crate::axis::Binner],
+    strides: &[usize],
+    mask: Option<&[bool]>,
+    range: std::ops::Range<usize>,
+    add: &mut impl FnMut(usize),
 ) {
     let ch: [&[f32]; N] = std::array::from_fn(|a| &channels[a][range.clone()]);
     let bn: [crate::axis::Binner; N] = std::array::from_fn(|a| binners[a]);
@@ -137,6 +154,6 @@ fn count_part<const N: usize>(
                 None => continue 'voxel,
             }
         }
-        local[idx] += 1;
+        add(idx);
     }
 }

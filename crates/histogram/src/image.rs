@@ -50,7 +50,7 @@ impl Histogram {
             let (w, h) = (self.axes[0].bins, 128usize);
             let mut pixels = vec![0u8; w * h];
             for (x, &c) in self.counts.iter().enumerate() {
-                let height = (grey_level(c, max, scale) as usize * h).div_ceil(255);
+                let height = (grey_level(c as u64, max, scale) as usize * h).div_ceil(255);
                 for y in 0..height {
                     pixels[(h - 1 - y) * w + x] = 255;
                 }
@@ -61,7 +61,7 @@ impl Histogram {
         let mut pixels = vec![0u8; w * h];
         for y in 0..h {
             for x in 0..w {
-                pixels[(h - 1 - y) * w + x] = grey_level(self.counts[y * w + x], max, scale);
+                pixels[(h - 1 - y) * w + x] = grey_level(self.counts[y * w + x] as u64, max, scale);
             }
         }
         Grey { width: w, height: h, pixels }

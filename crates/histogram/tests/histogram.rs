@@ -39,7 +39,7 @@ fn joint_counts_equal_a_brute_force_count() {
     let mask: Vec<bool> = (0..50_000).map(|i| i % 7 != 3).collect();
     let h = count(&[&a, &b], axes.clone(), Some(&mask)).unwrap();
     // brute force written here: floor((x - min) / width), max in the last bin
-    let mut want = vec![0u64; 17 * 9];
+    let mut want = vec![0u32; 17 * 9];
     let mut inside = 0u64;
     for i in 0..a.len() {
         let (x, y) = (a[i] as f64, b[i] as f64);
@@ -125,7 +125,7 @@ fn stretched_histogram_collapses_the_arch_to_a_line() {
         let mut near = 0;
         for bg in 0..256 {
             if ((axes[1].centre(bg) - a) / a).abs() <= 0.01 + axes[1].width() / a {
-                near += (0..256).map(|bv| h.counts[bg * 256 + bv]).sum::<u64>();
+                near += (0..256).map(|bv| h.counts[bg * 256 + bv] as u64).sum::<u64>();
             }
         }
         near as f64 / h.total() as f64
@@ -202,7 +202,7 @@ fn png_decodes_and_follows_the_log_mapping() {
             let c = h.counts[y * 10 + x];
             let want = (255.0 * (1.0 + c as f64).ln() / (1.0 + max as f64).ln()).round() as u8;
             assert_eq!(buf[(6 - y) * 10 + x], want, "g row {y} is drawn upward");
-            assert_eq!(grey_level(c, max, Scale::Log), want);
+            assert_eq!(grey_level(c as u64, max, Scale::Log), want);
         }
     }
 }

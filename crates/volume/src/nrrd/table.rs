@@ -33,23 +33,14 @@ fn header(axes: &[TableAxis], type_name: &str) -> String {
     s
 }
 
-/// Writes integer counts (first axis fastest) as uint32 when they fit, else uint64. Atomic.
-pub fn write_counts_nrrd(path: &Path, axes: &[TableAxis], counts: &[u64]) -> Result<()> {
-    let small = counts.iter().all(|&c| c <= u32::MAX as u64);
-    let head = header(axes, if small { "uint32" } else { "uint64" });
+/// Writes integer counts (first axis fastest) as uint32. Atomic.
+pub fn write_counts_nrrd(path: &Path, axes: &[TableAxis], counts: &[u32]) -> Result<()> {
+    let head = header(axes, "uint32");
     write_file_atomically(path, |w| {
         w.write_all(head.as_bytes())?;
-        let mut buf = Vec::with_capacity(counts.len().min(1 << 16) * 8);
         for chunk in counts.chunks(1 << 16) {
-            buf.clear();
-            for &c in chunk {
-                if small {
-                    buf.extend_from_slice(&(c as u32).to_le_bytes());
-                } else {
-                    buf.extend_from_slice(&c.to_le_bytes());
-                }
-            }
-            w.write_all(&buf)?;
+            let bytes: Vec<u8> = chunk.iter().flat_map(|c| c.to_le_bytes()).collect();
+            w.write_all(&bytes)?;
         }
         Ok(())
     })
