@@ -91,13 +91,11 @@ pub fn count(channels: &[&[f32]], axes: Vec<Axis>, mask: Option<&[bool]>) -> Res
     let parts = rayon::current_num_threads().clamp(1, 64);
     let part_len = n.div_ceil(parts).max(1);
     let range_of = |p: usize| (p * part_len).min(n)..((p + 1) * part_len).min(n);
-    // One private table per worker (faulted in by that worker, written
-    // before it is read so each page faults once), summed in a fixed order.
+    // One private table per worker, summed in a fixed order.
     let mut partial: Vec<Vec<u32>> = (0..parts)
         .into_par_iter()
         .map(|p| {
-            let mut local = Vec::with_capacity(total_bins);
-            local.resize(total_bins, 0u32);
+            let mut local = vec![0u32; total_bins];
             let mut add = |idx: usize| local[idx] += 1;
             count_part(channels, &binners, &strides, mask, range_of(p), &mut add);
             local
