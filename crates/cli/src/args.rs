@@ -426,7 +426,7 @@ Bins: value exactly at an axis maximum goes to the last bin; values outside the 
 Automatic ranges clip 0 / 0.002 / 0.004 percent at each end of v / g / f2 (Teem qbert's defaults);\n\
 integer data spanning at most 4096 values get one bin per value.\n\n\
 Outputs in DIR: hist_A_B.png (A to the right, B upward; axis ranges in the PNG text chunk), hist_A_B.nrrd\n\
-(counts), hist_A_B.json (axes, total); 3 axes add the three projections. --stretched adds hist_v_g_hit.*\n\
+(counts), hist_A_B.exr (counts, f32), hist_A_B.json (axes, total); 3 axes add the three projections. --stretched adds hist_v_g_hit.*\n\
 (traced voxels only) and normal_vs_stretched.png (the distance paper's Fig. 5). --hvol writes hvol.nrrd,\n\
 hvol_per_v.csv (mean g and f'' per v bin), position.nrrd (p(v,g)), opacity.png/.nrrd and hvol.json (sigma).\n\n\
 Examples:\n  mdtf histogram ct.nii.gz -o hist/ --axes v,g\n  mdtf histogram sphere.nii.gz -o hist/ --stretched\n  \

@@ -114,3 +114,33 @@ pub fn write_png(path: &Path, img: &Grey, description: &str) -> Result<(), Volum
         writer.finish().map_err(std::io::Error::other)
     })
 }
+
+/// Writes a 2D histogram's counts as a one-channel ("Y") f32 OpenEXR image,
+/// first axis to the right, second axis upward (rows from the top), for
+/// image tools. Atomic.
+pub fn write_exr(path: &Path, h: &Histogram) -> Result<(), VolumeError> {
+    use exr::prelude::*;
+    let io = |e: exr::error::Error| VolumeError::Io {
+        path: path.to_path_buf(),
+        cause: std::io::Error::other(e.to_string()),
+    };
+    if h.axes.len() != 2 {
+        return Err(VolumeError::Fields("EXR output is for 2D histograms".into()));
+    }
+    let (w, hgt) = (h.axes[0].bins, h.axes[1].bins);
+    let mut values = vec![0f32; w * hgt];
+    for y in 0..hgt {
+        for x in 0..w {
+            values[(hgt - 1 - y) * w + x] = h.counts[y * w + x] as f32;
+        }
+    }
+    let channel = AnyChannel::new("Y", FlatSamples::F32(values));
+    let mut attributes = LayerAttributes::named("histogram");
+    attributes.comments = Some(Text::from(h.describe(Scale::Linear).as_str()));
+    let layer =
+        Layer::new((w, hgt), attributes, Encoding::FAST_LOSSLESS, AnyChannels::sort(SmallVec::from_vec(vec![channel])));
+    let mut buffer = std::io::Cursor::new(Vec::new());
+    Image::from_layer(layer).write().to_buffered(&mut buffer).map_err(io)?;
+    let bytes = buffer.into_inner();
+    write_file_atomically(path, |out| out.write_all(&bytes))
+}

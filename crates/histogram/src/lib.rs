@@ -14,7 +14,7 @@ mod image;
 pub use axis::{Axis, AxisSpec, DEFAULT_BINS, MAX_INTEGER_BINS};
 pub use count::{Histogram, count};
 pub use hvol::{HistogramVolume, HvolParams, histogram_volume};
-pub use image::{Grey, Scale, grey_level, side_by_side, write_png};
+pub use image::{Grey, Scale, grey_level, side_by_side, write_exr, write_png};
 
 /// Errors of the histogram stage.
 #[derive(Debug, thiserror::Error)]

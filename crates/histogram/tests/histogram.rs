@@ -218,3 +218,24 @@ fn bad_axes_are_refused() {
     let axes = vec![Axis::new("a", 0.0, 4.0, 4).unwrap(), Axis::new("b", 0.0, 4.0, 4).unwrap()];
     assert!(count(&[&d, &d[..2]], axes, None).is_err());
 }
+
+#[test]
+fn exr_holds_the_counts_as_f32() {
+    use exr::prelude::*;
+    let v: Vec<f32> = (0..500).map(|i| (i % 5) as f32).collect();
+    let g: Vec<f32> = (0..500).map(|i| (i % 3) as f32).collect();
+    let axes = vec![Axis::new("v", 0.0, 5.0, 5).unwrap(), Axis::new("g", 0.0, 3.0, 3).unwrap()];
+    let h = count(&[&v, &g], axes, None).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("h.exr");
+    mdtf_histogram::write_exr(&p, &h).unwrap();
+    let image = read_first_flat_layer_from_file(&p).unwrap();
+    let ch = &image.layer_data.channel_data.list[0];
+    assert_eq!(ch.name, Text::from("Y"));
+    let values: Vec<f32> = ch.sample_data.values_as_f32().collect();
+    for y in 0..3 {
+        for x in 0..5 {
+            assert_eq!(values[(2 - y) * 5 + x], h.counts[y * 5 + x] as f32);
+        }
+    }
+}

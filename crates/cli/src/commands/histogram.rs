@@ -163,5 +163,8 @@ fn write_histogram(dir: &Path, h: &Histogram, scale: Scale) -> Result<()> {
     if h.axes.len() <= 2 {
         write_png(&dir.join(format!("{stem}.png")), &h.image(scale), &h.describe(scale))?;
     }
+    if h.axes.len() == 2 {
+        mdtf_histogram::write_exr(&dir.join(format!("{stem}.exr")), h)?;
+    }
     Ok(())
 }
