@@ -442,3 +442,70 @@ fn histogram_writes_pictures_counts_and_the_histogram_volume() {
     let e = mdtf_err(&["histogram", s.to_str().unwrap(), "-o", out.to_str().unwrap(), "--bins", "0"]);
     assert!(e.contains("zero bins"), "{e}");
 }
+
+#[test]
+fn pack_writes_a_manifest_that_decodes_v_and_names_missing_channels() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = dir.path().join("s.nii.gz");
+    let pack = dir.path().join("pack");
+    mdtf_ok(&[
+        "synth",
+        "erf-sphere",
+        "-o",
+        s.to_str().unwrap(),
+        "--size",
+        "24",
+        "--radius",
+        "7",
+        "--sigma",
+        "1.5",
+        "-q",
+    ]);
+    mdtf_ok(&[
+        "pack",
+        "--profile",
+        "distance-tf",
+        s.to_str().unwrap(),
+        "-o",
+        pack.to_str().unwrap(),
+        "--range",
+        "v=0:255",
+        "-q",
+    ]);
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(pack.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(m["schema"], "mdtf-pack/1");
+    let v = m["channels"].as_array().unwrap().iter().find(|c| c["name"] == "v").unwrap();
+    let (off, scale) = (v["decode"]["offset"].as_f64().unwrap(), v["decode"]["scale"].as_f64().unwrap());
+    assert_eq!((off, scale), (0.0, 1.0));
+    let value = read_scalar(&s, &ReadOptions::default()).unwrap();
+    let raw = std::fs::read(pack.join("normal_v.raw")).unwrap();
+    for (i, &x) in value.samples().iter().enumerate() {
+        assert!((off + scale * raw[i * 4 + 3] as f64 - x as f64).abs() <= 0.5 + 1e-6);
+    }
+    assert!(m["provenance"]["input_sha256"].as_str().unwrap().len() == 64);
+    let schema = mdtf_ok(&["pack", "--schema"]);
+    assert!(schema.contains("\"$id\": \"mdtf-pack/1\""));
+    // a folder without the boundary outputs
+    let d = dir.path().join("d");
+    mdtf_ok(&["derive", s.to_str().unwrap(), "-o", d.to_str().unwrap(), "--items", "g,f2,normal", "-q"]);
+    std::fs::copy(&s, d.join("value.nii.gz")).unwrap();
+    let e = mdtf_err(&[
+        "pack",
+        "--profile",
+        "distance-tf",
+        d.to_str().unwrap(),
+        "-o",
+        dir.path().join("p2").to_str().unwrap(),
+    ]);
+    assert!(e.contains("no g_hit file"), "{e}");
+    mdtf_ok(&[
+        "pack",
+        "--profile",
+        "slicer-3dtf",
+        d.to_str().unwrap(),
+        "-o",
+        dir.path().join("p3").to_str().unwrap(),
+        "-q",
+    ]);
+}

@@ -246,3 +246,37 @@ fn synth_and_convert_output_open_in_both_python_readers() {
     assert_eq!(floats(&a["fields"][0]), mine);
     assert!(mine.contains(&255.0) && mine.contains(&0.0));
 }
+
+#[test]
+fn pynrrd_opens_pack_textures_with_values_intact() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = dir.path().join("s.nii.gz");
+    let pack = dir.path().join("pack");
+    mdtf_ok(&[
+        "synth",
+        "erf-sphere",
+        "-o",
+        s.to_str().unwrap(),
+        "--size",
+        "24",
+        "--radius",
+        "7",
+        "--sigma",
+        "1.5",
+        "-q",
+    ]);
+    mdtf_ok(&["pack", "--profile", "slicer-3dtf", s.to_str().unwrap(), "-o", pack.to_str().unwrap(), "-q"]);
+    let d = dump(DUMP_PYNRRD, &pack.join("data.nhdr"));
+    assert_eq!(d["type"], "uint8");
+    assert_eq!(d["sizes"], serde_json::json!([4, 24, 24, 24]));
+    let raw = std::fs::read(pack.join("data.raw")).unwrap();
+    for comp in 0..4 {
+        let theirs = floats(&d["fields"][comp]);
+        let ours: Vec<f64> = raw.iter().skip(comp).step_by(4).map(|&b| b as f64).collect();
+        assert_eq!(theirs, ours, "component {comp}");
+    }
+    // and mdtf's own reader agrees
+    let mf = read(&pack.join("data.nhdr"), &ReadOptions::default()).unwrap();
+    assert_eq!(mf.fields.len(), 4);
+    assert_eq!(mf.fields[1].data.iter().map(|&v| v as f64).collect::<Vec<_>>(), floats(&d["fields"][1]));
+}

@@ -1,4 +1,193 @@
-//! Pack stage of mdtf: quantisation, texture packs per renderer, manifests,
-//! transfer-function lookup tables.
+//! Pack stage of mdtf: quantised textures and a manifest that tells a
+//! renderer, with nothing else, how to decode every channel.
 //!
-//! Placeholder: filled by the pack issue. It holds no functions yet.
+//! A pack is a folder: `manifest.json` plus, per texture, raw samples
+//! (components fastest, then x, y, z; little-endian) and a detached NRRD
+//! header that Teem, ParaView and 3D Slicer open. Every code decodes as
+//! value = offset + scale * code; signed channels (f'', normals) keep 0
+//! exactly representable.
+
+mod manifest;
+mod profile;
+mod quantise;
+
+pub use manifest::{
+    ChannelEntry, ChannelSource, MANIFEST_SCHEMA, Manifest, ManifestGeometry, Provenance, SCHEMA_ID, TextureEntry,
+};
+pub use profile::{PROFILE_NAMES, Profile, TextureLayout, describe};
+pub use quantise::{Decode, Dtype, QuantiseError, decode_for};
+
+use mdtf_volume::{Volume, VolumeError, write_file_atomically};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// Parameters of the pack stage.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PackParams {
+    /// The layout.
+    pub profile: Profile,
+    /// Value range per channel covered by the codes; channels not listed use their min and max.
+    #[serde(default)]
+    pub ranges: BTreeMap<String, [f64; 2]>,
+}
+
+/// Errors of the pack stage.
+#[derive(Debug, thiserror::Error)]
+pub enum PackError {
+    /// Channels the profile needs are missing.
+    #[error("profile {profile} needs channel(s) {missing}")]
+    MissingChannels {
+        /// Profile name.
+        profile: String,
+        /// The missing channels and the stage that makes each.
+        missing: String,
+    },
+    /// Channels on different grids.
+    #[error("{0}")]
+    Geometry(String),
+    /// A range would lose all precision.
+    #[error(transparent)]
+    Quantise(#[from] QuantiseError),
+    /// Writing failed.
+    #[error(transparent)]
+    Io(#[from] VolumeError),
+}
+
+/// Quantises `channels` (name, volume) into the textures of `params.profile`
+/// in `dir` and writes `manifest.json` there. Returns the manifest.
+pub fn pack(
+    channels: &[(String, Volume)],
+    params: &PackParams,
+    dir: &Path,
+    provenance: Provenance,
+    sources: &BTreeMap<String, ChannelSource>,
+) -> Result<Manifest, PackError> {
+    let get = |n: &str| channels.iter().find(|(c, _)| c == n).map(|(_, v)| v);
+    let missing: Vec<String> = params
+        .profile
+        .channels()
+        .into_iter()
+        .filter(|c| get(c).is_none())
+        .map(|c| format!("{c} (made by the {} stage)", describe(c).2))
+        .collect();
+    if !missing.is_empty() {
+        return Err(PackError::MissingChannels { profile: params.profile.to_string(), missing: missing.join(", ") });
+    }
+    let Some((_, first)) = channels.first() else {
+        return Err(PackError::Geometry("no channels to pack".into()));
+    };
+    let geometry = first.geometry.clone();
+    for (name, v) in channels {
+        if !v.geometry.same_grid(&geometry) {
+            return Err(PackError::Geometry(format!("channel {name} is not on the grid of {}", channels[0].0)));
+        }
+    }
+    let n = geometry.voxel_count();
+    let mut textures = Vec::new();
+    let mut entries = Vec::new();
+    for layout in params.profile.layout() {
+        let comps = layout.components.len();
+        let mut decodes = Vec::with_capacity(comps);
+        for (ci, c) in layout.components.iter().enumerate() {
+            let Some(c) = c else {
+                decodes.push(None);
+                continue;
+            };
+            let v = get(c).ok_or_else(|| PackError::Geometry(format!("channel {c} vanished")))?;
+            let [min, max] = match params.ranges.get(*c) {
+                Some(r) => *r,
+                None => v.finite_range().map_or([0.0, 0.0], |(lo, hi)| [lo as f64, hi as f64]),
+            };
+            let (meaning, units, stage, signed) = describe(c);
+            let d = decode_for(c, min, max, layout.dtype, signed)?;
+            let top = layout.dtype.max_code().unwrap_or(0.0);
+            entries.push(ChannelEntry {
+                name: c.to_string(),
+                meaning: meaning.into(),
+                units: units.into(),
+                texture: layout.name.into(),
+                component: ci,
+                decode: d,
+                range: [d.offset, d.offset + d.scale * top],
+                source: sources
+                    .get(*c)
+                    .cloned()
+                    .unwrap_or(ChannelSource { stage: stage.into(), params: serde_json::Value::Null }),
+            });
+            decodes.push(Some((v.samples(), d)));
+        }
+        let size = layout.dtype.size();
+        let mut bytes = vec![0u8; n * comps * size];
+        let plane = geometry.dims[0] * geometry.dims[1];
+        bytes.par_chunks_mut(plane * comps * size).enumerate().for_each(|(k, out)| {
+            for (ci, dec) in decodes.iter().enumerate() {
+                let Some((data, d)) = dec else { continue };
+                let src = &data[k * plane..(k + 1) * plane];
+                for (i, &v) in src.iter().enumerate() {
+                    let code = d.code(v, layout.dtype);
+                    let at = (i * comps + ci) * size;
+                    out[at..at + size].copy_from_slice(&code.to_le_bytes()[..size]);
+                }
+            }
+        });
+        let data_file = format!("{}.raw", layout.name);
+        let header_file = format!("{}.nhdr", layout.name);
+        write_file_atomically(&dir.join(&data_file), |w| w.write_all(&bytes))?;
+        let type_name = match layout.dtype {
+            Dtype::U8 => "uint8",
+            Dtype::U16 | Dtype::F16 => "uint16",
+            Dtype::F32 => "float",
+        };
+        let order: Vec<String> = layout.components.iter().map(|c| c.unwrap_or("-").to_string()).collect();
+        let extra =
+            [("mdtf_components", order.join(" ")), ("mdtf_dtype", format!("{:?}", layout.dtype).to_lowercase())];
+        let header = mdtf_volume::nrrd::texture_header(&geometry, comps, type_name, &data_file, &extra);
+        write_file_atomically(&dir.join(&header_file), |w| w.write_all(header.as_bytes()))?;
+        textures.push(TextureEntry {
+            name: layout.name.into(),
+            header: header_file,
+            data: data_file,
+            dims: geometry.dims,
+            components: comps,
+            component_order: layout.components.iter().map(|c| c.map(str::to_string)).collect(),
+            dtype: layout.dtype,
+        });
+    }
+    let manifest = Manifest {
+        schema: SCHEMA_ID.into(),
+        profile: params.profile.to_string(),
+        geometry: ManifestGeometry {
+            dims: geometry.dims,
+            spacing: geometry.spacing,
+            origin: geometry.origin,
+            world_from_voxel: geometry.world_from_voxel(),
+        },
+        textures,
+        channels: entries,
+        provenance,
+    };
+    let json = serde_json::to_string_pretty(&manifest)
+        .map_err(|e| PackError::Io(VolumeError::Fields(format!("manifest: {e}"))))?;
+    write_file_atomically(&dir.join("manifest.json"), |w| w.write_all(json.as_bytes()))?;
+    Ok(manifest)
+}
+
+/// SHA-256 of a file, hex, streamed.
+pub fn sha256_file(path: &Path) -> std::io::Result<String> {
+    use sha2::Digest;
+    use std::io::Read;
+    let mut f = std::fs::File::open(path)?;
+    let mut h = sha2::Sha256::new();
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        let n = f.read(&mut buf)?;
+        if n == 0 {
+            break;
+        }
+        h.update(&buf[..n]);
+    }
+    Ok(h.finalize().iter().map(|b| format!("{b:02x}")).collect())
+}

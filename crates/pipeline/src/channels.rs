@@ -6,7 +6,7 @@ use mdtf_derive::{DeriveParams, Item, Kernel};
 use mdtf_volume::{MultiField, Volume};
 
 /// Channel names computed from a value volume (fields of a multi-field input are channels too).
-pub const CHANNEL_NAMES: &str = "v, g, f2, g_hit, hit, distance";
+pub const CHANNEL_NAMES: &str = "v, g, f2, nx, ny, nz, g_hit, hit, distance";
 
 /// Computes the named channels of `input`: its fields by name (`v` is the
 /// first field), `g` and `f2` by the derive stage, `g_hit`, `hit` and
@@ -18,9 +18,9 @@ pub fn compute(
 ) -> Result<Vec<(String, Volume)>, ChainError> {
     let value = input.field_volume(0).ok_or_else(|| ChainError::Unknown("the input has no fields".into()))?;
     let needs = |n: &str| names.iter().any(|x| x == n);
-    let derived = if needs("g") || needs("f2") {
+    let derived = if ["g", "f2", "nx", "ny", "nz"].iter().any(|n| needs(n)) {
         let d = DeriveParams {
-            items: vec![Item::G, Item::F2],
+            items: vec![Item::G, Item::F2, Item::Normal],
             kernel: kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
             ..Default::default()
         };
@@ -42,6 +42,9 @@ pub fn compute(
                 ("v", _, _) => Some(value.clone()),
                 ("g", Some(d), _) => d.get(Item::G).and_then(|m| m.field_volume(0)),
                 ("f2", Some(d), _) => d.get(Item::F2).and_then(|m| m.field_volume(0)),
+                ("nx", Some(d), _) => d.get(Item::Normal).and_then(|m| m.field_volume(0)),
+                ("ny", Some(d), _) => d.get(Item::Normal).and_then(|m| m.field_volume(1)),
+                ("nz", Some(d), _) => d.get(Item::Normal).and_then(|m| m.field_volume(2)),
                 ("g_hit", _, Some(t)) => Some(t.boundary.g_hit.clone()),
                 ("hit", _, Some(t)) => Some(t.boundary.hit.clone()),
                 ("distance", _, Some(t)) => Some(t.boundary.distance.clone()),

@@ -6,6 +6,7 @@ mod convert;
 mod derive;
 mod histogram;
 mod info;
+mod pack;
 mod synth;
 
 use crate::args::Command;
@@ -22,5 +23,6 @@ pub fn run(command: Command, progress: &Progress) -> Result<()> {
         Command::Bilateral(a) => bilateral::run(&a, progress),
         Command::Boundary(a) => boundary::run(&a, progress),
         Command::Histogram(a) => histogram::run(&a, progress),
+        Command::Pack(a) => pack::run(&a, progress),
     }
 }

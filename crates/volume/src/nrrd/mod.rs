@@ -333,3 +333,35 @@ fn header_text(mf: &MultiField, ty: SampleType, encoding: Encoding, data_file: O
     }
     s
 }
+
+/// The detached header (.nhdr) of a texture: `components` interleaved
+/// samples (a leading `kinds: vector` axis when more than one) of the named
+/// NRRD type (e.g. "uint8") per voxel of `geometry`, data in `data_file`.
+/// Lines after the blank-free header body are key/value pairs from `extra`.
+pub fn texture_header(
+    geometry: &Geometry,
+    components: usize,
+    type_name: &str,
+    data_file: &str,
+    extra: &[(&str, String)],
+) -> String {
+    let g = geometry;
+    let dirs: Vec<String> =
+        (0..3).map(|a| format_vector([0, 1, 2].map(|r| g.directions[a][r] * g.spacing[a]))).collect();
+    let mut s = String::from("NRRD0005\n# written by mdtf\n");
+    s += &format!("type: {type_name}\n");
+    let sizes = format!("{} {} {}", g.dims[0], g.dims[1], g.dims[2]);
+    if components > 1 {
+        s += "dimension: 4\nspace: right-anterior-superior\n";
+        s += &format!("sizes: {components} {sizes}\nspace directions: none {}\n", dirs.join(" "));
+        s += "kinds: vector domain domain domain\n";
+    } else {
+        s += "dimension: 3\nspace: right-anterior-superior\n";
+        s += &format!("sizes: {sizes}\nspace directions: {}\nkinds: domain domain domain\n", dirs.join(" "));
+    }
+    s += &format!("endian: little\nencoding: raw\nspace origin: {}\ndata file: {data_file}\n", format_vector(g.origin));
+    for (k, v) in extra {
+        s += &format!("{k}:={v}\n");
+    }
+    s
+}

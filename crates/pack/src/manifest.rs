@@ -1,0 +1,161 @@
+//! The pack manifest: everything a renderer needs to decode the textures.
+
+use crate::quantise::{Decode, Dtype};
+use serde::{Deserialize, Serialize};
+
+/// Schema identifier written into every manifest.
+pub const SCHEMA_ID: &str = "mdtf-pack/1";
+
+/// Grid geometry of the packed volume.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ManifestGeometry {
+    /// Samples along x, y, z.
+    pub dims: [usize; 3],
+    /// Spacing in world units.
+    pub spacing: [f64; 3],
+    /// World position of voxel (0, 0, 0).
+    pub origin: [f64; 3],
+    /// 4x4 voxel-to-world matrix (RAS), rows.
+    pub world_from_voxel: [[f64; 4]; 4],
+}
+
+/// One texture file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TextureEntry {
+    /// Texture name.
+    pub name: String,
+    /// Detached NRRD header, relative to the manifest.
+    pub header: String,
+    /// Raw samples, relative to the manifest: components fastest, then x, y, z, little-endian.
+    pub data: String,
+    /// Samples along x, y, z.
+    pub dims: [usize; 3],
+    /// Components per sample.
+    pub components: usize,
+    /// Channel in each component, in order (null: unused).
+    pub component_order: Vec<Option<String>>,
+    /// Storage type of every component.
+    pub dtype: Dtype,
+}
+
+/// Where a channel came from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChannelSource {
+    /// The mdtf stage that made it ("input", "derive", "boundary", ...).
+    pub stage: String,
+    /// That stage's parameters.
+    pub params: serde_json::Value,
+}
+
+/// One channel: what it is and how to decode it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChannelEntry {
+    /// Channel name.
+    pub name: String,
+    /// What it measures.
+    pub meaning: String,
+    /// Its units.
+    pub units: String,
+    /// Texture holding it.
+    pub texture: String,
+    /// Component index within the texture.
+    pub component: usize,
+    /// value = offset + scale * code (float dtypes: scale 1, offset 0, code = the stored float).
+    pub decode: Decode,
+    /// The range the codes cover, [decode(0), decode(max code)].
+    pub range: [f64; 2],
+    /// Its origin.
+    pub source: ChannelSource,
+}
+
+/// Provenance of the pack.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Provenance {
+    /// mdtf version that wrote the pack.
+    pub mdtf_version: String,
+    /// Input file, as given.
+    pub input: Option<String>,
+    /// SHA-256 of the input file, hex.
+    pub input_sha256: Option<String>,
+    /// Parameters of every stage that ran.
+    pub stages: serde_json::Value,
+}
+
+/// The whole manifest.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Always [`SCHEMA_ID`].
+    pub schema: String,
+    /// Profile name.
+    pub profile: String,
+    /// Geometry of the volume textures.
+    pub geometry: ManifestGeometry,
+    /// Texture files.
+    pub textures: Vec<TextureEntry>,
+    /// Channels.
+    pub channels: Vec<ChannelEntry>,
+    /// Provenance.
+    pub provenance: Provenance,
+}
+
+/// JSON Schema (draft 2020-12) of the manifest, printed by `mdtf pack --schema`.
+pub const MANIFEST_SCHEMA: &str = r##"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "$id": "mdtf-pack/1",
+  "title": "mdtf texture pack manifest",
+  "type": "object",
+  "required": ["schema", "profile", "geometry", "textures", "channels", "provenance"],
+  "properties": {
+    "schema": {"const": "mdtf-pack/1"},
+    "profile": {"enum": ["slicer-3dtf", "distance-tf", "gaussian-tf", "peak-finding", "projected-tetrahedra"]},
+    "geometry": {
+      "type": "object",
+      "required": ["dims", "spacing", "origin", "world_from_voxel"],
+      "properties": {
+        "dims": {"type": "array", "items": {"type": "integer", "minimum": 1}, "minItems": 3, "maxItems": 3},
+        "spacing": {"type": "array", "items": {"type": "number", "exclusiveMinimum": 0}, "minItems": 3, "maxItems": 3},
+        "origin": {"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3},
+        "world_from_voxel": {"type": "array", "minItems": 4, "maxItems": 4,
+          "items": {"type": "array", "items": {"type": "number"}, "minItems": 4, "maxItems": 4}}
+      }
+    },
+    "textures": {"type": "array", "items": {
+      "type": "object",
+      "required": ["name", "header", "data", "dims", "components", "component_order", "dtype"],
+      "properties": {
+        "name": {"type": "string"},
+        "header": {"type": "string", "description": "detached NRRD header (.nhdr), relative to the manifest"},
+        "data": {"type": "string", "description": "raw little-endian samples, components fastest, then x, y, z"},
+        "dims": {"type": "array", "items": {"type": "integer", "minimum": 1}},
+        "components": {"type": "integer", "minimum": 1, "maximum": 4},
+        "component_order": {"type": "array", "items": {"type": ["string", "null"]}},
+        "dtype": {"enum": ["u8", "u16", "f16", "f32"]}
+      }
+    }},
+    "channels": {"type": "array", "items": {
+      "type": "object",
+      "required": ["name", "meaning", "units", "texture", "component", "decode", "range", "source"],
+      "properties": {
+        "name": {"type": "string"},
+        "meaning": {"type": "string"},
+        "units": {"type": "string"},
+        "texture": {"type": "string"},
+        "component": {"type": "integer", "minimum": 0},
+        "decode": {"type": "object", "required": ["offset", "scale"],
+          "description": "value = offset + scale * code; for f16/f32 textures the code is the stored float, offset 0, scale 1",
+          "properties": {"offset": {"type": "number"}, "scale": {"type": "number"}}},
+        "range": {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2},
+        "source": {"type": "object", "required": ["stage", "params"],
+          "properties": {"stage": {"type": "string"}, "params": {}}}
+      }
+    }},
+    "provenance": {"type": "object", "required": ["mdtf_version", "stages"],
+      "properties": {
+        "mdtf_version": {"type": "string"},
+        "input": {"type": ["string", "null"]},
+        "input_sha256": {"type": ["string", "null"]},
+        "stages": {"type": "object"}
+      }}
+  }
+}
+"##;
