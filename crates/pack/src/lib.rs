@@ -7,15 +7,19 @@
 //! value = offset + scale * code; signed channels (f'', normals) keep 0
 //! exactly representable.
 
+mod gaussian;
 mod manifest;
 mod profile;
 mod quantise;
+mod tables;
 
+pub use gaussian::GaussianPrimitive;
 pub use manifest::{
     ChannelEntry, ChannelSource, MANIFEST_SCHEMA, Manifest, ManifestGeometry, Provenance, SCHEMA_ID, TextureEntry,
 };
 pub use profile::{PROFILE_NAMES, Profile, TextureLayout, describe};
 pub use quantise::{Decode, Dtype, QuantiseError, decode_for};
+pub use tables::{Tf1d, peak_table, peaks, preintegration_table, segment};
 
 use mdtf_volume::{Volume, VolumeError, write_file_atomically};
 use rayon::prelude::*;
