@@ -509,3 +509,60 @@ fn pack_writes_a_manifest_that_decodes_v_and_names_missing_channels() {
         "-q",
     ]);
 }
+
+#[test]
+fn pack_rasterises_a_tf_file_into_the_slicer_tables() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = dir.path().join("s.nii.gz");
+    mdtf_ok(&[
+        "synth",
+        "erf-sphere",
+        "-o",
+        s.to_str().unwrap(),
+        "--size",
+        "24",
+        "--radius",
+        "7",
+        "--sigma",
+        "1.5",
+        "-q",
+    ]);
+    let tf = dir.path().join("tf.json");
+    std::fs::write(
+        &tf,
+        r#"{"v_range": [0, 256], "g_range": [0, 64], "f2_range": [-8, 8], "boundary_emphasis": 0.5,
+            "widgets": [{"type": "triangle", "v0": 100, "width": 40, "g_high": 60, "alpha": 0.9, "colour": [1, 0, 0]}]}"#,
+    )
+    .unwrap();
+    let pack = dir.path().join("pack");
+    mdtf_ok(&[
+        "pack",
+        "--profile",
+        "slicer-3dtf",
+        s.to_str().unwrap(),
+        "-o",
+        pack.to_str().unwrap(),
+        "--tf",
+        tf.to_str().unwrap(),
+        "-q",
+    ]);
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(pack.join("manifest.json")).unwrap()).unwrap();
+    let names: Vec<&str> = m["luts"].as_array().unwrap().iter().map(|l| l["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["tf3d", "tf2d", "tf_f2"]);
+    let t3 = read(&pack.join("tf3d_f32.nrrd"), &ReadOptions::default()).unwrap();
+    assert_eq!(t3.fields.len(), 4);
+    assert_eq!(t3.geometry.dims, [256, 128, 8]);
+    // cell (i, j, k): v = i + 0.5, g = (j + 0.5) / 2, f2 = -8 + (k + 0.5) * 2
+    for (i, j, k) in [(120usize, 60usize, 3usize), (100, 100, 0), (130, 30, 7)] {
+        let (v, g, f2) = (i as f64 + 0.5, (j as f64 + 0.5) * 0.5, -8.0 + (k as f64 + 0.5) * 2.0);
+        let tri = if g <= 60.0 { 0.9 * (1.0 - (v - 100.0).abs() / (40.0 * g / 60.0)).max(0.0) } else { 0.0 };
+        let emphasis = 1.0 - 0.5 * (f2.abs() / 8.0);
+        let got = t3.fields[3].data[[k, j, i]] as f64;
+        assert!((got - tri * emphasis).abs() < 1e-6, "({i}, {j}, {k}): {got} vs {}", tri * emphasis);
+    }
+    let bad = dir.path().join("bad.json");
+    std::fs::write(&bad, r#"{"v_range": [0, 1], "g_range": [0, 1], "widgets": [{"type": "rectangle", "centre": [0, 0], "half_size": [1, 1], "falloff": "cone", "alpha": 1, "colour": [1, 1, 1]}]}"#).unwrap();
+    let e = mdtf_err(&["pack", s.to_str().unwrap(), "-o", pack.to_str().unwrap(), "--tf", bad.to_str().unwrap()]);
+    assert!(e.contains("widgets[0].falloff"), "{e}");
+}

@@ -483,7 +483,12 @@ Each texture is raw little-endian samples (components fastest, then x, y, z) wit
 header (.nhdr) that Teem, ParaView and 3D Slicer open; manifest.json says for every channel\n\
 value = offset + scale * code, its meaning, units and source. Signed channels (f2, normals) keep 0\n\
 exact. Ranges default to the data with Teem qbert's percentile clipping (g 0.002 %, f2 0.004 %).\n\n\
-Examples:\n  mdtf pack --profile slicer-3dtf ct.nii.gz -o pack/\n  \
+Lookup tables (NRRD, uint8 and float, listed under \"luts\" in the manifest): slicer-3dtf writes tf3d\n\
+(256 x 128 x 8 over v, g, f2) and the separable tf2d (256 x 256) + tf_f2 (256) from --tf, or\n\
+tf2d_default from the histogram volume; distance-tf writes alpha_d (256 over d) and, with --tf, alpha_u.\n\
+TF widgets: triangle (v0, width, g_low, g_high, shear), rectangle (centre, half_size, falloff:\n\
+constant|ellipsoid|ramp|tent|pyramid), gaussian (centre, k, alpha_max); each with alpha/colour.\n\n\
+Examples:\n  mdtf pack --profile slicer-3dtf ct.nii.gz -o pack/\n  mdtf pack --profile slicer-3dtf ct.nii.gz -o pack/ --tf tf.json\n  \
     mdtf pack --profile distance-tf sphere.nii.gz -o pack/ --range v=0:255\n  mdtf pack --schema")]
 pub struct PackArgs {
     /// Input: a value volume (channels are computed in process) or a folder of stage outputs
@@ -502,6 +507,14 @@ pub struct PackArgs {
     /// Derivative kernel when computing channels from a value volume.
     #[arg(long, value_name = "K")]
     pub kernel: Option<String>,
+    /// Transfer-function file (JSON: v_range, g_range, f2_range, boundary_emphasis, widgets) rasterised
+    /// into the profile's lookup tables. Without it, slicer-3dtf gets the default opacity of the
+    /// histogram stage (tent of the position function p(v, g)).
+    #[arg(long, value_name = "TF.json")]
+    pub tf: Option<PathBuf>,
+    /// distance-tf: the alpha map of distance written as the 1D table alpha_d(d).
+    #[arg(long, default_value = "linear:a=1,dc=3", value_name = "SPEC")]
+    pub alpha: String,
     /// Print the manifest's JSON Schema and exit.
     #[arg(long)]
     pub schema: bool,

@@ -27,7 +27,7 @@ fn slicer_3dtf_256(bencher: divan::Bencher) {
         Provenance { mdtf_version: "bench".into(), input: None, input_sha256: None, stages: serde_json::Value::Null };
     bencher
         .counter(ItemsCount::new(n * n * n))
-        .bench(|| pack(&chans, &params, dir.path(), prov.clone(), &BTreeMap::new()).map(|m| m.textures.len()));
+        .bench(|| pack(&chans, &params, &[], dir.path(), prov.clone(), &BTreeMap::new()).map(|m| m.textures.len()));
 }
 
 /// The quantisation pass alone (in memory, no files), same data.

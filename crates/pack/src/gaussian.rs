@@ -16,6 +16,7 @@ use serde::{Deserialize, Serialize};
 
 /// One Gaussian primitive over an m-dimensional transfer-function domain.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct GaussianPrimitive {
     /// Centre c (m values, in data units).
     pub centre: Vec<f64>,

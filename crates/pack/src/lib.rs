@@ -8,18 +8,22 @@
 //! exactly representable.
 
 mod gaussian;
+mod lut;
 mod manifest;
 mod profile;
 mod quantise;
 mod tables;
+mod tf;
 
 pub use gaussian::GaussianPrimitive;
+pub use lut::{Lut, LutAxis, LutEntry};
 pub use manifest::{
     ChannelEntry, ChannelSource, MANIFEST_SCHEMA, Manifest, ManifestGeometry, Provenance, SCHEMA_ID, TextureEntry,
 };
 pub use profile::{PROFILE_NAMES, Profile, TextureLayout, describe};
 pub use quantise::{Decode, Dtype, QuantiseError, decode_for};
 pub use tables::{Tf1d, peak_table, peaks, preintegration_table, segment};
+pub use tf::{Falloff, TfFile, Widget, parse_tf, to_rgba8};
 
 use mdtf_volume::{Volume, VolumeError, write_file_atomically};
 use rayon::prelude::*;
@@ -200,9 +204,9 @@ fn interleave(codes: &[Vec<u32>], size: usize, out: &mut [u8]) {
     }
 }
 
-/// Writes encoded textures (raw + detached NRRD header each) and
-/// `manifest.json` into `dir`. Returns the manifest.
-pub fn write(encoded: &Encoded, dir: &Path, provenance: Provenance) -> Result<Manifest, PackError> {
+/// Writes encoded textures (raw + detached NRRD header each), the lookup
+/// tables and `manifest.json` into `dir`. Returns the manifest.
+pub fn write(encoded: &Encoded, luts: &[Lut], dir: &Path, provenance: Provenance) -> Result<Manifest, PackError> {
     let geometry = &encoded.geometry;
     let mut textures = Vec::new();
     for (layout, bytes) in &encoded.textures {
@@ -241,6 +245,7 @@ pub fn write(encoded: &Encoded, dir: &Path, provenance: Provenance) -> Result<Ma
         },
         textures,
         channels: encoded.channels.clone(),
+        luts: luts.iter().map(|l| l.write(dir)).collect::<Result<_, _>>()?,
         provenance,
     };
     let json = serde_json::to_string_pretty(&manifest)
@@ -253,11 +258,12 @@ pub fn write(encoded: &Encoded, dir: &Path, provenance: Provenance) -> Result<Ma
 pub fn pack(
     channels: &[(String, Volume)],
     params: &PackParams,
+    luts: &[Lut],
     dir: &Path,
     provenance: Provenance,
     sources: &BTreeMap<String, ChannelSource>,
 ) -> Result<Manifest, PackError> {
-    write(&encode(channels, params, sources)?, dir, provenance)
+    write(&encode(channels, params, sources)?, luts, dir, provenance)
 }
 
 /// SHA-256 of a file, hex, streamed.

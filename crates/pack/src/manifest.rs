@@ -94,6 +94,9 @@ pub struct Manifest {
     pub textures: Vec<TextureEntry>,
     /// Channels.
     pub channels: Vec<ChannelEntry>,
+    /// Lookup tables (transfer-function textures, 1D tables).
+    #[serde(default)]
+    pub luts: Vec<crate::lut::LutEntry>,
     /// Provenance.
     pub provenance: Provenance,
 }
@@ -104,7 +107,7 @@ pub const MANIFEST_SCHEMA: &str = r##"{
   "$id": "mdtf-pack/1",
   "title": "mdtf texture pack manifest",
   "type": "object",
-  "required": ["schema", "profile", "geometry", "textures", "channels", "provenance"],
+  "required": ["schema", "profile", "geometry", "textures", "channels", "luts", "provenance"],
   "properties": {
     "schema": {"const": "mdtf-pack/1"},
     "profile": {"enum": ["slicer-3dtf", "distance-tf", "gaussian-tf", "peak-finding", "projected-tetrahedra"]},
@@ -147,6 +150,21 @@ pub const MANIFEST_SCHEMA: &str = r##"{
         "range": {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2},
         "source": {"type": "object", "required": ["stage", "params"],
           "properties": {"stage": {"type": "string"}, "params": {}}}
+      }
+    }},
+    "luts": {"type": "array", "items": {
+      "type": "object",
+      "required": ["name", "meaning", "axes", "components", "file_u8", "file_f32"],
+      "properties": {
+        "name": {"type": "string"},
+        "meaning": {"type": "string"},
+        "axes": {"type": "array", "description": "first axis fastest; cell i covers [min + i w, min + (i + 1) w)",
+          "items": {"type": "object", "required": ["channel", "size", "min", "max"],
+            "properties": {"channel": {"type": "string"}, "size": {"type": "integer", "minimum": 1},
+              "min": {"type": "number"}, "max": {"type": "number"}}}},
+        "components": {"type": "integer", "description": "4: RGBA (colour 0..1, opacity 0..1), 1: one value"},
+        "file_u8": {"type": "string", "description": "NRRD, uint8, value = code / 255, leading rgba axis when components = 4"},
+        "file_f32": {"type": "string", "description": "NRRD, float, the same values"}
       }
     }},
     "provenance": {"type": "object", "required": ["mdtf_version", "stages"],

@@ -68,8 +68,8 @@ fn every_channel_decodes_within_half_a_step_from_the_manifest_alone() {
     for profile in [Profile::Slicer3dtf, Profile::DistanceTf] {
         let dir = tempfile::tempdir().unwrap();
         let prov = Provenance { mdtf_version: "test".into(), input: None, input_sha256: None, stages: Value::Null };
-        let m =
-            pack(&chans, &PackParams { profile, ranges: BTreeMap::new() }, dir.path(), prov, &BTreeMap::new()).unwrap();
+        let m = pack(&chans, &PackParams { profile, ranges: BTreeMap::new() }, &[], dir.path(), prov, &BTreeMap::new())
+            .unwrap();
         for name in profile.channels() {
             let truth = &chans.iter().find(|(c, _)| c == name).unwrap().1;
             let entry = m.channels.iter().find(|c| c.name == name).unwrap();
@@ -100,6 +100,7 @@ fn missing_channels_are_named_with_their_stage() {
     let e = pack(
         &chans,
         &PackParams { profile: Profile::DistanceTf, ranges: BTreeMap::new() },
+        &[],
         dir.path(),
         prov.clone(),
         &BTreeMap::new(),
@@ -112,6 +113,7 @@ fn missing_channels_are_named_with_their_stage() {
     let e = pack(
         &flat,
         &PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new() },
+        &[],
         dir.path(),
         prov,
         &BTreeMap::new(),

@@ -4,8 +4,10 @@ use crate::args::PackArgs;
 use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
+use mdtf_boundary::AlphaMap;
 use mdtf_histogram::AxisSpec;
-use mdtf_pack::{MANIFEST_SCHEMA, PackParams, Profile, Provenance, pack, sha256_file};
+use mdtf_histogram::{HvolParams, histogram_volume};
+use mdtf_pack::{Lut, LutAxis, MANIFEST_SCHEMA, PackParams, Profile, Provenance, pack, parse_tf, sha256_file};
 use mdtf_pipeline::channels;
 use mdtf_volume::Volume;
 use std::collections::BTreeMap;
@@ -44,8 +46,9 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         stages: serde_json::json!({ "pack": { "profile": profile.to_string(), "ranges": ranges },
             "derive": { "kernel": args.kernel.clone().unwrap_or_else(|| mdtf_derive::DEFAULT_KERNEL.to_string()) } }),
     };
+    let luts = progress.step("lookup tables", || luts(args, profile, &chans, &ranges))?;
     let params = PackParams { profile, ranges };
-    let m = progress.step("packing", || pack(&chans, &params, output, provenance, &BTreeMap::new()))?;
+    let m = progress.step("packing", || pack(&chans, &params, &luts, output, provenance, &BTreeMap::new()))?;
     progress.note(&format!(
         "packed {} textures ({}) and manifest.json into {}",
         m.textures.len(),
@@ -53,6 +56,66 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         output.display()
     ));
     Ok(())
+}
+
+/// The profile's lookup tables: from --tf, or the defaults.
+fn luts(
+    args: &PackArgs,
+    profile: Profile,
+    chans: &[(String, Volume)],
+    ranges: &BTreeMap<String, [f64; 2]>,
+) -> Result<Vec<Lut>> {
+    let tf = match &args.tf {
+        Some(p) => {
+            let text = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
+            Some(parse_tf(&text).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?)
+        }
+        None => None,
+    };
+    let get = |n: &str| chans.iter().find(|(c, _)| c == n).map(|(_, v)| v);
+    let mut out = Vec::new();
+    match profile {
+        Profile::Slicer3dtf => match &tf {
+            Some(tf) => out.extend(tf.slicer_luts()),
+            None => {
+                let (Some(v), Some(g), Some(f2)) = (get("v"), get("g"), get("f2")) else { bail!("missing v, g or f2") };
+                let hv = histogram_volume(v.samples(), g.samples(), f2.samples(), &HvolParams::default())?;
+                let [av, ag] = &hv.vg_axes;
+                out.push(Lut {
+                    name: "tf2d_default".into(),
+                    meaning: format!(
+                        "opacity over (v, g): tent of half-width {:.4} around p(v, g) = 0 (Kindlmann-Durkin, sigma {:.4}); colour white",
+                        hv.tent_width, hv.sigma
+                    ),
+                    axes: vec![
+                        LutAxis { channel: "v".into(), size: av.bins, min: av.min, max: av.max },
+                        LutAxis { channel: "g".into(), size: ag.bins, min: ag.min, max: ag.max },
+                    ],
+                    components: 4,
+                    values: hv.opacity.iter().flat_map(|&a| [1.0, 1.0, 1.0, a]).collect(),
+                });
+            }
+        },
+        Profile::DistanceTf => {
+            let map: AlphaMap = args.alpha.parse().map_err(anyhow::Error::msg)?;
+            let d_max = ranges
+                .get("distance")
+                .map(|r| r[1])
+                .or_else(|| get("distance").and_then(|d| d.finite_range()).map(|r| r.1 as f64));
+            let d_max = d_max.filter(|d| *d > 0.0).unwrap_or(15.0);
+            out.push(Lut {
+                name: "alpha_d".into(),
+                meaning: format!("opacity over the distance to the boundary: {map} (distance paper eqs. 9-11)"),
+                axes: vec![LutAxis { channel: "distance".into(), size: 256, min: 0.0, max: d_max }],
+                components: 1,
+                values: (0..256).map(|k| map.eval((k as f64 + 0.5) * d_max / 256.0) as f32).collect(),
+            });
+            if let Some(tf) = &tf {
+                out.push(tf.distance_alpha_u());
+            }
+        }
+    }
+    Ok(out)
 }
 
 fn from_value(input: &Path, names: &[String], args: &PackArgs) -> Result<Vec<(String, Volume)>> {

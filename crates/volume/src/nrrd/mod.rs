@@ -10,7 +10,7 @@ mod header;
 mod table;
 
 pub use header::{Encoding, NrrdHeader, read_header};
-pub use table::{TableAxis, write_counts_nrrd, write_table_nrrd};
+pub use table::{TableAxis, write_counts_nrrd, write_table_bytes, write_table_nrrd};
 
 use crate::atomic::write_file_atomically;
 use crate::dtype::{Endian, SampleType, encode_samples, first_unrepresentable};

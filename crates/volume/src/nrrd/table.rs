@@ -46,6 +46,16 @@ pub fn write_counts_nrrd(path: &Path, axes: &[TableAxis], counts: &[u32]) -> Res
     })
 }
 
+/// Writes a table of already-encoded little-endian samples of the named
+/// NRRD type (e.g. "uint8" RGBA with a leading 4-sample axis). Atomic.
+pub fn write_table_bytes(path: &Path, axes: &[TableAxis], type_name: &str, bytes: &[u8]) -> Result<()> {
+    let head = header(axes, type_name);
+    write_file_atomically(path, |w| {
+        w.write_all(head.as_bytes())?;
+        w.write_all(bytes)
+    })
+}
+
 /// Writes f32 samples (first axis fastest) as a float table. Atomic.
 pub fn write_table_nrrd(path: &Path, axes: &[TableAxis], values: &[f32]) -> Result<()> {
     let head = header(axes, "float");

@@ -1,0 +1,373 @@
+//! Transfer functions from a JSON file, rasterised into lookup tables.
+//!
+//! Widgets (Kniss et al. 9.4; every opacity is in [0, 1] before `alpha` scales it):
+//! * `triangle` (Levoy's iso-contour widget with thresholds and shear): for
+//!   g_low <= g <= g_high, centre c = v0 + shear g, half-width h = width g / g_high,
+//!   opacity alpha max(0, 1 - |v - c| / h); 0 outside the g thresholds.
+//! * `rectangle` with centre and half-sizes on (v, g): with dv = (v - cv)/sv and
+//!   dg = (g - cg)/sg inside |dv|, |dg| <= 1: `constant` 1, `ellipsoid`
+//!   max(0, 1 - dv^2 - dg^2), `ramp` (dv + 1)/2 (rising along v), `tent` 1 - |dv|,
+//!   `pyramid` 1 - max(|dv|, |dg|); 0 outside the rectangle.
+//! * `gaussian`: alpha_max exp(-||K ((v, g) - c)||^2) ([`GaussianPrimitive`]).
+//!
+//! Widgets combine as in the Gaussian-TF paper (eq. 3): opacities add
+//! (clamped to 1), colours are the opacity-weighted mean. The f'' axis
+//! carries the boundary-emphasis slider e in [0, 1]: the opacity is scaled
+//! by 1 - (1 - e) |f''| / max|f''| (e = 0: zero at the f'' extremes; e = 1: constant).
+
+use crate::gaussian::GaussianPrimitive;
+use serde::{Deserialize, Serialize};
+
+/// Rectangle falloff.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Falloff {
+    /// 1 everywhere inside.
+    Constant,
+    /// max(0, 1 - dv^2 - dg^2).
+    Ellipsoid,
+    /// (dv + 1) / 2.
+    Ramp,
+    /// 1 - |dv|.
+    Tent,
+    /// 1 - max(|dv|, |dg|).
+    Pyramid,
+}
+
+/// Levoy's triangle with g thresholds and shear.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Triangle {
+    /// Data value of the apex (g = 0).
+    pub v0: f64,
+    /// Half-width in v at g = g_high.
+    pub width: f64,
+    /// Lower g threshold.
+    #[serde(default)]
+    pub g_low: f64,
+    /// Upper g threshold (the top of the triangle).
+    pub g_high: f64,
+    /// Shift of the centre in v per unit g.
+    #[serde(default)]
+    pub shear: f64,
+    /// Peak opacity.
+    pub alpha: f64,
+    /// RGB colour, 0..1.
+    pub colour: [f64; 3],
+}
+
+/// Rectangle with a falloff.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Rectangle {
+    /// Centre (v, g).
+    pub centre: [f64; 2],
+    /// Half-sizes (v, g).
+    pub half_size: [f64; 2],
+    /// How opacity falls off inside.
+    pub falloff: Falloff,
+    /// Peak opacity.
+    pub alpha: f64,
+    /// RGB colour, 0..1.
+    pub colour: [f64; 3],
+}
+
+/// A classification widget on the (v, g) plane; in the file, an object with
+/// `"type": "triangle" | "rectangle" | "gaussian"` and that widget's fields.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Widget {
+    /// Levoy's triangle.
+    Triangle(Triangle),
+    /// Rectangle.
+    Rectangle(Rectangle),
+    /// Gaussian primitive over (v, g).
+    Gaussian(GaussianPrimitive),
+}
+
+impl Widget {
+    /// Opacity and colour at (v, g).
+    pub fn eval(&self, v: f64, g: f64) -> (f64, [f64; 3]) {
+        match self {
+            Widget::Triangle(Triangle { v0, width, g_low, g_high, shear, alpha, colour }) => {
+                if g < *g_low || g > *g_high || *g_high <= 0.0 {
+                    return (0.0, *colour);
+                }
+                let (c, h) = (v0 + shear * g, width * g / g_high);
+                let a = if h > 0.0 { (1.0 - (v - c).abs() / h).max(0.0) } else { 0.0 };
+                (alpha * a, *colour)
+            }
+            Widget::Rectangle(Rectangle { centre, half_size, falloff, alpha, colour }) => {
+                let (dv, dg) = ((v - centre[0]) / half_size[0], (g - centre[1]) / half_size[1]);
+                if dv.abs() > 1.0 || dg.abs() > 1.0 {
+                    return (0.0, *colour);
+                }
+                let a = match falloff {
+                    Falloff::Constant => 1.0,
+                    Falloff::Ellipsoid => (1.0 - dv * dv - dg * dg).max(0.0),
+                    Falloff::Ramp => (dv + 1.0) / 2.0,
+                    Falloff::Tent => 1.0 - dv.abs(),
+                    Falloff::Pyramid => 1.0 - dv.abs().max(dg.abs()),
+                };
+                (alpha * a, *colour)
+            }
+            Widget::Gaussian(p) => (p.alpha_max * p.density(&[v, g]), p.colour),
+        }
+    }
+}
+
+/// A transfer-function file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TfFile {
+    /// Range of v covered by the tables.
+    pub v_range: [f64; 2],
+    /// Range of g covered by the tables.
+    pub g_range: [f64; 2],
+    /// Range of f'' covered by the tables (symmetric use: |f''| / max |f''|).
+    pub f2_range: [f64; 2],
+    /// Boundary-emphasis slider e in [0, 1].
+    pub boundary_emphasis: f64,
+    /// The widgets.
+    pub widgets: Vec<Widget>,
+}
+
+/// The file's top level, widgets still raw so each can be checked against its own type.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTf {
+    v_range: [f64; 2],
+    g_range: [f64; 2],
+    #[serde(default = "default_f2_range")]
+    f2_range: [f64; 2],
+    #[serde(default = "one")]
+    boundary_emphasis: f64,
+    widgets: Vec<serde_json::Value>,
+}
+
+fn default_f2_range() -> [f64; 2] {
+    [-1.0, 1.0]
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+/// Parses a TF file; errors name the JSON path of the bad field.
+pub fn parse_tf(text: &str) -> Result<TfFile, String> {
+    let de = &mut serde_json::Deserializer::from_str(text);
+    let raw: RawTf = serde_path_to_error::deserialize(de).map_err(|e| format!("at {}: {}", e.path(), e.inner()))?;
+    let mut widgets = Vec::with_capacity(raw.widgets.len());
+    for (i, w) in raw.widgets.into_iter().enumerate() {
+        let mut w = w;
+        let kind = match w.as_object_mut().and_then(|o| o.remove("type")) {
+            Some(serde_json::Value::String(k)) => k,
+            _ => return Err(format!("at widgets[{i}].type: missing (triangle, rectangle or gaussian)")),
+        };
+        let field =
+            |e: serde_path_to_error::Error<serde_json::Error>| format!("at widgets[{i}].{}: {}", e.path(), e.inner());
+        widgets.push(match kind.as_str() {
+            "triangle" => Widget::Triangle(serde_path_to_error::deserialize(w).map_err(field)?),
+            "rectangle" => Widget::Rectangle(serde_path_to_error::deserialize(w).map_err(field)?),
+            "gaussian" => Widget::Gaussian(serde_path_to_error::deserialize(w).map_err(field)?),
+            other => {
+                return Err(format!(
+                    "at widgets[{i}].type: unknown widget '{other}' (triangle, rectangle or gaussian)"
+                ));
+            }
+        });
+    }
+    let tf = TfFile {
+        v_range: raw.v_range,
+        g_range: raw.g_range,
+        f2_range: raw.f2_range,
+        boundary_emphasis: raw.boundary_emphasis,
+        widgets,
+    };
+    if !(0.0..=1.0).contains(&tf.boundary_emphasis) {
+        return Err(format!("at boundary_emphasis: {} is not in [0, 1]", tf.boundary_emphasis));
+    }
+    for (name, r) in [("v_range", tf.v_range), ("g_range", tf.g_range), ("f2_range", tf.f2_range)] {
+        if r[1].is_nan() || r[0].is_nan() || r[1] <= r[0] {
+            return Err(format!("at {name}: [{}, {}] must be increasing", r[0], r[1]));
+        }
+    }
+    Ok(tf)
+}
+
+impl TfFile {
+    /// Combined opacity and colour of all widgets at (v, g) (eq. 3 of the Gaussian-TF paper).
+    pub fn eval2(&self, v: f64, g: f64) -> [f64; 4] {
+        let (mut a, mut c) = (0.0, [0.0; 3]);
+        for w in &self.widgets {
+            let (wa, wc) = w.eval(v, g);
+            a += wa;
+            for k in 0..3 {
+                c[k] += wa * wc[k];
+            }
+        }
+        if a > 0.0 {
+            c = c.map(|x| x / a);
+        }
+        [c[0], c[1], c[2], a.min(1.0)]
+    }
+
+    /// The boundary-emphasis factor at f''.
+    pub fn emphasis(&self, f2: f64) -> f64 {
+        let m = self.f2_range[0].abs().max(self.f2_range[1].abs());
+        (1.0 - (1.0 - self.boundary_emphasis) * (f2.abs() / m).min(1.0)).max(0.0)
+    }
+
+    /// Centre of cell i of n over [lo, hi].
+    fn at(range: [f64; 2], i: usize, n: usize) -> f64 {
+        range[0] + (i as f64 + 0.5) * (range[1] - range[0]) / n as f64
+    }
+
+    /// The 2D (v, g) table, nv x ng cells (v fastest), RGBA in [0, 1] at cell centres.
+    pub fn table2(&self, nv: usize, ng: usize) -> Vec<[f32; 4]> {
+        let mut out = Vec::with_capacity(nv * ng);
+        for j in 0..ng {
+            for i in 0..nv {
+                out.push(self.eval2(Self::at(self.v_range, i, nv), Self::at(self.g_range, j, ng)).map(|x| x as f32));
+            }
+        }
+        out
+    }
+
+    /// The 1D boundary-emphasis table over f'' (n cells), the separable third axis.
+    pub fn table_f2(&self, n: usize) -> Vec<f32> {
+        (0..n).map(|k| self.emphasis(Self::at(self.f2_range, k, n)) as f32).collect()
+    }
+
+    /// The 3D (v, g, f'') table (v fastest): the 2D table with its opacity scaled by the emphasis.
+    pub fn table3(&self, nv: usize, ng: usize, nf: usize) -> Vec<[f32; 4]> {
+        let t2 = self.table2(nv, ng);
+        let e = self.table_f2(nf);
+        let mut out = Vec::with_capacity(nv * ng * nf);
+        for &ek in &e {
+            for px in &t2 {
+                out.push([px[0], px[1], px[2], px[3] * ek]);
+            }
+        }
+        out
+    }
+}
+
+impl TfFile {
+    /// The 3D (v, g, f'') table 256 x 128 x 8 and the separable pair (v, g)
+    /// 256 x 256 + f'' 256 of Kniss et al.'s slicer.
+    pub fn slicer_luts(&self) -> Vec<crate::lut::Lut> {
+        use crate::lut::{Lut, LutAxis};
+        let axis = |c: &str, size, r: [f64; 2]| LutAxis { channel: c.into(), size, min: r[0], max: r[1] };
+        let flat = |t: Vec<[f32; 4]>| t.into_iter().flatten().collect::<Vec<f32>>();
+        vec![
+            Lut {
+                name: "tf3d".into(),
+                meaning: "RGBA over (v, g, f2): colour and opacity, the 2D widgets times boundary emphasis".into(),
+                axes: vec![axis("v", 256, self.v_range), axis("g", 128, self.g_range), axis("f2", 8, self.f2_range)],
+                components: 4,
+                values: flat(self.table3(256, 128, 8)),
+            },
+            Lut {
+                name: "tf2d".into(),
+                meaning: "RGBA over (v, g), the separable 2D part".into(),
+                axes: vec![axis("v", 256, self.v_range), axis("g", 256, self.g_range)],
+                components: 4,
+                values: flat(self.table2(256, 256)),
+            },
+            Lut {
+                name: "tf_f2".into(),
+                meaning: "opacity factor over f2 (boundary emphasis), the separable 1D part".into(),
+                axes: vec![axis("f2", 256, self.f2_range)],
+                components: 1,
+                values: self.table_f2(256),
+            },
+        ]
+    }
+
+    /// alpha_u over (v, g_hit) of the distance-TF renderer: the 2D widgets with g read as g_hit.
+    pub fn distance_alpha_u(&self) -> crate::lut::Lut {
+        use crate::lut::{Lut, LutAxis};
+        Lut {
+            name: "alpha_u".into(),
+            meaning: "RGBA over (v, g_hit): the user transfer function alpha_u".into(),
+            axes: vec![
+                LutAxis { channel: "v".into(), size: 256, min: self.v_range[0], max: self.v_range[1] },
+                LutAxis { channel: "g_hit".into(), size: 256, min: self.g_range[0], max: self.g_range[1] },
+            ],
+            components: 4,
+            values: self.table2(256, 256).into_iter().flatten().collect(),
+        }
+    }
+}
+
+/// RGBA in [0, 1] to 8-bit codes (value = code / 255).
+pub fn to_rgba8(table: &[[f32; 4]]) -> Vec<u8> {
+    table.iter().flat_map(|px| px.map(|x| (x.clamp(0.0, 1.0) * 255.0).round() as u8)).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const EXAMPLE: &str = r#"{
+      "v_range": [0, 255], "g_range": [0, 40], "f2_range": [-10, 10], "boundary_emphasis": 0.25,
+      "widgets": [
+        {"type": "triangle", "v0": 128, "width": 30, "g_low": 5, "g_high": 35, "shear": 0.5, "alpha": 0.8, "colour": [1, 0.5, 0]},
+        {"type": "rectangle", "centre": [60, 10], "half_size": [20, 8], "falloff": "pyramid", "alpha": 0.6, "colour": [0, 0, 1]},
+        {"type": "gaussian", "centre": [200, 25], "k": [[0.05, 0], [0, 0.2]], "alpha_max": 0.9, "colour": [0, 1, 0]}
+      ]}"#;
+
+    #[test]
+    fn rasterisation_equals_the_widget_formulas_at_cell_centres() {
+        let tf = parse_tf(EXAMPLE).unwrap();
+        let (nv, ng) = (64, 32);
+        let t = tf.table2(nv, ng);
+        for (i, j) in [(32, 16), (33, 20), (15, 8), (50, 20), (10, 2), (63, 31)] {
+            let (v, g) = ((i as f64 + 0.5) * 255.0 / 64.0, (j as f64 + 0.5) * 40.0 / 32.0);
+            // the formulas, written out again
+            let tri = if (5.0..=35.0).contains(&g) {
+                let (c, h) = (128.0 + 0.5 * g, 30.0 * g / 35.0);
+                0.8 * (1.0 - (v - c).abs() / h).max(0.0)
+            } else {
+                0.0
+            };
+            let (dv, dg) = ((v - 60.0) / 20.0, (g - 10.0) / 8.0);
+            let rect = if dv.abs() <= 1.0 && dg.abs() <= 1.0 { 0.6 * (1.0 - dv.abs().max(dg.abs())) } else { 0.0 };
+            let gau = 0.9 * (-((0.05 * (v - 200.0)).powi(2) + (0.2 * (g - 25.0)).powi(2))).exp();
+            let a = tri + rect + gau;
+            let got = t[j * nv + i];
+            assert!((got[3] as f64 - a.min(1.0)).abs() < 1e-6, "({i}, {j})");
+            if a > 0.0 {
+                let red = (tri * 1.0 + rect * 0.0 + gau * 0.0) / a;
+                assert!((got[0] as f64 - red).abs() < 1e-6);
+            }
+        }
+    }
+
+    #[test]
+    fn separable_3d_table_is_the_product_of_its_parts() {
+        let tf = parse_tf(EXAMPLE).unwrap();
+        let (t2, e, t3) = (tf.table2(256, 128), tf.table_f2(8), tf.table3(256, 128, 8));
+        assert_eq!(t3.len(), 256 * 128 * 8);
+        for k in 0..8 {
+            for idx in [0, 1000, 20_000, 32_767] {
+                assert_eq!(t3[k * 256 * 128 + idx][3], t2[idx][3] * e[k]);
+            }
+        }
+        // emphasis: 1 at f'' = 0, 1 - (1 - e) at the extremes
+        assert!((tf.emphasis(0.0) - 1.0).abs() < 1e-12 && (tf.emphasis(10.0) - 0.25).abs() < 1e-12);
+    }
+
+    #[test]
+    fn malformed_files_name_the_json_path() {
+        let bad = EXAMPLE.replace("\"falloff\": \"pyramid\"", "\"falloff\": \"cone\"");
+        let e = parse_tf(&bad).unwrap_err();
+        assert!(e.starts_with("at widgets[1].falloff") && e.contains("cone"), "{e}");
+        let bad = EXAMPLE.replace("\"g_high\": 35", "\"g_high\": \"x\"");
+        let e = parse_tf(&bad).unwrap_err();
+        assert!(e.starts_with("at widgets[0].g_high"), "{e}");
+        let bad = EXAMPLE.replace("\"type\": \"gaussian\"", "\"type\": \"blob\"");
+        assert!(parse_tf(&bad).unwrap_err().starts_with("at widgets[2].type"));
+        let bad = EXAMPLE.replace("\"boundary_emphasis\": 0.25", "\"boundary_emphasis\": 2");
+        assert!(parse_tf(&bad).unwrap_err().contains("boundary_emphasis"));
+    }
+}
