@@ -566,3 +566,50 @@ fn pack_rasterises_a_tf_file_into_the_slicer_tables() {
     let e = mdtf_err(&["pack", s.to_str().unwrap(), "-o", pack.to_str().unwrap(), "--tf", bad.to_str().unwrap()]);
     assert!(e.contains("widgets[0].falloff"), "{e}");
 }
+
+#[test]
+fn gaussian_and_peak_finding_profiles_pack_fields_and_tables() {
+    let dir = tempfile::tempdir().unwrap();
+    let mf = dir.path().join("m.nrrd");
+    mdtf_ok(&["synth", "multifield", "-o", mf.to_str().unwrap(), "--size", "24", "-q"]);
+    let tf = dir.path().join("tf.json");
+    std::fs::write(
+        &tf,
+        r#"{"v_range": [0, 100], "g_range": [0, 1],
+            "widgets": [{"type": "gaussian", "centre": [50, 0.5], "k": [[0.1, 0], [0, 4]], "alpha_max": 0.7, "colour": [0, 1, 0]}],
+            "tf1d": [[1,1,1,0], [1,0,0,3], [1,1,1,0.5], [0,0,1,1], [1,1,1,0]]}"#,
+    )
+    .unwrap();
+    let g = dir.path().join("g");
+    mdtf_ok(&[
+        "pack",
+        "--profile",
+        "gaussian-tf",
+        mf.to_str().unwrap(),
+        "-o",
+        g.to_str().unwrap(),
+        "--tf",
+        tf.to_str().unwrap(),
+        "-q",
+    ]);
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(g.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(m["textures"][0]["component_order"], serde_json::json!(["a", "b", "c", "gnorm"]));
+    assert_eq!(m["textures"][0]["dtype"], "u16");
+    let gaussians: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(g.join("gaussians.json")).unwrap()).unwrap();
+    assert_eq!(gaussians[0]["alpha_max"], 0.7);
+    let luts: Vec<&str> = m["luts"].as_array().unwrap().iter().map(|l| l["name"].as_str().unwrap()).collect();
+    assert_eq!(luts, ["peak_table", "preintegration"]);
+    // the peaks of tf1d are its samples at v = 25 (tau 3) and v = 75 (tau 1)
+    let pt = read(&g.join("peak_table_f32.nrrd"), &ReadOptions::default()).unwrap();
+    let values = pt.fields[0].data.iter().copied().collect::<Vec<f32>>();
+    assert!(values.contains(&25.0));
+    assert!(values.iter().all(|&v| v == -1.0 || v == 25.0 || v == 75.0), "peaks are sample positions");
+    assert!(values.contains(&75.0) && values.contains(&-1.0));
+    let p = dir.path().join("p");
+    mdtf_ok(&["pack", "--profile", "peak-finding", mf.to_str().unwrap(), "-o", p.to_str().unwrap(), "-q"]);
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(p.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(m["textures"][0]["component_order"], serde_json::json!(["a", "b", "c", "inv_g"]));
+}

@@ -22,7 +22,7 @@ fn slicer_3dtf_256(bencher: divan::Bencher) {
             .push((name.to_string(), Volume { geometry: t.v.geometry.clone(), data: t.normal.fields[i].data.clone() }));
     }
     let dir = tempfile::tempdir().expect("tempdir");
-    let params = PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new() };
+    let params = PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![] };
     let prov =
         Provenance { mdtf_version: "bench".into(), input: None, input_sha256: None, stages: serde_json::Value::Null };
     bencher
@@ -41,7 +41,7 @@ fn slicer_3dtf_256_encode_only(bencher: divan::Bencher) {
         chans
             .push((name.to_string(), Volume { geometry: t.v.geometry.clone(), data: t.normal.fields[i].data.clone() }));
     }
-    let params = PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new() };
+    let params = PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![] };
     bencher
         .counter(ItemsCount::new(n * n * n))
         .bench(|| encode(&chans, &params, &BTreeMap::new()).map(|e| e.textures.len()));

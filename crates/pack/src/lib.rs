@@ -40,6 +40,9 @@ pub struct PackParams {
     /// Value range per channel covered by the codes; channels not listed use their min and max.
     #[serde(default)]
     pub ranges: BTreeMap<String, [f64; 2]>,
+    /// Field names of a multi-field input, for the gaussian-tf and peak-finding layouts (empty: the scalar "v").
+    #[serde(default)]
+    pub fields: Vec<String>,
 }
 
 /// Errors of the pack stage.
@@ -86,10 +89,10 @@ pub fn encode(
     let get = |n: &str| channels.iter().find(|(c, _)| c == n).map(|(_, v)| v);
     let missing: Vec<String> = params
         .profile
-        .channels()
+        .channels(&params.fields)
         .into_iter()
         .filter(|c| get(c).is_none())
-        .map(|c| format!("{c} (made by the {} stage)", describe(c).2))
+        .map(|c| format!("{c} (made by the {} stage)", describe(&c).2))
         .collect();
     if !missing.is_empty() {
         return Err(PackError::MissingChannels { profile: params.profile.to_string(), missing: missing.join(", ") });
@@ -107,7 +110,7 @@ pub fn encode(
     let plane = geometry.dims[0] * geometry.dims[1];
     let mut textures = Vec::new();
     let mut entries = Vec::new();
-    for layout in params.profile.layout() {
+    for layout in params.profile.layout(&params.fields) {
         let comps = layout.components.len();
         let mut decodes = Vec::with_capacity(comps);
         for (ci, c) in layout.components.iter().enumerate() {
@@ -116,7 +119,7 @@ pub fn encode(
                 continue;
             };
             let v = get(c).ok_or_else(|| PackError::Geometry(format!("channel {c} vanished")))?;
-            let [min, max] = match params.ranges.get(*c) {
+            let [min, max] = match params.ranges.get(c) {
                 Some(r) => *r,
                 None => v.finite_range().map_or([0.0, 0.0], |(lo, hi)| [lo as f64, hi as f64]),
             };
@@ -127,12 +130,12 @@ pub fn encode(
                 name: c.to_string(),
                 meaning: meaning.into(),
                 units: units.into(),
-                texture: layout.name.into(),
+                texture: layout.name.clone(),
                 component: ci,
                 decode: d,
                 range: [d.offset, d.offset + d.scale * top],
                 source: sources
-                    .get(*c)
+                    .get(c)
                     .cloned()
                     .unwrap_or(ChannelSource { stage: stage.into(), params: serde_json::Value::Null }),
             });
@@ -219,18 +222,18 @@ pub fn write(encoded: &Encoded, luts: &[Lut], dir: &Path, provenance: Provenance
             Dtype::U16 | Dtype::F16 => "uint16",
             Dtype::F32 => "float",
         };
-        let order: Vec<String> = layout.components.iter().map(|c| c.unwrap_or("-").to_string()).collect();
+        let order: Vec<String> = layout.components.iter().map(|c| c.clone().unwrap_or_else(|| "-".into())).collect();
         let extra =
             [("mdtf_components", order.join(" ")), ("mdtf_dtype", format!("{:?}", layout.dtype).to_lowercase())];
         let header = mdtf_volume::nrrd::texture_header(geometry, comps, type_name, &data_file, &extra);
         write_file_atomically(&dir.join(&header_file), |w| w.write_all(header.as_bytes()))?;
         textures.push(TextureEntry {
-            name: layout.name.into(),
+            name: layout.name.clone(),
             header: header_file,
             data: data_file,
             dims: geometry.dims,
             components: comps,
-            component_order: layout.components.iter().map(|c| c.map(str::to_string)).collect(),
+            component_order: layout.components.clone(),
             dtype: layout.dtype,
         });
     }

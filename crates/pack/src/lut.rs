@@ -30,8 +30,10 @@ pub struct Lut {
     pub axes: Vec<LutAxis>,
     /// 4 (RGBA) or 1 (a single value per cell).
     pub components: usize,
-    /// Values in [0, 1], components fastest.
+    /// Values, components fastest; in [0, 1] when `unit_range`.
     pub values: Vec<f32>,
+    /// Values lie in [0, 1], so an 8-bit version (code / 255) is written too.
+    pub unit_range: bool,
 }
 
 /// A written lookup table, as the manifest lists it.
@@ -45,8 +47,8 @@ pub struct LutEntry {
     pub axes: Vec<LutAxis>,
     /// Components per cell (4: RGBA).
     pub components: usize,
-    /// The 8-bit version (code / 255), NRRD with an attached header.
-    pub file_u8: String,
+    /// The 8-bit version (code / 255), NRRD with an attached header, for tables of values in [0, 1].
+    pub file_u8: Option<String>,
     /// The f32 version, NRRD with an attached header.
     pub file_f32: String,
 }
@@ -64,9 +66,15 @@ impl Lut {
             min: a.min,
             max: a.max,
         }));
-        let u8s: Vec<u8> = self.values.iter().map(|x| (x.clamp(0.0, 1.0) * 255.0).round() as u8).collect();
-        let (file_u8, file_f32) = (format!("{}_u8.nrrd", self.name), format!("{}_f32.nrrd", self.name));
-        write_table_bytes(&dir.join(&file_u8), &axes, "uint8", &u8s)?;
+        let file_f32 = format!("{}_f32.nrrd", self.name);
+        let file_u8 = if self.unit_range {
+            let name = format!("{}_u8.nrrd", self.name);
+            let u8s: Vec<u8> = self.values.iter().map(|x| (x.clamp(0.0, 1.0) * 255.0).round() as u8).collect();
+            write_table_bytes(&dir.join(&name), &axes, "uint8", &u8s)?;
+            Some(name)
+        } else {
+            None
+        };
         let f32s: Vec<u8> = self.values.iter().flat_map(|x| x.to_le_bytes()).collect();
         write_table_bytes(&dir.join(&file_f32), &axes, "float", &f32s)?;
         Ok(LutEntry {

@@ -154,7 +154,7 @@ pub const MANIFEST_SCHEMA: &str = r##"{
     }},
     "luts": {"type": "array", "items": {
       "type": "object",
-      "required": ["name", "meaning", "axes", "components", "file_u8", "file_f32"],
+      "required": ["name", "meaning", "axes", "components", "file_f32"],
       "properties": {
         "name": {"type": "string"},
         "meaning": {"type": "string"},
@@ -163,7 +163,7 @@ pub const MANIFEST_SCHEMA: &str = r##"{
             "properties": {"channel": {"type": "string"}, "size": {"type": "integer", "minimum": 1},
               "min": {"type": "number"}, "max": {"type": "number"}}}},
         "components": {"type": "integer", "description": "4: RGBA (colour 0..1, opacity 0..1), 1: one value"},
-        "file_u8": {"type": "string", "description": "NRRD, uint8, value = code / 255, leading rgba axis when components = 4"},
+        "file_u8": {"type": ["string", "null"], "description": "NRRD, uint8, value = code / 255, leading rgba axis when components = 4; null for tables not in [0, 1]"},
         "file_f32": {"type": "string", "description": "NRRD, float, the same values"}
       }
     }},

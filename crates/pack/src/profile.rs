@@ -13,53 +13,65 @@ pub enum Profile {
     Slicer3dtf,
     /// The distance-based TF renderer: RGBA8 `normal_v` (nx, ny, nz, v) and 2-component u8 `ghit_d` (g_hit, d).
     DistanceTf,
+    /// Gaussian TFs on multi-field data: the fields (normalised to [0, 1] by
+    /// their decode) and ||G||, four per u16 texture `fields_k`.
+    GaussianTf,
+    /// Peak finding: the fields and 1/g, four per u16 texture `fields_k`.
+    PeakFinding,
 }
 
 /// Profile names for messages.
-pub const PROFILE_NAMES: &str = "slicer-3dtf, distance-tf";
+pub const PROFILE_NAMES: &str = "slicer-3dtf, distance-tf, gaussian-tf, peak-finding";
 
 /// One texture of a profile: its name, channels per component (None: unused) and type.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TextureLayout {
     /// Texture name (also its file stem).
-    pub name: &'static str,
+    pub name: String,
     /// Channel per component.
-    pub components: Vec<Option<&'static str>>,
+    pub components: Vec<Option<String>>,
     /// Storage type.
     pub dtype: Dtype,
 }
 
+fn tex(name: &str, components: &[Option<&str>], dtype: Dtype) -> TextureLayout {
+    TextureLayout { name: name.into(), components: components.iter().map(|c| c.map(str::to_string)).collect(), dtype }
+}
+
 impl Profile {
-    /// The textures of this profile.
-    pub fn layout(self) -> Vec<TextureLayout> {
+    /// The textures of this profile; `fields` names the input's fields (the
+    /// multi-field profiles pack them all; an empty list means the scalar "v").
+    pub fn layout(self, fields: &[String]) -> Vec<TextureLayout> {
+        let groups = |extra: &str| {
+            let mut all: Vec<String> = if fields.is_empty() { vec!["v".into()] } else { fields.to_vec() };
+            all.push(extra.into());
+            all.chunks(4)
+                .enumerate()
+                .map(|(k, c)| TextureLayout {
+                    name: format!("fields_{k}"),
+                    components: c.iter().cloned().map(Some).collect(),
+                    dtype: Dtype::U16,
+                })
+                .collect()
+        };
         match self {
             Profile::Slicer3dtf => vec![
-                TextureLayout {
-                    name: "data",
-                    components: vec![Some("v"), Some("g"), Some("f2"), None],
-                    dtype: Dtype::U8,
-                },
-                TextureLayout {
-                    name: "normal",
-                    components: vec![Some("nx"), Some("ny"), Some("nz"), Some("g")],
-                    dtype: Dtype::U8,
-                },
+                tex("data", &[Some("v"), Some("g"), Some("f2"), None], Dtype::U8),
+                tex("normal", &[Some("nx"), Some("ny"), Some("nz"), Some("g")], Dtype::U8),
             ],
             Profile::DistanceTf => vec![
-                TextureLayout {
-                    name: "normal_v",
-                    components: vec![Some("nx"), Some("ny"), Some("nz"), Some("v")],
-                    dtype: Dtype::U8,
-                },
-                TextureLayout { name: "ghit_d", components: vec![Some("g_hit"), Some("distance")], dtype: Dtype::U8 },
+                tex("normal_v", &[Some("nx"), Some("ny"), Some("nz"), Some("v")], Dtype::U8),
+                tex("ghit_d", &[Some("g_hit"), Some("distance")], Dtype::U8),
             ],
+            Profile::GaussianTf => groups("gnorm"),
+            Profile::PeakFinding => groups("inv_g"),
         }
     }
 
     /// Every channel the profile needs, each once, in layout order.
-    pub fn channels(self) -> Vec<&'static str> {
-        let mut out: Vec<&'static str> = Vec::new();
-        for t in self.layout() {
+    pub fn channels(self, fields: &[String]) -> Vec<String> {
+        let mut out: Vec<String> = Vec::new();
+        for t in self.layout(fields) {
             for c in t.components.into_iter().flatten() {
                 if !out.contains(&c) {
                     out.push(c);
@@ -79,6 +91,8 @@ pub fn describe(channel: &str) -> (&'static str, &'static str, &'static str, boo
         "nx" | "ny" | "nz" => ("unit normal component along the grid axis", "1", "derive", true),
         "g_hit" => ("gradient magnitude at the boundary hit", "value units per world unit", "boundary", false),
         "distance" => ("distance to the nearest boundary (-1: none)", "world units", "boundary", false),
+        "gnorm" => ("||Df^T Df|| (Frobenius) of the fields normalised to [0, 1]", "per world unit^2", "derive", false),
+        "inv_g" => ("inverse gradient magnitude 1 / max(g, epsilon)", "world units per value unit", "derive", false),
         _ => ("field", "field units", "input", false),
     }
 }
@@ -89,9 +103,9 @@ impl FromStr for Profile {
         match s {
             "slicer-3dtf" => Ok(Profile::Slicer3dtf),
             "distance-tf" => Ok(Profile::DistanceTf),
-            "gaussian-tf" | "peak-finding" | "projected-tetrahedra" => {
-                Err(format!("profile '{s}' is not implemented yet (available: {PROFILE_NAMES})"))
-            }
+            "gaussian-tf" => Ok(Profile::GaussianTf),
+            "peak-finding" => Ok(Profile::PeakFinding),
+            "projected-tetrahedra" => Err(format!("profile '{s}' is not implemented yet (available: {PROFILE_NAMES})")),
             _ => Err(format!("unknown profile '{s}' (available: {PROFILE_NAMES})")),
         }
     }
@@ -102,6 +116,8 @@ impl fmt::Display for Profile {
         f.write_str(match self {
             Profile::Slicer3dtf => "slicer-3dtf",
             Profile::DistanceTf => "distance-tf",
+            Profile::GaussianTf => "gaussian-tf",
+            Profile::PeakFinding => "peak-finding",
         })
     }
 }

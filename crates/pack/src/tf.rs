@@ -128,6 +128,8 @@ pub struct TfFile {
     pub boundary_emphasis: f64,
     /// The widgets.
     pub widgets: Vec<Widget>,
+    /// Optional 1D TF over v_range: (r, g, b, tau) samples, for the peak and pre-integration tables.
+    pub tf1d: Option<Vec<[f64; 4]>>,
 }
 
 /// The file's top level, widgets still raw so each can be checked against its own type.
@@ -140,7 +142,10 @@ struct RawTf {
     f2_range: [f64; 2],
     #[serde(default = "one")]
     boundary_emphasis: f64,
+    #[serde(default)]
     widgets: Vec<serde_json::Value>,
+    #[serde(default)]
+    tf1d: Option<Vec<[f64; 4]>>,
 }
 
 fn default_f2_range() -> [f64; 2] {
@@ -181,7 +186,11 @@ pub fn parse_tf(text: &str) -> Result<TfFile, String> {
         f2_range: raw.f2_range,
         boundary_emphasis: raw.boundary_emphasis,
         widgets,
+        tf1d: raw.tf1d,
     };
+    if tf.tf1d.as_ref().is_some_and(|t| t.len() < 2) {
+        return Err("at tf1d: give at least 2 samples".into());
+    }
     if !(0.0..=1.0).contains(&tf.boundary_emphasis) {
         return Err(format!("at boundary_emphasis: {} is not in [0, 1]", tf.boundary_emphasis));
     }
@@ -265,6 +274,7 @@ impl TfFile {
                 axes: vec![axis("v", 256, self.v_range), axis("g", 128, self.g_range), axis("f2", 8, self.f2_range)],
                 components: 4,
                 values: flat(self.table3(256, 128, 8)),
+                unit_range: true,
             },
             Lut {
                 name: "tf2d".into(),
@@ -272,6 +282,7 @@ impl TfFile {
                 axes: vec![axis("v", 256, self.v_range), axis("g", 256, self.g_range)],
                 components: 4,
                 values: flat(self.table2(256, 256)),
+                unit_range: true,
             },
             Lut {
                 name: "tf_f2".into(),
@@ -279,6 +290,7 @@ impl TfFile {
                 axes: vec![axis("f2", 256, self.f2_range)],
                 components: 1,
                 values: self.table_f2(256),
+                unit_range: true,
             },
         ]
     }
@@ -295,7 +307,53 @@ impl TfFile {
             ],
             components: 4,
             values: self.table2(256, 256).into_iter().flatten().collect(),
+            unit_range: true,
         }
+    }
+}
+
+impl TfFile {
+    /// The Gaussian widgets, as written to a pack's `gaussians.json`.
+    pub fn gaussians(&self) -> Vec<GaussianPrimitive> {
+        self.widgets.iter().filter_map(|w| if let Widget::Gaussian(g) = w { Some(g.clone()) } else { None }).collect()
+    }
+
+    /// With a `tf1d`: the 256 x 256 peak table (s of the highest TF peak between front and
+    /// back values, -1 for none) and the pre-integration table for a segment of `step` world units.
+    pub fn table_luts(&self, step: f64) -> Vec<crate::lut::Lut> {
+        use crate::lut::{Lut, LutAxis};
+        let Some(samples) = &self.tf1d else { return Vec::new() };
+        let tf = crate::tables::Tf1d { samples: samples.clone() };
+        let span = self.v_range[1] - self.v_range[0];
+        let axes = |a: &str, b: &str| {
+            vec![
+                LutAxis { channel: a.into(), size: 256, min: self.v_range[0], max: self.v_range[1] },
+                LutAxis { channel: b.into(), size: 256, min: self.v_range[0], max: self.v_range[1] },
+            ]
+        };
+        let peak = crate::tables::peak_table(&tf, 256)
+            .into_iter()
+            .map(|s| if s < 0.0 { -1.0 } else { (self.v_range[0] + s as f64 * span) as f32 })
+            .collect();
+        vec![
+            Lut {
+                name: "peak_table".into(),
+                meaning: "v of the highest peak of tf1d between the front (first axis) and back values; -1: none"
+                    .into(),
+                axes: axes("v_front", "v_back"),
+                components: 1,
+                values: peak,
+                unit_range: false,
+            },
+            Lut {
+                name: "preintegration".into(),
+                meaning: format!("RGBA of a {step}-world-unit segment from the front to the back value (Engel et al.)"),
+                axes: axes("v_front", "v_back"),
+                components: 4,
+                values: crate::tables::preintegration_table(&tf, 256, step).into_iter().flatten().collect(),
+                unit_range: true,
+            },
+        ]
     }
 }
 

@@ -23,6 +23,18 @@ fn channels() -> Vec<(String, Volume)> {
     for (i, name) in ["nx", "ny", "nz"].iter().enumerate() {
         out.push((name.to_string(), Volume { geometry: t.v.geometry.clone(), data: t.normal.fields[i].data.clone() }));
     }
+    // stand-ins for the multi-field channels: any data decodes the same way
+    out.push(("gnorm".to_string(), Volume { geometry: t.g.geometry.clone(), data: t.g.data.mapv(|g| g * g) }));
+    out.push((
+        "inv_g".to_string(),
+        Volume { geometry: t.g.geometry.clone(), data: t.g.data.mapv(|g| 1.0 / g.max(0.5)) },
+    ));
+    for (name, scale) in [("a", 1.0f32), ("b", -3.0), ("c", 0.25), ("d", 7.0), ("e", 2.0)] {
+        out.push((
+            name.to_string(),
+            Volume { geometry: t.v.geometry.clone(), data: t.v.data.mapv(|v| v * scale + 1.0) },
+        ));
+    }
     out
 }
 
@@ -65,12 +77,25 @@ fn decode(dir: &Path, name: &str) -> Vec<Vec<f64>> {
 #[test]
 fn every_channel_decodes_within_half_a_step_from_the_manifest_alone() {
     let chans = channels();
-    for profile in [Profile::Slicer3dtf, Profile::DistanceTf] {
+    let five: Vec<String> = ["a", "b", "c", "d", "e"].iter().map(|s| s.to_string()).collect();
+    for (profile, fields) in [
+        (Profile::Slicer3dtf, vec![]),
+        (Profile::DistanceTf, vec![]),
+        (Profile::GaussianTf, five.clone()),
+        (Profile::PeakFinding, vec![]),
+        (Profile::PeakFinding, five),
+    ] {
         let dir = tempfile::tempdir().unwrap();
         let prov = Provenance { mdtf_version: "test".into(), input: None, input_sha256: None, stages: Value::Null };
-        let m = pack(&chans, &PackParams { profile, ranges: BTreeMap::new() }, &[], dir.path(), prov, &BTreeMap::new())
-            .unwrap();
-        for name in profile.channels() {
+        let params = PackParams { profile, ranges: BTreeMap::new(), fields: fields.clone() };
+        let m = pack(&chans, &params, &[], dir.path(), prov, &BTreeMap::new()).unwrap();
+        if profile == Profile::GaussianTf {
+            // five fields and ||G||: two RGBA16 textures
+            assert_eq!(m.textures.len(), 2);
+            assert_eq!(m.textures[1].component_order, vec![Some("e".to_string()), Some("gnorm".to_string())]);
+        }
+        for name in profile.channels(&fields) {
+            let name = name.as_str();
             let truth = &chans.iter().find(|(c, _)| c == name).unwrap().1;
             let entry = m.channels.iter().find(|c| c.name == name).unwrap();
             for decoded in decode(dir.path(), name) {
@@ -88,7 +113,11 @@ fn every_channel_decodes_within_half_a_step_from_the_manifest_alone() {
         }
         // the NRRD header points at the raw file and says what the components are
         let hdr = std::fs::read_to_string(dir.path().join(&m.textures[0].header)).unwrap();
-        assert!(hdr.contains("type: uint8") && hdr.contains(&format!("data file: {}", m.textures[0].data)), "{hdr}");
+        let ty = if matches!(profile, Profile::Slicer3dtf | Profile::DistanceTf) { "uint8" } else { "uint16" };
+        assert!(
+            hdr.contains(&format!("type: {ty}")) && hdr.contains(&format!("data file: {}", m.textures[0].data)),
+            "{hdr}"
+        );
     }
 }
 
@@ -99,7 +128,7 @@ fn missing_channels_are_named_with_their_stage() {
     let prov = Provenance { mdtf_version: "t".into(), input: None, input_sha256: None, stages: Value::Null };
     let e = pack(
         &chans,
-        &PackParams { profile: Profile::DistanceTf, ranges: BTreeMap::new() },
+        &PackParams { profile: Profile::DistanceTf, ranges: BTreeMap::new(), fields: vec![] },
         &[],
         dir.path(),
         prov.clone(),
@@ -112,7 +141,7 @@ fn missing_channels_are_named_with_their_stage() {
     flat[0].1 = Volume::new(flat[0].1.geometry.clone(), Array3::from_elem(flat[0].1.data.dim(), 3.0)).unwrap();
     let e = pack(
         &flat,
-        &PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new() },
+        &PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![] },
         &[],
         dir.path(),
         prov,

@@ -6,7 +6,7 @@ use mdtf_derive::{DeriveParams, Item, Kernel};
 use mdtf_volume::{MultiField, Volume};
 
 /// Channel names computed from a value volume (fields of a multi-field input are channels too).
-pub const CHANNEL_NAMES: &str = "v, g, f2, nx, ny, nz, g_hit, hit, distance";
+pub const CHANNEL_NAMES: &str = "v, g, f2, nx, ny, nz, inv_g, gnorm, g_hit, hit, distance";
 
 /// Computes the named channels of `input`: its fields by name (`v` is the
 /// first field), `g` and `f2` by the derive stage, `g_hit`, `hit` and
@@ -18,13 +18,23 @@ pub fn compute(
 ) -> Result<Vec<(String, Volume)>, ChainError> {
     let value = input.field_volume(0).ok_or_else(|| ChainError::Unknown("the input has no fields".into()))?;
     let needs = |n: &str| names.iter().any(|x| x == n);
-    let derived = if ["g", "f2", "nx", "ny", "nz"].iter().any(|n| needs(n)) {
+    let derived = if ["g", "f2", "nx", "ny", "nz", "inv_g"].iter().any(|n| needs(n)) {
         let d = DeriveParams {
-            items: vec![Item::G, Item::F2, Item::Normal],
+            items: vec![Item::G, Item::F2, Item::Normal, Item::InvG],
             kernel: kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
             ..Default::default()
         };
         Some(mdtf_derive::run(&MultiField::from(value.clone()), &d)?)
+    } else {
+        None
+    };
+    let gnorm = if needs("gnorm") && input.fields.len() > 1 {
+        let d = DeriveParams {
+            items: vec![Item::Gnorm],
+            kernel: kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
+            ..Default::default()
+        };
+        mdtf_derive::run(input, &d)?.items.into_iter().next().and_then(|(_, m)| m.field_volume(0))
     } else {
         None
     };
@@ -45,6 +55,8 @@ pub fn compute(
                 ("nx", Some(d), _) => d.get(Item::Normal).and_then(|m| m.field_volume(0)),
                 ("ny", Some(d), _) => d.get(Item::Normal).and_then(|m| m.field_volume(1)),
                 ("nz", Some(d), _) => d.get(Item::Normal).and_then(|m| m.field_volume(2)),
+                ("inv_g", Some(d), _) => d.get(Item::InvG).and_then(|m| m.field_volume(0)),
+                ("gnorm", _, _) => gnorm.clone(),
                 ("g_hit", _, Some(t)) => Some(t.boundary.g_hit.clone()),
                 ("hit", _, Some(t)) => Some(t.boundary.hit.clone()),
                 ("distance", _, Some(t)) => Some(t.boundary.distance.clone()),

@@ -13,6 +13,9 @@ use mdtf_volume::Volume;
 use std::collections::BTreeMap;
 use std::path::Path;
 
+/// Named channels, and the field names of a multi-field input (empty for a scalar one).
+type ChannelsAndFields = (Vec<(String, Volume)>, Vec<String>);
+
 /// Packs, or prints the schema.
 pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
     if args.schema {
@@ -21,9 +24,13 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
     }
     let (Some(input), Some(output)) = (&args.input, &args.output) else { bail!("give an input and -o PACK_DIR") };
     let profile: Profile = args.profile.parse().map_err(anyhow::Error::msg)?;
-    let names: Vec<String> = profile.channels().iter().map(|s| s.to_string()).collect();
-    let chans = progress.step("reading channels", || -> Result<Vec<(String, Volume)>> {
-        if input.is_dir() { from_folder(input, &names, args) } else { from_value(input, &names, args) }
+    let (chans, fields) = progress.step("reading channels", || -> Result<ChannelsAndFields> {
+        if input.is_dir() {
+            let names = profile.channels(&[]);
+            Ok((from_folder(input, &names, args)?, Vec::new()))
+        } else {
+            from_value(input, profile, args)
+        }
     })?;
     let mut ranges = BTreeMap::new();
     for r in &args.range {
@@ -47,8 +54,16 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
             "derive": { "kernel": args.kernel.clone().unwrap_or_else(|| mdtf_derive::DEFAULT_KERNEL.to_string()) } }),
     };
     let luts = progress.step("lookup tables", || luts(args, profile, &chans, &ranges))?;
-    let params = PackParams { profile, ranges };
+    let params = PackParams { profile, ranges, fields };
     let m = progress.step("packing", || pack(&chans, &params, &luts, output, provenance, &BTreeMap::new()))?;
+    if let Some(tf) = &args.tf
+        && profile == Profile::GaussianTf
+    {
+        let text = std::fs::read_to_string(tf)?;
+        let gaussians = parse_tf(&text).map_err(anyhow::Error::msg)?.gaussians();
+        let json = serde_json::to_string_pretty(&gaussians)?;
+        mdtf_volume::write_file_atomically(&output.join("gaussians.json"), |w| w.write_all(json.as_bytes()))?;
+    }
     progress.note(&format!(
         "packed {} textures ({}) and manifest.json into {}",
         m.textures.len(),
@@ -93,6 +108,7 @@ fn luts(
                     ],
                     components: 4,
                     values: hv.opacity.iter().flat_map(|&a| [1.0, 1.0, 1.0, a]).collect(),
+                    unit_range: true,
                 });
             }
         },
@@ -109,19 +125,30 @@ fn luts(
                 axes: vec![LutAxis { channel: "distance".into(), size: 256, min: 0.0, max: d_max }],
                 components: 1,
                 values: (0..256).map(|k| map.eval((k as f64 + 0.5) * d_max / 256.0) as f32).collect(),
+                unit_range: true,
             });
             if let Some(tf) = &tf {
                 out.push(tf.distance_alpha_u());
+            }
+        }
+        Profile::GaussianTf | Profile::PeakFinding => {
+            if let Some(tf) = &tf {
+                let step = chans.first().map_or(1.0, |(_, v)| v.geometry.min_spacing());
+                out.extend(tf.table_luts(step));
             }
         }
     }
     Ok(out)
 }
 
-fn from_value(input: &Path, names: &[String], args: &PackArgs) -> Result<Vec<(String, Volume)>> {
+/// Channels of a value volume computed in process; a multi-field input's field names are the fields.
+fn from_value(input: &Path, profile: Profile, args: &PackArgs) -> Result<ChannelsAndFields> {
     let (mf, _) = read_input(input, &args.read, &read_options(&args.read))?;
     let kernel = args.kernel.as_deref().map(str::parse).transpose()?;
-    Ok(channels::compute(&mf, names, kernel)?)
+    let fields: Vec<String> =
+        if mf.fields.len() > 1 { mf.fields.iter().map(|f| f.name.clone()).collect() } else { Vec::new() };
+    let names = profile.channels(&fields);
+    Ok((channels::compute(&mf, &names, kernel)?, fields))
 }
 
 /// Reads stage outputs by name from a folder: value (or v), g, f2, normal (3 fields), g_hit, distance.
