@@ -512,6 +512,10 @@ pub struct PackArgs {
     /// histogram stage (tent of the position function p(v, g)).
     #[arg(long, value_name = "TF.json")]
     pub tf: Option<PathBuf>,
+    /// Storage type of every texture instead of the profile's: u8, u16, f16 (IEEE half bits; NRRD
+    /// header says uint16, the manifest f16) or f32.
+    #[arg(long, value_name = "T")]
+    pub dtype: Option<String>,
     /// distance-tf: the alpha map of distance written as the 1D table alpha_d(d).
     #[arg(long, default_value = "linear:a=1,dc=3", value_name = "SPEC")]
     pub alpha: String,

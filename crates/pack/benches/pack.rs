@@ -22,7 +22,7 @@ fn slicer_3dtf_256(bencher: divan::Bencher) {
             .push((name.to_string(), Volume { geometry: t.v.geometry.clone(), data: t.normal.fields[i].data.clone() }));
     }
     let dir = tempfile::tempdir().expect("tempdir");
-    let params = PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![] };
+    let params = PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![], dtype: None };
     let prov =
         Provenance { mdtf_version: "bench".into(), input: None, input_sha256: None, stages: serde_json::Value::Null };
     bencher
@@ -41,7 +41,7 @@ fn slicer_3dtf_256_encode_only(bencher: divan::Bencher) {
         chans
             .push((name.to_string(), Volume { geometry: t.v.geometry.clone(), data: t.normal.fields[i].data.clone() }));
     }
-    let params = PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![] };
+    let params = PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![], dtype: None };
     bencher
         .counter(ItemsCount::new(n * n * n))
         .bench(|| encode(&chans, &params, &BTreeMap::new()).map(|e| e.textures.len()));
@@ -64,4 +64,18 @@ fn preintegration_256(bencher: divan::Bencher) {
             .collect(),
     };
     bencher.bench(|| mdtf_pack::preintegration_table(&tf, 256, 1.0).len());
+}
+
+/// Rasterising a 256 x 128 x 8 (v, g, f'') LUT from three widgets (target: < 50 ms).
+#[divan::bench(sample_count = 5, sample_size = 1)]
+fn lut_256x128x8(bencher: divan::Bencher) {
+    let tf = mdtf_pack::parse_tf(
+        r#"{"v_range": [0, 255], "g_range": [0, 40], "f2_range": [-10, 10], "boundary_emphasis": 0.25,
+            "widgets": [
+              {"type": "triangle", "v0": 128, "width": 30, "g_low": 5, "g_high": 35, "shear": 0.5, "alpha": 0.8, "colour": [1, 0.5, 0]},
+              {"type": "rectangle", "centre": [60, 10], "half_size": [20, 8], "falloff": "pyramid", "alpha": 0.6, "colour": [0, 0, 1]},
+              {"type": "gaussian", "centre": [200, 25], "k": [[0.05, 0], [0, 0.2]], "alpha_max": 0.9, "colour": [0, 1, 0]}]}"#,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    bencher.bench(|| tf.table3(256, 128, 8).len());
 }

@@ -43,6 +43,9 @@ pub struct PackParams {
     /// Field names of a multi-field input, for the gaussian-tf and peak-finding layouts (empty: the scalar "v").
     #[serde(default)]
     pub fields: Vec<String>,
+    /// Storage type for every texture instead of the profile's (u8, u16, f16 or f32).
+    #[serde(default)]
+    pub dtype: Option<Dtype>,
 }
 
 /// Errors of the pack stage.
@@ -110,7 +113,10 @@ pub fn encode(
     let plane = geometry.dims[0] * geometry.dims[1];
     let mut textures = Vec::new();
     let mut entries = Vec::new();
-    for layout in params.profile.layout(&params.fields) {
+    for mut layout in params.profile.layout(&params.fields) {
+        if let Some(d) = params.dtype {
+            layout.dtype = d;
+        }
         let comps = layout.components.len();
         let mut decodes = Vec::with_capacity(comps);
         for (ci, c) in layout.components.iter().enumerate() {

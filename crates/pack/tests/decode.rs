@@ -3,7 +3,7 @@
 //! reproduces every channel within half a code step; 0 stays exact.
 
 use mdtf_datagen::erf_sphere;
-use mdtf_pack::{PackParams, Profile, Provenance, pack};
+use mdtf_pack::{Dtype, PackParams, Profile, Provenance, pack};
 use mdtf_volume::{Geometry, Volume};
 use ndarray::Array3;
 use serde_json::Value;
@@ -87,7 +87,7 @@ fn every_channel_decodes_within_half_a_step_from_the_manifest_alone() {
     ] {
         let dir = tempfile::tempdir().unwrap();
         let prov = Provenance { mdtf_version: "test".into(), input: None, input_sha256: None, stages: Value::Null };
-        let params = PackParams { profile, ranges: BTreeMap::new(), fields: fields.clone() };
+        let params = PackParams { profile, ranges: BTreeMap::new(), fields: fields.clone(), dtype: None };
         let m = pack(&chans, &params, &[], dir.path(), prov, &BTreeMap::new()).unwrap();
         if profile == Profile::GaussianTf {
             // five fields and ||G||: two RGBA16 textures
@@ -122,13 +122,61 @@ fn every_channel_decodes_within_half_a_step_from_the_manifest_alone() {
 }
 
 #[test]
+fn every_dtype_decodes_within_half_a_step() {
+    let chans = channels();
+    for dtype in [Dtype::U8, Dtype::U16, Dtype::F16, Dtype::F32] {
+        let dir = tempfile::tempdir().unwrap();
+        let prov = Provenance { mdtf_version: "test".into(), input: None, input_sha256: None, stages: Value::Null };
+        let params =
+            PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![], dtype: Some(dtype) };
+        let m = pack(&chans, &params, &[], dir.path(), prov, &BTreeMap::new()).unwrap();
+        for name in ["v", "f2", "nx"] {
+            let truth = &chans.iter().find(|(c, _)| c == name).unwrap().1;
+            let entry = m.channels.iter().find(|c| c.name == name).unwrap();
+            let decoded = &decode_any(dir.path(), name, dtype)[0];
+            for (d, &t) in decoded.iter().zip(truth.samples()) {
+                let tol = match dtype {
+                    Dtype::U8 | Dtype::U16 => 0.5 * entry.decode.scale * (1.0 + 1e-6) + 1e-9,
+                    Dtype::F16 => (t as f64).abs() * 2f64.powi(-11) + 1e-7, // half a unit in the last place
+                    Dtype::F32 => 0.0,
+                };
+                assert!((d - t as f64).abs() <= tol, "{dtype:?} {name}: {t} -> {d}");
+            }
+        }
+    }
+}
+
+/// Like `decode`, reading f16 bit patterns where the manifest says f16.
+fn decode_any(dir: &Path, name: &str, dtype: Dtype) -> Vec<Vec<f64>> {
+    if dtype != Dtype::F16 {
+        return decode(dir, name);
+    }
+    let m: Value = serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap();
+    let ch = m["channels"].as_array().unwrap().iter().find(|c| c["name"] == name).unwrap();
+    let tex = m["textures"].as_array().unwrap().iter().find(|t| t["name"] == ch["texture"]).unwrap();
+    assert_eq!(tex["dtype"], "f16");
+    let comps = tex["components"].as_u64().unwrap() as usize;
+    let c = ch["component"].as_u64().unwrap() as usize;
+    let bytes = std::fs::read(dir.join(tex["data"].as_str().unwrap())).unwrap();
+    let n = bytes.len() / (2 * comps);
+    vec![
+        (0..n)
+            .map(|i| {
+                half::f16::from_bits(u16::from_le_bytes([bytes[(i * comps + c) * 2], bytes[(i * comps + c) * 2 + 1]]))
+                    .to_f64()
+            })
+            .collect(),
+    ]
+}
+
+#[test]
 fn missing_channels_are_named_with_their_stage() {
     let chans: Vec<(String, Volume)> = channels().into_iter().filter(|(c, _)| c != "g_hit" && c != "f2").collect();
     let dir = tempfile::tempdir().unwrap();
     let prov = Provenance { mdtf_version: "t".into(), input: None, input_sha256: None, stages: Value::Null };
     let e = pack(
         &chans,
-        &PackParams { profile: Profile::DistanceTf, ranges: BTreeMap::new(), fields: vec![] },
+        &PackParams { profile: Profile::DistanceTf, ranges: BTreeMap::new(), fields: vec![], dtype: None },
         &[],
         dir.path(),
         prov.clone(),
@@ -141,7 +189,7 @@ fn missing_channels_are_named_with_their_stage() {
     flat[0].1 = Volume::new(flat[0].1.geometry.clone(), Array3::from_elem(flat[0].1.data.dim(), 3.0)).unwrap();
     let e = pack(
         &flat,
-        &PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![] },
+        &PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![], dtype: None },
         &[],
         dir.path(),
         prov,

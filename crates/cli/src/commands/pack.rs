@@ -7,7 +7,7 @@ use anyhow::{Context, Result, bail};
 use mdtf_boundary::AlphaMap;
 use mdtf_histogram::AxisSpec;
 use mdtf_histogram::{HvolParams, histogram_volume};
-use mdtf_pack::{Lut, LutAxis, MANIFEST_SCHEMA, PackParams, Profile, Provenance, pack, parse_tf, sha256_file};
+use mdtf_pack::{Dtype, Lut, LutAxis, MANIFEST_SCHEMA, PackParams, Profile, Provenance, pack, parse_tf, sha256_file};
 use mdtf_pipeline::channels;
 use mdtf_volume::Volume;
 use std::collections::BTreeMap;
@@ -54,7 +54,15 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
             "derive": { "kernel": args.kernel.clone().unwrap_or_else(|| mdtf_derive::DEFAULT_KERNEL.to_string()) } }),
     };
     let luts = progress.step("lookup tables", || luts(args, profile, &chans, &ranges))?;
-    let params = PackParams { profile, ranges, fields };
+    let dtype = match args.dtype.as_deref() {
+        None => None,
+        Some("u8") => Some(Dtype::U8),
+        Some("u16") => Some(Dtype::U16),
+        Some("f16") => Some(Dtype::F16),
+        Some("f32") => Some(Dtype::F32),
+        Some(other) => bail!("--dtype: unknown type '{other}' (u8, u16, f16, f32)"),
+    };
+    let params = PackParams { profile, ranges, fields, dtype };
     let m = progress.step("packing", || pack(&chans, &params, &luts, output, provenance, &BTreeMap::new()))?;
     if let Some(tf) = &args.tf
         && profile == Profile::GaussianTf
