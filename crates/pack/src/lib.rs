@@ -183,7 +183,8 @@ fn encode_row(src: &[f32], d: &Decode, dtype: Dtype, codes: &mut [u32]) {
                 let x = (v as f64 - off) * inv + 0.5;
                 let x = if x > 0.0 { x } else { 0.0 };
                 let x = if x < top { x } else { top };
-                *c = x as u32; // x >= 0: truncation is floor, so this rounds half up
+                // x >= 0: truncation is floor, so this rounds half up; i64 converts in SIMD lanes
+                *c = x as i64 as u32;
             }
         }
         None => {
@@ -199,8 +200,10 @@ fn interleave(codes: &[Vec<u32>], size: usize, out: &mut [u8]) {
     let comps = codes.len();
     match (size, comps) {
         (1, 4) => {
-            for (i, px) in out.chunks_exact_mut(4).enumerate() {
-                px.copy_from_slice(&[codes[0][i] as u8, codes[1][i] as u8, codes[2][i] as u8, codes[3][i] as u8]);
+            let n = out.len() / 4;
+            let (c0, c1, c2, c3) = (&codes[0][..n], &codes[1][..n], &codes[2][..n], &codes[3][..n]);
+            for ((((px, a), b), c), d) in out.chunks_exact_mut(4).zip(c0).zip(c1).zip(c2).zip(c3) {
+                px.copy_from_slice(&[*a as u8, *b as u8, *c as u8, *d as u8]);
             }
         }
         _ => {
