@@ -11,6 +11,18 @@ fn main() {
     divan::main();
 }
 
+/// v, g, f'' and the normal of the analytic erf sphere, as float fields.
+fn sphere_channels(n: usize) -> Vec<(String, Volume)> {
+    let t = erf_sphere(Geometry::new([n; 3], [1.0; 3]), 0.3 * n as f64, 3.0, 0.0, 255.0, None).truth();
+    let mut chans =
+        vec![("v".to_string(), t.v.clone()), ("g".to_string(), t.g.clone()), ("f2".to_string(), t.f2.clone())];
+    for (i, name) in ["nx", "ny", "nz"].iter().enumerate() {
+        chans
+            .push((name.to_string(), Volume { geometry: t.v.geometry.clone(), data: t.normal.fields[i].data.clone() }));
+    }
+    chans
+}
+
 #[divan::bench(sample_count = 5, sample_size = 1)]
 fn slicer_3dtf_256(bencher: divan::Bencher) {
     let n = 256;
