@@ -26,13 +26,7 @@ fn sphere_channels(n: usize) -> Vec<(String, Volume)> {
 #[divan::bench(sample_count = 5, sample_size = 1)]
 fn slicer_3dtf_256(bencher: divan::Bencher) {
     let n = 256;
-    let t = erf_sphere(Geometry::new([n; 3], [1.0; 3]), 76.8, 3.0, 0.0, 255.0, None).truth();
-    let mut chans =
-        vec![("v".to_string(), t.v.clone()), ("g".to_string(), t.g.clone()), ("f2".to_string(), t.f2.clone())];
-    for (i, name) in ["nx", "ny", "nz"].iter().enumerate() {
-        chans
-            .push((name.to_string(), Volume { geometry: t.v.geometry.clone(), data: t.normal.fields[i].data.clone() }));
-    }
+    let chans = sphere_channels(n);
     let dir = tempfile::tempdir().expect("tempdir");
     let params = PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![], dtype: None };
     let prov =
@@ -46,13 +40,7 @@ fn slicer_3dtf_256(bencher: divan::Bencher) {
 #[divan::bench(sample_count = 5, sample_size = 1)]
 fn slicer_3dtf_256_encode_only(bencher: divan::Bencher) {
     let n = 256;
-    let t = erf_sphere(Geometry::new([n; 3], [1.0; 3]), 76.8, 3.0, 0.0, 255.0, None).truth();
-    let mut chans =
-        vec![("v".to_string(), t.v.clone()), ("g".to_string(), t.g.clone()), ("f2".to_string(), t.f2.clone())];
-    for (i, name) in ["nx", "ny", "nz"].iter().enumerate() {
-        chans
-            .push((name.to_string(), Volume { geometry: t.v.geometry.clone(), data: t.normal.fields[i].data.clone() }));
-    }
+    let chans = sphere_channels(n);
     let params = PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![], dtype: None };
     bencher
         .counter(ItemsCount::new(n * n * n))
