@@ -8,11 +8,13 @@
 
 mod axis;
 mod count;
+mod files;
 mod hvol;
 mod image;
 
 pub use axis::{Axis, AxisSpec, DEFAULT_BINS, MAX_INTEGER_BINS};
 pub use count::{Histogram, count};
+pub use files::{write_histogram, write_hvol, write_stretched};
 pub use hvol::{HistogramVolume, HvolParams, histogram_volume};
 pub use image::{Grey, Scale, grey_level, side_by_side, write_exr, write_png};
 

@@ -2,7 +2,7 @@
 //! `mdtf histogram` and later the pack stage ask for by name.
 
 use crate::boundary_chain::{self, BoundaryChainParams, ChainError};
-use mdtf_derive::{DeriveParams, Item, Kernel};
+use mdtf_derive::{DeriveParams, Item};
 use mdtf_volume::{MultiField, Volume};
 
 /// Channel names computed from a value volume (fields of a multi-field input are channels too).
@@ -14,8 +14,9 @@ pub const CHANNEL_NAMES: &str = "v, g, f2, nx, ny, nz, inv_g, gnorm, g_hit, hit,
 pub fn compute(
     input: &MultiField,
     names: &[String],
-    kernel: Option<Kernel>,
+    chain: &BoundaryChainParams,
 ) -> Result<Vec<(String, Volume)>, ChainError> {
+    let kernel = chain.kernel;
     let value = input.field_volume(0).ok_or_else(|| ChainError::Unknown("the input has no fields".into()))?;
     let needs = |n: &str| names.iter().any(|x| x == n);
     let derived = if ["g", "f2", "nx", "ny", "nz", "inv_g"].iter().any(|n| needs(n)) {
@@ -39,7 +40,7 @@ pub fn compute(
         None
     };
     let traced = if needs("g_hit") || needs("hit") || needs("distance") {
-        Some(boundary_chain::run(&value, &BoundaryChainParams { kernel, ..Default::default() })?)
+        Some(boundary_chain::run(&value, chain)?)
     } else {
         None
     };

@@ -4,3 +4,4 @@
 
 pub mod boundary_chain;
 pub mod channels;
+pub mod pack_inputs;

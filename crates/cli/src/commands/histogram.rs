@@ -5,12 +5,11 @@ use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
 use mdtf_histogram::{
-    Axis, AxisSpec, Histogram, HvolParams, Scale, count, histogram_volume, hit_mask, side_by_side, write_png,
+    Axis, AxisSpec, HvolParams, Scale, count, histogram_volume, hit_mask, write_histogram, write_hvol, write_stretched,
 };
+use mdtf_pipeline::boundary_chain::BoundaryChainParams;
 use mdtf_pipeline::channels;
-use mdtf_volume::nrrd::{TableAxis, write_counts_nrrd, write_table_nrrd};
-use mdtf_volume::{Volume, write_file_atomically};
-use std::path::Path;
+use mdtf_volume::Volume;
 
 fn spec_for(args: &HistogramArgs, i: usize, name: &str) -> Result<AxisSpec> {
     let mut spec = AxisSpec::qbert(name);
@@ -53,7 +52,9 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
             }
         }
     }
-    let chans = progress.step("computing channels", || channels::compute(&input, &wanted, kernel))?;
+    let chans = progress.step("computing channels", || {
+        channels::compute(&input, &wanted, &BoundaryChainParams { kernel, ..Default::default() })
+    })?;
     let get = |n: &str| chans.iter().find(|(c, _)| c == n).map(|(_, v)| v);
     let mask: Option<Vec<bool>> = match &args.mask {
         Some(p) => {
@@ -103,68 +104,14 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
         let mut stretched_axes = shared;
         stretched_axes[1].name = "g_hit".into();
         let stretched = count(&[v.samples(), g_hit.samples()], stretched_axes, Some(&traced))?;
-        write_histogram(&args.output, &stretched, scale)?;
-        let both = side_by_side(&normal.image(scale), &stretched.image(scale));
-        let text =
-            format!("left: normal (v, g) of traced voxels; right: stretched (v, g_hit); {}", normal.describe(scale));
-        write_png(&args.output.join("normal_vs_stretched.png"), &both, &text)?;
+        write_stretched(&args.output, &normal, &stretched, scale)?;
     }
     if args.hvol {
         let (Some(v), Some(g), Some(f2)) = (get("v"), get("g"), get("f2")) else { bail!("hvol: missing channels") };
         let p = HvolParams { g_thresh: args.g_thresh, tent_width: args.tent_width, ..HvolParams::default() };
         let hv = progress.step("histogram volume", || histogram_volume(v.samples(), g.samples(), f2.samples(), &p))?;
-        write_counts_nrrd(&args.output.join("hvol.nrrd"), &table_axes(&hv.hist.axes), &hv.hist.counts)?;
-        let vg = table_axes(&hv.vg_axes);
-        write_table_nrrd(&args.output.join("position.nrrd"), &vg, &hv.position)?;
-        write_table_nrrd(&args.output.join("opacity.nrrd"), &vg, &hv.opacity)?;
-        let (w, hgt) = (hv.vg_axes[0].bins, hv.vg_axes[1].bins);
-        let mut pixels = vec![0u8; w * hgt];
-        for y in 0..hgt {
-            for x in 0..w {
-                pixels[(hgt - 1 - y) * w + x] = (hv.opacity[y * w + x].clamp(0.0, 1.0) * 255.0).round() as u8;
-            }
-        }
-        let text = format!("opacity alpha(v, g) = tent(p(v, g)), half-width {}; sigma {}", hv.tent_width, hv.sigma);
-        write_png(&args.output.join("opacity.png"), &mdtf_histogram::Grey { width: w, height: hgt, pixels }, &text)?;
-        let mut csv = String::from("v,voxels,mean_g,mean_f2\n");
-        for b in 0..hv.count_v.len() {
-            csv += &format!("{},{},{},{}\n", hv.vg_axes[0].centre(b), hv.count_v[b], hv.mean_g_v[b], hv.mean_h_v[b]);
-        }
-        write_file_atomically(&args.output.join("hvol_per_v.csv"), |w| w.write_all(csv.as_bytes()))?;
-        let json = serde_json::json!({
-            "sigma": hv.sigma, "g_thresh": hv.g_thresh, "tent_width": hv.tent_width,
-            "axes": hv.hist.axes, "sigma_formula": "2 max g(v) / (sqrt(e) (max h(v) - min h(v)))",
-        });
-        write_json(&args.output.join("hvol.json"), &json)?;
+        write_hvol(&args.output, &hv)?;
         progress.note(&format!("histogram volume: sigma {:.4} world units, g_thresh {:.4}", hv.sigma, hv.g_thresh));
-    }
-    Ok(())
-}
-
-fn table_axes(axes: &[Axis]) -> Vec<TableAxis> {
-    axes.iter().map(|a| TableAxis { label: a.name.clone(), size: a.bins, min: a.min, max: a.max }).collect()
-}
-
-fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
-    let text = serde_json::to_string_pretty(value)?;
-    write_file_atomically(path, |w| w.write_all(text.as_bytes()))?;
-    Ok(())
-}
-
-fn write_histogram(dir: &Path, h: &Histogram, scale: Scale) -> Result<()> {
-    let stem: Vec<&str> = h.axes.iter().map(|a| a.name.as_str()).collect();
-    let stem = format!("hist_{}", stem.join("_"));
-    write_counts_nrrd(&dir.join(format!("{stem}.nrrd")), &table_axes(&h.axes), &h.counts)?;
-    write_json(
-        &dir.join(format!("{stem}.json")),
-        &serde_json::json!({ "axes": h.axes, "total": h.total(), "max": h.max(), "scale": format!("{scale:?}"),
-            "png": "first axis to the right, second axis upward" }),
-    )?;
-    if h.axes.len() <= 2 {
-        write_png(&dir.join(format!("{stem}.png")), &h.image(scale), &h.describe(scale))?;
-    }
-    if h.axes.len() == 2 {
-        mdtf_histogram::write_exr(&dir.join(format!("{stem}.exr")), h)?;
     }
     Ok(())
 }

@@ -5,10 +5,9 @@ use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
 use mdtf_boundary::AlphaMap;
-use mdtf_histogram::AxisSpec;
-use mdtf_histogram::{HvolParams, histogram_volume};
-use mdtf_pack::{Dtype, Lut, LutAxis, MANIFEST_SCHEMA, PackParams, Profile, Provenance, pack, parse_tf, sha256_file};
-use mdtf_pipeline::channels;
+use mdtf_pack::{Dtype, MANIFEST_SCHEMA, PackParams, Profile, Provenance, pack, parse_tf, sha256_file};
+use mdtf_pipeline::boundary_chain::BoundaryChainParams;
+use mdtf_pipeline::{channels, pack_inputs};
 use mdtf_volume::Volume;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -38,13 +37,7 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         let (a, b) = span.split_once(':').with_context(|| format!("--range: expected NAME=MIN:MAX, got '{r}'"))?;
         ranges.insert(name.to_string(), [a.trim().parse::<f64>()?, b.trim().parse::<f64>()?]);
     }
-    for (name, v) in &chans {
-        if !ranges.contains_key(name) && matches!(name.as_str(), "g" | "f2" | "g_hit") {
-            // qbert's percentile clipping of the tails
-            let axis = AxisSpec { bins: Some(256), ..AxisSpec::qbert(name) }.resolve(name, v.samples())?;
-            ranges.insert(name.clone(), [axis.min, axis.max]);
-        }
-    }
+    let ranges = pack_inputs::ranges(&chans, &ranges)?;
     std::fs::create_dir_all(output).with_context(|| format!("cannot create {}", output.display()))?;
     let provenance = Provenance {
         mdtf_version: env!("CARGO_PKG_VERSION").into(),
@@ -53,7 +46,15 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         stages: serde_json::json!({ "pack": { "profile": profile.to_string(), "ranges": ranges },
             "derive": { "kernel": args.kernel.clone().unwrap_or_else(|| mdtf_derive::DEFAULT_KERNEL.to_string()) } }),
     };
-    let luts = progress.step("lookup tables", || luts(args, profile, &chans, &ranges))?;
+    let tf = match &args.tf {
+        Some(p) => {
+            let text = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
+            Some(parse_tf(&text).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?)
+        }
+        None => None,
+    };
+    let alpha: AlphaMap = args.alpha.parse().map_err(anyhow::Error::msg)?;
+    let luts = progress.step("lookup tables", || pack_inputs::luts(profile, tf.as_ref(), &alpha, &chans, &ranges))?;
     let dtype = match args.dtype.as_deref() {
         None => None,
         Some("u8") => Some(Dtype::U8),
@@ -81,74 +82,6 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
     Ok(())
 }
 
-/// The profile's lookup tables: from --tf, or the defaults.
-fn luts(
-    args: &PackArgs,
-    profile: Profile,
-    chans: &[(String, Volume)],
-    ranges: &BTreeMap<String, [f64; 2]>,
-) -> Result<Vec<Lut>> {
-    let tf = match &args.tf {
-        Some(p) => {
-            let text = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
-            Some(parse_tf(&text).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?)
-        }
-        None => None,
-    };
-    let get = |n: &str| chans.iter().find(|(c, _)| c == n).map(|(_, v)| v);
-    let mut out = Vec::new();
-    match profile {
-        Profile::Slicer3dtf => match &tf {
-            Some(tf) => out.extend(tf.slicer_luts()),
-            None => {
-                let (Some(v), Some(g), Some(f2)) = (get("v"), get("g"), get("f2")) else { bail!("missing v, g or f2") };
-                let hv = histogram_volume(v.samples(), g.samples(), f2.samples(), &HvolParams::default())?;
-                let [av, ag] = &hv.vg_axes;
-                out.push(Lut {
-                    name: "tf2d_default".into(),
-                    meaning: format!(
-                        "opacity over (v, g): tent of half-width {:.4} around p(v, g) = 0 (Kindlmann-Durkin, sigma {:.4}); colour white",
-                        hv.tent_width, hv.sigma
-                    ),
-                    axes: vec![
-                        LutAxis { channel: "v".into(), size: av.bins, min: av.min, max: av.max },
-                        LutAxis { channel: "g".into(), size: ag.bins, min: ag.min, max: ag.max },
-                    ],
-                    components: 4,
-                    values: hv.opacity.iter().flat_map(|&a| [1.0, 1.0, 1.0, a]).collect(),
-                    unit_range: true,
-                });
-            }
-        },
-        Profile::DistanceTf => {
-            let map: AlphaMap = args.alpha.parse().map_err(anyhow::Error::msg)?;
-            let d_max = ranges
-                .get("distance")
-                .map(|r| r[1])
-                .or_else(|| get("distance").and_then(|d| d.finite_range()).map(|r| r.1 as f64));
-            let d_max = d_max.filter(|d| *d > 0.0).unwrap_or(15.0);
-            out.push(Lut {
-                name: "alpha_d".into(),
-                meaning: format!("opacity over the distance to the boundary: {map} (distance paper eqs. 9-11)"),
-                axes: vec![LutAxis { channel: "distance".into(), size: 256, min: 0.0, max: d_max }],
-                components: 1,
-                values: (0..256).map(|k| map.eval((k as f64 + 0.5) * d_max / 256.0) as f32).collect(),
-                unit_range: true,
-            });
-            if let Some(tf) = &tf {
-                out.push(tf.distance_alpha_u());
-            }
-        }
-        Profile::GaussianTf | Profile::PeakFinding => {
-            if let Some(tf) = &tf {
-                let step = chans.first().map_or(1.0, |(_, v)| v.geometry.min_spacing());
-                out.extend(tf.table_luts(step));
-            }
-        }
-    }
-    Ok(out)
-}
-
 /// Channels of a value volume computed in process; a multi-field input's field names are the fields.
 fn from_value(input: &Path, profile: Profile, args: &PackArgs) -> Result<ChannelsAndFields> {
     let (mf, _) = read_input(input, &args.read, &read_options(&args.read))?;
@@ -156,7 +89,7 @@ fn from_value(input: &Path, profile: Profile, args: &PackArgs) -> Result<Channel
     let fields: Vec<String> =
         if mf.fields.len() > 1 { mf.fields.iter().map(|f| f.name.clone()).collect() } else { Vec::new() };
     let names = profile.channels(&fields);
-    Ok((channels::compute(&mf, &names, kernel)?, fields))
+    Ok((channels::compute(&mf, &names, &BoundaryChainParams { kernel, ..Default::default() })?, fields))
 }
 
 /// Reads stage outputs by name from a folder: value (or v), g, f2, normal (3 fields), g_hit, distance.

@@ -1,0 +1,75 @@
+//! Writing histograms and the histogram volume as files: PNG pictures,
+//! NRRD counts and tables, EXR counts, JSON and CSV sidecars.
+
+use crate::axis::Axis;
+use crate::count::Histogram;
+use crate::hvol::HistogramVolume;
+use crate::image::{Grey, Scale, side_by_side, write_exr, write_png};
+use mdtf_volume::nrrd::{TableAxis, write_counts_nrrd, write_table_nrrd};
+use mdtf_volume::{VolumeError, write_file_atomically};
+use std::path::Path;
+
+fn table_axes(axes: &[Axis]) -> Vec<TableAxis> {
+    axes.iter().map(|a| TableAxis { label: a.name.clone(), size: a.bins, min: a.min, max: a.max }).collect()
+}
+
+fn write_json(path: &Path, value: &serde_json::Value) -> Result<(), VolumeError> {
+    let text = serde_json::to_string_pretty(value).map_err(|e| VolumeError::Fields(e.to_string()))?;
+    write_file_atomically(path, |w| w.write_all(text.as_bytes()))
+}
+
+/// Writes `hist_<axes>.{nrrd,json}` and, for 1D/2D, `.png` (and `.exr` for 2D) into `dir`.
+pub fn write_histogram(dir: &Path, h: &Histogram, scale: Scale) -> Result<(), VolumeError> {
+    let stem: Vec<&str> = h.axes.iter().map(|a| a.name.as_str()).collect();
+    let stem = format!("hist_{}", stem.join("_"));
+    write_counts_nrrd(&dir.join(format!("{stem}.nrrd")), &table_axes(&h.axes), &h.counts)?;
+    write_json(
+        &dir.join(format!("{stem}.json")),
+        &serde_json::json!({ "axes": h.axes, "total": h.total(), "max": h.max(), "scale": format!("{scale:?}"),
+            "png": "first axis to the right, second axis upward" }),
+    )?;
+    if h.axes.len() <= 2 {
+        write_png(&dir.join(format!("{stem}.png")), &h.image(scale), &h.describe(scale))?;
+    }
+    if h.axes.len() == 2 {
+        write_exr(&dir.join(format!("{stem}.exr")), h)?;
+    }
+    Ok(())
+}
+
+/// Writes the stretched histogram's files and `normal_vs_stretched.png` (the distance paper's Fig. 5).
+pub fn write_stretched(dir: &Path, normal: &Histogram, stretched: &Histogram, scale: Scale) -> Result<(), VolumeError> {
+    write_histogram(dir, stretched, scale)?;
+    let both = side_by_side(&normal.image(scale), &stretched.image(scale));
+    let text = format!("left: normal (v, g) of traced voxels; right: stretched (v, g_hit); {}", normal.describe(scale));
+    write_png(&dir.join("normal_vs_stretched.png"), &both, &text)
+}
+
+/// Writes `hvol.nrrd`, `position.nrrd`, `opacity.{nrrd,png}`, `hvol_per_v.csv` and `hvol.json`.
+pub fn write_hvol(dir: &Path, hv: &HistogramVolume) -> Result<(), VolumeError> {
+    write_counts_nrrd(&dir.join("hvol.nrrd"), &table_axes(&hv.hist.axes), &hv.hist.counts)?;
+    let vg = table_axes(&hv.vg_axes);
+    write_table_nrrd(&dir.join("position.nrrd"), &vg, &hv.position)?;
+    write_table_nrrd(&dir.join("opacity.nrrd"), &vg, &hv.opacity)?;
+    let (w, h) = (hv.vg_axes[0].bins, hv.vg_axes[1].bins);
+    let mut pixels = vec![0u8; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            pixels[(h - 1 - y) * w + x] = (hv.opacity[y * w + x].clamp(0.0, 1.0) * 255.0).round() as u8;
+        }
+    }
+    let text = format!("opacity alpha(v, g) = tent(p(v, g)), half-width {}; sigma {}", hv.tent_width, hv.sigma);
+    write_png(&dir.join("opacity.png"), &Grey { width: w, height: h, pixels }, &text)?;
+    let mut csv = String::from("v,voxels,mean_g,mean_f2\n");
+    for b in 0..hv.count_v.len() {
+        csv += &format!("{},{},{},{}\n", hv.vg_axes[0].centre(b), hv.count_v[b], hv.mean_g_v[b], hv.mean_h_v[b]);
+    }
+    write_file_atomically(&dir.join("hvol_per_v.csv"), |w| w.write_all(csv.as_bytes()))?;
+    write_json(
+        &dir.join("hvol.json"),
+        &serde_json::json!({
+            "sigma": hv.sigma, "g_thresh": hv.g_thresh, "tent_width": hv.tent_width,
+            "axes": hv.hist.axes, "sigma_formula": "2 max g(v) / (sqrt(e) (max h(v) - min h(v)))",
+        }),
+    )
+}

@@ -1,0 +1,163 @@
+//! Pipeline files (TOML): the input, the stages with their parameters (the
+//! very serde structs the stages and subcommands use, so names and defaults
+//! are one set), what to keep, and the pack profile.
+
+use mdtf_boundary::{AlphaMap, BoundaryParams};
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// A built-in phantom used when the pipeline names no input file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum PhantomKind {
+    /// The erf sphere of DESIGN.md.
+    #[default]
+    ErfSphere,
+    /// Nested tooth-like shells.
+    Shells,
+    /// Three erf spheres as three fields.
+    Multifield,
+}
+
+/// `[input]`: a file, or a built-in phantom.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct InputSection {
+    /// Volume file (NIfTI or NRRD); relative paths are relative to the pipeline file.
+    pub file: Option<PathBuf>,
+    /// Phantom to synthesise when there is no file.
+    pub phantom: PhantomKind,
+    /// Phantom grid size (cube).
+    pub size: usize,
+    /// Phantom boundary blur, world units.
+    pub sigma: f64,
+    /// Gaussian noise added to the phantom (value units), 0 for none.
+    pub noise: f64,
+}
+
+impl Default for InputSection {
+    fn default() -> Self {
+        InputSection { file: None, phantom: PhantomKind::ErfSphere, size: 128, sigma: 3.0, noise: 0.0 }
+    }
+}
+
+/// `[derive]`: the derivative kernel used by every stage that needs derivatives.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct DeriveSection {
+    /// Kernel name (central4, central, bspline3, catmull-rom, gauss:SIGMA); default central4.
+    pub kernel: Option<String>,
+}
+
+/// `[prefilter]`: the bilateral pre-filter of g and f'' before tracing.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PrefilterSection {
+    /// Spatial sigma, world units.
+    pub sigma_d: f64,
+    /// Range sigma as a fraction of each channel's range.
+    pub sigma_r: f64,
+}
+
+/// `[histogram]`: which pictures to make.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HistogramSection {
+    /// The joint (v, g) histogram.
+    pub joint: bool,
+    /// The stretched (v, g_hit) histogram and the normal | stretched figure.
+    pub stretched: bool,
+    /// The histogram volume and the default opacity.
+    pub hvol: bool,
+}
+
+impl Default for HistogramSection {
+    fn default() -> Self {
+        HistogramSection { joint: true, stretched: false, hvol: false }
+    }
+}
+
+/// `[pack]`: the renderer family and its transfer function.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PackSection {
+    /// Profile: slicer-3dtf, distance-tf, gaussian-tf or peak-finding.
+    pub profile: String,
+    /// Transfer-function file (relative to the pipeline file).
+    #[serde(default)]
+    pub tf: Option<PathBuf>,
+    /// distance-tf: the alpha map of distance.
+    #[serde(default)]
+    pub alpha: Option<AlphaMap>,
+}
+
+/// A whole pipeline file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Pipeline {
+    /// One line saying what the pipeline is for.
+    #[serde(default)]
+    pub description: String,
+    /// The input.
+    #[serde(default)]
+    pub input: InputSection,
+    /// Derivatives.
+    #[serde(default)]
+    pub derive: DeriveSection,
+    /// Optional pre-filter before tracing.
+    #[serde(default)]
+    pub prefilter: Option<PrefilterSection>,
+    /// Boundary tracing (runs when a later stage needs its channels).
+    #[serde(default)]
+    pub boundary: BoundaryParams,
+    /// Histograms.
+    #[serde(default)]
+    pub histogram: Option<HistogramSection>,
+    /// The pack.
+    pub pack: PackSection,
+    /// Channels to write as volumes too (e.g. ["g", "f2", "distance"]).
+    #[serde(default)]
+    pub keep: Vec<String>,
+}
+
+/// Parses a pipeline file after applying `overrides` ("section.key=value",
+/// the value parsed as TOML, else taken as a string). Errors name the file's field.
+pub fn parse(text: &str, overrides: &[String]) -> Result<Pipeline, String> {
+    let mut doc: toml::Table = toml::from_str(text).map_err(|e| e.to_string())?;
+    for o in overrides {
+        let (key, value) = o.split_once('=').ok_or_else(|| format!("--set {o}: expected section.key=value"))?;
+        let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {value}"))
+            .ok()
+            .and_then(|t| t.get("v").cloned())
+            .unwrap_or_else(|| toml::Value::String(value.to_string()));
+        let mut parts: Vec<&str> = key.split('.').collect();
+        let last = parts.pop().ok_or_else(|| format!("--set {o}: empty key"))?;
+        let mut table = &mut doc;
+        for p in parts {
+            table = table
+                .entry(p.to_string())
+                .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+                .as_table_mut()
+                .ok_or_else(|| format!("--set {o}: {p} is not a section"))?;
+        }
+        table.insert(last.to_string(), value);
+    }
+    let text = toml::to_string(&doc).map_err(|e| e.to_string())?;
+    toml::from_str(&text).map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn overrides_patch_nested_keys_with_typed_values() {
+        let text = "[pack]\nprofile = \"slicer-3dtf\"\n[input]\nsize = 64\n";
+        let p = parse(text, &["input.size=32".into(), "boundary.g_min=2.5".into(), "derive.kernel=central".into()]).unwrap();
+        assert_eq!(p.input.size, 32);
+        assert_eq!(p.boundary.g_min, Some(2.5));
+        assert_eq!(p.derive.kernel.as_deref(), Some("central"));
+        let e = parse(text, &["input.sise=3".into()]).unwrap_err();
+        assert!(e.contains("sise"), "{e}");
+    }
+}

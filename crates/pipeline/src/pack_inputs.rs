@@ -1,0 +1,91 @@
+//! What the pack stage needs besides the channels: code ranges with Teem
+//! qbert's percentile clipping, and the profile's lookup tables from a TF
+//! file or the defaults (the histogram volume's opacity, a distance alpha map).
+
+use mdtf_boundary::AlphaMap;
+use mdtf_histogram::{AxisSpec, HistogramError, HvolParams, histogram_volume};
+use mdtf_pack::{Lut, LutAxis, Profile, TfFile};
+use mdtf_volume::Volume;
+use std::collections::BTreeMap;
+
+/// Code ranges: the explicit ones, and for g, f2 and g_hit the data range
+/// with qbert's percentile clipping (0.002 % / 0.004 % each end); other
+/// channels are left to the pack stage (their min and max).
+pub fn ranges(
+    chans: &[(String, Volume)],
+    explicit: &BTreeMap<String, [f64; 2]>,
+) -> Result<BTreeMap<String, [f64; 2]>, HistogramError> {
+    let mut out = explicit.clone();
+    for (name, v) in chans {
+        if !out.contains_key(name) && matches!(name.as_str(), "g" | "f2" | "g_hit") {
+            let axis = AxisSpec { bins: Some(256), ..AxisSpec::qbert(name) }.resolve(name, v.samples())?;
+            out.insert(name.clone(), [axis.min, axis.max]);
+        }
+    }
+    Ok(out)
+}
+
+/// The lookup tables of `profile`: from `tf` when given; otherwise the
+/// histogram volume's default opacity (slicer-3dtf); distance-tf always gets
+/// `alpha_d` from `alpha` (and `alpha_u` from `tf`).
+pub fn luts(
+    profile: Profile,
+    tf: Option<&TfFile>,
+    alpha: &AlphaMap,
+    chans: &[(String, Volume)],
+    ranges: &BTreeMap<String, [f64; 2]>,
+) -> Result<Vec<Lut>, HistogramError> {
+    let get = |n: &str| chans.iter().find(|(c, _)| c == n).map(|(_, v)| v);
+    let mut out = Vec::new();
+    match profile {
+        Profile::Slicer3dtf => match tf {
+            Some(tf) => out.extend(tf.slicer_luts()),
+            None => {
+                let (Some(v), Some(g), Some(f2)) = (get("v"), get("g"), get("f2")) else {
+                    return Err(HistogramError::Degenerate("the default opacity needs v, g and f2".into()));
+                };
+                let hv = histogram_volume(v.samples(), g.samples(), f2.samples(), &HvolParams::default())?;
+                let [av, ag] = &hv.vg_axes;
+                out.push(Lut {
+                    name: "tf2d_default".into(),
+                    meaning: format!(
+                        "opacity over (v, g): tent of half-width {:.4} around p(v, g) = 0 (Kindlmann-Durkin, sigma {:.4}); colour white",
+                        hv.tent_width, hv.sigma
+                    ),
+                    axes: vec![
+                        LutAxis { channel: "v".into(), size: av.bins, min: av.min, max: av.max },
+                        LutAxis { channel: "g".into(), size: ag.bins, min: ag.min, max: ag.max },
+                    ],
+                    components: 4,
+                    values: hv.opacity.iter().flat_map(|&a| [1.0, 1.0, 1.0, a]).collect(),
+                    unit_range: true,
+                });
+            }
+        },
+        Profile::DistanceTf => {
+            let d_max = ranges
+                .get("distance")
+                .map(|r| r[1])
+                .or_else(|| get("distance").and_then(|d| d.finite_range()).map(|r| r.1 as f64));
+            let d_max = d_max.filter(|d| *d > 0.0).unwrap_or(15.0);
+            out.push(Lut {
+                name: "alpha_d".into(),
+                meaning: format!("opacity over the distance to the boundary: {alpha} (distance paper eqs. 9-11)"),
+                axes: vec![LutAxis { channel: "distance".into(), size: 256, min: 0.0, max: d_max }],
+                components: 1,
+                values: (0..256).map(|k| alpha.eval((k as f64 + 0.5) * d_max / 256.0) as f32).collect(),
+                unit_range: true,
+            });
+            if let Some(tf) = tf {
+                out.push(tf.distance_alpha_u());
+            }
+        }
+        Profile::GaussianTf | Profile::PeakFinding => {
+            if let Some(tf) = tf {
+                let step = chans.first().map_or(1.0, |(_, v)| v.geometry.min_spacing());
+                out.extend(tf.table_luts(step));
+            }
+        }
+    }
+    Ok(out)
+}
