@@ -613,3 +613,56 @@ fn gaussian_and_peak_finding_profiles_pack_fields_and_tables() {
         serde_json::from_str(&std::fs::read_to_string(p.join("manifest.json")).unwrap()).unwrap();
     assert_eq!(m["textures"][0]["component_order"], serde_json::json!(["a", "b", "c", "inv_g"]));
 }
+
+#[test]
+fn every_shipped_pipeline_runs_on_its_phantom_and_a_failed_run_changes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().join("pipelines");
+    let mut shipped = 0;
+    for entry in std::fs::read_dir(&root).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "toml") {
+            continue;
+        }
+        shipped += 1;
+        let out = dir.path().join(path.file_stem().unwrap());
+        mdtf_ok(&["run", path.to_str().unwrap(), "-o", out.to_str().unwrap(), "--set", "input.size=40", "-q"]);
+        let m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("pack/manifest.json")).unwrap()).unwrap();
+        assert_eq!(m["schema"], "mdtf-pack/1", "{}", path.display());
+        let report: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("run_report.json")).unwrap()).unwrap();
+        assert!(report["stages"].as_array().unwrap().iter().any(|s| s["stage"] == "pack"));
+    }
+    assert!(shipped >= 4);
+    // a failing run (unknown kernel) leaves the previous output untouched
+    let out = dir.path().join("slicer-3dtf");
+    let before = std::fs::read(out.join("pack/manifest.json")).unwrap();
+    let e = mdtf_err(&[
+        "run",
+        root.join("slicer-3dtf.toml").to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--set",
+        "input.size=40",
+        "--set",
+        "derive.kernel=cubic",
+    ]);
+    assert!(e.contains("derive") && e.contains("unknown kernel"), "{e}");
+    assert_eq!(std::fs::read(out.join("pack/manifest.json")).unwrap(), before);
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with(".mdtf-run-"))
+        .collect();
+    assert!(left.is_empty(), "temporary run folders left behind");
+    let e = mdtf_err(&[
+        "run",
+        root.join("slicer-3dtf.toml").to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--set",
+        "input.sise=4",
+    ]);
+    assert!(e.contains("sise"), "{e}");
+}

@@ -153,7 +153,8 @@ mod tests {
     #[test]
     fn overrides_patch_nested_keys_with_typed_values() {
         let text = "[pack]\nprofile = \"slicer-3dtf\"\n[input]\nsize = 64\n";
-        let p = parse(text, &["input.size=32".into(), "boundary.g_min=2.5".into(), "derive.kernel=central".into()]).unwrap();
+        let p = parse(text, &["input.size=32".into(), "boundary.g_min=2.5".into(), "derive.kernel=central".into()])
+            .unwrap();
         assert_eq!(p.input.size, 32);
         assert_eq!(p.boundary.g_min, Some(2.5));
         assert_eq!(p.derive.kernel.as_deref(), Some("central"));

@@ -1,7 +1,9 @@
-//! Composition of mdtf stages, run in process without intermediate files.
-//! The stage crates never call each other; chains live here (and, with the
-//! pipelines issue, pipeline files and their runner).
+//! Composition of mdtf stages, run in process without intermediate files:
+//! the stage crates never call each other; chains, pipeline files
+//! ([`file`]) and their runner ([`run`]) live here.
 
 pub mod boundary_chain;
 pub mod channels;
+pub mod file;
 pub mod pack_inputs;
+pub mod run;

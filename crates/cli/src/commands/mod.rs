@@ -7,6 +7,7 @@ mod derive;
 mod histogram;
 mod info;
 mod pack;
+mod run;
 mod synth;
 
 use crate::args::Command;
@@ -24,5 +25,6 @@ pub fn run(command: Command, progress: &Progress) -> Result<()> {
         Command::Boundary(a) => boundary::run(&a, progress),
         Command::Histogram(a) => histogram::run(&a, progress),
         Command::Pack(a) => pack::run(&a, progress),
+        Command::Run(a) => run::run(&a, progress),
     }
 }

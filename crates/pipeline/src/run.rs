@@ -1,0 +1,396 @@
+//! The in-process runner of pipeline files: input -> derive -> (pre-filter,
+//! boundary) -> histograms -> pack, with per-stage timings and a report.
+//! Everything is written into a temporary folder beside the output and
+//! renamed into place at the end, so a failed run leaves the output folder
+//! as it was.
+
+use crate::file::{PhantomKind, Pipeline};
+use mdtf_bilateral::{BilateralParams, RangeUnits};
+use mdtf_boundary::{AlphaMap, BoundaryInput};
+use mdtf_datagen::{MultiFieldPhantom, RadialPhantom, add_gaussian_noise, erf_sphere, min_extent};
+use mdtf_derive::{DeriveParams, Item, Kernel};
+use mdtf_histogram::{
+    Axis, AxisSpec, HvolParams, Scale, count, histogram_volume, hit_mask, write_histogram, write_hvol, write_stretched,
+};
+use mdtf_pack::{PackParams, Profile, Provenance, pack, parse_tf};
+use mdtf_volume::{Geometry, MultiField, ReadOptions, Volume, WriteOptions, write_file_atomically};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Errors of a run, with the stage that failed.
+#[derive(Debug, thiserror::Error)]
+#[error("{stage}: {message}")]
+pub struct RunError {
+    /// Stage name.
+    pub stage: String,
+    /// What went wrong.
+    pub message: String,
+}
+
+fn fail(stage: &str) -> impl Fn(String) -> RunError + '_ {
+    move |message| RunError { stage: stage.into(), message }
+}
+
+/// One stage's line of the run report.
+#[derive(Debug, Clone, Serialize)]
+pub struct StageReport {
+    /// Stage name.
+    pub stage: String,
+    /// Wall time, seconds.
+    pub seconds: f64,
+    /// Voxels per second (of the input grid).
+    pub mvoxel_per_s: f64,
+    /// Peak resident memory of the process after the stage, MiB (Linux; 0 elsewhere).
+    pub peak_mib: f64,
+    /// Files written by the stage, relative to the output folder.
+    pub outputs: Vec<String>,
+}
+
+/// The run report, written as run_report.json.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunReport {
+    /// Pipeline file.
+    pub pipeline: String,
+    /// Output folder.
+    pub output: String,
+    /// Input (file or phantom).
+    pub input: String,
+    /// Grid size.
+    pub dims: [usize; 3],
+    /// The stages, in order.
+    pub stages: Vec<StageReport>,
+    /// Total wall time, seconds.
+    pub total_seconds: f64,
+}
+
+/// Peak resident set size of this process in MiB (VmHWM), 0 where unknown.
+fn peak_mib() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+        })
+        .map_or(0.0, |kb| kb / 1024.0)
+}
+
+/// Where a run reads from and writes to.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    /// The pipeline file (relative paths inside it are relative to its folder).
+    pub pipeline_path: PathBuf,
+    /// Input file replacing the pipeline's.
+    pub input: Option<PathBuf>,
+    /// Output folder.
+    pub output: PathBuf,
+}
+
+/// Runs `p`; `on_stage(name)` is called as each stage starts.
+pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<RunReport, RunError> {
+    let start = Instant::now();
+    let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let parent = match opts.output.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&parent).map_err(|e| fail("output")(e.to_string()))?;
+    let tmp =
+        tempfile::Builder::new().prefix(".mdtf-run-").tempdir_in(&parent).map_err(|e| fail("output")(e.to_string()))?;
+    let dir = tmp.path();
+    let mut stages = Vec::new();
+    let mut stage = |name: &str, t: Instant, voxels: usize, outputs: Vec<String>| {
+        let seconds = t.elapsed().as_secs_f64();
+        stages.push(StageReport {
+            stage: name.into(),
+            seconds,
+            mvoxel_per_s: voxels as f64 / seconds.max(1e-9) / 1e6,
+            peak_mib: peak_mib(),
+            outputs,
+        });
+    };
+
+    // input
+    on_stage("input");
+    let t = Instant::now();
+    let (input, input_name) = load_input(p, opts, &base)?;
+    let geo = input.geometry.clone();
+    let n = geo.voxel_count();
+    stage("input", t, n, vec![]);
+    let value = input.field_volume(0).ok_or_else(|| fail("input")("no fields".into()))?;
+    let value_range = value.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
+
+    // which channels the later stages need
+    let profile: Profile = p.pack.profile.parse().map_err(fail("pack"))?;
+    let fields: Vec<String> =
+        if input.fields.len() > 1 { input.fields.iter().map(|f| f.name.clone()).collect() } else { vec![] };
+    let mut needed = profile.channels(&fields);
+    needed.extend(p.keep.iter().cloned());
+    if let Some(h) = &p.histogram {
+        needed.extend(["v", "g"].map(String::from));
+        if h.stretched {
+            needed.extend(["g_hit", "hit"].map(String::from));
+        }
+        if h.hvol {
+            needed.push("f2".into());
+        }
+    }
+    if profile == Profile::Slicer3dtf && p.pack.tf.is_none() {
+        needed.push("f2".into());
+    }
+    let needs = |c: &str| needed.iter().any(|x| x == c);
+    let mut chans: Vec<(String, Volume)> = Vec::new();
+    for f in &input.fields {
+        if needs(&f.name) {
+            chans.push((f.name.clone(), Volume { geometry: geo.clone(), data: f.data.clone() }));
+        }
+    }
+    if needs("v") && !chans.iter().any(|(c, _)| c == "v") {
+        chans.push(("v".into(), value.clone()));
+    }
+
+    // derive
+    let kernel: Kernel = match &p.derive.kernel {
+        Some(k) => k.parse().map_err(|e: mdtf_derive::UnknownKernel| fail("derive")(e.to_string()))?,
+        None => mdtf_derive::DEFAULT_KERNEL,
+    };
+    let tracing = ["g_hit", "hit", "distance"].iter().any(|c| needs(c));
+    let mut derived: BTreeMap<&str, Volume> = BTreeMap::new();
+    let mut normal: Option<MultiField> = None;
+    if tracing || ["g", "f2", "nx", "ny", "nz", "inv_g"].iter().any(|c| needs(c)) {
+        on_stage("derive");
+        let t = Instant::now();
+        let d = DeriveParams { items: vec![Item::G, Item::F2, Item::Normal, Item::InvG], kernel, ..Default::default() };
+        let out = mdtf_derive::run(&MultiField::from(value.clone()), &d).map_err(|e| fail("derive")(e.to_string()))?;
+        for (item, mf) in out.items {
+            match item {
+                Item::Normal => normal = Some(mf),
+                other => {
+                    if let Some(v) = mf.field_volume(0) {
+                        derived.insert(other.name(), v);
+                    }
+                }
+            }
+        }
+        stage("derive", t, n, vec![]);
+    }
+    if needs("gnorm") && input.fields.len() > 1 {
+        on_stage("derive (multi-field)");
+        let t = Instant::now();
+        let d = DeriveParams { items: vec![Item::Gnorm], kernel, ..Default::default() };
+        let out = mdtf_derive::run(&input, &d).map_err(|e| fail("derive")(e.to_string()))?;
+        if let Some(v) = out.items.into_iter().next().and_then(|(_, m)| m.field_volume(0)) {
+            derived.insert("gnorm", v);
+        }
+        stage("derive (multi-field)", t, n, vec![]);
+    }
+    if let Some(nm) = &normal {
+        for (i, c) in ["nx", "ny", "nz"].iter().enumerate() {
+            if needs(c)
+                && let Some(v) = nm.field_volume(i)
+            {
+                chans.push((c.to_string(), v));
+            }
+        }
+    }
+    for c in ["g", "f2", "inv_g", "gnorm"] {
+        if needs(c)
+            && let Some(v) = derived.get(c)
+        {
+            chans.push((c.to_string(), v.clone()));
+        }
+    }
+
+    // pre-filter and boundary
+    if tracing {
+        let (Some(g0), Some(f20), Some(nm)) = (derived.get("g"), derived.get("f2"), normal.as_ref()) else {
+            return Err(fail("boundary")("derivatives missing".into()));
+        };
+        let (mut g, mut f2) = (g0.clone(), f20.clone());
+        if let Some(pf) = p.prefilter {
+            on_stage("prefilter");
+            let t = Instant::now();
+            let filter = |v: &Volume| {
+                let range = v.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
+                let bp = BilateralParams {
+                    sigma_d: pf.sigma_d,
+                    sigma_r: pf.sigma_r * range.max(f64::MIN_POSITIVE),
+                    range_units: RangeUnits::Value,
+                    ..Default::default()
+                };
+                mdtf_bilateral::run(v, &bp).map_err(|e| fail("prefilter")(e.to_string()))
+            };
+            g = filter(&g)?;
+            f2 = filter(&f2)?;
+            stage("prefilter", t, n, vec![]);
+        }
+        on_stage("boundary");
+        let t = Instant::now();
+        let out = mdtf_boundary::run(&BoundaryInput { g: &g, f2: &f2, normal: nm, value_range }, &p.boundary)
+            .map_err(|e| fail("boundary")(e.to_string()))?;
+        for (c, v) in [("g_hit", &out.g_hit), ("hit", &out.hit), ("distance", &out.distance)] {
+            if needs(c) {
+                chans.push((c.into(), v.clone()));
+            }
+        }
+        let report = out.report(&g);
+        let rdir = dir.join("boundary");
+        std::fs::create_dir_all(&rdir).map_err(|e| fail("boundary")(e.to_string()))?;
+        report.write(&rdir).map_err(|e| fail("boundary")(e.to_string()))?;
+        stage("boundary", t, n, vec!["boundary/boundary_report.csv".into(), "boundary/boundary_report.png".into()]);
+    }
+    let get = |c: &str| chans.iter().find(|(x, _)| x == c).map(|(_, v)| v);
+
+    // kept intermediates
+    if !p.keep.is_empty() {
+        on_stage("keep");
+        let t = Instant::now();
+        let kdir = dir.join("volumes");
+        std::fs::create_dir_all(&kdir).map_err(|e| fail("keep")(e.to_string()))?;
+        let mut written = Vec::new();
+        for c in &p.keep {
+            let v = get(c).ok_or_else(|| fail("keep")(format!("no channel '{c}' was computed")))?;
+            let path = kdir.join(format!("{c}.nii.gz"));
+            mdtf_volume::write_volume(&path, v, &WriteOptions::default(), &[])
+                .map_err(|e| fail("keep")(e.to_string()))?;
+            written.push(format!("volumes/{c}.nii.gz"));
+        }
+        stage("keep", t, n, written);
+    }
+
+    // histograms
+    if let Some(h) = &p.histogram {
+        on_stage("histogram");
+        let t = Instant::now();
+        let hdir = dir.join("histogram");
+        std::fs::create_dir_all(&hdir).map_err(|e| fail("histogram")(e.to_string()))?;
+        let err = |e: String| fail("histogram")(e);
+        let (Some(v), Some(g)) = (get("v"), get("g")) else { return Err(err("v and g missing".into())) };
+        let axis = |name: &str, data: &Volume| {
+            AxisSpec::qbert(name).resolve(name, data.samples()).map_err(|e| err(e.to_string()))
+        };
+        let axes: Vec<Axis> = vec![axis("v", v)?, axis("g", g)?];
+        let mut outputs = Vec::new();
+        if h.joint {
+            let hist = count(&[v.samples(), g.samples()], axes.clone(), None).map_err(|e| err(e.to_string()))?;
+            write_histogram(&hdir, &hist, Scale::Log).map_err(|e| err(e.to_string()))?;
+            outputs.push("histogram/hist_v_g.png".into());
+        }
+        if h.stretched
+            && let (Some(g_hit), Some(hit)) = (get("g_hit"), get("hit"))
+        {
+            let traced = hit_mask(hit.samples());
+            let normal =
+                count(&[v.samples(), g.samples()], axes.clone(), Some(&traced)).map_err(|e| err(e.to_string()))?;
+            let mut sa = axes.clone();
+            sa[1].name = "g_hit".into();
+            let stretched =
+                count(&[v.samples(), g_hit.samples()], sa, Some(&traced)).map_err(|e| err(e.to_string()))?;
+            write_stretched(&hdir, &normal, &stretched, Scale::Log).map_err(|e| err(e.to_string()))?;
+            outputs.push("histogram/normal_vs_stretched.png".into());
+        }
+        if h.hvol
+            && let Some(f2) = get("f2")
+        {
+            let hv = histogram_volume(v.samples(), g.samples(), f2.samples(), &HvolParams::default())
+                .map_err(|e| err(e.to_string()))?;
+            write_hvol(&hdir, &hv).map_err(|e| err(e.to_string()))?;
+            outputs.push("histogram/opacity.png".into());
+        }
+        stage("histogram", t, n, outputs);
+    }
+
+    // pack
+    on_stage("pack");
+    let t = Instant::now();
+    let err = |e: String| fail("pack")(e);
+    let tf = match &p.pack.tf {
+        Some(f) => {
+            let path = base.join(f);
+            let text = std::fs::read_to_string(&path).map_err(|e| err(format!("{}: {e}", path.display())))?;
+            Some(parse_tf(&text).map_err(|e| err(format!("{}: {e}", path.display())))?)
+        }
+        None => None,
+    };
+    let pack_chans: Vec<(String, Volume)> =
+        profile.channels(&fields).into_iter().filter_map(|c| get(&c).map(|v| (c, v.clone()))).collect();
+    let ranges = crate::pack_inputs::ranges(&pack_chans, &BTreeMap::new()).map_err(|e| err(e.to_string()))?;
+    let alpha = p.pack.alpha.unwrap_or(AlphaMap::Linear { a: 1.0, dc: 3.0 });
+    let luts =
+        crate::pack_inputs::luts(profile, tf.as_ref(), &alpha, &pack_chans, &ranges).map_err(|e| err(e.to_string()))?;
+    let pdir = dir.join("pack");
+    std::fs::create_dir_all(&pdir).map_err(|e| err(e.to_string()))?;
+    let provenance = Provenance {
+        mdtf_version: env!("CARGO_PKG_VERSION").into(),
+        input: Some(input_name.clone()),
+        input_sha256: opts
+            .input
+            .as_ref()
+            .or(p.input.file.as_ref())
+            .and_then(|f| mdtf_pack::sha256_file(&base.join(f)).ok()),
+        stages: serde_json::to_value(p).unwrap_or(serde_json::Value::Null),
+    };
+    let params = PackParams { profile, ranges, fields, dtype: None };
+    pack(&pack_chans, &params, &luts, &pdir, provenance, &BTreeMap::new()).map_err(|e| err(e.to_string()))?;
+    stage("pack", t, n, vec!["pack/manifest.json".into()]);
+
+    let report = RunReport {
+        pipeline: opts.pipeline_path.display().to_string(),
+        output: opts.output.display().to_string(),
+        input: input_name,
+        dims: geo.dims,
+        stages,
+        total_seconds: start.elapsed().as_secs_f64(),
+    };
+    let json = serde_json::to_string_pretty(&report).map_err(|e| fail("report")(e.to_string()))?;
+    write_file_atomically(&dir.join("run_report.json"), |w| w.write_all(json.as_bytes()))
+        .map_err(|e| fail("report")(e.to_string()))?;
+    publish(tmp, &opts.output)?;
+    Ok(report)
+}
+
+/// Moves the finished temporary folder to `output`, replacing an older one only now.
+fn publish(tmp: tempfile::TempDir, output: &Path) -> Result<(), RunError> {
+    let tmp_path = tmp.keep();
+    let io = |e: std::io::Error| fail("output")(format!("{}: {e}", output.display()));
+    if output.exists() {
+        let old = output.with_extension(format!("old-{}", std::process::id()));
+        std::fs::rename(output, &old).map_err(io)?;
+        std::fs::rename(&tmp_path, output).map_err(io)?;
+        std::fs::remove_dir_all(&old).map_err(io)?;
+    } else {
+        std::fs::rename(&tmp_path, output).map_err(io)?;
+    }
+    Ok(())
+}
+
+fn load_input(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(MultiField, String), RunError> {
+    let file = opts.input.clone().or_else(|| p.input.file.as_ref().map(|f| base.join(f)));
+    if let Some(f) = file {
+        let mf = mdtf_volume::read(&f, &ReadOptions::default()).map_err(|e| fail("input")(e.to_string()))?;
+        return Ok((mf, f.display().to_string()));
+    }
+    let i = &p.input;
+    if i.size < 8 || i.size > 1024 {
+        return Err(fail("input")(format!("phantom size {} must be 8 to 1024", i.size)));
+    }
+    let geo = Geometry::new([i.size; 3], [1.0; 3]);
+    let name = format!("built-in {:?} phantom, {}^3, sigma {}", i.phantom, i.size, i.sigma);
+    let mut mf = match i.phantom {
+        PhantomKind::ErfSphere => {
+            let r = 0.3 * min_extent(&geo);
+            MultiField::from(erf_sphere(geo, r, i.sigma, 0.0, 255.0, None).volume())
+        }
+        PhantomKind::Shells => MultiField::from(RadialPhantom::tooth(geo, i.sigma).volume()),
+        PhantomKind::Multifield => MultiFieldPhantom::new(geo, i.sigma).volume(),
+    };
+    if i.noise > 0.0 {
+        let g = mf.geometry.clone();
+        for (k, f) in mf.fields.iter_mut().enumerate() {
+            let mut v = Volume { geometry: g.clone(), data: std::mem::take(&mut f.data) };
+            add_gaussian_noise(&mut v, i.noise, 1 + k as u64);
+            f.data = v.data;
+        }
+    }
+    Ok((mf, name))
+}
