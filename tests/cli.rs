@@ -666,3 +666,14 @@ fn every_shipped_pipeline_runs_on_its_phantom_and_a_failed_run_changes_nothing()
     ]);
     assert!(e.contains("sise"), "{e}");
 }
+
+#[test]
+fn validate_passes_on_a_correct_installation() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = mdtf_ok(&["validate", "--size", "64", "-o", dir.path().to_str().unwrap()]);
+    assert_eq!(out.lines().filter(|l| l.ends_with(" ok")).count(), 12, "{out}");
+    assert!(dir.path().join("boundary/boundary_report.png").exists());
+    assert!(dir.path().join("histogram/normal_vs_stretched.png").exists());
+    let e = mdtf_err(&["validate", "--size", "16"]);
+    assert!(e.contains("at least 48"), "{e}");
+}

@@ -7,3 +7,4 @@ pub mod channels;
 pub mod file;
 pub mod pack_inputs;
 pub mod run;
+pub mod validate;

@@ -9,6 +9,7 @@ mod info;
 mod pack;
 mod run;
 mod synth;
+mod validate;
 
 use crate::args::Command;
 use crate::progress::Progress;
@@ -26,5 +27,6 @@ pub fn run(command: Command, progress: &Progress) -> Result<()> {
         Command::Histogram(a) => histogram::run(&a, progress),
         Command::Pack(a) => pack::run(&a, progress),
         Command::Run(a) => run::run(&a, progress),
+        Command::Validate(a) => validate::run(&a, progress),
     }
 }

@@ -1,0 +1,29 @@
+//! `mdtf validate`: measured errors against documented tolerances.
+
+use crate::args::ValidateArgs;
+use crate::progress::Progress;
+use anyhow::{Result, bail};
+use mdtf_pipeline::validate::validate;
+
+/// Runs the checks and prints the table on stdout.
+pub fn run(args: &ValidateArgs, progress: &Progress) -> Result<()> {
+    let checks = progress.step("validating", || validate(args.size, &args.output)).map_err(anyhow::Error::msg)?;
+    progress.clear();
+    println!("{:<48} {:>12} {:>14}  result", "check", "measured", "tolerance");
+    for c in &checks {
+        let bound = format!("{} {:.3e}", if c.at_most { "<=" } else { ">=" }, c.tolerance);
+        println!(
+            "{:<48} {:>12.4e} {:>14}  {}",
+            c.name,
+            c.measured,
+            bound,
+            if c.ok() { "ok" } else { "OUT OF TOLERANCE" }
+        );
+    }
+    println!("pictures: {}/boundary, {}/histogram", args.output.display(), args.output.display());
+    let failed = checks.iter().filter(|c| !c.ok()).count();
+    if failed > 0 {
+        bail!("{failed} of {} checks out of tolerance", checks.len());
+    }
+    Ok(())
+}

@@ -1,0 +1,234 @@
+//! `mdtf validate`: every stage on the analytic phantoms, each measured
+//! error next to its documented tolerance. What a user runs to trust an
+//! installation; the same numbers the test suite asserts.
+
+use mdtf_boundary::{BoundaryInput, BoundaryParams, HitCode};
+use mdtf_datagen::erf_sphere;
+use mdtf_derive::{DeriveParams, Item};
+use mdtf_histogram::{Axis, HvolParams, Scale, count, histogram_volume, hit_mask, write_hvol, write_stretched};
+use mdtf_pack::{Dtype, GaussianPrimitive, Tf1d, decode_for, preintegration_table, segment};
+use mdtf_volume::{Geometry, MultiField, Volume};
+use serde::Serialize;
+use std::f64::consts::PI;
+use std::path::Path;
+
+/// One line of the validation table.
+#[derive(Debug, Clone, Serialize)]
+pub struct Check {
+    /// What is measured.
+    pub name: String,
+    /// The measured value.
+    pub measured: f64,
+    /// The bound it must meet.
+    pub tolerance: f64,
+    /// true: measured must be <= tolerance; false: >= tolerance.
+    pub at_most: bool,
+}
+
+impl Check {
+    /// Whether the measurement meets its bound.
+    pub fn ok(&self) -> bool {
+        if self.at_most { self.measured <= self.tolerance } else { self.measured >= self.tolerance }
+    }
+}
+
+fn check(name: &str, measured: f64, tolerance: f64, at_most: bool) -> Check {
+    Check { name: name.into(), measured, tolerance, at_most }
+}
+
+/// Runs the checks on an n^3 erf sphere (radius 0.3 n, sigma 3, values 0..255),
+/// writing the boundary report and histogram pictures into `dir`.
+pub fn validate(n: usize, dir: &Path) -> Result<Vec<Check>, String> {
+    if n < 48 {
+        return Err(format!("--size {n}: the checks need at least 48 voxels per axis"));
+    }
+    let sigma = 3.0;
+    let r = 0.3 * n as f64;
+    let ph = erf_sphere(Geometry::new([n; 3], [1.0; 3]), r, sigma, 0.0, 255.0, None);
+    let value = ph.volume();
+    let truth = ph.truth();
+    let a = 255.0 / (sigma * (2.0 * PI).sqrt());
+    let mut out = Vec::new();
+
+    // derive
+    let d = DeriveParams { items: vec![Item::G, Item::F2, Item::Normal], ..Default::default() };
+    let mut derived = mdtf_derive::run(&MultiField::from(value.clone()), &d).map_err(|e| e.to_string())?;
+    let normal = derived.items.remove(2).1;
+    let f2 = derived.items.remove(1).1.into_scalar().map_err(|e| e.to_string())?;
+    let g = derived.items.remove(0).1.into_scalar().map_err(|e| e.to_string())?;
+    let shell: Vec<usize> =
+        (0..truth.x.samples().len()).filter(|&i| truth.x.samples()[i].abs() < 2.0 * sigma as f32).collect();
+    let mean_err = |est: &Volume, tru: &Volume, peak: f64| {
+        shell.iter().map(|&i| (est.samples()[i] as f64 - tru.samples()[i] as f64).abs()).sum::<f64>()
+            / shell.len() as f64
+            / peak
+    };
+    out.push(check("derive: mean |g error| / peak g", mean_err(&g, &truth.g, a), 3e-4, true));
+    out.push(check(
+        "derive: mean |f'' error| / peak |f''|",
+        mean_err(&f2, &truth.f2, a * (-0.5f64).exp() / sigma),
+        3e-3,
+        true,
+    ));
+    // zero crossing of f'' along the x axis line nearest the centre
+    let c = (n as f64 - 1.0) / 2.0;
+    let (j, k) = (n / 2, n / 2);
+    let (dj, dk) = (j as f64 - c, k as f64 - c);
+    let expect = (r * r - dj * dj - dk * dk).sqrt() + c;
+    let mut crossing = f64::NAN;
+    for i in n / 2..n - 1 {
+        let (p, q) = (f2.data[[k, j, i]] as f64, f2.data[[k, j, i + 1]] as f64);
+        if p < 0.0 && q >= 0.0 {
+            crossing = i as f64 + p / (p - q);
+            break;
+        }
+    }
+    out.push(check("derive: f'' zero crossing error, voxels", (crossing - expect).abs(), 0.02, true));
+
+    // boundary
+    let b = mdtf_boundary::run(
+        &BoundaryInput { g: &g, f2: &f2, normal: &normal, value_range: 255.0 },
+        &BoundaryParams::default(),
+    )
+    .map_err(|e| e.to_string())?;
+    let hits: Vec<usize> =
+        (0..b.hit.samples().len()).filter(|&i| b.hit.samples()[i] == HitCode::Hit as u8 as f32).collect();
+    let mean_dot = hits.iter().map(|&i| b.dot.samples()[i] as f64).sum::<f64>() / hits.len().max(1) as f64;
+    let near: Vec<usize> = hits.iter().copied().filter(|&i| truth.x.samples()[i].abs() <= 3.0 * sigma as f32).collect();
+    let derr: Vec<f64> =
+        near.iter().map(|&i| (b.distance.samples()[i] as f64 - truth.x.samples()[i].abs() as f64).abs()).collect();
+    let g_ok = hits.iter().filter(|&&i| ((b.g_hit.samples()[i] as f64 - a) / a).abs() <= 0.01).count() as f64
+        / hits.len().max(1) as f64;
+    out.push(check("boundary: mean dot product", mean_dot, 0.9999, false));
+    out.push(check(
+        "boundary: mean |d - |x||, voxels",
+        derr.iter().sum::<f64>() / derr.len().max(1) as f64,
+        0.05,
+        true,
+    ));
+    out.push(check("boundary: max |d - |x||, voxels", derr.iter().copied().fold(0.0, f64::max), 0.25, true));
+    out.push(check("boundary: share of g_hit within 1% of A", g_ok, 0.99, false));
+    let rdir = dir.join("boundary");
+    std::fs::create_dir_all(&rdir).map_err(|e| e.to_string())?;
+    b.report(&g).write(&rdir).map_err(|e| e.to_string())?;
+
+    // histogram
+    let hv = histogram_volume(
+        value.samples(),
+        g.samples(),
+        f2.samples(),
+        &HvolParams { g_thresh: Some(0.0), ..Default::default() },
+    )
+    .map_err(|e| e.to_string())?;
+    out.push(check("histogram: sigma estimate relative error", (hv.sigma - sigma).abs() / sigma, 0.02, true));
+    let [av, ag] = &hv.vg_axes;
+    let (mut sx, mut nx) = (vec![0.0f64; av.bins * ag.bins], vec![0u64; av.bins * ag.bins]);
+    for i in 0..value.samples().len() {
+        if let (Some(bv), Some(bg)) = (av.bin(value.samples()[i]), ag.bin(g.samples()[i])) {
+            sx[bg * av.bins + bv] += truth.x.samples()[i] as f64;
+            nx[bg * av.bins + bv] += 1;
+        }
+    }
+    let worst_p = (0..sx.len())
+        .filter(|&i| hv.count_vg[i] >= 50 && (sx[i] / nx[i].max(1) as f64).abs() <= 2.0 * sigma)
+        .map(|i| (hv.position[i] as f64 - sx[i] / nx[i] as f64).abs())
+        .fold(0.0, f64::max);
+    out.push(check("histogram: worst |p(v,g) - x|, voxels", worst_p, 0.1, true));
+    let hdir = dir.join("histogram");
+    std::fs::create_dir_all(&hdir).map_err(|e| e.to_string())?;
+    write_hvol(&hdir, &hv).map_err(|e| e.to_string())?;
+    let traced = hit_mask(b.hit.samples());
+    let axes = vec![
+        Axis::new("v", 0.0, 255.0, 256).map_err(|e| e.to_string())?,
+        Axis::new("g", 0.0, 1.05 * a, 256).map_err(|e| e.to_string())?,
+    ];
+    let normal_h = count(&[value.samples(), g.samples()], axes.clone(), Some(&traced)).map_err(|e| e.to_string())?;
+    let mut sa = axes;
+    sa[1].name = "g_hit".into();
+    let stretched = count(&[value.samples(), b.g_hit.samples()], sa, Some(&traced)).map_err(|e| e.to_string())?;
+    write_stretched(&hdir, &normal_h, &stretched, Scale::Log).map_err(|e| e.to_string())?;
+
+    // pack decode: worst decode(quantise(x)) error in code steps, over f'' as u8 and u16
+    let mut worst_steps = 0.0f64;
+    let (lo, hi) = f2.finite_range().map_or((0.0, 1.0), |(l, h)| (l as f64, h as f64));
+    for dtype in [Dtype::U8, Dtype::U16] {
+        let dec = decode_for("f2", lo, hi, dtype, true).map_err(|e| e.to_string())?;
+        for &x in f2.samples().iter().step_by(97) {
+            let back = dec.value(dec.code(x, dtype), dtype);
+            worst_steps = worst_steps.max((back - x as f64).abs() / dec.scale);
+        }
+    }
+    out.push(check("pack: worst decode error, code steps", worst_steps, 0.5 + 1e-6, true));
+
+    // tables: pre-integration against a fine quadrature, Gaussian segment integral against Simpson
+    let tf = Tf1d {
+        samples: (0..256)
+            .map(|k| {
+                let s = k as f64 / 255.0;
+                [
+                    s,
+                    1.0 - s,
+                    0.5,
+                    4.0 * (-((s - 0.3) / 0.05f64).powi(2)).exp() + 1.5 * (-((s - 0.7) / 0.1f64).powi(2)).exp(),
+                ]
+            })
+            .collect(),
+    };
+    let table = preintegration_table(&tf, 32, 1.3);
+    let mut worst_t = 0.0f64;
+    for (i, j) in [(0usize, 31usize), (31, 0), (5, 20), (12, 12), (28, 3)] {
+        let reference = fine_segment(&tf, i as f64 / 31.0, j as f64 / 31.0, 1.3);
+        for ch in 0..4 {
+            worst_t = worst_t.max((table[j * 32 + i][ch] as f64 - reference[ch]).abs());
+        }
+        let s = segment(&tf, i as f64 / 31.0, j as f64 / 31.0, 1.3);
+        worst_t = worst_t.max((s[3] - reference[3]).abs());
+    }
+    out.push(check("pack: pre-integration vs quadrature", worst_t, 1e-4, true));
+    let gp = GaussianPrimitive {
+        centre: vec![0.4, 0.6],
+        k: vec![vec![5.0, 1.0], vec![-2.0, 7.0]],
+        alpha_max: 1.0,
+        colour: [1.0; 3],
+    };
+    let mut worst_g = 0.0f64;
+    for (v1, v2) in
+        [([0.1, 0.2], [0.9, 0.8]), ([0.4, 0.6], [0.4, 0.6]), ([0.0, 1.0], [1.0, 0.0]), ([0.35, 0.5], [0.45, 0.7])]
+    {
+        let steps = 4000;
+        let simpson: f64 = (0..=steps)
+            .map(|k| {
+                let t = k as f64 / steps as f64;
+                let w = if k == 0 || k == steps {
+                    1.0
+                } else if k % 2 == 1 {
+                    4.0
+                } else {
+                    2.0
+                };
+                w * gp.density(&[v1[0] + t * (v2[0] - v1[0]), v1[1] + t * (v2[1] - v1[1])])
+            })
+            .sum::<f64>()
+            / (3.0 * steps as f64);
+        worst_g = worst_g.max((gp.segment_integral(&v1, &v2) - simpson).abs());
+    }
+    out.push(check("pack: Gaussian segment integral vs quadrature", worst_g, 1e-5, true));
+    Ok(out)
+}
+
+/// The pre-integration integrals by 4000 midpoint steps (independent of the table code).
+fn fine_segment(tf: &Tf1d, sf: f64, sb: f64, d: f64) -> [f64; 4] {
+    let steps = 4000;
+    let h = 1.0 / steps as f64;
+    let (mut depth, mut c) = (0.0, [0.0; 3]);
+    for k in 0..steps {
+        let t = (k as f64 + 0.5) * h;
+        let v = tf.at(sf + t * (sb - sf));
+        let mid = depth + 0.5 * d * v[3] * h;
+        for ch in 0..3 {
+            c[ch] += v[ch] * d * v[3] * (-mid).exp() * h;
+        }
+        depth += d * v[3] * h;
+    }
+    [c[0], c[1], c[2], 1.0 - (-depth).exp()]
+}
