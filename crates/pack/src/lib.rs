@@ -113,6 +113,8 @@ pub fn encode(
     let plane = geometry.dims[0] * geometry.dims[1];
     let mut textures = Vec::new();
     let mut entries = Vec::new();
+    // each channel's data range, measured once even when it sits in two textures
+    let mut measured: BTreeMap<String, [f64; 2]> = BTreeMap::new();
     for mut layout in params.profile.layout(&params.fields) {
         if let Some(d) = params.dtype {
             layout.dtype = d;
@@ -127,7 +129,9 @@ pub fn encode(
             let v = get(c).ok_or_else(|| PackError::Geometry(format!("channel {c} vanished")))?;
             let [min, max] = match params.ranges.get(c) {
                 Some(r) => *r,
-                None => v.finite_range().map_or([0.0, 0.0], |(lo, hi)| [lo as f64, hi as f64]),
+                None => *measured
+                    .entry(c.clone())
+                    .or_insert_with(|| v.finite_range().map_or([0.0, 0.0], |(lo, hi)| [lo as f64, hi as f64])),
             };
             let (meaning, units, stage, signed) = describe(c);
             let d = decode_for(c, min, max, layout.dtype, signed)?;
@@ -178,13 +182,15 @@ fn encode_row(src: &[f32], d: &Decode, dtype: Dtype, codes: &mut [u32]) {
     match dtype.max_code() {
         Some(top) => {
             let (off, inv) = (d.offset, 1.0 / d.scale);
+            // Adding 2^52 leaves the rounded (to nearest, ties to even: still within half a
+            // step) integer in the low mantissa bits: no float-to-int conversion, so no
+            // per-lane NaN handling, and the loop stays in SIMD registers.
+            const MAGIC: f64 = 4_503_599_627_370_496.0;
             for (c, &v) in codes.iter_mut().zip(src) {
-                // NaN fails both comparisons and becomes code 0
-                let x = (v as f64 - off) * inv + 0.5;
-                let x = if x > 0.0 { x } else { 0.0 };
+                let x = (v as f64 - off) * inv;
+                let x = if x > 0.0 { x } else { 0.0 }; // NaN fails the comparison: code 0
                 let x = if x < top { x } else { top };
-                // x >= 0: truncation is floor, so this rounds half up; i64 converts in SIMD lanes
-                *c = x as i64 as u32;
+                *c = (x + MAGIC).to_bits() as u32;
             }
         }
         None => {
