@@ -50,6 +50,8 @@ pub enum Command {
     Run(RunArgs),
     /// Check this installation: every stage on the analytic erf sphere against its documented tolerance.
     Validate(ValidateArgs),
+    /// Render a pack from its manifest alone (CPU ray caster), as its renderer would show it.
+    Preview(PreviewArgs),
 }
 
 /// Which phantom to generate.
@@ -570,4 +572,29 @@ pub struct ValidateArgs {
     /// Folder for the boundary report and histogram pictures.
     #[arg(short, long, default_value = "out/validate", value_name = "DIR")]
     pub output: PathBuf,
+}
+
+/// `mdtf preview`.
+#[derive(Debug, Args)]
+#[command(
+    after_help = "Orthographic ray casting with emission-absorption compositing front to back, opacity corrected\n\
+for the step; slicer-3dtf classifies with its 3D (or 2D) TF LUT, distance-tf with alpha_u(v, g_hit) x alpha_d(d);\n\
+Blinn-Phong shading from the normal channel, weighted by 1 - (1 - g/g_max)^2.\n\n\
+Example:\n  mdtf preview out/pack -o preview.png --view 30,20 --size 512"
+)]
+pub struct PreviewArgs {
+    /// Pack folder (with manifest.json).
+    pub pack: PathBuf,
+    /// Output PNG.
+    #[arg(short, long, default_value = "preview.png", value_name = "PNG")]
+    pub output: PathBuf,
+    /// View direction AZIMUTH,ELEVATION in degrees.
+    #[arg(long, default_value = "30,20", value_name = "AZ,EL", allow_hyphen_values = true)]
+    pub view: String,
+    /// Image size in pixels (square).
+    #[arg(long, default_value_t = 512)]
+    pub size: usize,
+    /// Sample spacing along rays, voxels.
+    #[arg(long, default_value_t = 0.5)]
+    pub step: f64,
 }

@@ -9,7 +9,9 @@
 //!   the mean f'' and mean g of the voxels in the (v, g) bin (using the mean
 //!   g rather than the bin centre removes the bin-width bias); 0 in empty
 //!   bins and where g <= g_thresh. For an ideal boundary p is the signed
-//!   distance to it, positive on the high side.
+//!   distance to it, positive on the high side. Empty bins of a v that
+//!   occurs use the v bin's mean f'' and the bin's centre g (the 1D form of
+//!   Kindlmann and Durkin), so the default opacity has no holes.
 //! * alpha(v, g) = a_max max(0, 1 - |p(v, g)| / w): a tent of half-width w
 //!   (default sigma) around the boundary, 0 in empty bins.
 
@@ -60,7 +62,7 @@ pub struct HistogramVolume {
     pub vg_axes: [Axis; 2],
     /// Voxels per (v, g) bin.
     pub count_vg: Vec<u64>,
-    /// Position function p(v, g), world units (0 where undefined).
+    /// Position function p(v, g), world units (0 where undefined: v never occurs, or g <= g_thresh).
     pub position: Vec<f32>,
     /// Default opacity alpha(v, g) in [0, 1].
     pub opacity: Vec<f32>,
@@ -127,10 +129,16 @@ pub fn histogram_volume(
     let mut opacity = vec![0f32; nv * ng];
     for i in 0..nv * ng {
         let c = sums.c_vg[i];
-        if c == 0 {
+        let (bv, bg) = (i % nv, i / nv);
+        // Empty (v, g) bins fall back to Kindlmann and Durkin's 1D form: the v bin's mean f''
+        // at the bin's centre g, so the default opacity is defined wherever v occurs.
+        let (gm, hm) = if c > 0 {
+            (sums.g_vg[i] / c as f64, sums.h_vg[i] / c as f64)
+        } else if sums.c_v[bv] > 0 {
+            (ag.centre(bg), mean_h_v[bv])
+        } else {
             continue;
-        }
-        let (gm, hm) = (sums.g_vg[i] / c as f64, sums.h_vg[i] / c as f64);
+        };
         if gm - g_thresh <= 0.0 {
             continue;
         }

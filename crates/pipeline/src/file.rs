@@ -118,6 +118,13 @@ pub struct Pipeline {
     /// Channels to write as volumes too (e.g. ["g", "f2", "distance"]).
     #[serde(default)]
     pub keep: Vec<String>,
+    /// Render preview.png from the pack (profiles with a preview: slicer-3dtf, distance-tf).
+    #[serde(default = "yes")]
+    pub preview: bool,
+}
+
+fn yes() -> bool {
+    true
 }
 
 /// Parses a pipeline file after applying `overrides` ("section.key=value",

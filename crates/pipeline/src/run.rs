@@ -334,6 +334,14 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     pack(&pack_chans, &params, &luts, &pdir, provenance, &BTreeMap::new()).map_err(|e| err(e.to_string()))?;
     stage("pack", t, n, vec!["pack/manifest.json".into()]);
 
+    if p.preview && matches!(profile, Profile::Slicer3dtf | Profile::DistanceTf) {
+        on_stage("preview");
+        let t = Instant::now();
+        let cam = mdtf_preview::Camera { azimuth: 30.0, elevation: 20.0, size: 512, step: 0.5 };
+        mdtf_preview::preview(&pdir, &dir.join("preview.png"), &cam).map_err(|e| fail("preview")(e.to_string()))?;
+        stage("preview", t, 512 * 512, vec!["preview.png".into()]);
+    }
+
     let report = RunReport {
         pipeline: opts.pipeline_path.display().to_string(),
         output: opts.output.display().to_string(),

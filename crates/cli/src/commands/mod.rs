@@ -7,6 +7,7 @@ mod derive;
 mod histogram;
 mod info;
 mod pack;
+mod preview;
 mod run;
 mod synth;
 mod validate;
@@ -28,5 +29,6 @@ pub fn run(command: Command, progress: &Progress) -> Result<()> {
         Command::Pack(a) => pack::run(&a, progress),
         Command::Run(a) => run::run(&a, progress),
         Command::Validate(a) => validate::run(&a, progress),
+        Command::Preview(a) => preview::run(&a, progress),
     }
 }

@@ -1,0 +1,75 @@
+//! Preview of an mdtf pack: decode it from its manifest alone and ray-cast
+//! it the way its renderer family would (3D or 2D TF LUT for slicer-3dtf,
+//! alpha_u(v, g_hit) x alpha_d(d) for distance-tf), with Blinn-Phong shading
+//! where the profile has normals. A check that the pack is complete, and a
+//! picture to look at before loading it into the real renderer.
+
+mod load;
+mod render;
+
+pub use load::{LoadedPack, Table, load};
+pub use render::{Camera, Classifier, render};
+
+use mdtf_volume::{VolumeError, write_file_atomically};
+use std::path::Path;
+
+/// Errors of the preview.
+#[derive(Debug, thiserror::Error)]
+pub enum PreviewError {
+    /// The pack is incomplete or inconsistent.
+    #[error("{0}")]
+    Pack(String),
+    /// The profile has no preview yet.
+    #[error("no preview for profile {0} yet (slicer-3dtf and distance-tf have one)")]
+    Unsupported(String),
+    /// Writing the image failed.
+    #[error(transparent)]
+    Io(#[from] VolumeError),
+}
+
+/// The classifier a pack's profile implies, from its lookup tables.
+pub fn classifier(pack: &LoadedPack) -> Result<Classifier, PreviewError> {
+    let table = |n: &str| pack.tables.get(n).cloned();
+    match pack.manifest.profile.as_str() {
+        "slicer-3dtf" => table("tf3d")
+            .or_else(|| table("tf2d_default"))
+            .or_else(|| table("tf2d"))
+            .map(Classifier::Lut)
+            .ok_or_else(|| PreviewError::Pack("slicer-3dtf pack without tf3d, tf2d or tf2d_default".into())),
+        "distance-tf" => Ok(Classifier::Distance {
+            alpha_u: table("alpha_u"),
+            alpha_d: table("alpha_d").ok_or_else(|| PreviewError::Pack("distance-tf pack without alpha_d".into()))?,
+        }),
+        other => Err(PreviewError::Unsupported(other.into())),
+    }
+}
+
+/// Writes RGB8 pixels as a PNG. Atomic.
+pub fn write_png(path: &Path, size: usize, rgb: &[u8], description: &str) -> Result<(), PreviewError> {
+    write_file_atomically(path, |out| {
+        let mut enc = png::Encoder::new(out, size as u32, size as u32);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        enc.add_text_chunk("Description".into(), description.to_string()).map_err(std::io::Error::other)?;
+        let mut w = enc.write_header().map_err(std::io::Error::other)?;
+        w.write_image_data(rgb).map_err(std::io::Error::other)?;
+        w.finish().map_err(std::io::Error::other)
+    })?;
+    Ok(())
+}
+
+/// Loads the pack in `dir`, renders it and writes `out`.
+pub fn preview(dir: &Path, out: &Path, cam: &Camera) -> Result<(), PreviewError> {
+    let pack = load(dir)?;
+    let c = classifier(&pack)?;
+    let img = render(&pack.channels, &c, cam);
+    let text = format!(
+        "mdtf preview of {} ({}), azimuth {} elevation {}, step {} voxel",
+        dir.display(),
+        pack.manifest.profile,
+        cam.azimuth,
+        cam.elevation,
+        cam.step
+    );
+    write_png(out, cam.size, &img, &text)
+}

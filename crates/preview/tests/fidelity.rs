@@ -1,0 +1,44 @@
+//! A pack loses nothing that shows: rendering the decoded pack and rendering
+//! the float fields it was made from differ by at most 2/255 per pixel on average.
+
+use mdtf_datagen::erf_sphere;
+use mdtf_pack::{PackParams, Profile, Provenance, pack, parse_tf};
+use mdtf_preview::{Camera, classifier, load, render};
+use mdtf_volume::{Geometry, Volume};
+use std::collections::BTreeMap;
+
+#[test]
+fn decoded_pack_renders_like_the_float_fields() {
+    let n = 64;
+    let t = erf_sphere(Geometry::new([n; 3], [1.0; 3]), 19.2, 2.0, 0.0, 255.0, None).truth();
+    let mut chans =
+        vec![("v".to_string(), t.v.clone()), ("g".to_string(), t.g.clone()), ("f2".to_string(), t.f2.clone())];
+    for (i, name) in ["nx", "ny", "nz"].iter().enumerate() {
+        chans
+            .push((name.to_string(), Volume { geometry: t.v.geometry.clone(), data: t.normal.fields[i].data.clone() }));
+    }
+    let a = 255.0 / (2.0 * (2.0 * std::f64::consts::PI).sqrt());
+    let tf = parse_tf(&format!(
+        r#"{{"v_range": [0, 255], "g_range": [0, {gmax}], "f2_range": [-20, 20], "boundary_emphasis": 0.5,
+            "widgets": [{{"type": "triangle", "v0": 128, "width": 60, "g_high": {a}, "alpha": 0.6, "colour": [1, 0.7, 0.4]}}]}}"#,
+        gmax = 1.1 * a
+    ))
+    .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let prov =
+        Provenance { mdtf_version: "t".into(), input: None, input_sha256: None, stages: serde_json::Value::Null };
+    let params = PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![], dtype: None };
+    pack(&chans, &params, &tf.slicer_luts(), dir.path(), prov, &BTreeMap::new()).unwrap();
+    let loaded = load(dir.path()).unwrap();
+    let c = classifier(&loaded).unwrap();
+    let cam = Camera { azimuth: 30.0, elevation: 20.0, size: 96, step: 0.5 };
+    let from_pack = render(&loaded.channels, &c, &cam);
+    let floats: BTreeMap<String, Volume> = chans.into_iter().collect();
+    let from_floats = render(&floats, &c, &cam);
+    let mean = from_pack.iter().zip(&from_floats).map(|(p, q)| (*p as f64 - *q as f64).abs()).sum::<f64>()
+        / from_pack.len() as f64;
+    let lit = from_floats.iter().filter(|&&x| x > 20).count();
+    eprintln!("mean |pack - float| = {mean:.3} / 255 over {} values ({lit} lit)", from_pack.len());
+    assert!(lit > 1000, "the sphere is visible");
+    assert!(mean <= 2.0, "{mean}");
+}
