@@ -578,7 +578,8 @@ pub struct ValidateArgs {
 #[derive(Debug, Args)]
 #[command(
     after_help = "Orthographic ray casting with emission-absorption compositing front to back, opacity corrected\n\
-for the step; slicer-3dtf classifies with its 3D (or 2D) TF LUT, distance-tf with alpha_u(v, g_hit) x alpha_d(d);\n\
+for the step; slicer-3dtf classifies with its 3D (or 2D) TF LUT, distance-tf with alpha_u(v, g_hit) x alpha_d(d),\n\
+gaussian-tf with the pack's Gaussian primitives (gaussians.json);\n\
 Blinn-Phong shading from the normal channel, weighted by 1 - (1 - g/g_max)^2.\n\n\
 Example:\n  mdtf preview out/pack -o preview.png --view 30,20 --size 512"
 )]
@@ -597,4 +598,16 @@ pub struct PreviewArgs {
     /// Sample spacing along rays, voxels.
     #[arg(long, default_value_t = 0.5)]
     pub step: f64,
+    /// gaussian-tf: integrate the primitives along each segment analytically (eq. 11) or sample them (Riemann sum).
+    #[arg(long, value_enum, default_value_t = IntegrationArg::Analytic)]
+    pub integration: IntegrationArg,
+}
+
+/// `--integration` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum IntegrationArg {
+    /// The analytic segment integral of each Gaussian primitive.
+    Analytic,
+    /// The density at the samples.
+    Riemann,
 }

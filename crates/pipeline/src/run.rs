@@ -338,7 +338,8 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         on_stage("preview");
         let t = Instant::now();
         let cam = mdtf_preview::Camera { azimuth: 30.0, elevation: 20.0, size: 512, step: 0.5 };
-        mdtf_preview::preview(&pdir, &dir.join("preview.png"), &cam).map_err(|e| fail("preview")(e.to_string()))?;
+        mdtf_preview::preview(&pdir, &dir.join("preview.png"), &cam, true)
+            .map_err(|e| fail("preview")(e.to_string()))?;
         stage("preview", t, 512 * 512, vec!["preview.png".into()]);
     }
 

@@ -1,6 +1,7 @@
 //! Preview of an mdtf pack: decode it from its manifest alone and ray-cast
 //! it the way its renderer family would (3D or 2D TF LUT for slicer-3dtf,
-//! alpha_u(v, g_hit) x alpha_d(d) for distance-tf), with Blinn-Phong shading
+//! alpha_u(v, g_hit) x alpha_d(d) for distance-tf, Gaussian primitives with
+//! a Riemann sum or the analytic segment integral for gaussian-tf), with Blinn-Phong shading
 //! where the profile has normals. A check that the pack is complete, and a
 //! picture to look at before loading it into the real renderer.
 
@@ -20,15 +21,16 @@ pub enum PreviewError {
     #[error("{0}")]
     Pack(String),
     /// The profile has no preview yet.
-    #[error("no preview for profile {0} yet (slicer-3dtf and distance-tf have one)")]
+    #[error("no preview for profile {0} yet (slicer-3dtf, distance-tf and gaussian-tf have one)")]
     Unsupported(String),
     /// Writing the image failed.
     #[error(transparent)]
     Io(#[from] VolumeError),
 }
 
-/// The classifier a pack's profile implies, from its lookup tables.
-pub fn classifier(pack: &LoadedPack) -> Result<Classifier, PreviewError> {
+/// The classifier a pack's profile implies, from its lookup tables (and for
+/// gaussian-tf its primitives, integrated analytically or by a Riemann sum).
+pub fn classifier(pack: &LoadedPack, analytic: bool) -> Result<Classifier, PreviewError> {
     let table = |n: &str| pack.tables.get(n).cloned();
     match pack.manifest.profile.as_str() {
         "slicer-3dtf" => table("tf3d")
@@ -40,6 +42,29 @@ pub fn classifier(pack: &LoadedPack) -> Result<Classifier, PreviewError> {
             alpha_u: table("alpha_u"),
             alpha_d: table("alpha_d").ok_or_else(|| PreviewError::Pack("distance-tf pack without alpha_d".into()))?,
         }),
+        "gaussian-tf" => {
+            let primitives = pack.gaussians.clone().filter(|g| !g.is_empty()).ok_or_else(|| {
+                PreviewError::Pack("gaussian-tf pack without gaussians.json (pack it with --tf)".into())
+            })?;
+            let m = primitives[0].centre.len();
+            // the TF axes are the packed fields in texture order, ||G|| excluded
+            let mut fields: Vec<String> = Vec::new();
+            for t in &pack.manifest.textures {
+                for c in t.component_order.iter().flatten() {
+                    if c != "gnorm" && !fields.contains(c) {
+                        fields.push(c.clone());
+                    }
+                }
+            }
+            if fields.len() < m {
+                return Err(PreviewError::Pack(format!(
+                    "the primitives have {m} dimensions, the pack {} fields",
+                    fields.len()
+                )));
+            }
+            fields.truncate(m);
+            Ok(Classifier::Gaussian { primitives, channels: fields, analytic })
+        }
         other => Err(PreviewError::Unsupported(other.into())),
     }
 }
@@ -58,10 +83,10 @@ pub fn write_png(path: &Path, size: usize, rgb: &[u8], description: &str) -> Res
     Ok(())
 }
 
-/// Loads the pack in `dir`, renders it and writes `out`.
-pub fn preview(dir: &Path, out: &Path, cam: &Camera) -> Result<(), PreviewError> {
+/// Loads the pack in `dir`, renders it and writes `out` (Gaussian TFs integrated analytically when `analytic`).
+pub fn preview(dir: &Path, out: &Path, cam: &Camera, analytic: bool) -> Result<(), PreviewError> {
     let pack = load(dir)?;
-    let c = classifier(&pack)?;
+    let c = classifier(&pack, analytic)?;
     let img = render(&pack.channels, &c, cam);
     let text = format!(
         "mdtf preview of {} ({}), azimuth {} elevation {}, step {} voxel",

@@ -27,6 +27,8 @@ pub struct LoadedPack {
     pub channels: BTreeMap<String, Volume>,
     /// Lookup tables by name.
     pub tables: BTreeMap<String, Table>,
+    /// Gaussian primitives (gaussian-tf packs with a `gaussians.json`).
+    pub gaussians: Option<Vec<mdtf_pack::GaussianPrimitive>>,
 }
 
 fn read(path: &Path) -> Result<Vec<u8>, PreviewError> {
@@ -93,5 +95,9 @@ pub fn load(dir: &Path) -> Result<LoadedPack, PreviewError> {
         let axes = lut.axes.iter().map(|a| (a.channel.clone(), a.size, a.min, a.max)).collect();
         tables.insert(lut.name.clone(), Table { axes, components: comps, values });
     }
-    Ok(LoadedPack { manifest, channels, tables })
+    let gaussians = match std::fs::read_to_string(dir.join("gaussians.json")) {
+        Ok(text) => Some(serde_json::from_str(&text).map_err(|e| PreviewError::Pack(format!("gaussians.json: {e}")))?),
+        Err(_) => None,
+    };
+    Ok(LoadedPack { manifest, channels, tables, gaussians })
 }

@@ -34,6 +34,17 @@ pub enum Classifier {
         /// alpha_d over d.
         alpha_d: Table,
     },
+    /// Gaussian primitives over the named channels (their alpha_max is the extinction per
+    /// voxel of path): a Riemann sum of the density at the samples, or the analytic integral
+    /// of each primitive along the segment from the previous sample (Gaussian-TF paper eqs. 11-15).
+    Gaussian {
+        /// The primitives.
+        primitives: Vec<mdtf_pack::GaussianPrimitive>,
+        /// Channel of each TF axis, in order.
+        channels: Vec<String>,
+        /// Integrate analytically between samples instead of sampling the density.
+        analytic: bool,
+    },
 }
 
 fn lookup(t: &Table, coords: &[f32]) -> [f32; 4] {
@@ -112,17 +123,21 @@ pub fn render(channels: &BTreeMap<String, Volume>, classifier: &Classifier, cam:
             );
             let origin = [0, 1, 2].map(|a| centre[a] + u * right[a] + v * up[a] - radius * dir[a]);
             let (mut rgb, mut alpha) = ([0f64; 3], 0f64);
+            let mut previous: Option<Vec<f64>> = None;
             for s in 0..steps {
                 let pw = [0, 1, 2].map(|a| origin[a] + (s as f64 + 0.5) * step_world * dir[a]);
                 if (0..3).any(|a| pw[a] < 0.0 || pw[a] > ext[a]) {
+                    previous = None;
                     continue;
                 }
                 let p = [0, 1, 2].map(|a| pw[a] / g.spacing[a]);
                 let sample = |n: &str| get(n).map_or(0.0, |v| trilinear(v, p));
-                let [r, gr, b, a] = match classifier {
+                let ([r, gr, b], a) = match classifier {
                     Classifier::Lut(t) => {
                         let coords: Vec<f32> = t.axes.iter().map(|(c, ..)| sample(c)).collect();
-                        lookup(t, &coords)
+                        let [r, gr, b, a] = lookup(t, &coords);
+                        // opacity correction: the TF's opacity is per voxel (L_min) of path
+                        ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(cam.step))
                     }
                     Classifier::Distance { alpha_u, alpha_d } => {
                         let d = sample("distance");
@@ -130,14 +145,30 @@ pub fn render(channels: &BTreeMap<String, Volume>, classifier: &Classifier, cam:
                         let u = alpha_u
                             .as_ref()
                             .map_or([1.0, 1.0, 1.0, 1.0], |t| lookup(t, &[sample("v"), sample("g_hit")]));
-                        [u[0], u[1], u[2], u[3] * ad]
+                        ([u[0], u[1], u[2]], 1.0 - (1.0 - ((u[3] * ad) as f64).min(0.999)).powf(cam.step))
+                    }
+                    Classifier::Gaussian { primitives, channels: names, analytic } => {
+                        let v: Vec<f64> = names.iter().map(|c| sample(c) as f64).collect();
+                        let from = if *analytic { previous.replace(v.clone()) } else { None };
+                        let (mut depth, mut c) = (0.0, [0.0f64; 3]);
+                        for gp in primitives {
+                            let rho = match &from {
+                                Some(v0) => gp.segment_integral(v0, &v),
+                                None => gp.density(&v),
+                            };
+                            depth += gp.alpha_max * rho;
+                            for k in 0..3 {
+                                c[k] += gp.alpha_max * rho * gp.colour[k];
+                            }
+                        }
+                        let colour = if depth > 0.0 { c.map(|x| (x / depth) as f32) } else { [0.0; 3] };
+                        // eq. 15: alpha = 1 - exp(-l sum tau_i rho'_i), l = the step in voxels
+                        (colour, 1.0 - (-depth * cam.step).exp())
                     }
                 };
                 if a <= 0.0 {
                     continue;
                 }
-                // opacity correction: the TF's opacity is per voxel (L_min) of path
-                let a = 1.0 - (1.0 - (a as f64).min(0.999)).powf(cam.step);
                 let mut colour = [r as f64, gr as f64, b as f64];
                 if let (Some(nxv), Some(nyv), Some(nzv)) = (nx, ny, nz) {
                     let n = [trilinear(nxv, p) as f64, trilinear(nyv, p) as f64, trilinear(nzv, p) as f64];

@@ -30,7 +30,7 @@ fn decoded_pack_renders_like_the_float_fields() {
     let params = PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![], dtype: None };
     pack(&chans, &params, &tf.slicer_luts(), dir.path(), prov, &BTreeMap::new()).unwrap();
     let loaded = load(dir.path()).unwrap();
-    let c = classifier(&loaded).unwrap();
+    let c = classifier(&loaded, true).unwrap();
     let cam = Camera { azimuth: 30.0, elevation: 20.0, size: 96, step: 0.5 };
     let from_pack = render(&loaded.channels, &c, &cam);
     let floats: BTreeMap<String, Volume> = chans.into_iter().collect();

@@ -1,6 +1,6 @@
 //! `mdtf preview`: render a pack.
 
-use crate::args::PreviewArgs;
+use crate::args::{IntegrationArg, PreviewArgs};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
 use mdtf_preview::{Camera, preview};
@@ -18,7 +18,8 @@ pub fn run(args: &PreviewArgs, progress: &Progress) -> Result<()> {
     if !(cam.step.is_finite() && cam.step > 0.0) {
         bail!("--step must be positive, got {}", cam.step);
     }
-    progress.step("rendering", || preview(&args.pack, &args.output, &cam))?;
+    let analytic = args.integration == IntegrationArg::Analytic;
+    progress.step("rendering", || preview(&args.pack, &args.output, &cam, analytic))?;
     progress.note(&format!("wrote {}", args.output.display()));
     Ok(())
 }
