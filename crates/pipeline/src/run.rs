@@ -334,13 +334,40 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     pack(&pack_chans, &params, &luts, &pdir, provenance, &BTreeMap::new()).map_err(|e| err(e.to_string()))?;
     stage("pack", t, n, vec!["pack/manifest.json".into()]);
 
-    if p.preview && matches!(profile, Profile::Slicer3dtf | Profile::DistanceTf) {
+    let previewable = match profile {
+        Profile::Slicer3dtf | Profile::DistanceTf => true,
+        Profile::GaussianTf => p.pack.tf.is_some(),
+        Profile::PeakFinding => false,
+    };
+    if p.preview && previewable {
         on_stage("preview");
         let t = Instant::now();
+        if profile == Profile::GaussianTf
+            && let Some(tf) = &tf
+        {
+            let json = serde_json::to_string_pretty(&tf.gaussians()).map_err(|e| fail("preview")(e.to_string()))?;
+            write_file_atomically(&pdir.join("gaussians.json"), |w| w.write_all(json.as_bytes()))
+                .map_err(|e| fail("preview")(e.to_string()))?;
+        }
         let cam = mdtf_preview::Camera { azimuth: 30.0, elevation: 20.0, size: 512, step: 0.5 };
         mdtf_preview::preview(&pdir, &dir.join("preview.png"), &cam, true)
             .map_err(|e| fail("preview")(e.to_string()))?;
-        stage("preview", t, 512 * 512, vec!["preview.png".into()]);
+        // the contact sheet: every picture of the run side by side
+        let mut pictures: Vec<PathBuf> = vec![dir.join("preview.png")];
+        for f in [
+            "histogram/hist_v_g.png",
+            "histogram/normal_vs_stretched.png",
+            "histogram/opacity.png",
+            "boundary/boundary_report.png",
+        ] {
+            if dir.join(f).exists() {
+                pictures.push(dir.join(f));
+            }
+        }
+        let refs: Vec<&Path> = pictures.iter().map(PathBuf::as_path).collect();
+        mdtf_preview::contact_sheet(&refs, 3, 384, &dir.join("contact_sheet.png"))
+            .map_err(|e| fail("preview")(e.to_string()))?;
+        stage("preview", t, 512 * 512, vec!["preview.png".into(), "contact_sheet.png".into()]);
     }
 
     let report = RunReport {

@@ -98,3 +98,61 @@ pub fn preview(dir: &Path, out: &Path, cam: &Camera, analytic: bool) -> Result<(
     );
     write_png(out, cam.size, &img, &text)
 }
+
+/// One image of a contact sheet, as 8-bit RGB.
+fn decode_png(path: &Path) -> Result<(usize, usize, Vec<u8>), PreviewError> {
+    let bad = |e: String| PreviewError::Pack(format!("{}: {e}", path.display()));
+    let file = std::fs::File::open(path).map_err(|e| bad(e.to_string()))?;
+    let mut reader = png::Decoder::new(std::io::BufReader::new(file)).read_info().map_err(|e| bad(e.to_string()))?;
+    let mut buf = vec![0; reader.output_buffer_size().ok_or_else(|| bad("image too large".into()))?];
+    let info = reader.next_frame(&mut buf).map_err(|e| bad(e.to_string()))?;
+    let (w, h) = (info.width as usize, info.height as usize);
+    let channels = info.color_type.samples();
+    if info.bit_depth != png::BitDepth::Eight {
+        return Err(bad("only 8-bit images go on a contact sheet".into()));
+    }
+    let mut rgb = Vec::with_capacity(w * h * 3);
+    for px in buf[..w * h * channels].chunks_exact(channels) {
+        match channels {
+            1 | 2 => rgb.extend([px[0]; 3]),
+            _ => rgb.extend(&px[..3]),
+        }
+    }
+    Ok((w, h, rgb))
+}
+
+/// Tiles PNG images left to right in rows of `columns`, each scaled to fit a
+/// `cell` x `cell` square (nearest neighbour), on a dark grey background.
+pub fn contact_sheet(images: &[&Path], columns: usize, cell: usize, out: &Path) -> Result<(), PreviewError> {
+    let columns = columns.max(1);
+    let rows = images.len().div_ceil(columns).max(1);
+    let (w, h) = (columns * cell, rows * cell);
+    let mut sheet = vec![40u8; w * h * 3];
+    for (n, path) in images.iter().enumerate() {
+        let (iw, ih, rgb) = decode_png(path)?;
+        let scale = (cell as f64 / iw.max(ih) as f64).min(4.0);
+        let (ox, oy) = ((n % columns) * cell, (n / columns) * cell);
+        for y in 0..cell {
+            for x in 0..cell {
+                let (sx, sy) = ((x as f64 / scale) as usize, (y as f64 / scale) as usize);
+                if sx < iw && sy < ih {
+                    let src = (sy * iw + sx) * 3;
+                    let dst = ((oy + y) * w + ox + x) * 3;
+                    sheet[dst..dst + 3].copy_from_slice(&rgb[src..src + 3]);
+                }
+            }
+        }
+    }
+    let names: Vec<String> = images.iter().map(|p| p.display().to_string()).collect();
+    write_file_atomically(out, |o| {
+        let mut enc = png::Encoder::new(o, w as u32, h as u32);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        enc.add_text_chunk("Description".into(), format!("mdtf contact sheet: {}", names.join(", ")))
+            .map_err(std::io::Error::other)?;
+        let mut wr = enc.write_header().map_err(std::io::Error::other)?;
+        wr.write_image_data(&sheet).map_err(std::io::Error::other)?;
+        wr.finish().map_err(std::io::Error::other)
+    })?;
+    Ok(())
+}
