@@ -3,7 +3,7 @@
 //! file or the defaults (the histogram volume's opacity, a distance alpha map).
 
 use mdtf_boundary::AlphaMap;
-use mdtf_histogram::{AxisSpec, HistogramError, HvolParams, histogram_volume};
+use mdtf_histogram::{AxisSpec, HistogramError, HistogramVolume, HvolParams, histogram_volume};
 use mdtf_pack::{Lut, LutAxis, Profile, TfFile};
 use mdtf_volume::Volume;
 use std::collections::BTreeMap;
@@ -26,14 +26,16 @@ pub fn ranges(
 }
 
 /// The lookup tables of `profile`: from `tf` when given; otherwise the
-/// histogram volume's default opacity (slicer-3dtf); distance-tf always gets
-/// `alpha_d` from `alpha` (and `alpha_u` from `tf`).
+/// histogram volume's default opacity (slicer-3dtf; `hvol` when the caller
+/// already has it, else computed); distance-tf always gets `alpha_d` from
+/// `alpha` (and `alpha_u` from `tf`).
 pub fn luts(
     profile: Profile,
     tf: Option<&TfFile>,
     alpha: &AlphaMap,
     chans: &[(String, Volume)],
     ranges: &BTreeMap<String, [f64; 2]>,
+    hvol: Option<&HistogramVolume>,
 ) -> Result<Vec<Lut>, HistogramError> {
     let get = |n: &str| chans.iter().find(|(c, _)| c == n).map(|(_, v)| v);
     let mut out = Vec::new();
@@ -41,10 +43,17 @@ pub fn luts(
         Profile::Slicer3dtf => match tf {
             Some(tf) => out.extend(tf.slicer_luts()),
             None => {
-                let (Some(v), Some(g), Some(f2)) = (get("v"), get("g"), get("f2")) else {
-                    return Err(HistogramError::Degenerate("the default opacity needs v, g and f2".into()));
+                let computed;
+                let hv = match hvol {
+                    Some(h) => h,
+                    None => {
+                        let (Some(v), Some(g), Some(f2)) = (get("v"), get("g"), get("f2")) else {
+                            return Err(HistogramError::Degenerate("the default opacity needs v, g and f2".into()));
+                        };
+                        computed = histogram_volume(v.samples(), g.samples(), f2.samples(), &HvolParams::default())?;
+                        &computed
+                    }
                 };
-                let hv = histogram_volume(v.samples(), g.samples(), f2.samples(), &HvolParams::default())?;
                 let [av, ag] = &hv.vg_axes;
                 out.push(Lut {
                     name: "tf2d_default".into(),

@@ -258,7 +258,8 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         stage("keep", t, n, written);
     }
 
-    // histograms
+    // histograms (the histogram volume is kept for the pack's default opacity)
+    let mut hvol_kept = None;
     if let Some(h) = &p.histogram {
         on_stage("histogram");
         let t = Instant::now();
@@ -296,6 +297,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
                 .map_err(|e| err(e.to_string()))?;
             write_hvol(&hdir, &hv).map_err(|e| err(e.to_string()))?;
             outputs.push("histogram/opacity.png".into());
+            hvol_kept = Some(hv);
         }
         stage("histogram", t, n, outputs);
     }
@@ -316,8 +318,8 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         profile.channels(&fields).into_iter().filter_map(|c| get(&c).map(|v| (c, v.clone()))).collect();
     let ranges = crate::pack_inputs::ranges(&pack_chans, &BTreeMap::new()).map_err(|e| err(e.to_string()))?;
     let alpha = p.pack.alpha.unwrap_or(AlphaMap::Linear { a: 1.0, dc: 3.0 });
-    let luts =
-        crate::pack_inputs::luts(profile, tf.as_ref(), &alpha, &pack_chans, &ranges).map_err(|e| err(e.to_string()))?;
+    let luts = crate::pack_inputs::luts(profile, tf.as_ref(), &alpha, &pack_chans, &ranges, hvol_kept.as_ref())
+        .map_err(|e| err(e.to_string()))?;
     let pdir = dir.join("pack");
     std::fs::create_dir_all(&pdir).map_err(|e| err(e.to_string()))?;
     let provenance = Provenance {

@@ -54,7 +54,8 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         None => None,
     };
     let alpha: AlphaMap = args.alpha.parse().map_err(anyhow::Error::msg)?;
-    let luts = progress.step("lookup tables", || pack_inputs::luts(profile, tf.as_ref(), &alpha, &chans, &ranges))?;
+    let luts =
+        progress.step("lookup tables", || pack_inputs::luts(profile, tf.as_ref(), &alpha, &chans, &ranges, None))?;
     let dtype = match args.dtype.as_deref() {
         None => None,
         Some("u8") => Some(Dtype::U8),
