@@ -63,6 +63,13 @@ impl Progress {
         out
     }
 
+    /// Shows `msg` as the current step (e.g. the stage a pipeline is in).
+    pub fn message(&self, msg: &str) {
+        if let Some(bar) = &self.bar {
+            bar.set_message(msg.to_string());
+        }
+    }
+
     /// Prints a line of results on stderr unless quiet.
     pub fn note(&self, line: &str) {
         if self.quiet {

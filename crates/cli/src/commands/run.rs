@@ -14,7 +14,7 @@ pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
     let opts =
         RunOptions { pipeline_path: args.pipeline.clone(), input: args.input.clone(), output: args.output.clone() };
     let report = progress
-        .step("running", || run_pipeline(&pipeline, &opts, &|stage| progress.note(&format!("  {stage} ..."))))?;
+        .step("running", || run_pipeline(&pipeline, &opts, &|stage| progress.message(&format!("running: {stage}"))))?;
     let mut table = format!("{:<22} {:>9} {:>12} {:>10}\n", "stage", "seconds", "Mvoxel/s", "peak MiB");
     for s in &report.stages {
         table += &format!("{:<22} {:>9.3} {:>12.1} {:>10.0}\n", s.stage, s.seconds, s.mvoxel_per_s, s.peak_mib);
