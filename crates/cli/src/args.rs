@@ -579,7 +579,8 @@ pub struct ValidateArgs {
 #[command(
     after_help = "Orthographic ray casting with emission-absorption compositing front to back, opacity corrected\n\
 for the step; slicer-3dtf classifies with its 3D (or 2D) TF LUT, distance-tf with alpha_u(v, g_hit) x alpha_d(d),\n\
-gaussian-tf with the pack's Gaussian primitives (gaussians.json);\n\
+gaussian-tf with the pack's Gaussian primitives (gaussians.json), peak-finding with its peak and\n\
+pre-integration tables (1D peak finding on v);\n\
 Blinn-Phong shading from the normal channel, weighted by 1 - (1 - g/g_max)^2.\n\n\
 Example:\n  mdtf preview out/pack -o preview.png --view 30,20 --size 512"
 )]
@@ -598,7 +599,9 @@ pub struct PreviewArgs {
     /// Sample spacing along rays, voxels.
     #[arg(long, default_value_t = 0.5)]
     pub step: f64,
-    /// gaussian-tf: integrate the primitives along each segment analytically (eq. 11) or sample them (Riemann sum).
+    /// Between-sample classification: gaussian-tf integrates the primitives along each segment
+    /// analytically (eq. 11), peak-finding classifies at the TF peak crossed between samples;
+    /// `riemann` classifies both at the samples only.
     #[arg(long, value_enum, default_value_t = IntegrationArg::Analytic)]
     pub integration: IntegrationArg,
 }
@@ -606,8 +609,8 @@ pub struct PreviewArgs {
 /// `--integration` values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum IntegrationArg {
-    /// The analytic segment integral of each Gaussian primitive.
+    /// Analytic segment integral (gaussian-tf) or peak finding (peak-finding).
     Analytic,
-    /// The density at the samples.
+    /// Classify at the samples (Riemann sum / post-classification).
     Riemann,
 }

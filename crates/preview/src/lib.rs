@@ -21,7 +21,7 @@ pub enum PreviewError {
     #[error("{0}")]
     Pack(String),
     /// The profile has no preview yet.
-    #[error("no preview for profile {0} yet (slicer-3dtf, distance-tf and gaussian-tf have one)")]
+    #[error("no preview for profile {0} yet")]
     Unsupported(String),
     /// Writing the image failed.
     #[error(transparent)]
@@ -29,7 +29,9 @@ pub enum PreviewError {
 }
 
 /// The classifier a pack's profile implies, from its lookup tables (and for
-/// gaussian-tf its primitives, integrated analytically or by a Riemann sum).
+/// gaussian-tf its primitives). `analytic` selects the between-sample mode:
+/// the analytic segment integral for gaussian-tf, peak finding for
+/// peak-finding; otherwise both classify at the samples.
 pub fn classifier(pack: &LoadedPack, analytic: bool) -> Result<Classifier, PreviewError> {
     let table = |n: &str| pack.tables.get(n).cloned();
     match pack.manifest.profile.as_str() {
@@ -65,6 +67,14 @@ pub fn classifier(pack: &LoadedPack, analytic: bool) -> Result<Classifier, Previ
             fields.truncate(m);
             Ok(Classifier::Gaussian { primitives, channels: fields, analytic })
         }
+        "peak-finding" => Ok(Classifier::Peak {
+            peak_table: table("peak_table").ok_or_else(|| {
+                PreviewError::Pack("peak-finding pack without peak_table (pack it with a TF that has tf1d)".into())
+            })?,
+            preintegration: table("preintegration")
+                .ok_or_else(|| PreviewError::Pack("peak-finding pack without preintegration".into()))?,
+            find_peaks: analytic,
+        }),
         other => Err(PreviewError::Unsupported(other.into())),
     }
 }

@@ -45,6 +45,18 @@ pub enum Classifier {
         /// Integrate analytically between samples instead of sampling the density.
         analytic: bool,
     },
+    /// Peak finding on v (1D): between consecutive samples, when the TF has a peak
+    /// between their values (the pack's peak table), classify at the peak; else (or
+    /// with `find_peaks` off: plain post-classification) at the sample. Colour and
+    /// opacity come from the pre-integration table's diagonal (a segment at one value).
+    Peak {
+        /// v of the highest TF peak between (v_front, v_back); -1 for none.
+        peak_table: Table,
+        /// RGBA of a segment of one L_min between (v_front, v_back).
+        preintegration: Table,
+        /// Look for peaks between samples.
+        find_peaks: bool,
+    },
 }
 
 fn lookup(t: &Table, coords: &[f32]) -> [f32; 4] {
@@ -146,6 +158,20 @@ pub fn render(channels: &BTreeMap<String, Volume>, classifier: &Classifier, cam:
                             .as_ref()
                             .map_or([1.0, 1.0, 1.0, 1.0], |t| lookup(t, &[sample("v"), sample("g_hit")]));
                         ([u[0], u[1], u[2]], 1.0 - (1.0 - ((u[3] * ad) as f64).min(0.999)).powf(cam.step))
+                    }
+                    Classifier::Peak { peak_table, preintegration, find_peaks } => {
+                        let v1 = sample("v");
+                        let v0 =
+                            if *find_peaks { previous.replace(vec![v1 as f64]).map(|p| p[0] as f32) } else { None };
+                        let at = match v0 {
+                            Some(v0) => {
+                                let peak = lookup(peak_table, &[v0, v1])[3];
+                                if peak >= 0.0 { peak } else { v1 }
+                            }
+                            None => v1,
+                        };
+                        let [r, gr, b, a] = lookup(preintegration, &[at, at]);
+                        ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(cam.step))
                     }
                     Classifier::Gaussian { primitives, channels: names, analytic } => {
                         let v: Vec<f64> = names.iter().map(|c| sample(c) as f64).collect();
