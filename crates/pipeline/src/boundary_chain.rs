@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 
 /// The bilateral pre-filter applied to g and f''.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Prefilter {
     /// Spatial sigma, world units.
     pub sigma_d: f64,
@@ -74,22 +75,35 @@ pub fn run(value: &Volume, params: &BoundaryChainParams) -> Result<BoundaryChain
         out.items.remove(i).1
     };
     let normal = take(&mut out, Item::Normal);
-    let mut f2 = first_field(take(&mut out, Item::F2));
-    let mut g = first_field(take(&mut out, Item::G));
-    if let Some(p) = params.prefilter {
-        let filter = |v: &Volume| {
-            let range = v.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
-            let bp = BilateralParams {
-                sigma_d: p.sigma_d,
-                sigma_r: p.sigma_r * range.max(f64::MIN_POSITIVE),
-                range_units: RangeUnits::Value,
-                ..BilateralParams::default()
-            };
-            mdtf_bilateral::run(v, &bp)
-        };
-        g = filter(&g)?;
-        f2 = filter(&f2)?;
-    }
+    let f2 = first_field(take(&mut out, Item::F2));
+    let g = first_field(take(&mut out, Item::G));
+    trace_derived(g, f2, normal, value_range, params)
+}
+
+/// The bilateral pre-filter of one channel: sigma_r is a fraction of the channel's own range.
+pub fn prefilter(v: &Volume, p: &Prefilter) -> Result<Volume, BilateralError> {
+    let range = v.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
+    let bp = BilateralParams {
+        sigma_d: p.sigma_d,
+        sigma_r: p.sigma_r * range.max(f64::MIN_POSITIVE),
+        range_units: RangeUnits::Value,
+        ..BilateralParams::default()
+    };
+    mdtf_bilateral::run(v, &bp)
+}
+
+/// The chain after derive: pre-filter g and f'' if asked, then trace.
+pub fn trace_derived(
+    g: Volume,
+    f2: Volume,
+    normal: MultiField,
+    value_range: f64,
+    params: &BoundaryChainParams,
+) -> Result<BoundaryChainOutput, ChainError> {
+    let (g, f2) = match &params.prefilter {
+        Some(p) => (prefilter(&g, p)?, prefilter(&f2, p)?),
+        None => (g, f2),
+    };
     let boundary =
         mdtf_boundary::run(&BoundaryInput { g: &g, f2: &f2, normal: &normal, value_range }, &params.boundary)?;
     Ok(BoundaryChainOutput { g, f2, normal, boundary })

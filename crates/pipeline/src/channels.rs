@@ -19,7 +19,9 @@ pub fn compute(
     let kernel = chain.kernel;
     let value = input.field_volume(0).ok_or_else(|| ChainError::Unknown("the input has no fields".into()))?;
     let needs = |n: &str| names.iter().any(|x| x == n);
-    let derived = if ["g", "f2", "nx", "ny", "nz", "inv_g"].iter().any(|n| needs(n)) {
+    let tracing = needs("g_hit") || needs("hit") || needs("distance");
+    // one derive pass serves both the derivative channels and the tracing
+    let derived = if tracing || ["g", "f2", "nx", "ny", "nz", "inv_g"].iter().any(|n| needs(n)) {
         let d = DeriveParams {
             items: vec![Item::G, Item::F2, Item::Normal, Item::InvG],
             kernel: kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
@@ -39,10 +41,19 @@ pub fn compute(
     } else {
         None
     };
-    let traced = if needs("g_hit") || needs("hit") || needs("distance") {
-        Some(boundary_chain::run(&value, chain)?)
-    } else {
-        None
+    let traced = match &derived {
+        Some(d) if tracing => {
+            let field = |item: Item, i: usize| {
+                d.get(item)
+                    .and_then(|m| m.field_volume(i))
+                    .ok_or_else(|| ChainError::Unknown(format!("derive gave no {item}")))
+            };
+            let normal =
+                d.get(Item::Normal).cloned().ok_or_else(|| ChainError::Unknown("derive gave no normal".into()))?;
+            let range = value.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
+            Some(boundary_chain::trace_derived(field(Item::G, 0)?, field(Item::F2, 0)?, normal, range, chain)?)
+        }
+        _ => None,
     };
     let mut out = Vec::new();
     for name in names {

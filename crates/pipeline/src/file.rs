@@ -49,16 +49,6 @@ pub struct DeriveSection {
     pub kernel: Option<String>,
 }
 
-/// `[prefilter]`: the bilateral pre-filter of g and f'' before tracing.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct PrefilterSection {
-    /// Spatial sigma, world units.
-    pub sigma_d: f64,
-    /// Range sigma as a fraction of each channel's range.
-    pub sigma_r: f64,
-}
-
 /// `[histogram]`: which pictures to make.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -104,9 +94,9 @@ pub struct Pipeline {
     /// Derivatives.
     #[serde(default)]
     pub derive: DeriveSection,
-    /// Optional pre-filter before tracing.
+    /// `[prefilter]`: optional bilateral pre-filter of g and f'' before tracing.
     #[serde(default)]
-    pub prefilter: Option<PrefilterSection>,
+    pub prefilter: Option<crate::boundary_chain::Prefilter>,
     /// Boundary tracing (runs when a later stage needs its channels).
     #[serde(default)]
     pub boundary: BoundaryParams,

@@ -5,7 +5,6 @@
 //! as it was.
 
 use crate::file::{PhantomKind, Pipeline};
-use mdtf_bilateral::{BilateralParams, RangeUnits};
 use mdtf_boundary::{AlphaMap, BoundaryInput};
 use mdtf_datagen::{MultiFieldPhantom, RadialPhantom, add_gaussian_noise, erf_sphere, min_extent};
 use mdtf_derive::{DeriveParams, Item, Kernel};
@@ -210,16 +209,8 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         if let Some(pf) = p.prefilter {
             on_stage("prefilter");
             let t = Instant::now();
-            let filter = |v: &Volume| {
-                let range = v.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
-                let bp = BilateralParams {
-                    sigma_d: pf.sigma_d,
-                    sigma_r: pf.sigma_r * range.max(f64::MIN_POSITIVE),
-                    range_units: RangeUnits::Value,
-                    ..Default::default()
-                };
-                mdtf_bilateral::run(v, &bp).map_err(|e| fail("prefilter")(e.to_string()))
-            };
+            let filter =
+                |v: &Volume| crate::boundary_chain::prefilter(v, &pf).map_err(|e| fail("prefilter")(e.to_string()));
             g = filter(&g)?;
             f2 = filter(&f2)?;
             stage("prefilter", t, n, vec![]);
