@@ -50,19 +50,7 @@ fn slicer_3dtf_256_encode_only(bencher: divan::Bencher) {
 /// The 256 x 256 pre-integration table of a 256-sample TF (target: < 100 ms).
 #[divan::bench(sample_count = 5, sample_size = 1)]
 fn preintegration_256(bencher: divan::Bencher) {
-    let tf = mdtf_pack::Tf1d {
-        samples: (0..256)
-            .map(|k| {
-                let s = k as f64 / 255.0;
-                [
-                    s,
-                    1.0 - s,
-                    0.5,
-                    4.0 * (-((s - 0.3) / 0.05f64).powi(2)).exp() + 1.5 * (-((s - 0.7) / 0.1f64).powi(2)).exp(),
-                ]
-            })
-            .collect(),
-    };
+    let tf = mdtf_pack::Tf1d::two_peaks(256);
     bencher.bench(|| mdtf_pack::preintegration_table(&tf, 256, 1.0).len());
 }
 

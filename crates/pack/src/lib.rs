@@ -22,7 +22,7 @@ pub use manifest::{
 };
 pub use profile::{PROFILE_NAMES, Profile, TextureLayout, describe};
 pub use quantise::{Decode, Dtype, QuantiseError, decode_for};
-pub use tables::{Tf1d, peak_table, peaks, preintegration_table, segment};
+pub use tables::{Tf1d, peak_table, peaks, preintegration_table, segment, segment_by_midpoint};
 pub use tf::{Falloff, TfFile, Widget, parse_tf, to_rgba8};
 
 use mdtf_volume::{Volume, VolumeError, write_file_atomically};

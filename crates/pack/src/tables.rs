@@ -27,6 +27,43 @@ impl Tf1d {
         let (a, b) = (self.samples[k], self.samples[k + 1]);
         [0, 1, 2, 3].map(|c| a[c] + t * (b[c] - a[c]))
     }
+
+    /// An example TF with two extinction peaks (tau = 4 at s = 0.3, width
+    /// 0.05; tau = 1.5 at s = 0.7, width 0.1) and colour (s, 1 - s, 0.5),
+    /// sampled at `n` >= 2 points. The self-check, the tests and the
+    /// benchmarks use it as a TF with narrow features.
+    pub fn two_peaks(n: usize) -> Tf1d {
+        let last = n.max(2) - 1;
+        Tf1d {
+            samples: (0..=last)
+                .map(|k| {
+                    let s = k as f64 / last as f64;
+                    let tau =
+                        4.0 * (-((s - 0.3) / 0.05f64).powi(2)).exp() + 1.5 * (-((s - 0.7) / 0.1f64).powi(2)).exp();
+                    [s, 1.0 - s, 0.5, tau]
+                })
+                .collect(),
+        }
+    }
+}
+
+/// The same integrals as [`segment`] by `steps` midpoint steps with the
+/// optical depth accumulated step by step: a slow, independent reference
+/// for checking [`segment`] and [`preintegration_table`].
+pub fn segment_by_midpoint(tf: &Tf1d, sf: f64, sb: f64, d: f64, steps: usize) -> [f64; 4] {
+    let steps = steps.max(1);
+    let h = 1.0 / steps as f64;
+    let (mut depth, mut c) = (0.0, [0.0; 3]);
+    for k in 0..steps {
+        let t = (k as f64 + 0.5) * h;
+        let v = tf.at(sf + t * (sb - sf));
+        let mid_depth = depth + 0.5 * d * v[3] * h;
+        for ch in 0..3 {
+            c[ch] += v[ch] * d * v[3] * (-mid_depth).exp() * h;
+        }
+        depth += d * v[3] * h;
+    }
+    [c[0], c[1], c[2], 1.0 - (-depth).exp()]
 }
 
 /// Gauss-Legendre nodes and weights on [0, 1] (2 points: exact for degree 3;
@@ -161,46 +198,15 @@ pub fn peak_table(tf: &Tf1d, n: usize) -> Vec<f32> {
 mod tests {
     use super::*;
 
-    fn test_tf(n: usize) -> Tf1d {
-        Tf1d {
-            samples: (0..n)
-                .map(|k| {
-                    let s = k as f64 / (n - 1) as f64;
-                    let tau =
-                        4.0 * (-((s - 0.3) / 0.05f64).powi(2)).exp() + 1.5 * (-((s - 0.7) / 0.1f64).powi(2)).exp();
-                    [s, 1.0 - s, 0.5, tau]
-                })
-                .collect(),
-        }
-    }
-
-    /// Fine quadrature of the same integrals written out independently (4000 midpoint steps,
-    /// optical depth accumulated step by step).
-    fn reference(tf: &Tf1d, sf: f64, sb: f64, d: f64) -> [f64; 4] {
-        let steps = 4_000;
-        let h = 1.0 / steps as f64;
-        let (mut depth, mut c) = (0.0, [0.0; 3]);
-        for k in 0..steps {
-            let t = (k as f64 + 0.5) * h;
-            let v = tf.at(sf + t * (sb - sf));
-            let mid_depth = depth + 0.5 * d * v[3] * h;
-            for ch in 0..3 {
-                c[ch] += v[ch] * d * v[3] * (-mid_depth).exp() * h;
-            }
-            depth += d * v[3] * h;
-        }
-        [c[0], c[1], c[2], 1.0 - (-depth).exp()]
-    }
-
     #[test]
     fn table_entries_match_fine_quadrature() {
-        let tf = test_tf(256);
+        let tf = Tf1d::two_peaks(256);
         let n = 40;
         let table = preintegration_table(&tf, n, 1.7);
         let mut worst = 0.0f64;
         for j in 0..n {
             for i in 0..n {
-                let want = reference(&tf, i as f64 / (n - 1) as f64, j as f64 / (n - 1) as f64, 1.7);
+                let want = segment_by_midpoint(&tf, i as f64 / (n - 1) as f64, j as f64 / (n - 1) as f64, 1.7, 4_000);
                 for c in 0..4 {
                     worst = worst.max((table[j * n + i][c] as f64 - want[c]).abs());
                 }
@@ -212,7 +218,7 @@ mod tests {
 
     #[test]
     fn peak_table_equals_a_brute_force_scan() {
-        let tf = test_tf(101);
+        let tf = Tf1d::two_peaks(101);
         let n = 101;
         let table = peak_table(&tf, n);
         let tau: Vec<f64> = tf.samples.iter().map(|s| s[3]).collect();

@@ -6,7 +6,7 @@ use mdtf_boundary::{BoundaryInput, BoundaryParams, HitCode};
 use mdtf_datagen::erf_sphere;
 use mdtf_derive::{DeriveParams, Item};
 use mdtf_histogram::{Axis, HvolParams, Scale, count, histogram_volume, hit_mask, write_hvol, write_stretched};
-use mdtf_pack::{Dtype, GaussianPrimitive, Tf1d, decode_for, preintegration_table, segment};
+use mdtf_pack::{Dtype, GaussianPrimitive, Tf1d, decode_for, preintegration_table, segment, segment_by_midpoint};
 use mdtf_volume::{Geometry, MultiField, Volume};
 use serde::Serialize;
 use std::f64::consts::PI;
@@ -161,23 +161,11 @@ pub fn validate(n: usize, dir: &Path) -> Result<Vec<Check>, String> {
     out.push(check("pack: worst decode error, code steps", worst_steps, 0.5 + 1e-6, true));
 
     // tables: pre-integration against a fine quadrature, Gaussian segment integral against Simpson
-    let tf = Tf1d {
-        samples: (0..256)
-            .map(|k| {
-                let s = k as f64 / 255.0;
-                [
-                    s,
-                    1.0 - s,
-                    0.5,
-                    4.0 * (-((s - 0.3) / 0.05f64).powi(2)).exp() + 1.5 * (-((s - 0.7) / 0.1f64).powi(2)).exp(),
-                ]
-            })
-            .collect(),
-    };
+    let tf = Tf1d::two_peaks(256);
     let table = preintegration_table(&tf, 32, 1.3);
     let mut worst_t = 0.0f64;
     for (i, j) in [(0usize, 31usize), (31, 0), (5, 20), (12, 12), (28, 3)] {
-        let reference = fine_segment(&tf, i as f64 / 31.0, j as f64 / 31.0, 1.3);
+        let reference = segment_by_midpoint(&tf, i as f64 / 31.0, j as f64 / 31.0, 1.3, 4000);
         for ch in 0..4 {
             worst_t = worst_t.max((table[j * 32 + i][ch] as f64 - reference[ch]).abs());
         }
@@ -214,21 +202,4 @@ pub fn validate(n: usize, dir: &Path) -> Result<Vec<Check>, String> {
     }
     out.push(check("pack: Gaussian segment integral vs quadrature", worst_g, 1e-5, true));
     Ok(out)
-}
-
-/// The pre-integration integrals by 4000 midpoint steps (independent of the table code).
-fn fine_segment(tf: &Tf1d, sf: f64, sb: f64, d: f64) -> [f64; 4] {
-    let steps = 4000;
-    let h = 1.0 / steps as f64;
-    let (mut depth, mut c) = (0.0, [0.0; 3]);
-    for k in 0..steps {
-        let t = (k as f64 + 0.5) * h;
-        let v = tf.at(sf + t * (sb - sf));
-        let mid = depth + 0.5 * d * v[3] * h;
-        for ch in 0..3 {
-            c[ch] += v[ch] * d * v[3] * (-mid).exp() * h;
-        }
-        depth += d * v[3] * h;
-    }
-    [c[0], c[1], c[2], 1.0 - (-depth).exp()]
 }
