@@ -653,7 +653,7 @@ fn every_shipped_pipeline_runs_on_its_phantom_and_a_failed_run_changes_nothing()
     let left: Vec<_> = std::fs::read_dir(dir.path())
         .unwrap()
         .filter_map(|e| e.ok())
-        .filter(|e| e.file_name().to_string_lossy().starts_with(".mdtf-run-"))
+        .filter(|e| e.file_name().to_string_lossy().starts_with(".mdtf-partial-"))
         .collect();
     assert!(left.is_empty(), "temporary run folders left behind");
     let e = mdtf_err(&[
@@ -671,9 +671,114 @@ fn every_shipped_pipeline_runs_on_its_phantom_and_a_failed_run_changes_nothing()
 fn validate_passes_on_a_correct_installation() {
     let dir = tempfile::tempdir().unwrap();
     let out = mdtf_ok(&["validate", "--size", "64", "-o", dir.path().to_str().unwrap()]);
-    assert_eq!(out.lines().filter(|l| l.ends_with(" ok")).count(), 12, "{out}");
+    assert_eq!(out.lines().filter(|l| l.ends_with(" ok")).count(), 14, "{out}");
     assert!(dir.path().join("boundary/boundary_report.png").exists());
     assert!(dir.path().join("histogram/normal_vs_stretched.png").exists());
     let e = mdtf_err(&["validate", "--size", "16"]);
     assert!(e.contains("at least 48"), "{e}");
+}
+
+/// Reads an attached-header NRRD of f32 samples written by mdtf (header, blank line, raw little-endian data).
+fn nrrd_f32(path: &std::path::Path) -> Vec<f32> {
+    let bytes = std::fs::read(path).unwrap();
+    let at = bytes.windows(2).position(|w| w == b"\n\n").unwrap() + 2;
+    bytes[at..].chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
+}
+
+#[test]
+fn tetra_meshes_a_volume_and_packs_s_g_boxes_and_tables() {
+    let dir = tempfile::tempdir().unwrap();
+    let vol = dir.path().join("s.nii.gz");
+    mdtf_ok(&[
+        "synth",
+        "erf-sphere",
+        "-o",
+        vol.to_str().unwrap(),
+        "--size",
+        "24",
+        "--radius",
+        "7",
+        "--sigma",
+        "2",
+        "-q",
+    ]);
+    let pack = dir.path().join("pack");
+    mdtf_ok(&[
+        "tetra",
+        "--from-volume",
+        vol.to_str().unwrap(),
+        "--tets",
+        "5",
+        "-o",
+        pack.to_str().unwrap(),
+        "--tables",
+        "gaussian,triangle",
+        "-q",
+    ]);
+    assert!(pack.join("mesh.vtu").exists());
+    let m: serde_json::Value = serde_json::from_slice(&std::fs::read(pack.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(m["profile"], "projected-tetrahedra");
+    assert_eq!(m["mesh"]["tetrahedra"], 23 * 23 * 23 * 5);
+    assert_eq!(m["mesh"]["points"], 24 * 24 * 24);
+    assert_eq!(m["geometry"]["dims"], serde_json::json!([24, 24, 24]));
+    let luts: Vec<&str> = m["luts"].as_array().unwrap().iter().map(|l| l["name"].as_str().unwrap()).collect();
+    assert_eq!(luts, ["pt_gaussian", "pt_triangle_rise", "pt_triangle_fall"]);
+    // s is the volume's value at every point, g its gradient magnitude
+    let volume = mdtf_volume::read(&vol, &mdtf_volume::ReadOptions::default()).unwrap();
+    let s_g = nrrd_f32(&pack.join("s_g.nrrd"));
+    let values: Vec<f32> = volume.fields[0].data.iter().copied().collect();
+    assert_eq!(s_g.len(), 2 * values.len());
+    assert!(s_g.chunks_exact(2).zip(&values).all(|(sg, v)| sg[0] == *v));
+    // every cell box holds its vertices' (s, g)
+    let boxes = nrrd_f32(&pack.join("cell_box.nrrd"));
+    let tets_bytes = std::fs::read(pack.join("tets.nrrd")).unwrap();
+    let at = tets_bytes.windows(2).position(|w| w == b"\n\n").unwrap() + 2;
+    let tets: Vec<u32> =
+        tets_bytes[at..].chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+    for (t, b) in tets.chunks_exact(4).zip(boxes.chunks_exact(4)).step_by(97) {
+        for &v in t {
+            let (s, g) = (s_g[2 * v as usize], s_g[2 * v as usize + 1]);
+            assert!(b[0] <= s && s <= b[1] && b[2] <= g && g <= b[3]);
+        }
+    }
+}
+
+#[test]
+fn tetra_refuses_bad_meshes_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let head =
+        "# vtk DataFile Version 4.2\nx\nASCII\nDATASET UNSTRUCTURED_GRID\nPOINTS 4 float\n0 0 0 1 0 0 0 1 0 0 0 1\n";
+    let scalars = "POINT_DATA 4\nSCALARS density float 1\nLOOKUP_TABLE default\n1 2 3 4\n";
+    let cases = [
+        ("tri.vtk", format!("{head}CELLS 1 4\n3 0 1 2\nCELL_TYPES 1\n5\n{scalars}"), vec!["no tetrahedra", "Triangle"]),
+        (
+            "idx.vtk",
+            format!("{head}CELLS 1 5\n4 0 1 2 7\nCELL_TYPES 1\n10\n{scalars}"),
+            vec!["uses point 7", "4 points"],
+        ),
+        ("flat.vtk", format!("{head}CELLS 1 5\n4 0 1 2 2\nCELL_TYPES 1\n10\n{scalars}"), vec!["zero volume"]),
+        (
+            "ok.vtk",
+            format!("{head}CELLS 1 5\n4 0 1 2 3\nCELL_TYPES 1\n10\n{scalars}"),
+            vec!["pressure", "density (1 comp.)"],
+        ),
+    ];
+    for (name, text, wanted) in cases {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        let pack = dir.path().join(format!("pack-{name}"));
+        let mut args = vec!["tetra", path.to_str().unwrap(), "-o", pack.to_str().unwrap()];
+        if name == "ok.vtk" {
+            args.extend(["--scalar", "pressure"]);
+        }
+        let e = mdtf_err(&args);
+        for w in wanted {
+            assert!(e.contains(w), "{name}: {e}");
+        }
+        assert!(!pack.exists(), "{name}: output written");
+    }
+    let left = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter(|e| e.as_ref().is_ok_and(|e| e.file_name().to_string_lossy().starts_with(".mdtf-partial-")));
+    assert_eq!(left.count(), 0);
 }

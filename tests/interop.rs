@@ -280,3 +280,85 @@ fn pynrrd_opens_pack_textures_with_values_intact() {
     assert_eq!(mf.fields.len(), 4);
     assert_eq!(mf.fields[1].data.iter().map(|&v| v as f64).collect::<Vec<_>>(), floats(&d["fields"][1]));
 }
+
+/// Writes a mesh with meshio: tetrahedra, one triangle, a linear scalar s, a
+/// second scalar and a vector array, in the format and options given.
+const MESHIO_WRITE: &str = r#"
+import sys, meshio, numpy as np
+rng = np.random.default_rng(7)
+n = 4
+g = np.stack(np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing='ij'), -1).reshape(-1, 3).astype(float)
+pts = g * [1.0, 1.5, 0.75] + rng.uniform(-0.1, 0.1, g.shape)
+idx = lambda i, j, k: (i * n + j) * n + k
+tets = []
+for i in range(n - 1):
+    for j in range(n - 1):
+        for k in range(n - 1):
+            c = [idx(i + (m >> 2 & 1), j + (m >> 1 & 1), k + (m & 1)) for m in range(8)]
+            for t in ([0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]):
+                tets.append([c[v] for v in t])
+s = 2.0 * pts[:, 0] - 3.0 * pts[:, 1] + 0.5 * pts[:, 2] + 10.0
+m = meshio.Mesh(pts, [("tetra", np.array(tets)), ("triangle", np.array([[0, 1, 2]]))],
+                point_data={"s": s, "temperature": s * 0 + 1.0, "velocity": pts * 2.0})
+kw = {}
+if sys.argv[2] == "ascii": kw["binary"] = False
+if sys.argv[2] == "raw": kw["compression"] = None
+m.write(sys.argv[1], **kw)
+"#;
+
+/// Reads a mesh with meshio and prints points, tetra cells and point arrays as JSON.
+const MESHIO_DUMP: &str = r#"
+import sys, json, meshio, numpy as np
+m = meshio.read(sys.argv[1])
+tets = [c.data.tolist() for c in m.cells if c.type == "tetra"]
+print(json.dumps({"points": m.points.tolist(), "tets": tets[0] if tets else [],
+  "arrays": {k: np.asarray(v).tolist() for k, v in m.point_data.items()}}))
+"#;
+
+#[test]
+fn meshio_meshes_round_trip_through_mdtf_tetra() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, mode) in [
+        ("m.vtu", "default"),
+        ("m_raw.vtu", "raw"),
+        ("m_ascii.vtu", "ascii"),
+        ("m.vtk", "default"),
+        ("m_ascii.vtk", "ascii"),
+    ] {
+        let input = dir.path().join(name);
+        run_python(MESHIO_WRITE, &[input.to_str().unwrap(), mode]);
+        let pack = dir.path().join(format!("pack_{name}"));
+        mdtf_ok(&[
+            "tetra",
+            input.to_str().unwrap(),
+            "-o",
+            pack.to_str().unwrap(),
+            "--scalar",
+            "s",
+            "--tables",
+            "front-back",
+            "--fb-size",
+            "8,8,8",
+            "-q",
+        ]);
+        let theirs = dump(MESHIO_DUMP, &input);
+        let ours = dump(MESHIO_DUMP, &pack.join("mesh.vtu"));
+        assert_eq!(ours["points"], theirs["points"], "{name}: points");
+        assert_eq!(ours["tets"], theirs["tets"], "{name}: tetrahedra");
+        for array in ["s", "temperature", "velocity"] {
+            assert_eq!(ours["arrays"][array], theirs["arrays"][array], "{name}: {array}");
+        }
+        // the added arrays: s is linear, so every vertex gradient is exactly (2, -3, 0.5)
+        let g = floats(&ours["arrays"]["g"]);
+        let expected = (4.0f64 + 9.0 + 0.25).sqrt();
+        assert_eq!(g.len(), 64, "{name}");
+        assert!(g.iter().all(|x| (x - expected).abs() < 1e-4), "{name}: g {g:?}");
+        let grad = ours["arrays"]["gradient"].as_array().unwrap();
+        assert!((grad[5][1].as_f64().unwrap() + 3.0).abs() < 1e-4, "{name}: gradient {:?}", grad[5]);
+        // the manifest says what was skipped
+        let manifest: Value = serde_json::from_slice(&std::fs::read(pack.join("manifest.json")).unwrap()).unwrap();
+        assert_eq!(manifest["profile"], "projected-tetrahedra");
+        assert_eq!(manifest["mesh"]["tetrahedra"], 162, "{name}");
+        assert_eq!(manifest["mesh"]["skipped_cells"]["Triangle"], 1, "{name}");
+    }
+}

@@ -54,15 +54,15 @@ pub fn mdtf_err(args: &[&str]) -> String {
 }
 
 /// The Python interpreter for interop tests: `$MDTF_PYTHON`, else `python3`.
-/// Panics with instructions if nibabel or pynrrd is missing: the interop
-/// tests must run, not skip (CI installs both).
+/// Panics with instructions if nibabel, pynrrd or meshio is missing: the
+/// interop tests must run, not skip (CI installs them).
 pub fn python() -> String {
     let py = std::env::var("MDTF_PYTHON").unwrap_or_else(|_| "python3".into());
-    let ok = Command::new(&py).args(["-c", "import nibabel, nrrd, numpy"]).output();
+    let ok = Command::new(&py).args(["-c", "import nibabel, nrrd, numpy, meshio"]).output();
     match ok {
         Ok(o) if o.status.success() => py,
         _ => panic!(
-            "{py} lacks nibabel/pynrrd/numpy: run `{py} -m pip install nibabel pynrrd numpy` (or set MDTF_PYTHON)"
+            "{py} lacks nibabel/pynrrd/numpy/meshio: run `{py} -m pip install nibabel pynrrd numpy meshio` (or set MDTF_PYTHON)"
         ),
     }
 }

@@ -13,16 +13,23 @@ mod manifest;
 mod profile;
 mod quantise;
 mod tables;
+mod tet_tables;
 mod tf;
 
 pub use gaussian::GaussianPrimitive;
 pub use lut::{Lut, LutAxis, LutEntry};
 pub use manifest::{
-    ChannelEntry, ChannelSource, MANIFEST_SCHEMA, Manifest, ManifestGeometry, Provenance, SCHEMA_ID, TextureEntry,
+    ChannelEntry, ChannelSource, MANIFEST_SCHEMA, Manifest, ManifestGeometry, MeshArrayEntry, MeshEntry, Provenance,
+    SCHEMA_ID, TextureEntry,
 };
 pub use profile::{PROFILE_NAMES, Profile, TextureLayout, describe};
 pub use quantise::{Decode, Dtype, QuantiseError, decode_for};
 pub use tables::{Tf1d, peak_table, peaks, preintegration_table, segment, segment_by_midpoint};
+pub use tet_tables::{
+    TetTable, TetTableParams, front_back_tables, front_back_weights, gaussian_segment, gaussian_table,
+    gaussian_widget_integral, lookup_gaussian, preintegration_1d_table, sinusoid_integral, sinusoid_table,
+    triangle_flank_integral, triangle_tables,
+};
 pub use tf::{Falloff, TfFile, Widget, parse_tf, to_rgba8};
 
 use mdtf_volume::{Volume, VolumeError, write_file_atomically};
@@ -264,6 +271,7 @@ pub fn write(encoded: &Encoded, luts: &[Lut], dir: &Path, provenance: Provenance
         textures,
         channels: encoded.channels.clone(),
         luts: luts.iter().map(|l| l.write(dir)).collect::<Result<_, _>>()?,
+        mesh: None,
         provenance,
     };
     let json = serde_json::to_string_pretty(&manifest)

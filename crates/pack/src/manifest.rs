@@ -97,8 +97,52 @@ pub struct Manifest {
     /// Lookup tables (transfer-function textures, 1D tables).
     #[serde(default)]
     pub luts: Vec<crate::lut::LutEntry>,
+    /// The tetrahedral mesh of a `projected-tetrahedra` pack (absent for volume packs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mesh: Option<MeshEntry>,
     /// Provenance.
     pub provenance: Provenance,
+}
+
+/// The tetrahedral mesh of a `projected-tetrahedra` pack.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MeshEntry {
+    /// Number of points (vertices).
+    pub points: usize,
+    /// Number of tetrahedra kept.
+    pub tetrahedra: usize,
+    /// Cells of other types skipped when reading, by VTK cell type.
+    pub skipped_cells: std::collections::BTreeMap<String, usize>,
+    /// Zero-volume tetrahedra skipped.
+    pub degenerate_tetrahedra: usize,
+    /// Longest edge (world units).
+    pub max_edge_length: f64,
+    /// How the per-vertex gradients were computed.
+    pub gradient_method: String,
+    /// The mesh with its point arrays (s, g, gradient) as VTK XML, relative to the manifest.
+    pub vtu: String,
+    /// The binary arrays.
+    pub arrays: Vec<MeshArrayEntry>,
+}
+
+/// One binary array of a mesh pack: an NRRD file with an attached header,
+/// components along the first (fastest) axis, one sample per point or cell.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MeshArrayEntry {
+    /// Array name.
+    pub name: String,
+    /// What it holds, component by component.
+    pub meaning: String,
+    /// Units.
+    pub units: String,
+    /// "point" or "cell".
+    pub association: String,
+    /// Components per point or cell.
+    pub components: usize,
+    /// "f32" or "u32", little-endian.
+    pub dtype: String,
+    /// The NRRD file, relative to the manifest.
+    pub file: String,
 }
 
 /// JSON Schema (draft 2020-12) of the manifest, printed by `mdtf pack --schema`.
@@ -167,6 +211,23 @@ pub const MANIFEST_SCHEMA: &str = r##"{
         "file_f32": {"type": "string", "description": "NRRD, float, the same values"}
       }
     }},
+    "mesh": {"type": "object", "description": "projected-tetrahedra packs only",
+      "required": ["points", "tetrahedra", "skipped_cells", "degenerate_tetrahedra", "max_edge_length", "gradient_method", "vtu", "arrays"],
+      "properties": {
+        "points": {"type": "integer", "minimum": 0},
+        "tetrahedra": {"type": "integer", "minimum": 1},
+        "skipped_cells": {"type": "object", "additionalProperties": {"type": "integer"}},
+        "degenerate_tetrahedra": {"type": "integer", "minimum": 0},
+        "max_edge_length": {"type": "number"},
+        "gradient_method": {"type": "string"},
+        "vtu": {"type": "string"},
+        "arrays": {"type": "array", "items": {"type": "object",
+          "required": ["name", "meaning", "units", "association", "components", "dtype", "file"],
+          "properties": {"name": {"type": "string"}, "meaning": {"type": "string"}, "units": {"type": "string"},
+            "association": {"enum": ["point", "cell"]}, "components": {"type": "integer", "minimum": 1},
+            "dtype": {"enum": ["f32", "u32"]}, "file": {"type": "string"}}}}
+      }
+    },
     "provenance": {"type": "object", "required": ["mdtf_version", "stages"],
       "properties": {
         "mdtf_version": {"type": "string"},

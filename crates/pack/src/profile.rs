@@ -18,10 +18,14 @@ pub enum Profile {
     GaussianTf,
     /// Peak finding: the fields and 1/g, four per u16 texture `fields_k`.
     PeakFinding,
+    /// Projected tetrahedra with bivariate (s, g) TFs: no volume textures;
+    /// the mesh's per-vertex and per-cell arrays and the pre-integration
+    /// tables, written by `mdtf tetra` (crate mdtf-tetra).
+    ProjectedTetrahedra,
 }
 
 /// Profile names for messages.
-pub const PROFILE_NAMES: &str = "slicer-3dtf, distance-tf, gaussian-tf, peak-finding";
+pub const PROFILE_NAMES: &str = "slicer-3dtf, distance-tf, gaussian-tf, peak-finding, projected-tetrahedra";
 
 /// One texture of a profile: its name, channels per component (None: unused) and type.
 #[derive(Debug, Clone, PartialEq)]
@@ -65,6 +69,7 @@ impl Profile {
             ],
             Profile::GaussianTf => groups("gnorm"),
             Profile::PeakFinding => groups("inv_g"),
+            Profile::ProjectedTetrahedra => Vec::new(),
         }
     }
 
@@ -105,7 +110,7 @@ impl FromStr for Profile {
             "distance-tf" => Ok(Profile::DistanceTf),
             "gaussian-tf" => Ok(Profile::GaussianTf),
             "peak-finding" => Ok(Profile::PeakFinding),
-            "projected-tetrahedra" => Err(format!("profile '{s}' is not implemented yet (available: {PROFILE_NAMES})")),
+            "projected-tetrahedra" => Ok(Profile::ProjectedTetrahedra),
             _ => Err(format!("unknown profile '{s}' (available: {PROFILE_NAMES})")),
         }
     }
@@ -118,6 +123,7 @@ impl fmt::Display for Profile {
             Profile::DistanceTf => "distance-tf",
             Profile::GaussianTf => "gaussian-tf",
             Profile::PeakFinding => "peak-finding",
+            Profile::ProjectedTetrahedra => "projected-tetrahedra",
         })
     }
 }

@@ -79,6 +79,12 @@ const GL: [(f64, f64); 2] = [(0.211_324_865_405_187_1, 0.5), (0.788_675_134_594_
 /// each piece, so its integral is exact) and each piece is integrated with
 /// 2-point Gauss-Legendre, subdivided so that no piece attenuates by more than e^-1/2.
 pub fn segment(tf: &Tf1d, sf: f64, sb: f64, d: f64) -> [f64; 4] {
+    segment_in_pieces(tf, sf, sb, d, 2.0)
+}
+
+/// [`segment`] with every piece attenuating by at most e^(-1 / `pieces_per_depth`)
+/// (2: [`segment`]; 4 for about eight times less error at twice the work).
+pub(crate) fn segment_in_pieces(tf: &Tf1d, sf: f64, sb: f64, d: f64, pieces_per_depth: f64) -> [f64; 4] {
     let n = tf.samples.len().max(2);
     let span = (n - 1) as f64;
     // the t of each sample position strictly between sf and sb, in increasing t
@@ -103,7 +109,7 @@ pub fn segment(tf: &Tf1d, sf: f64, sb: f64, d: f64) -> [f64; 4] {
             continue;
         }
         // the TF is linear on this piece: interpolate instead of looking it up
-        let pieces = (d * (va[3] + vb[3]) * (t1 - t0)).ceil().max(1.0) as usize;
+        let pieces = (0.5 * pieces_per_depth * d * (va[3] + vb[3]) * (t1 - t0)).ceil().max(1.0) as usize;
         let dv = [vb[0] - va[0], vb[1] - va[1], vb[2] - va[2], vb[3] - va[3]];
         let h = (t1 - t0) / pieces as f64;
         let df = 1.0 / pieces as f64;
@@ -113,7 +119,7 @@ pub fn segment(tf: &Tf1d, sf: f64, sb: f64, d: f64) -> [f64; 4] {
             for &(x, wgt) in &GL {
                 let f = fa + x * df;
                 let tau = va[3] + f * dv[3];
-                let local = 0.5 * d * (tau_a + tau) * x * h; // <= 1/2 by the choice of pieces
+                let local = 0.5 * d * (tau_a + tau) * x * h; // <= 1/2 for pieces_per_depth >= 2
                 let w = d * tau * transmitted * exp_neg_small(local) * wgt * h;
                 colour[0] += (va[0] + f * dv[0]) * w;
                 colour[1] += (va[1] + f * dv[1]) * w;

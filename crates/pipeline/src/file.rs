@@ -105,6 +105,9 @@ pub struct Pipeline {
     pub histogram: Option<HistogramSection>,
     /// The pack.
     pub pack: PackSection,
+    /// `[tetra]`: meshing and tables of the projected-tetrahedra profile.
+    #[serde(default)]
+    pub tetra: mdtf_tetra::TetraParams,
     /// Channels to write as volumes too (e.g. ["g", "f2", "distance"]).
     #[serde(default)]
     pub keep: Vec<String>,

@@ -89,6 +89,8 @@ pub fn luts(
                 out.push(tf.distance_alpha_u());
             }
         }
+        // the mesh pack's tables come from mdtf-tetra
+        Profile::ProjectedTetrahedra => {}
         Profile::GaussianTf | Profile::PeakFinding => {
             if let Some(tf) = tf {
                 let step = chans.first().map_or(1.0, |(_, v)| v.geometry.min_spacing());

@@ -89,13 +89,7 @@ pub struct RunOptions {
 pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<RunReport, RunError> {
     let start = Instant::now();
     let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
-    let parent = match opts.output.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    std::fs::create_dir_all(&parent).map_err(|e| fail("output")(e.to_string()))?;
-    let tmp =
-        tempfile::Builder::new().prefix(".mdtf-run-").tempdir_in(&parent).map_err(|e| fail("output")(e.to_string()))?;
+    let tmp = mdtf_volume::staging_dir(&opts.output).map_err(|e| fail("output")(e.to_string()))?;
     let dir = tmp.path();
     let mut stages = Vec::new();
     let mut stage = |name: &str, t: Instant, voxels: usize, outputs: Vec<String>| {
@@ -305,12 +299,6 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         }
         None => None,
     };
-    let pack_chans: Vec<(String, Volume)> =
-        profile.channels(&fields).into_iter().filter_map(|c| get(&c).map(|v| (c, v.clone()))).collect();
-    let ranges = crate::pack_inputs::ranges(&pack_chans, &BTreeMap::new()).map_err(|e| err(e.to_string()))?;
-    let alpha = p.pack.alpha.unwrap_or(AlphaMap::Linear { a: 1.0, dc: 3.0 });
-    let luts = crate::pack_inputs::luts(profile, tf.as_ref(), &alpha, &pack_chans, &ranges, hvol_kept.as_ref())
-        .map_err(|e| err(e.to_string()))?;
     let pdir = dir.join("pack");
     std::fs::create_dir_all(&pdir).map_err(|e| err(e.to_string()))?;
     let provenance = Provenance {
@@ -323,14 +311,28 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             .and_then(|f| mdtf_pack::sha256_file(&base.join(f)).ok()),
         stages: serde_json::to_value(p).unwrap_or(serde_json::Value::Null),
     };
-    let params = PackParams { profile, ranges, fields, dtype: None };
-    pack(&pack_chans, &params, &luts, &pdir, provenance, &BTreeMap::new()).map_err(|e| err(e.to_string()))?;
+    if profile == Profile::ProjectedTetrahedra {
+        let mesh = mdtf_tetra::tetrahedralise(&value, p.tetra.tets, "v").map_err(|e| err(e.to_string()))?;
+        let out = mdtf_tetra::run(&mesh, &p.tetra, tf.as_ref()).map_err(|e| err(e.to_string()))?;
+        let report = mdtf_tetra::MeshReport::default();
+        mdtf_tetra::write_pack(&pdir, &mesh, &report, &out, Some(&geo), provenance).map_err(|e| err(e.to_string()))?;
+    } else {
+        let pack_chans: Vec<(String, Volume)> =
+            profile.channels(&fields).into_iter().filter_map(|c| get(&c).map(|v| (c, v.clone()))).collect();
+        let ranges = crate::pack_inputs::ranges(&pack_chans, &BTreeMap::new()).map_err(|e| err(e.to_string()))?;
+        let alpha = p.pack.alpha.unwrap_or(AlphaMap::Linear { a: 1.0, dc: 3.0 });
+        let luts = crate::pack_inputs::luts(profile, tf.as_ref(), &alpha, &pack_chans, &ranges, hvol_kept.as_ref())
+            .map_err(|e| err(e.to_string()))?;
+        let params = PackParams { profile, ranges, fields, dtype: None };
+        pack(&pack_chans, &params, &luts, &pdir, provenance, &BTreeMap::new()).map_err(|e| err(e.to_string()))?;
+    }
     stage("pack", t, n, vec!["pack/manifest.json".into()]);
 
     let previewable = match profile {
         Profile::Slicer3dtf | Profile::DistanceTf => true,
         Profile::GaussianTf => p.pack.tf.is_some(),
         Profile::PeakFinding => tf.as_ref().is_some_and(|t| t.tf1d.is_some()),
+        Profile::ProjectedTetrahedra => false,
     };
     if p.preview && previewable {
         on_stage("preview");
@@ -374,23 +376,8 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let json = serde_json::to_string_pretty(&report).map_err(|e| fail("report")(e.to_string()))?;
     write_file_atomically(&dir.join("run_report.json"), |w| w.write_all(json.as_bytes()))
         .map_err(|e| fail("report")(e.to_string()))?;
-    publish(tmp, &opts.output)?;
+    mdtf_volume::publish_dir(tmp, &opts.output).map_err(|e| fail("output")(e.to_string()))?;
     Ok(report)
-}
-
-/// Moves the finished temporary folder to `output`, replacing an older one only now.
-fn publish(tmp: tempfile::TempDir, output: &Path) -> Result<(), RunError> {
-    let tmp_path = tmp.keep();
-    let io = |e: std::io::Error| fail("output")(format!("{}: {e}", output.display()));
-    if output.exists() {
-        let old = output.with_extension(format!("old-{}", std::process::id()));
-        std::fs::rename(output, &old).map_err(io)?;
-        std::fs::rename(&tmp_path, output).map_err(io)?;
-        std::fs::remove_dir_all(&old).map_err(io)?;
-    } else {
-        std::fs::rename(&tmp_path, output).map_err(io)?;
-    }
-    Ok(())
 }
 
 fn load_input(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(MultiField, String), RunError> {

@@ -201,5 +201,62 @@ pub fn validate(n: usize, dir: &Path) -> Result<Vec<Check>, String> {
         worst_g = worst_g.max((gp.segment_integral(&v1, &v2) - simpson).abs());
     }
     out.push(check("pack: Gaussian segment integral vs quadrature", worst_g, 1e-5, true));
+    out.push(check("tetra: vertex g mean rel. error", tetra_g_error(n)?, 0.02, true));
+    out.push(check("tetra: F/B, Gaussian tables vs quadr.", tetra_table_error(), 1e-4, true));
     Ok(out)
+}
+
+/// Mean relative error of per-vertex g on the 6-tetrahedra mesh of an n^3
+/// erf sphere (radius 0.3 n, sigma 3) over the points with |x| < 2 sigma.
+fn tetra_g_error(n: usize) -> Result<f64, String> {
+    let phantom = erf_sphere(Geometry::new([n; 3], [1.0; 3]), 0.3 * n as f64, 3.0, 0.0, 255.0, None);
+    let mesh =
+        mdtf_tetra::tetrahedralise(&phantom.volume(), mdtf_tetra::TetScheme::Six, "v").map_err(|e| e.to_string())?;
+    let g = mdtf_tetra::magnitudes(&mdtf_tetra::vertex_gradients(&mesh, mdtf_tetra::GradientMethod::LeastSquares));
+    let (mut sum, mut count) = (0.0, 0usize);
+    for (p, &gv) in mesh.points.iter().zip(&g) {
+        let truth = phantom.at(*p);
+        if truth.x.abs() < 6.0 {
+            sum += (gv as f64 - truth.g).abs() / truth.g;
+            count += 1;
+        }
+    }
+    Ok(sum / count.max(1) as f64)
+}
+
+/// Worst error of sampled F/B and Gaussian-widget table entries against
+/// midpoint quadratures of their defining integrals, relative to each table's maximum.
+fn tetra_table_error() -> f64 {
+    let (size, tau_max, d_max) = ([16, 16, 16], 6.0, 2.0);
+    let [f, b] = mdtf_pack::front_back_tables(size, tau_max, d_max);
+    let centre = |i: usize, n: usize, lo: f64, hi: f64| lo + (i as f64 + 0.5) * (hi - lo) / n as f64;
+    let max_of = |v: &[f32]| v.iter().fold(0.0f64, |m, x| m.max(x.abs() as f64));
+    let scale = max_of(&f.values).max(max_of(&b.values));
+    let mut worst = 0.0f64;
+    for (i, j, k) in [(0, 0, 0), (15, 0, 15), (0, 15, 15), (7, 9, 3), (15, 15, 15), (3, 12, 8)] {
+        let (af, ab, d) = (centre(i, 16, 0.0, tau_max), centre(j, 16, 0.0, tau_max), centre(k, 16, 0.0, d_max));
+        let steps = 20_000;
+        let h = d / steps as f64;
+        let (mut depth, mut rf, mut rb) = (0.0, 0.0, 0.0);
+        for m in 0..steps {
+            let l = (m as f64 + 0.5) * h;
+            let a = af + (ab - af) * l / d;
+            let e = (-(depth + 0.5 * a * h)).exp() * h;
+            rf += (1.0 - l / d) * e;
+            rb += l / d * e;
+            depth += a * h;
+        }
+        let at = (k * 16 + j) * 16 + i;
+        worst = worst.max((f.values[at] as f64 - rf).abs() / scale).max((b.values[at] as f64 - rb).abs() / scale);
+    }
+    let gauss = mdtf_pack::gaussian_table([32, 16], 8.0, 4.0);
+    let gscale = max_of(&gauss.values);
+    for (i, j) in [(0, 0), (31, 15), (0, 15), (16, 8), (20, 3)] {
+        let (t, p) = (centre(i, 32, -4.0, 4.0), centre(j, 16, 0.0, 8.0));
+        let steps = 20_000;
+        let reference: f64 =
+            (0..steps).map(|m| (-p * libm::erf((m as f64 + 0.5) * t / steps as f64)).exp() * t / steps as f64).sum();
+        worst = worst.max((gauss.values[j * 32 + i] as f64 - reference).abs() / gscale);
+    }
+    worst
 }

@@ -62,6 +62,30 @@ fn publish_permissions(tmp: &Path, target: &Path) {
     let _ = std::fs::set_permissions(tmp, perms);
 }
 
+/// A temporary folder beside `output` to build a whole output folder in;
+/// hand it to [`publish_dir`] when everything is written. Dropped without
+/// publishing, it is removed and `output` is untouched.
+pub fn staging_dir(output: &Path) -> Result<tempfile::TempDir> {
+    let parent = parent_dir(output);
+    std::fs::create_dir_all(&parent).map_err(|e| VolumeError::io(&parent, e))?;
+    tempfile::Builder::new().prefix(".mdtf-partial-").tempdir_in(&parent).map_err(|e| VolumeError::io(output, e))
+}
+
+/// Moves a finished staging folder to `output`, replacing an older `output` only now.
+pub fn publish_dir(staging: tempfile::TempDir, output: &Path) -> Result<()> {
+    let tmp_path = staging.keep();
+    let io = |e: std::io::Error| VolumeError::io(output, e);
+    if output.exists() {
+        let old = output.with_extension(format!("old-{}", std::process::id()));
+        std::fs::rename(output, &old).map_err(io)?;
+        std::fs::rename(&tmp_path, output).map_err(io)?;
+        std::fs::remove_dir_all(&old).map_err(io)?;
+    } else {
+        std::fs::rename(&tmp_path, output).map_err(io)?;
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -25,7 +25,7 @@ mod raw;
 mod samples;
 mod volume;
 
-pub use atomic::{refuse_overwriting_inputs, write_file_atomically};
+pub use atomic::{publish_dir, refuse_overwriting_inputs, staging_dir, write_file_atomically};
 pub use dtype::{Endian, SAMPLE_TYPE_NAMES, SampleType};
 pub use error::{Result, VolumeError};
 pub use geometry::Geometry;

@@ -10,6 +10,7 @@ mod pack;
 mod preview;
 mod run;
 mod synth;
+mod tetra;
 mod validate;
 
 use crate::args::Command;
@@ -30,5 +31,6 @@ pub fn run(command: Command, progress: &Progress) -> Result<()> {
         Command::Run(a) => run::run(&a, progress),
         Command::Validate(a) => validate::run(&a, progress),
         Command::Preview(a) => preview::run(&a, progress),
+        Command::Tetra(a) => tetra::run(&a, progress),
     }
 }

@@ -1,0 +1,277 @@
+//! Reading and writing VTK unstructured grids (legacy `.vtk`, ASCII or
+//! binary, versions up to 5.1; XML `.vtu`, ASCII, binary or zlib-compressed)
+//! through the `vtkio` crate. Only tetrahedra are kept.
+
+use crate::TetraError;
+use crate::mesh::{MeshReport, PointArray, TetMesh};
+use std::path::Path;
+use vtkio::model::{
+    Attribute, Attributes, ByteOrder, CellType, Cells, DataArray, DataSet, ElementType, IOBuffer, Piece,
+    UnstructuredGridPiece, Version, VertexNumbers, Vtk,
+};
+
+fn read_error(path: &Path, message: impl std::fmt::Display) -> TetraError {
+    TetraError::Read { path: path.to_path_buf(), message: message.to_string() }
+}
+
+/// Reads a tetrahedral mesh, taking the point array `scalar` as s (None: the
+/// only one-component point array). Cells other than tetrahedra and
+/// zero-volume tetrahedra are skipped and counted in the report.
+pub fn read_mesh(path: &Path, scalar: Option<&str>) -> Result<(TetMesh, MeshReport), TetraError> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    if ext != "vtk" && ext != "vtu" {
+        return Err(read_error(path, "not a VTK unstructured grid: expected a .vtk (legacy) or .vtu (XML) file"));
+    }
+    if !path.is_file() {
+        return Err(read_error(path, "no such file"));
+    }
+    // vtkio asserts on some malformed inputs; a panic there is a bad file, not a bug of ours
+    let imported = std::panic::catch_unwind(|| Vtk::import(path))
+        .map_err(|_| read_error(path, "malformed VTK file (the parser gave up)"))?;
+    let mut vtk = imported.map_err(|e| read_error(path, format!("cannot parse: {e}")))?;
+    vtk.load_all_pieces().map_err(|e| read_error(path, format!("cannot load pieces: {e}")))?;
+    let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
+        return Err(read_error(path, "the file holds no UNSTRUCTURED_GRID (only unstructured grids are meshes here)"));
+    };
+    let mut pieces_in = Vec::new();
+    for piece in pieces {
+        match piece {
+            Piece::Inline(p) => pieces_in.push(*p),
+            Piece::Loaded(ds) => match *ds {
+                DataSet::UnstructuredGrid { pieces, .. } => {
+                    for p in pieces {
+                        if let Piece::Inline(p) = p {
+                            pieces_in.push(*p);
+                        }
+                    }
+                }
+                _ => return Err(read_error(path, "a loaded piece is not an unstructured grid")),
+            },
+            Piece::Source(src, _) => return Err(read_error(path, format!("piece in another file ({src}) not loaded"))),
+        }
+    }
+    if pieces_in.len() != 1 {
+        return Err(read_error(path, format!("{} pieces; mdtf reads single-piece grids", pieces_in.len())));
+    }
+    let piece = pieces_in.remove(0);
+    piece_to_mesh(path, piece, scalar)
+}
+
+fn piece_to_mesh(
+    path: &Path,
+    piece: UnstructuredGridPiece,
+    scalar: Option<&str>,
+) -> Result<(TetMesh, MeshReport), TetraError> {
+    let coords: Vec<f64> =
+        piece.points.cast_into::<f64>().ok_or_else(|| read_error(path, "point coordinates are not numbers"))?;
+    if !coords.len().is_multiple_of(3) {
+        return Err(read_error(path, format!("{} point coordinates is not a multiple of 3", coords.len())));
+    }
+    let points: Vec<[f64; 3]> = coords.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let types = &piece.cells.types;
+    let cells = cell_lists(path, piece.cells.cell_verts, types.len())?;
+    let mut report = MeshReport::default();
+    let mut raw = Vec::new();
+    for (c, (kind, verts)) in types.iter().zip(&cells).enumerate() {
+        if *kind == CellType::Tetra {
+            if verts.len() != 4 {
+                return Err(read_error(path, format!("tetrahedron {c} has {} points", verts.len())));
+            }
+            raw.push([verts[0], verts[1], verts[2], verts[3]]);
+        } else {
+            *report.skipped_cells.entry(format!("{kind:?}")).or_insert(0) += 1;
+        }
+    }
+    let arrays = point_arrays(path, &piece.data, points.len())?;
+    let present = || {
+        let names: Vec<String> = arrays.iter().map(|a| format!("{} ({} comp.)", a.name, a.components)).collect();
+        if names.is_empty() { "none".to_string() } else { names.join(", ") }
+    };
+    let chosen = match scalar {
+        Some(name) => arrays.iter().position(|a| a.name == name && a.components == 1).ok_or_else(|| {
+            TetraError::MissingArray { what: path.display().to_string(), name: name.into(), present: present() }
+        })?,
+        None => {
+            let singles: Vec<usize> = (0..arrays.len()).filter(|&i| arrays[i].components == 1).collect();
+            match singles.as_slice() {
+                [one] => *one,
+                [] => {
+                    return Err(TetraError::MissingArray {
+                        what: path.display().to_string(),
+                        name: "(any one-component scalar)".into(),
+                        present: present(),
+                    });
+                }
+                _ => {
+                    return Err(TetraError::Invalid(format!(
+                        "{}: several scalar point arrays; choose one with --scalar: {}",
+                        path.display(),
+                        present()
+                    )));
+                }
+            }
+        }
+    };
+    let (name, values) = (arrays[chosen].name.clone(), &arrays[chosen].values);
+    if raw.is_empty() {
+        let kinds = report.summary();
+        return Err(TetraError::NoTetrahedra {
+            what: path.display().to_string(),
+            detail: if kinds.is_empty() { "the grid has no cells".into() } else { kinds },
+        });
+    }
+    let scalar_values: Vec<f32> = values.iter().map(|&v| v as f32).collect();
+    let (mesh, degenerate) =
+        TetMesh::from_parts(&path.display().to_string(), points, raw, name, scalar_values, arrays)?;
+    report.degenerate_tets = degenerate;
+    Ok((mesh, report))
+}
+
+/// Point lists of every cell, from either connectivity layout.
+fn cell_lists(path: &Path, verts: VertexNumbers, n_cells: usize) -> Result<Vec<Vec<u64>>, TetraError> {
+    let mut out = Vec::with_capacity(n_cells);
+    match verts {
+        VertexNumbers::Legacy { vertices, .. } => {
+            let mut i = 0;
+            while i < vertices.len() {
+                let n = vertices[i] as usize;
+                let end = i + 1 + n;
+                if end > vertices.len() {
+                    return Err(read_error(path, "CELLS list ends inside a cell"));
+                }
+                out.push(vertices[i + 1..end].iter().map(|&v| v as u64).collect());
+                i = end;
+            }
+        }
+        VertexNumbers::XML { connectivity, mut offsets } => {
+            // legacy 5.x files carry a leading 0, XML files do not
+            if offsets.len() == n_cells + 1 && offsets.first() == Some(&0) {
+                offsets.remove(0);
+            }
+            let mut start = 0usize;
+            for &end in &offsets {
+                let end = end as usize;
+                if end < start || end > connectivity.len() {
+                    return Err(read_error(path, format!("cell offset {end} outside the connectivity array")));
+                }
+                out.push(connectivity[start..end].to_vec());
+                start = end;
+            }
+        }
+    }
+    if out.len() != n_cells {
+        return Err(read_error(path, format!("{} cell point lists for {n_cells} cell types", out.len())));
+    }
+    Ok(out)
+}
+
+/// Every numeric point array (legacy attributes and FIELD arrays alike).
+fn point_arrays(path: &Path, data: &Attributes, n_points: usize) -> Result<Vec<PointArray>, TetraError> {
+    let mut out = Vec::new();
+    let mut push = |name: &str, components: usize, buf: &IOBuffer| -> Result<(), TetraError> {
+        let values: Vec<f64> =
+            buf.cast_into::<f64>().ok_or_else(|| read_error(path, format!("point array {name} is not numeric")))?;
+        if components == 0 || values.len() != components * n_points {
+            return Err(read_error(
+                path,
+                format!("point array {name} has {} values for {n_points} points x {components}", values.len()),
+            ));
+        }
+        out.push(PointArray { name: name.into(), components, values });
+        Ok(())
+    };
+    for attr in &data.point {
+        match attr {
+            Attribute::DataArray(DataArray { name, elem, data }) => {
+                if matches!(elem, ElementType::LookupTable) {
+                    continue;
+                }
+                push(name, elem.num_comp() as usize, data)?;
+            }
+            Attribute::Field { data_array, .. } => {
+                for a in data_array {
+                    push(&a.name, a.elem as usize, &a.data)?;
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Writes the mesh with its scalar, its other arrays and `added` point
+/// arrays: XML (`.vtu`, base64 binary) or legacy binary (`.vtk`) by the
+/// extension. Atomic.
+pub fn write_mesh(path: &Path, mesh: &TetMesh, added: &[PointArray]) -> Result<(), TetraError> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let xml = match ext.as_str() {
+        "vtu" => true,
+        "vtk" => false,
+        _ => return Err(TetraError::Invalid(format!("{}: write a .vtu or .vtk file", path.display()))),
+    };
+    let mut point_data = Vec::new();
+    if !mesh.arrays.iter().any(|a| a.name == mesh.scalar_name) {
+        point_data.push(data_array(&mesh.scalar_name, 1, mesh.scalar.iter().map(|&v| v as f64).collect()));
+    }
+    for a in mesh.arrays.iter().chain(added) {
+        point_data.push(data_array(&a.name, a.components, a.values.clone()));
+    }
+    let n = mesh.tets.len();
+    let piece = UnstructuredGridPiece {
+        points: IOBuffer::F64(mesh.points.iter().flatten().copied().collect()),
+        cells: Cells {
+            cell_verts: VertexNumbers::XML {
+                connectivity: mesh.tets.iter().flatten().map(|&i| i as u64).collect(),
+                offsets: (1..=n as u64).map(|c| 4 * c).collect(),
+            },
+            types: vec![CellType::Tetra; n],
+        },
+        data: Attributes { point: point_data, cell: Vec::new() },
+    };
+    let vtk = Vtk {
+        version: if xml { Version::new_xml(1, 0) } else { Version::new_legacy(5, 1) },
+        title: "mdtf tetrahedral mesh".into(),
+        byte_order: if xml { ByteOrder::LittleEndian } else { ByteOrder::BigEndian },
+        data: DataSet::inline(piece),
+        file_path: None,
+    };
+    mdtf_volume::write_file_atomically(path, |w| {
+        let result = if xml {
+            let mut text = Vec::new();
+            vtk.write_xml(&mut text)
+                .map(|_| {
+                    signed_cell_indices(&mut text);
+                    text
+                })
+                .and_then(|text| w.write_all(&text).map_err(vtkio::Error::from))
+        } else {
+            use vtkio::writer::WriteVtk;
+            vtkio::writer::BinaryWriter(w).write_vtk(vtk).map(|_| ()).map_err(vtkio::Error::from)
+        };
+        result.map_err(|e| std::io::Error::other(e.to_string()))
+    })?;
+    Ok(())
+}
+
+/// vtkio writes connectivity and offsets as UInt64; VTK and ParaView write
+/// Int64, and meshio turns UInt64 cells into floats (numpy mixes uint64 with
+/// int64 as float64). The values are below 2^63, so their little-endian bytes
+/// are the same either way: only the type attribute of the two arrays changes.
+fn signed_cell_indices(xml: &mut [u8]) {
+    for name in ["connectivity", "offsets"] {
+        let from = format!("type=\"UInt64\" Name=\"{name}\"");
+        let to = format!("type=\"Int64\" Name=\"{name}\" ");
+        if let Some(at) = xml.windows(from.len()).position(|w| w == from.as_bytes()) {
+            // same length (the trailing space pads it), so nothing moves
+            xml[at..at + to.len()].copy_from_slice(to.as_bytes());
+        }
+    }
+}
+
+fn data_array(name: &str, components: usize, values: Vec<f64>) -> Attribute {
+    let elem = if components == 1 {
+        ElementType::Scalars { num_comp: 1, lookup_table: None }
+    } else {
+        ElementType::Generic(components as u32)
+    };
+    Attribute::DataArray(DataArray { name: name.into(), elem, data: IOBuffer::F64(values) })
+}
