@@ -615,28 +615,14 @@ fn gaussian_and_peak_finding_profiles_pack_fields_and_tables() {
 }
 
 #[test]
-fn every_shipped_pipeline_runs_on_its_phantom_and_a_failed_run_changes_nothing() {
+fn a_failed_pipeline_run_changes_nothing() {
+    // (tests/pipelines.rs runs every shipped pipeline and decodes its pack)
     let dir = tempfile::tempdir().unwrap();
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().join("pipelines");
-    let mut shipped = 0;
-    for entry in std::fs::read_dir(&root).unwrap() {
-        let path = entry.unwrap().path();
-        if path.extension().is_none_or(|e| e != "toml") {
-            continue;
-        }
-        shipped += 1;
-        let out = dir.path().join(path.file_stem().unwrap());
-        mdtf_ok(&["run", path.to_str().unwrap(), "-o", out.to_str().unwrap(), "--set", "input.size=40", "-q"]);
-        let m: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("pack/manifest.json")).unwrap()).unwrap();
-        assert_eq!(m["schema"], "mdtf-pack/1", "{}", path.display());
-        let report: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("run_report.json")).unwrap()).unwrap();
-        assert!(report["stages"].as_array().unwrap().iter().any(|s| s["stage"] == "pack"));
-    }
-    assert!(shipped >= 4);
-    // a failing run (unknown kernel) leaves the previous output untouched
     let out = dir.path().join("slicer-3dtf");
+    let pipeline = root.join("slicer-3dtf.toml");
+    mdtf_ok(&["run", pipeline.to_str().unwrap(), "-o", out.to_str().unwrap(), "--set", "input.size=40", "-q"]);
+    // a failing run (unknown kernel) leaves the previous output untouched
     let before = std::fs::read(out.join("pack/manifest.json")).unwrap();
     let e = mdtf_err(&[
         "run",

@@ -70,6 +70,13 @@ impl Progress {
         }
     }
 
+    /// Prints a progress line above the spinner (terminal only, like the spinner).
+    pub fn line(&self, line: &str) {
+        if let Some(bar) = &self.bar {
+            bar.println(line);
+        }
+    }
+
     /// Prints a line of results on stderr unless quiet.
     pub fn note(&self, line: &str) {
         if self.quiet {

@@ -8,9 +8,12 @@ use mdtf_pack::{Lut, LutAxis, Profile, TfFile};
 use mdtf_volume::Volume;
 use std::collections::BTreeMap;
 
-/// Code ranges: the explicit ones, and for g, f2 and g_hit the data range
-/// with qbert's percentile clipping (0.002 % / 0.004 % each end); other
-/// channels are left to the pack stage (their min and max).
+/// Code ranges: the explicit ones; for g, f2 and g_hit the data range with
+/// qbert's percentile clipping (0.002 % / 0.004 % each end); for inv_g
+/// [0, 100 / g_max] (1/g down to g = 1 % of its maximum: the boundaries
+/// peak finding looks for keep their precision, homogeneous voxels, where
+/// 1/g runs to 1/epsilon, share the top code); other channels are left to
+/// the pack stage (their min and max).
 pub fn ranges(
     chans: &[(String, Volume)],
     explicit: &BTreeMap<String, [f64; 2]>,
@@ -20,6 +23,13 @@ pub fn ranges(
         if !out.contains_key(name) && matches!(name.as_str(), "g" | "f2" | "g_hit") {
             let axis = AxisSpec { bins: Some(256), ..AxisSpec::qbert(name) }.resolve(name, v.samples())?;
             out.insert(name.clone(), [axis.min, axis.max]);
+        }
+        if !out.contains_key(name) && name == "inv_g" {
+            let smallest =
+                v.samples().iter().copied().filter(|&x| x > 0.0 && x.is_finite()).fold(f32::INFINITY, f32::min);
+            if smallest.is_finite() {
+                out.insert(name.clone(), [0.0, 100.0 * smallest as f64]);
+            }
         }
     }
     Ok(out)

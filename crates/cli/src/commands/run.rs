@@ -13,8 +13,22 @@ pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
     let pipeline = parse(&text, &args.set).map_err(|e| anyhow::anyhow!("{}: {e}", args.pipeline.display()))?;
     let opts =
         RunOptions { pipeline_path: args.pipeline.clone(), input: args.input.clone(), output: args.output.clone() };
-    let report = progress
-        .step("running", || run_pipeline(&pipeline, &opts, &|stage| progress.message(&format!("running: {stage}"))))?;
+    // one line per stage: the spinner names the running stage, and each stage
+    // gets its own finished line with its wall time when the next one starts
+    let current: std::sync::Mutex<Option<(String, std::time::Instant)>> = std::sync::Mutex::new(None);
+    let finish = |next: Option<&str>| {
+        let mut cur = current.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((name, start)) = cur.take() {
+            progress.line(&format!("  {name} ({:.2} s)", start.elapsed().as_secs_f64()));
+        }
+        if let Some(n) = next {
+            progress.message(&format!("running: {n}"));
+            *cur = Some((n.to_string(), std::time::Instant::now()));
+        }
+    };
+    let report = run_pipeline(&pipeline, &opts, &|stage| finish(Some(stage)));
+    finish(None);
+    let report = report?;
     let mut table = format!("{:<22} {:>9} {:>12} {:>10}\n", "stage", "seconds", "Mvoxel/s", "peak MiB");
     for s in &report.stages {
         table += &format!("{:<22} {:>9.3} {:>12.1} {:>10.0}\n", s.stage, s.seconds, s.mvoxel_per_s, s.peak_mib);

@@ -1,0 +1,231 @@
+//! Every shipped pipeline, run end to end on a small version of its
+//! built-in phantom: the pack, decoded from its manifest alone, must match
+//! the phantom's analytic fields within the tolerances below (derivative
+//! accuracy plus one quantisation step), not just exist.
+
+use mdtf_datagen::{MultiFieldPhantom, RadialPhantom, erf_sphere, min_extent, voxel_position};
+use mdtf_e2e::mdtf_ok;
+use mdtf_pipeline::file::{PhantomKind, Pipeline, parse};
+use mdtf_volume::Geometry;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+const SIZE: usize = 40;
+
+fn pipelines_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().join("pipelines")
+}
+
+/// Runs `name`.toml at SIZE^3 and returns (its parsed file, the pack folder, the manifest).
+fn run(name: &str, dir: &Path) -> (Pipeline, PathBuf, Value) {
+    let file = pipelines_dir().join(format!("{name}.toml"));
+    let size = format!("input.size={SIZE}");
+    let pipeline = parse(&std::fs::read_to_string(&file).unwrap(), std::slice::from_ref(&size)).unwrap();
+    let out = dir.join(name);
+    mdtf_ok(&["run", file.to_str().unwrap(), "-o", out.to_str().unwrap(), "--set", &size, "-q"]);
+    let pack = out.join("pack");
+    let manifest = serde_json::from_slice(&std::fs::read(pack.join("manifest.json")).unwrap()).unwrap();
+    (pipeline, pack, manifest)
+}
+
+/// A channel decoded from the manifest alone, and its quantisation step.
+fn decode(pack: &Path, manifest: &Value, channel: &str) -> (Vec<f64>, f64) {
+    let c = manifest["channels"].as_array().unwrap().iter().find(|c| c["name"] == channel).unwrap_or_else(|| {
+        panic!("no channel {channel} in the manifest");
+    });
+    let t = manifest["textures"].as_array().unwrap().iter().find(|t| t["name"] == c["texture"]).unwrap();
+    let comps = t["components"].as_u64().unwrap() as usize;
+    let size = match t["dtype"].as_str().unwrap() {
+        "u8" => 1,
+        "u16" => 2,
+        other => panic!("pipelines pack u8/u16, not {other}"),
+    };
+    let bytes = std::fs::read(pack.join(t["data"].as_str().unwrap())).unwrap();
+    let (offset, scale) = (c["decode"]["offset"].as_f64().unwrap(), c["decode"]["scale"].as_f64().unwrap());
+    let comp = c["component"].as_u64().unwrap() as usize;
+    let values = bytes
+        .chunks_exact(comps * size)
+        .map(|px| {
+            let code =
+                if size == 1 { px[comp] as f64 } else { u16::from_le_bytes([px[2 * comp], px[2 * comp + 1]]) as f64 };
+            offset + scale * code
+        })
+        .collect();
+    (values, scale)
+}
+
+#[test]
+fn every_shipped_pipeline_has_a_decode_test_here() {
+    let mut shipped: Vec<String> = std::fs::read_dir(pipelines_dir())
+        .unwrap()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+        .collect();
+    shipped.sort();
+    assert_eq!(shipped, ["distance-tf", "gaussian-tf", "peak-finding", "projected-tetrahedra", "slicer-3dtf"]);
+}
+
+fn geometry() -> Geometry {
+    Geometry::new([SIZE; 3], [1.0; 3])
+}
+
+/// Voxel positions in x-fastest order.
+fn positions(g: &Geometry) -> Vec<[f64; 3]> {
+    let mut out = Vec::with_capacity(g.voxel_count());
+    for k in 0..g.dims[2] {
+        for j in 0..g.dims[1] {
+            for i in 0..g.dims[0] {
+                out.push(voxel_position(g, i, j, k));
+            }
+        }
+    }
+    out
+}
+
+/// The erf sphere `mdtf run` builds for a pipeline (radius 0.3 of the extent, values 0..255).
+fn sphere(p: &Pipeline) -> RadialPhantom {
+    assert_eq!(p.input.phantom, PhantomKind::ErfSphere);
+    let g = geometry();
+    erf_sphere(g.clone(), 0.3 * min_extent(&g), p.input.sigma, 0.0, 255.0, None)
+}
+
+fn max_abs_error(decoded: &[f64], truth: impl Iterator<Item = f64>, mask: impl Iterator<Item = bool>) -> f64 {
+    decoded.iter().zip(truth).zip(mask).filter(|(_, m)| *m).fold(0.0f64, |w, ((d, t), _)| w.max((d - t).abs()))
+}
+
+#[test]
+fn slicer_3dtf_pack_decodes_to_the_analytic_sphere() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, pack, m) = run("slicer-3dtf", dir.path());
+    let ph = sphere(&p);
+    let truth: Vec<_> = positions(&geometry()).into_iter().map(|x| ph.at(x)).collect();
+    let peak_g = truth.iter().map(|t| t.g).fold(0.0, f64::max);
+    let peak_f2 = truth.iter().map(|t| t.f2.abs()).fold(0.0, f64::max);
+    let all = || std::iter::repeat(true);
+    // derivatives within 2 voxels of a face feel the clamp-to-edge border (central4's reach)
+    let inner: Vec<bool> =
+        positions(&geometry()).iter().map(|x| x.iter().all(|&c| c >= 2.0 && c <= (SIZE - 3) as f64)).collect();
+    let inside = || inner.iter().copied();
+    let (v, sv) = decode(&pack, &m, "v");
+    assert!(max_abs_error(&v, truth.iter().map(|t| t.v), all()) <= 0.5 * sv + 1e-3);
+    let (g, sg) = decode(&pack, &m, "g");
+    let eg = max_abs_error(&g, truth.iter().map(|t| t.g), inside());
+    assert!(eg <= 0.5 * sg + 0.01 * peak_g, "g: worst {eg} (step {sg}, peak {peak_g})");
+    let (f2, sf) = decode(&pack, &m, "f2");
+    let ef = max_abs_error(&f2, truth.iter().map(|t| t.f2), inside());
+    assert!(ef <= 0.5 * sf + 0.02 * peak_f2, "f2: worst {ef} (step {sf}, peak {peak_f2})");
+    let n: Vec<Vec<f64>> = ["nx", "ny", "nz"].iter().map(|c| decode(&pack, &m, c).0).collect();
+    let mut worst_dot = 1.0f64;
+    for (i, t) in truth.iter().enumerate() {
+        if t.g > 0.1 * peak_g && inner[i] {
+            let (a, b, c) = (n[0][i], n[1][i], n[2][i]);
+            let dot = (a * t.normal[0] + b * t.normal[1] + c * t.normal[2]) / (a * a + b * b + c * c).sqrt();
+            worst_dot = worst_dot.min(dot);
+        }
+    }
+    assert!(worst_dot >= 0.99, "normals: worst dot {worst_dot}");
+}
+
+#[test]
+fn distance_tf_pack_decodes_to_the_analytic_distance_and_hit_gradient() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, pack, m) = run("distance-tf", dir.path());
+    let ph = sphere(&p);
+    let truth: Vec<_> = positions(&geometry()).into_iter().map(|x| ph.at(x)).collect();
+    let peak_g = truth.iter().map(|t| t.g).fold(0.0, f64::max);
+    let (v, sv) = decode(&pack, &m, "v");
+    assert!(max_abs_error(&v, truth.iter().map(|t| t.v), std::iter::repeat(true)) <= 0.5 * sv + 1e-3);
+    let (d, sd) = decode(&pack, &m, "distance");
+    let (gh, sg) = decode(&pack, &m, "g_hit");
+    // traced voxels: those with a distance (the pack stores -1 for none, decoded within a step of it)
+    let traced: Vec<bool> = d.iter().map(|&x| x > -0.5).collect();
+    let n_traced = traced.iter().filter(|&&t| t).count();
+    let near = truth.iter().filter(|t| t.x.abs() < 2.0 * p.input.sigma).count();
+    assert!(n_traced as f64 >= 0.9 * near as f64, "{n_traced} traced of {near} voxels within 2 sigma");
+    let ed = max_abs_error(&d, truth.iter().map(|t| t.x.abs()), traced.iter().copied());
+    assert!(ed <= 0.5 * sd + 0.1, "distance: worst {ed} (step {sd})");
+    let eg = max_abs_error(&gh, std::iter::repeat(peak_g), traced.iter().copied());
+    assert!(eg <= 0.5 * sg + 0.01 * peak_g, "g_hit: worst {eg} (step {sg}, A {peak_g})");
+}
+
+#[test]
+fn gaussian_tf_pack_decodes_to_the_fields_and_their_multi_field_gradient() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, pack, m) = run("gaussian-tf", dir.path());
+    assert_eq!(p.input.phantom, PhantomKind::Multifield);
+    let ph = MultiFieldPhantom::new(geometry(), p.input.sigma);
+    let sampled = ph.volume();
+    for f in &sampled.fields {
+        let (dec, step) = decode(&pack, &m, &f.name);
+        let e = max_abs_error(&dec, f.data.iter().map(|&x| x as f64), std::iter::repeat(true));
+        assert!(e <= 0.5 * step + 1e-3, "field {}: worst {e} (step {step})", f.name);
+    }
+    let truth = ph.truth(&sampled);
+    let (gn, step) = decode(&pack, &m, "gnorm");
+    let peak = truth.gnorm.data.iter().fold(0.0f32, |a, &b| a.max(b)) as f64;
+    let (mut sum, mut n) = (0.0, 0);
+    for (d, &t) in gn.iter().zip(truth.gnorm.data.iter()) {
+        if t as f64 > 0.1 * peak {
+            sum += (d - t as f64).abs() / t as f64;
+            n += 1;
+        }
+    }
+    let mean = sum / n as f64;
+    assert!(mean <= 0.02, "||G||: mean relative error {mean} over {n} voxels (step {step})");
+}
+
+#[test]
+fn peak_finding_pack_decodes_to_the_shells_and_their_inverse_gradient() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, pack, m) = run("peak-finding", dir.path());
+    assert_eq!(p.input.phantom, PhantomKind::Shells);
+    let ph = RadialPhantom::tooth(geometry(), p.input.sigma);
+    let truth: Vec<_> = positions(&geometry()).into_iter().map(|x| ph.at(x)).collect();
+    let peak_g = truth.iter().map(|t| t.g).fold(0.0, f64::max);
+    let (v, sv) = decode(&pack, &m, "v");
+    assert!(max_abs_error(&v, truth.iter().map(|t| t.v), std::iter::repeat(true)) <= 0.5 * sv + 1e-3);
+    let (inv, step) = decode(&pack, &m, "inv_g");
+    let (mut sum, mut n) = (0.0, 0);
+    for (d, t) in inv.iter().zip(&truth) {
+        if t.g > 0.2 * peak_g {
+            sum += (d - 1.0 / t.g).abs() * t.g;
+            n += 1;
+        }
+    }
+    let mean = sum / n as f64;
+    assert!(mean <= 0.02, "1/g: mean relative error {mean} over {n} voxels (step {step})");
+}
+
+fn nrrd_f32(path: &Path) -> Vec<f32> {
+    let bytes = std::fs::read(path).unwrap();
+    let at = bytes.windows(2).position(|w| w == b"\n\n").unwrap() + 2;
+    bytes[at..].chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
+}
+
+#[test]
+fn projected_tetrahedra_pack_holds_the_sphere_s_and_g_at_every_point() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, pack, m) = run("projected-tetrahedra", dir.path());
+    let ph = sphere(&p);
+    assert_eq!(m["mesh"]["points"], SIZE * SIZE * SIZE);
+    let points = nrrd_f32(&pack.join("points.nrrd"));
+    let s_g = nrrd_f32(&pack.join("s_g.nrrd"));
+    let (mut sum, mut n, mut worst_s) = (0.0, 0, 0.0f64);
+    for (xyz, sg) in points.chunks_exact(3).zip(s_g.chunks_exact(2)) {
+        let t = ph.at([xyz[0] as f64, xyz[1] as f64, xyz[2] as f64]);
+        worst_s = worst_s.max((sg[0] as f64 - t.v).abs());
+        let inside = xyz.iter().all(|&c| c > 0.5 && c < SIZE as f32 - 1.5);
+        if t.x.abs() < 2.0 * p.input.sigma && inside {
+            sum += (sg[1] as f64 - t.g).abs() / t.g;
+            n += 1;
+        }
+    }
+    assert!(worst_s < 1e-3, "s: worst {worst_s}");
+    let mean = sum / n as f64;
+    assert!(mean <= 0.02, "g: mean relative error {mean} over {n} points");
+    let luts: Vec<&str> = m["luts"].as_array().unwrap().iter().map(|l| l["name"].as_str().unwrap()).collect();
+    for t in ["pt_front", "pt_back", "pt_gaussian", "pt_triangle_rise", "pt_triangle_fall", "pt_sinusoid"] {
+        assert!(luts.contains(&t), "{t} missing from {luts:?}");
+    }
+}
