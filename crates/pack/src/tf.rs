@@ -295,6 +295,38 @@ impl TfFile {
         ]
     }
 
+    /// The 2D TF of multidimensional peak finding over (v, 1/g), `n` = [cells
+    /// along v, cells along 1/g] with 1/g in `inv_g_range`: the (v, g) widgets
+    /// evaluated at g = 1 / (1/g) (cells at 1/g = 0 take g = the top of
+    /// `g_range`). 1/g needs the finer axis: boundaries, where g is large,
+    /// crowd its low end. None without widgets.
+    pub fn peak_finding_tf2d(&self, inv_g_range: [f64; 2], n: [usize; 2]) -> Option<crate::lut::Lut> {
+        use crate::lut::{Lut, LutAxis};
+        if self.widgets.is_empty() {
+            return None;
+        }
+        let mut values = Vec::with_capacity(4 * n[0] * n[1]);
+        for j in 0..n[1] {
+            let inv_g = Self::at(inv_g_range, j, n[1]);
+            let g = if inv_g > 0.0 { 1.0 / inv_g } else { self.g_range[1] };
+            for i in 0..n[0] {
+                values.extend(self.eval2(Self::at(self.v_range, i, n[0]), g).map(|x| x as f32));
+            }
+        }
+        Some(Lut {
+            name: "tf2d".into(),
+            meaning: "RGBA over (v, inv_g): the (v, g) widgets at g = 1 / inv_g, for multidimensional peak finding"
+                .into(),
+            axes: vec![
+                LutAxis { channel: "v".into(), size: n[0], min: self.v_range[0], max: self.v_range[1] },
+                LutAxis { channel: "inv_g".into(), size: n[1], min: inv_g_range[0], max: inv_g_range[1] },
+            ],
+            components: 4,
+            values,
+            unit_range: true,
+        })
+    }
+
     /// alpha_u over (v, g_hit) of the distance-TF renderer: the 2D widgets with g read as g_hit.
     pub fn distance_alpha_u(&self) -> crate::lut::Lut {
         use crate::lut::{Lut, LutAxis};

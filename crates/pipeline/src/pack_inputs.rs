@@ -105,6 +105,13 @@ pub fn luts(
             if let Some(tf) = tf {
                 let step = chans.first().map_or(1.0, |(_, v)| v.geometry.min_spacing());
                 out.extend(tf.table_luts(step));
+                // peak-finding: the widgets over (v, 1/g) for multidimensional peak finding
+                if profile == Profile::PeakFinding
+                    && let Some(r) = ranges.get("inv_g")
+                    && let Some(lut) = tf.peak_finding_tf2d(*r, [256, 1024])
+                {
+                    out.push(lut);
+                }
             }
         }
     }

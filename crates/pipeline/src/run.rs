@@ -331,7 +331,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let previewable = match profile {
         Profile::Slicer3dtf | Profile::DistanceTf => true,
         Profile::GaussianTf => p.pack.tf.is_some(),
-        Profile::PeakFinding => tf.as_ref().is_some_and(|t| t.tf1d.is_some()),
+        Profile::PeakFinding => tf.as_ref().is_some_and(|t| t.tf1d.is_some() || !t.widgets.is_empty()),
         Profile::ProjectedTetrahedra => false,
     };
     if p.preview && previewable {

@@ -67,6 +67,12 @@ pub fn classifier(pack: &LoadedPack, analytic: bool) -> Result<Classifier, Previ
             fields.truncate(m);
             Ok(Classifier::Gaussian { primitives, channels: fields, analytic })
         }
+        // a 2D TF over (v, 1/g): multidimensional peak finding along chords in TF space
+        "peak-finding" if pack.tables.contains_key("tf2d") => Ok(Classifier::Chord {
+            tf: table("tf2d").ok_or_else(|| PreviewError::Pack("tf2d vanished".into()))?,
+            cells_per_sample: 2.0,
+            find_peaks: analytic,
+        }),
         "peak-finding" => Ok(Classifier::Peak {
             peak_table: table("peak_table").ok_or_else(|| {
                 PreviewError::Pack("peak-finding pack without peak_table (pack it with a TF that has tf1d)".into())

@@ -53,3 +53,55 @@ fn peak_finding_finds_the_feature_that_coarse_sampling_misses() {
     assert!(lk > 300, "{lk}");
     assert!(lp * 5 < lk, "post-classification should miss most of the shell: {lp} vs {lk}");
 }
+
+/// Pixels whose red channel shows the feature.
+fn lit_pixels(img: &[u8]) -> Vec<bool> {
+    img.chunks_exact(3).map(|px| px[0] > 30).collect()
+}
+
+/// Share of the reference's lit pixels that `img` lights too.
+fn coverage(img: &[u8], reference: &[bool]) -> f64 {
+    let lit = lit_pixels(img);
+    let both = lit.iter().zip(reference).filter(|(a, b)| **a && **b).count();
+    both as f64 / reference.iter().filter(|b| **b).count().max(1) as f64
+}
+
+#[test]
+fn chordal_peak_finding_finds_a_thin_2d_feature_that_coarse_sampling_misses() {
+    // the sphere's v and 1/g; a TF feature thin in v (3 of 255) and limited to g >= 0.5 g_max
+    let phantom = erf_sphere(Geometry::new([48; 3], [1.0; 3]), 14.0, 2.0, 0.0, 255.0, None);
+    let truth = phantom.truth();
+    let g_max = truth.g.finite_range().unwrap().1 as f64;
+    let inv_g = truth.g.data.mapv(|g| if (g as f64) > 0.01 * g_max { 1.0 / g } else { (100.0 / g_max) as f32 });
+    let channels: BTreeMap<String, Volume> = [
+        ("v".to_string(), truth.v.clone()),
+        ("inv_g".to_string(), Volume { geometry: truth.v.geometry.clone(), data: inv_g }),
+    ]
+    .into_iter()
+    .collect();
+    let tf = parse_tf(&format!(
+        r#"{{"v_range": [0, 255], "g_range": [0, {g_max}], "widgets": [{{"type": "rectangle",
+            "centre": [128, {c}], "half_size": [1.5, {h}], "falloff": "constant", "alpha": 0.9, "colour": [1, 0.6, 0.3]}}]}}"#,
+        c = 0.775 * g_max,
+        h = 0.275 * g_max
+    ))
+    .unwrap();
+    let lut = tf.peak_finding_tf2d([0.0, 100.0 / g_max], [256, 1024]).unwrap();
+    let table = Table {
+        axes: lut.axes.iter().map(|a| (a.channel.clone(), a.size, a.min, a.max)).collect(),
+        components: lut.components,
+        values: lut.values,
+    };
+    let classify = |find_peaks| Classifier::Chord { tf: table.clone(), cells_per_sample: 2.0, find_peaks };
+    let cam = |step| Camera { azimuth: 30.0, elevation: 20.0, size: 64, step };
+    let reference = lit_pixels(&render(&channels, &classify(false), &cam(0.05)));
+    let post = coverage(&render(&channels, &classify(false), &cam(2.0)), &reference);
+    let peak = coverage(&render(&channels, &classify(true), &cam(2.0)), &reference);
+    let n_ref = reference.iter().filter(|b| **b).count();
+    eprintln!(
+        "thin 2D feature, step 2 vs a step-0.05 reference ({n_ref} pixels): post-classification covers {post:.3}, chordal peak finding {peak:.3}"
+    );
+    assert!(n_ref > 300, "{n_ref}");
+    assert!(peak >= 0.95, "peak finding coverage {peak}");
+    assert!(post <= 0.5 * peak, "post-classification should miss most of it: {post}");
+}
