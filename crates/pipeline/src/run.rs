@@ -110,8 +110,12 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let geo = input.geometry.clone();
     let n = geo.voxel_count();
     stage("input", t, n, vec![]);
-    let value = input.field_volume(0).ok_or_else(|| fail("input")("no fields".into()))?;
-    let value_range = value.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
+    let value_range = input.fields.first().map_or(0.0, |f| {
+        let (lo, hi) = f.data.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &x| {
+            if x.is_finite() { (l.min(x), h.max(x)) } else { (l, h) }
+        });
+        if hi >= lo { (hi - lo) as f64 } else { 0.0 }
+    });
 
     // which channels the later stages need
     let profile: Profile = p.pack.profile.parse().map_err(fail("pack"))?;
@@ -131,100 +135,130 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     if profile == Profile::Slicer3dtf && p.pack.tf.is_none() {
         needed.push("f2".into());
     }
+    if profile == Profile::ProjectedTetrahedra {
+        needed.push("v".into()); // the meshed scalar
+    }
     let needs = |c: &str| needed.iter().any(|x| x == c);
-    let mut chans: Vec<(String, Volume)> = Vec::new();
-    for f in &input.fields {
-        if needs(&f.name) {
-            chans.push((f.name.clone(), Volume { geometry: geo.clone(), data: f.data.clone() }));
+    let tracing = ["g_hit", "hit", "distance"].iter().any(|c| needs(c));
+    // Every channel lives here once; stages borrow them and the pack takes them at the end.
+    let mut chans: BTreeMap<String, Volume> = BTreeMap::new();
+    let multi = input.fields.len() > 1;
+    let (value, input) = if multi {
+        let value = input.field_volume(0).ok_or_else(|| fail("input")("no fields".into()))?;
+        (value, Some(input))
+    } else {
+        (input.into_scalar().map_err(|e| fail("input")(e.to_string()))?, None)
+    };
+    if let Some(mf) = &input {
+        for (k, f) in mf.fields.iter().enumerate() {
+            if needs(&f.name)
+                && let Some(v) = mf.field_volume(k)
+            {
+                chans.insert(f.name.clone(), v);
+            }
         }
     }
-    if needs("v") && !chans.iter().any(|(c, _)| c == "v") {
-        chans.push(("v".into(), value.clone()));
-    }
 
-    // derive
+    // derive (only the items the later stages use)
     let kernel: Kernel = match &p.derive.kernel {
         Some(k) => k.parse().map_err(|e: mdtf_derive::UnknownKernel| fail("derive")(e.to_string()))?,
         None => mdtf_derive::DEFAULT_KERNEL,
     };
-    let tracing = ["g_hit", "hit", "distance"].iter().any(|c| needs(c));
-    let mut derived: BTreeMap<&str, Volume> = BTreeMap::new();
+    let mut items = Vec::new();
+    if tracing || needs("g") {
+        items.push(Item::G);
+    }
+    if tracing || needs("f2") {
+        items.push(Item::F2);
+    }
+    if tracing || ["nx", "ny", "nz"].iter().any(|c| needs(c)) {
+        items.push(Item::Normal);
+    }
+    if needs("inv_g") {
+        items.push(Item::InvG);
+    }
     let mut normal: Option<MultiField> = None;
-    if tracing || ["g", "f2", "nx", "ny", "nz", "inv_g"].iter().any(|c| needs(c)) {
+    // the value volume goes into derive as a one-field MultiField and comes back out: no copy
+    let mut value_mf = MultiField::from(value);
+    if !items.is_empty() {
         on_stage("derive");
         let t = Instant::now();
-        let d = DeriveParams { items: vec![Item::G, Item::F2, Item::Normal, Item::InvG], kernel, ..Default::default() };
-        let out = mdtf_derive::run(&MultiField::from(value.clone()), &d).map_err(|e| fail("derive")(e.to_string()))?;
+        let d = DeriveParams { items, kernel, ..Default::default() };
+        let out = mdtf_derive::run(&value_mf, &d).map_err(|e| fail("derive")(e.to_string()))?;
         for (item, mf) in out.items {
             match item {
                 Item::Normal => normal = Some(mf),
                 other => {
-                    if let Some(v) = mf.field_volume(0) {
-                        derived.insert(other.name(), v);
-                    }
+                    let v = mf.into_scalar().map_err(|e| fail("derive")(e.to_string()))?;
+                    chans.insert(other.name().to_string(), v);
                 }
             }
         }
         stage("derive", t, n, vec![]);
     }
-    if needs("gnorm") && input.fields.len() > 1 {
+    if needs("gnorm")
+        && let Some(mf) = &input
+    {
         on_stage("derive (multi-field)");
         let t = Instant::now();
         let d = DeriveParams { items: vec![Item::Gnorm], kernel, ..Default::default() };
-        let out = mdtf_derive::run(&input, &d).map_err(|e| fail("derive")(e.to_string()))?;
-        if let Some(v) = out.items.into_iter().next().and_then(|(_, m)| m.field_volume(0)) {
-            derived.insert("gnorm", v);
+        let out = mdtf_derive::run(mf, &d).map_err(|e| fail("derive")(e.to_string()))?;
+        if let Some((_, m)) = out.items.into_iter().next() {
+            chans.insert("gnorm".into(), m.into_scalar().map_err(|e| fail("derive")(e.to_string()))?);
         }
         stage("derive (multi-field)", t, n, vec![]);
     }
-    if let Some(nm) = &normal {
-        for (i, c) in ["nx", "ny", "nz"].iter().enumerate() {
-            if needs(c)
-                && let Some(v) = nm.field_volume(i)
-            {
-                chans.push((c.to_string(), v));
-            }
-        }
-    }
-    for c in ["g", "f2", "inv_g", "gnorm"] {
-        if needs(c)
-            && let Some(v) = derived.get(c)
-        {
-            chans.push((c.to_string(), v.clone()));
-        }
+    drop(input);
+    if needs("v") && !chans.contains_key("v") {
+        let field = value_mf.fields.remove(0);
+        chans.insert("v".into(), Volume { geometry: geo.clone(), data: field.data });
     }
 
     // pre-filter and boundary
     if tracing {
-        let (Some(g0), Some(f20), Some(nm)) = (derived.get("g"), derived.get("f2"), normal.as_ref()) else {
+        let (Some(g0), Some(f20), Some(nm)) = (chans.get("g"), chans.get("f2"), normal.as_ref()) else {
             return Err(fail("boundary")("derivatives missing".into()));
         };
-        let (mut g, mut f2) = (g0.clone(), f20.clone());
-        if let Some(pf) = p.prefilter {
-            on_stage("prefilter");
-            let t = Instant::now();
-            let filter =
-                |v: &Volume| crate::boundary_chain::prefilter(v, &pf).map_err(|e| fail("prefilter")(e.to_string()));
-            g = filter(&g)?;
-            f2 = filter(&f2)?;
-            stage("prefilter", t, n, vec![]);
-        }
+        let filtered = match p.prefilter {
+            Some(pf) => {
+                on_stage("prefilter");
+                let t = Instant::now();
+                let filter =
+                    |v: &Volume| crate::boundary_chain::prefilter(v, &pf).map_err(|e| fail("prefilter")(e.to_string()));
+                let pair = (filter(g0)?, filter(f20)?);
+                stage("prefilter", t, n, vec![]);
+                Some(pair)
+            }
+            None => None,
+        };
+        let (g, f2) = match &filtered {
+            Some((g, f2)) => (g, f2),
+            None => (g0, f20),
+        };
         on_stage("boundary");
         let t = Instant::now();
-        let out = mdtf_boundary::run(&BoundaryInput { g: &g, f2: &f2, normal: nm, value_range }, &p.boundary)
+        let out = mdtf_boundary::run(&BoundaryInput { g, f2, normal: nm, value_range }, &p.boundary)
             .map_err(|e| fail("boundary")(e.to_string()))?;
-        for (c, v) in [("g_hit", &out.g_hit), ("hit", &out.hit), ("distance", &out.distance)] {
-            if needs(c) {
-                chans.push((c.into(), v.clone()));
-            }
-        }
-        let report = out.report(&g);
+        let report = out.report(g);
         let rdir = dir.join("boundary");
         std::fs::create_dir_all(&rdir).map_err(|e| fail("boundary")(e.to_string()))?;
         report.write(&rdir).map_err(|e| fail("boundary")(e.to_string()))?;
+        for (c, v) in [("g_hit", out.g_hit), ("hit", out.hit), ("distance", out.distance)] {
+            if needs(c) {
+                chans.insert(c.into(), v);
+            }
+        }
         stage("boundary", t, n, vec!["boundary/boundary_report.csv".into(), "boundary/boundary_report.png".into()]);
     }
-    let get = |c: &str| chans.iter().find(|(x, _)| x == c).map(|(_, v)| v);
+    if let Some(nm) = normal {
+        let geometry = nm.geometry;
+        for (c, f) in ["nx", "ny", "nz"].iter().zip(nm.fields) {
+            if needs(c) {
+                chans.insert(c.to_string(), Volume { geometry: geometry.clone(), data: f.data });
+            }
+        }
+    }
+    let get = |c: &str| chans.get(c);
 
     // kept intermediates
     if !p.keep.is_empty() {
@@ -312,13 +346,15 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         stages: serde_json::to_value(p).unwrap_or(serde_json::Value::Null),
     };
     if profile == Profile::ProjectedTetrahedra {
-        let mesh = mdtf_tetra::tetrahedralise(&value, p.tetra.tets, "v").map_err(|e| err(e.to_string()))?;
+        let value = get("v").ok_or_else(|| err("no value volume".into()))?;
+        let mesh = mdtf_tetra::tetrahedralise(value, p.tetra.tets, "v").map_err(|e| err(e.to_string()))?;
         let out = mdtf_tetra::run(&mesh, &p.tetra, tf.as_ref()).map_err(|e| err(e.to_string()))?;
         let report = mdtf_tetra::MeshReport::default();
         mdtf_tetra::write_pack(&pdir, &mesh, &report, &out, Some(&geo), provenance).map_err(|e| err(e.to_string()))?;
     } else {
+        // the pack is the last stage to read the channels: they move into it
         let pack_chans: Vec<(String, Volume)> =
-            profile.channels(&fields).into_iter().filter_map(|c| get(&c).map(|v| (c, v.clone()))).collect();
+            profile.channels(&fields).into_iter().filter_map(|c| chans.remove(&c).map(|v| (c, v))).collect();
         let ranges = crate::pack_inputs::ranges(&pack_chans, &BTreeMap::new()).map_err(|e| err(e.to_string()))?;
         let alpha = p.pack.alpha.unwrap_or(AlphaMap::Linear { a: 1.0, dc: 3.0 });
         let luts = crate::pack_inputs::luts(profile, tf.as_ref(), &alpha, &pack_chans, &ranges, hvol_kept.as_ref())

@@ -115,26 +115,112 @@ fn lookup(t: &Table, coords: &[f32]) -> [f32; 4] {
     }
 }
 
-fn trilinear(v: &Volume, p: [f64; 3]) -> f32 {
-    let [nx, ny, nz] = v.geometry.dims;
-    let d = v.samples();
-    let dims = [nx, ny, nz];
-    let mut i0 = [0usize; 3];
-    let mut t = [0f32; 3];
-    for a in 0..3 {
-        let x = p[a].clamp(0.0, (dims[a] - 1) as f64);
-        let f = (x.floor() as usize).min(dims[a].saturating_sub(2));
-        i0[a] = f;
-        t[a] = (x - f as f64) as f32;
+/// Where a sample falls in the grid: the base voxel and the weights along
+/// x, y, z; computed once per sample and used for every channel.
+#[derive(Clone, Copy)]
+struct Cell {
+    /// Index of the (i, j, k) corner.
+    base: usize,
+    /// Steps to the +x, +y, +z neighbours (0 on a one-sample axis).
+    stride: [usize; 3],
+    /// Weights of the +x, +y, +z neighbours.
+    t: [f32; 3],
+}
+
+impl Cell {
+    /// The cell of voxel-space position `p` in a grid of `dims` (clamped to the grid).
+    fn at(dims: [usize; 3], p: [f64; 3]) -> Cell {
+        let mut i0 = [0usize; 3];
+        let mut t = [0f32; 3];
+        for a in 0..3 {
+            let x = p[a].clamp(0.0, (dims[a] - 1) as f64);
+            let f = (x.floor() as usize).min(dims[a].saturating_sub(2));
+            i0[a] = f;
+            t[a] = (x - f as f64) as f32;
+        }
+        let [nx, ny, _] = dims;
+        let step = |a: usize, s: usize| if dims[a] > 1 { s } else { 0 };
+        Cell { base: (i0[2] * ny + i0[1]) * nx + i0[0], stride: [step(0, 1), step(1, nx), step(2, nx * ny)], t }
     }
-    let at = |i: usize, j: usize, k: usize| d[(k.min(nz - 1) * ny + j.min(ny - 1)) * nx + i.min(nx - 1)];
-    let l = |a: f32, b: f32, t: f32| a + (b - a) * t;
-    let [i, j, k] = i0;
-    let c00 = l(at(i, j, k), at(i + 1, j, k), t[0]);
-    let c10 = l(at(i, j + 1, k), at(i + 1, j + 1, k), t[0]);
-    let c01 = l(at(i, j, k + 1), at(i + 1, j, k + 1), t[0]);
-    let c11 = l(at(i, j + 1, k + 1), at(i + 1, j + 1, k + 1), t[0]);
-    l(l(c00, c10, t[1]), l(c01, c11, t[1]), t[2])
+
+    /// Trilinear interpolation of `d` (x-fastest samples of the grid).
+    #[inline(always)]
+    fn sample(&self, d: &[f32]) -> f32 {
+        let [sx, sy, sz] = self.stride;
+        let b = self.base;
+        let l = |a: f32, c: f32, t: f32| a + (c - a) * t;
+        let c00 = l(d[b], d[b + sx], self.t[0]);
+        let c10 = l(d[b + sy], d[b + sy + sx], self.t[0]);
+        let c01 = l(d[b + sz], d[b + sz + sx], self.t[0]);
+        let c11 = l(d[b + sz + sy], d[b + sz + sy + sx], self.t[0]);
+        l(l(c00, c10, self.t[1]), l(c01, c11, self.t[1]), self.t[2])
+    }
+}
+
+/// Edge of the blocks of empty-space skipping, voxels.
+const BLOCK: usize = 8;
+
+/// For a LUT classifier: per block of BLOCK^3 cells (trilinear cells, i.e.
+/// voxels plus the next one along each axis), whether any sample inside can
+/// get a non-zero opacity. Interpolated values stay within the block's
+/// min..max of each channel, so a block whose box of LUT cells holds only
+/// zero opacity is skipped without changing a pixel.
+fn visible_blocks(t: &Table, chans: &[Option<&[f32]>], dims: [usize; 3]) -> (Vec<bool>, [usize; 3]) {
+    let nb = dims.map(|n| n.saturating_sub(1).max(1).div_ceil(BLOCK));
+    let mut out = vec![false; nb[0] * nb[1] * nb[2]];
+    out.par_iter_mut().enumerate().for_each(|(b, o)| {
+        let (bx, by, bz) = (b % nb[0], (b / nb[0]) % nb[1], b / (nb[0] * nb[1]));
+        let lo = [bx * BLOCK, by * BLOCK, bz * BLOCK];
+        let hi = [0, 1, 2].map(|a| ((lo[a] + BLOCK) + 1).min(dims[a]));
+        let mut cells: Vec<(usize, usize)> = Vec::with_capacity(t.axes.len());
+        for (k, (_, n, min, max)) in t.axes.iter().enumerate() {
+            let (mut vmin, mut vmax) = (f32::INFINITY, f32::NEG_INFINITY);
+            match chans[k] {
+                Some(d) => {
+                    for z in lo[2]..hi[2] {
+                        for y in lo[1]..hi[1] {
+                            let row = (z * dims[1] + y) * dims[0];
+                            for &v in &d[row + lo[0]..row + hi[0]] {
+                                vmin = vmin.min(v);
+                                vmax = vmax.max(v);
+                            }
+                        }
+                    }
+                }
+                None => (vmin, vmax) = (0.0, 0.0),
+            }
+            let cell = |x: f32| {
+                let c = ((x as f64 - min) / (max - min) * *n as f64).floor();
+                if c.is_nan() { 0 } else { c.clamp(0.0, (*n - 1) as f64) as usize }
+            };
+            cells.push((cell(vmin), cell(vmax)));
+        }
+        *o = any_opaque(t, &cells, 0, 0, 1);
+    });
+    (out, nb)
+}
+
+/// Whether the LUT has a non-zero opacity in the box `cells` (per axis, from `axis` on).
+fn any_opaque(t: &Table, cells: &[(usize, usize)], axis: usize, offset: usize, stride: usize) -> bool {
+    if axis == cells.len() {
+        return if t.components == 4 { t.values[offset * 4 + 3] > 0.0 } else { t.values[offset] > 0.0 };
+    }
+    let (lo, hi) = cells[axis];
+    (lo..=hi).any(|i| any_opaque(t, cells, axis + 1, offset + i * stride, stride * t.axes[axis].1))
+}
+
+/// The samples of the channels a table is indexed by (None: the pack lacks it, read as 0).
+fn table_channels<'a>(t: &Table, channels: &'a BTreeMap<String, Volume>) -> Vec<Option<&'a [f32]>> {
+    t.axes.iter().map(|(c, ..)| channels.get(c).map(|v| v.samples())).collect()
+}
+
+/// Up to four table coordinates at `cell` (tables have at most 3 axes; the chord's 2 to 4).
+fn coords(cell: &Cell, chans: &[Option<&[f32]>]) -> [f32; 4] {
+    let mut out = [0f32; 4];
+    for (o, c) in out.iter_mut().zip(chans) {
+        *o = c.map_or(0.0, |d| cell.sample(d));
+    }
+    out
 }
 
 /// Renders `channels` (decoded or float, by name) with `classifier`; RGB8 pixels, rows from the top.
@@ -157,8 +243,16 @@ pub fn render(channels: &BTreeMap<String, Volume>, classifier: &Classifier, cam:
     let step_world = cam.step * l_min;
     let steps = (2.0 * radius / step_world).ceil() as usize;
     let get = |n: &str| channels.get(n);
-    let (nx, ny, nz, gch) = (get("nx"), get("ny"), get("nz"), get("g"));
-    let g_max = gch.and_then(|v| v.finite_range()).map_or(1.0, |r| r.1.max(1e-12) as f64);
+    let data = |n: &str| get(n).map(|v| v.samples());
+    let (nx, ny, nz, gch) = (data("nx"), data("ny"), data("nz"), data("g"));
+    let (v_data, distance, g_hit) = (data("v"), data("distance"), data("g_hit"));
+    let dims = g.dims;
+    let table_chans = match classifier {
+        Classifier::Lut(t) | Classifier::Chord { tf: t, .. } => table_channels(t, channels),
+        Classifier::Gaussian { channels: names, .. } => names.iter().map(|c| data(c)).collect(),
+        _ => Vec::new(),
+    };
+    let g_max = get("g").and_then(|v| v.finite_range()).map_or(1.0, |r| r.1.max(1e-12) as f64);
     let light = [-dir[0] + 0.3 * up[0], -dir[1] + 0.3 * up[1], -dir[2] + 0.3 * up[2]];
     let ll = (light.iter().map(|x| x * x).sum::<f64>()).sqrt();
     let light = light.map(|x| x / ll);
@@ -166,6 +260,10 @@ pub fn render(channels: &BTreeMap<String, Volume>, classifier: &Classifier, cam:
     let hl = (half.iter().map(|x| x * x).sum::<f64>()).sqrt().max(1e-12);
     let half = half.map(|x| x / hl);
     let mut img = vec![0u8; cam.size * cam.size * 3];
+    let skip = match classifier {
+        Classifier::Lut(t) => Some(visible_blocks(t, &table_chans, dims)),
+        _ => None,
+    };
     img.par_chunks_mut(cam.size * 3).enumerate().for_each(|(row, out)| {
         for col in 0..cam.size {
             let (u, v) = (
@@ -182,24 +280,30 @@ pub fn render(channels: &BTreeMap<String, Volume>, classifier: &Classifier, cam:
                     continue;
                 }
                 let p = [0, 1, 2].map(|a| pw[a] / g.spacing[a]);
-                let sample = |n: &str| get(n).map_or(0.0, |v| trilinear(v, p));
+                if let Some((visible, nb)) = &skip {
+                    let b = [0, 1, 2].map(|a| ((p[a].max(0.0) as usize) / BLOCK).min(nb[a] - 1));
+                    if !visible[(b[2] * nb[1] + b[1]) * nb[0] + b[0]] {
+                        continue;
+                    }
+                }
+                let cell = Cell::at(dims, p);
+                let sample = |d: Option<&[f32]>| d.map_or(0.0, |d| cell.sample(d));
                 let ([r, gr, b], a) = match classifier {
                     Classifier::Lut(t) => {
-                        let coords: Vec<f32> = t.axes.iter().map(|(c, ..)| sample(c)).collect();
-                        let [r, gr, b, a] = lookup(t, &coords);
+                        let [r, gr, b, a] = lookup(t, &coords(&cell, &table_chans));
                         // opacity correction: the TF's opacity is per voxel (L_min) of path
                         ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(cam.step))
                     }
                     Classifier::Distance { alpha_u, alpha_d } => {
-                        let d = sample("distance");
+                        let d = sample(distance);
                         let ad = if d >= 0.0 { lookup(alpha_d, &[d])[3] } else { 0.0 };
                         let u = alpha_u
                             .as_ref()
-                            .map_or([1.0, 1.0, 1.0, 1.0], |t| lookup(t, &[sample("v"), sample("g_hit")]));
+                            .map_or([1.0, 1.0, 1.0, 1.0], |t| lookup(t, &[sample(v_data), sample(g_hit)]));
                         ([u[0], u[1], u[2]], 1.0 - (1.0 - ((u[3] * ad) as f64).min(0.999)).powf(cam.step))
                     }
                     Classifier::Peak { peak_table, preintegration, find_peaks } => {
-                        let v1 = sample("v");
+                        let v1 = sample(v_data);
                         let v0 =
                             if *find_peaks { previous.replace(vec![v1 as f64]).map(|p| p[0] as f32) } else { None };
                         let at = match v0 {
@@ -213,20 +317,21 @@ pub fn render(channels: &BTreeMap<String, Volume>, classifier: &Classifier, cam:
                         ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(cam.step))
                     }
                     Classifier::Chord { tf, cells_per_sample, find_peaks } => {
-                        let f1: Vec<f32> = tf.axes.iter().map(|(c, ..)| sample(c)).collect();
+                        let f1 = coords(&cell, &table_chans);
+                        let f1 = &f1[..tf.axes.len()];
                         let f0 =
                             if *find_peaks { previous.replace(f1.iter().map(|&x| x as f64).collect()) } else { None };
                         let [r, gr, b, a] = match f0 {
                             Some(f0) => {
                                 let f0: Vec<f32> = f0.iter().map(|&x| x as f32).collect();
-                                chord_peak(tf, &f0, &f1, *cells_per_sample)
+                                chord_peak(tf, &f0, f1, *cells_per_sample)
                             }
-                            None => lookup(tf, &f1),
+                            None => lookup(tf, f1),
                         };
                         ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(cam.step))
                     }
-                    Classifier::Gaussian { primitives, channels: names, analytic } => {
-                        let v: Vec<f64> = names.iter().map(|c| sample(c) as f64).collect();
+                    Classifier::Gaussian { primitives, channels: _, analytic } => {
+                        let v: Vec<f64> = table_chans.iter().map(|&c| sample(c) as f64).collect();
                         let from = if *analytic { previous.replace(v.clone()) } else { None };
                         let (mut depth, mut c) = (0.0, [0.0f64; 3]);
                         for gp in primitives {
@@ -249,14 +354,14 @@ pub fn render(channels: &BTreeMap<String, Volume>, classifier: &Classifier, cam:
                 }
                 let mut colour = [r as f64, gr as f64, b as f64];
                 if let (Some(nxv), Some(nyv), Some(nzv)) = (nx, ny, nz) {
-                    let n = [trilinear(nxv, p) as f64, trilinear(nyv, p) as f64, trilinear(nzv, p) as f64];
+                    let n = [cell.sample(nxv) as f64, cell.sample(nyv) as f64, cell.sample(nzv) as f64];
                     let nl = (n.iter().map(|x| x * x).sum::<f64>()).sqrt();
                     if nl > 1e-6 {
                         let n = n.map(|x| x / nl);
                         let diffuse = (n[0] * light[0] + n[1] * light[1] + n[2] * light[2]).abs();
                         let spec = (n[0] * half[0] + n[1] * half[1] + n[2] * half[2]).abs().powi(32);
                         let w = gch.map_or(1.0, |gv| {
-                            let t = 1.0 - (trilinear(gv, p) as f64 / g_max).clamp(0.0, 1.0);
+                            let t = 1.0 - (cell.sample(gv) as f64 / g_max).clamp(0.0, 1.0);
                             1.0 - t * t
                         });
                         let shaded = colour.map(|c| c * (0.25 + 0.75 * diffuse) + 0.3 * spec);
