@@ -362,3 +362,28 @@ fn meshio_meshes_round_trip_through_mdtf_tetra() {
         assert_eq!(manifest["mesh"]["skipped_cells"]["Triangle"], 1, "{name}");
     }
 }
+
+#[test]
+fn nibabel_opens_the_nifti_copies_of_pack_textures() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = dir.path().join("s.nii.gz");
+    let pack = dir.path().join("pack");
+    let (s_str, pack_str) = (s.to_str().unwrap(), pack.to_str().unwrap());
+    mdtf_ok(&["synth", "erf-sphere", "-o", s_str, "--size", "20", "--radius", "6", "--sigma", "1.5", "-q"]);
+    mdtf_ok(&["pack", "--profile", "slicer-3dtf", s_str, "-o", pack_str, "--nifti", "-q"]);
+    let manifest: Value = serde_json::from_slice(&std::fs::read(pack.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(manifest["textures"][0]["nifti"], "data.nii");
+    let d = dump(DUMP_NIBABEL, &pack.join("data.nii"));
+    assert_eq!(d["shape"], serde_json::json!([20, 20, 20, 4]));
+    assert_eq!(d["dtype"], "uint8");
+    let raw = std::fs::read(pack.join("data.raw")).unwrap();
+    for comp in 0..4 {
+        let ours: Vec<f64> = raw.iter().skip(comp).step_by(4).map(|&b| b as f64).collect();
+        assert_eq!(floats(&d["fields"][comp]), ours, "component {comp}");
+    }
+    // the geometry is the volume's
+    let src = dump(DUMP_NIBABEL, &s);
+    assert_eq!(d["affine"], src["affine"]);
+    let e = mdtf_volume::read(&pack.join("data.nii"), &ReadOptions::default()).unwrap();
+    assert_eq!(e.fields.len(), 4);
+}

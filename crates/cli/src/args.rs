@@ -507,7 +507,7 @@ pub struct PackArgs {
     /// Output pack folder.
     #[arg(short, long, value_name = "DIR", required_unless_present = "schema")]
     pub output: Option<PathBuf>,
-    /// Layout: slicer-3dtf or distance-tf.
+    /// Layout: slicer-3dtf, distance-tf, gaussian-tf or peak-finding (meshes: `mdtf tetra`).
     #[arg(long, default_value = "slicer-3dtf")]
     pub profile: String,
     /// Range of a channel, NAME=MIN:MAX (repeatable).
@@ -528,6 +528,10 @@ pub struct PackArgs {
     /// distance-tf: the alpha map of distance written as the 1D table alpha_d(d).
     #[arg(long, default_value = "linear:a=1,dc=3", value_name = "SPEC")]
     pub alpha: String,
+    /// Also write every texture as NIfTI-1 (`<name>.nii`, one volume per component, the codes as
+    /// stored) for tools without NRRD.
+    #[arg(long)]
+    pub nifti: bool,
     /// Print the manifest's JSON Schema and exit.
     #[arg(long)]
     pub schema: bool,

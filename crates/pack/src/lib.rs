@@ -53,6 +53,10 @@ pub struct PackParams {
     /// Storage type for every texture instead of the profile's (u8, u16, f16 or f32).
     #[serde(default)]
     pub dtype: Option<Dtype>,
+    /// Also write every texture as NIfTI-1 (`<name>.nii`, one volume per
+    /// component, the codes as stored: u8, u16 (f16 bits) or f32) for tools without NRRD.
+    #[serde(default)]
+    pub nifti: bool,
 }
 
 /// Errors of the pack stage.
@@ -88,6 +92,8 @@ pub struct Encoded {
     pub textures: Vec<(TextureLayout, Vec<u8>)>,
     /// One entry per (channel, texture, component).
     pub channels: Vec<ChannelEntry>,
+    /// Write NIfTI copies of the textures too.
+    pub nifti: bool,
 }
 
 /// Quantises `channels` (name, volume) into the textures of `params.profile`, in memory.
@@ -178,7 +184,7 @@ pub fn encode(
         );
         textures.push((layout, bytes));
     }
-    Ok(Encoded { profile: params.profile, geometry, textures, channels: entries })
+    Ok(Encoded { profile: params.profile, geometry, textures, channels: entries, nifti: params.nifti })
 }
 
 /// Codes of one row of one component. Integer codes are rounded in f64 (so
@@ -249,6 +255,13 @@ pub fn write(encoded: &Encoded, luts: &[Lut], dir: &Path, provenance: Provenance
             [("mdtf_components", order.join(" ")), ("mdtf_dtype", format!("{:?}", layout.dtype).to_lowercase())];
         let header = mdtf_volume::nrrd::texture_header(geometry, comps, type_name, &data_file, &extra);
         write_file_atomically(&dir.join(&header_file), |w| w.write_all(header.as_bytes()))?;
+        let nifti = if encoded.nifti {
+            let file = format!("{}.nii", layout.name);
+            write_nifti_texture(&dir.join(&file), geometry, &layout.components, layout.dtype, bytes)?;
+            Some(file)
+        } else {
+            None
+        };
         textures.push(TextureEntry {
             name: layout.name.clone(),
             header: header_file,
@@ -257,6 +270,7 @@ pub fn write(encoded: &Encoded, luts: &[Lut], dir: &Path, provenance: Provenance
             components: comps,
             component_order: layout.components.clone(),
             dtype: layout.dtype,
+            nifti,
         });
     }
     let manifest = Manifest {
@@ -278,6 +292,44 @@ pub fn write(encoded: &Encoded, luts: &[Lut], dir: &Path, provenance: Provenance
         .map_err(|e| PackError::Io(VolumeError::Fields(format!("manifest: {e}"))))?;
     write_file_atomically(&dir.join("manifest.json"), |w| w.write_all(json.as_bytes()))?;
     Ok(manifest)
+}
+
+/// Writes one texture as NIfTI-1: a 4D volume with one component per
+/// volume (named after its channel), the stored codes as u8, u16 or f32.
+fn write_nifti_texture(
+    path: &Path,
+    geometry: &mdtf_volume::Geometry,
+    components: &[Option<String>],
+    dtype: Dtype,
+    bytes: &[u8],
+) -> Result<(), PackError> {
+    use mdtf_volume::{Field, MultiField, SampleType, WriteOptions};
+    let (size, ty) = match dtype {
+        Dtype::U8 => (1, SampleType::U8),
+        Dtype::U16 | Dtype::F16 => (2, SampleType::U16),
+        Dtype::F32 => (4, SampleType::F32),
+    };
+    let comps = components.len();
+    let mut fields = Vec::with_capacity(comps);
+    for (c, name) in components.iter().enumerate() {
+        let values: Vec<f32> = bytes
+            .chunks_exact(comps * size)
+            .map(|px| {
+                let b = &px[c * size..(c + 1) * size];
+                match size {
+                    1 => b[0] as f32,
+                    2 => u16::from_le_bytes([b[0], b[1]]) as f32,
+                    _ => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+                }
+            })
+            .collect();
+        let data = ndarray::Array3::from_shape_vec(geometry.shape(), values)
+            .map_err(|e| PackError::Geometry(format!("{}: {e}", path.display())))?;
+        fields.push(Field { name: name.clone().unwrap_or_else(|| "unused".into()), data });
+    }
+    let mf = MultiField { geometry: geometry.clone(), fields };
+    mdtf_volume::write(path, &mf, &WriteOptions { ty, gzip: false }, &[])?;
+    Ok(())
 }
 
 /// [`encode`] then [`write`].

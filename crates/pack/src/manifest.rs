@@ -36,6 +36,9 @@ pub struct TextureEntry {
     pub component_order: Vec<Option<String>>,
     /// Storage type of every component.
     pub dtype: Dtype,
+    /// The same codes as NIfTI-1 (one volume per component), when asked for.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nifti: Option<String>,
 }
 
 /// Where a channel came from.
@@ -176,7 +179,8 @@ pub const MANIFEST_SCHEMA: &str = r##"{
         "dims": {"type": "array", "items": {"type": "integer", "minimum": 1}},
         "components": {"type": "integer", "minimum": 1, "maximum": 4},
         "component_order": {"type": "array", "items": {"type": ["string", "null"]}},
-        "dtype": {"enum": ["u8", "u16", "f16", "f32"]}
+        "dtype": {"enum": ["u8", "u16", "f16", "f32"]},
+        "nifti": {"type": "string", "description": "optional NIfTI-1 copy: a 4D volume, one component per volume, the same codes"}
       }
     }},
     "channels": {"type": "array", "items": {

@@ -87,7 +87,7 @@ fn every_channel_decodes_within_half_a_step_from_the_manifest_alone() {
     ] {
         let dir = tempfile::tempdir().unwrap();
         let prov = Provenance { mdtf_version: "test".into(), input: None, input_sha256: None, stages: Value::Null };
-        let params = PackParams { profile, ranges: BTreeMap::new(), fields: fields.clone(), dtype: None };
+        let params = PackParams { profile, ranges: BTreeMap::new(), fields: fields.clone(), dtype: None, nifti: false };
         let m = pack(&chans, &params, &[], dir.path(), prov, &BTreeMap::new()).unwrap();
         if profile == Profile::GaussianTf {
             // five fields and ||G||: two RGBA16 textures
@@ -127,8 +127,13 @@ fn every_dtype_decodes_within_half_a_step() {
     for dtype in [Dtype::U8, Dtype::U16, Dtype::F16, Dtype::F32] {
         let dir = tempfile::tempdir().unwrap();
         let prov = Provenance { mdtf_version: "test".into(), input: None, input_sha256: None, stages: Value::Null };
-        let params =
-            PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![], dtype: Some(dtype) };
+        let params = PackParams {
+            profile: Profile::Slicer3dtf,
+            ranges: BTreeMap::new(),
+            fields: vec![],
+            dtype: Some(dtype),
+            nifti: false,
+        };
         let m = pack(&chans, &params, &[], dir.path(), prov, &BTreeMap::new()).unwrap();
         for name in ["v", "f2", "nx"] {
             let truth = &chans.iter().find(|(c, _)| c == name).unwrap().1;
@@ -176,7 +181,13 @@ fn missing_channels_are_named_with_their_stage() {
     let prov = Provenance { mdtf_version: "t".into(), input: None, input_sha256: None, stages: Value::Null };
     let e = pack(
         &chans,
-        &PackParams { profile: Profile::DistanceTf, ranges: BTreeMap::new(), fields: vec![], dtype: None },
+        &PackParams {
+            profile: Profile::DistanceTf,
+            ranges: BTreeMap::new(),
+            fields: vec![],
+            dtype: None,
+            nifti: false,
+        },
         &[],
         dir.path(),
         prov.clone(),
@@ -189,7 +200,13 @@ fn missing_channels_are_named_with_their_stage() {
     flat[0].1 = Volume::new(flat[0].1.geometry.clone(), Array3::from_elem(flat[0].1.data.dim(), 3.0)).unwrap();
     let e = pack(
         &flat,
-        &PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![], dtype: None },
+        &PackParams {
+            profile: Profile::Slicer3dtf,
+            ranges: BTreeMap::new(),
+            fields: vec![],
+            dtype: None,
+            nifti: false,
+        },
         &[],
         dir.path(),
         prov,

@@ -71,7 +71,7 @@ impl Default for HistogramSection {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PackSection {
-    /// Profile: slicer-3dtf, distance-tf, gaussian-tf or peak-finding.
+    /// Profile: slicer-3dtf, distance-tf, gaussian-tf, peak-finding or projected-tetrahedra.
     pub profile: String,
     /// Transfer-function file (relative to the pipeline file).
     #[serde(default)]
@@ -79,6 +79,9 @@ pub struct PackSection {
     /// distance-tf: the alpha map of distance.
     #[serde(default)]
     pub alpha: Option<AlphaMap>,
+    /// Also write every texture as NIfTI-1.
+    #[serde(default)]
+    pub nifti: bool,
 }
 
 /// A whole pipeline file.

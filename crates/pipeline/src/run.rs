@@ -321,8 +321,9 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         stage("histogram", t, n, outputs);
     }
 
-    // pack
-    on_stage("pack");
+    // pack (for meshes: the tetra stage, which writes the pack itself)
+    let pack_stage = if profile == Profile::ProjectedTetrahedra { "tetra + pack" } else { "pack" };
+    on_stage(pack_stage);
     let t = Instant::now();
     let err = |e: String| fail("pack")(e);
     let tf = match &p.pack.tf {
@@ -359,10 +360,10 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         let alpha = p.pack.alpha.unwrap_or(AlphaMap::Linear { a: 1.0, dc: 3.0 });
         let luts = crate::pack_inputs::luts(profile, tf.as_ref(), &alpha, &pack_chans, &ranges, hvol_kept.as_ref())
             .map_err(|e| err(e.to_string()))?;
-        let params = PackParams { profile, ranges, fields, dtype: None };
+        let params = PackParams { profile, ranges, fields, dtype: None, nifti: p.pack.nifti };
         pack(&pack_chans, &params, &luts, &pdir, provenance, &BTreeMap::new()).map_err(|e| err(e.to_string()))?;
     }
-    stage("pack", t, n, vec!["pack/manifest.json".into()]);
+    stage(pack_stage, t, n, vec!["pack/manifest.json".into()]);
 
     let previewable = match profile {
         Profile::Slicer3dtf | Profile::DistanceTf => true,

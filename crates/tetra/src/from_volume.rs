@@ -46,6 +46,29 @@ pub fn tetrahedralise(volume: &Volume, scheme: TetScheme, scalar_name: &str) -> 
             "a {nx} x {ny} x {nz} volume has no cells to cut into tetrahedra (need at least 2 samples per axis)"
         )));
     }
+    let per_cell = match scheme {
+        TetScheme::Five => 5,
+        TetScheme::Six => 6,
+    };
+    let cells = (nx - 1) as u128 * (ny - 1) as u128 * (nz - 1) as u128;
+    let points = (nx * ny * nz) as u128;
+    if points > u32::MAX as u128 {
+        return Err(crate::TetraError::Invalid(format!("{nx} x {ny} x {nz} = {points} points: more than 2^32 - 1")));
+    }
+    // what the stage holds at its peak: connectivity and vertex stars (16 + 16 bytes a
+    // tetrahedron), cell boxes (24) and one array being written (16); per point the
+    // position, scalar, gradient, g and star offset (52)
+    let needed = cells * per_cell * 72 + points * 52;
+    let available = mdtf_volume::available_memory() as u128;
+    if needed > available {
+        return Err(crate::TetraError::Invalid(format!(
+            "meshing {nx} x {ny} x {nz} voxels gives {} tetrahedra needing about {} of memory, more than the {} \
+             available; resample the volume first (or use --tets 5)",
+            cells * per_cell,
+            mdtf_volume::human_bytes(needed),
+            mdtf_volume::human_bytes(available)
+        )));
+    }
     let m = g.world_from_voxel();
     let mut points = Vec::with_capacity(nx * ny * nz);
     for k in 0..nz {
@@ -56,11 +79,7 @@ pub fn tetrahedralise(volume: &Volume, scheme: TetScheme, scalar_name: &str) -> 
             }
         }
     }
-    let per_cell = match scheme {
-        TetScheme::Five => 5,
-        TetScheme::Six => 6,
-    };
-    let mut tets = Vec::with_capacity((nx - 1) * (ny - 1) * (nz - 1) * per_cell);
+    let mut tets = Vec::with_capacity(cells as usize * per_cell as usize);
     let index = |i: usize, j: usize, k: usize| (i + nx * (j + ny * k)) as u32;
     for k in 0..nz - 1 {
         for j in 0..ny - 1 {

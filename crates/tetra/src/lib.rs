@@ -13,6 +13,7 @@ mod gradient;
 mod mesh;
 mod pack_mesh;
 mod vtk_io;
+pub mod vtu_writer;
 
 pub use cells::{CellInfo, cell_infos, cull};
 pub use from_volume::{TetScheme, tetrahedralise};

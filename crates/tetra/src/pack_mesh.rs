@@ -2,7 +2,7 @@
 //! per-vertex (s, g), per-cell boxes, and the pre-integration tables, with a
 //! manifest of the pack schema.
 
-use crate::mesh::{MeshReport, PointArray, TetMesh};
+use crate::mesh::{MeshReport, TetMesh};
 use crate::{TetraError, TetraOutput, write_mesh};
 use mdtf_pack::{Manifest, ManifestGeometry, MeshArrayEntry, MeshEntry, Profile, Provenance, SCHEMA_ID};
 use mdtf_volume::Geometry;
@@ -17,7 +17,8 @@ struct ArrayOut<'a> {
     association: &'a str,
     components: usize,
     dtype: &'a str,
-    bytes: Vec<u8>,
+    /// Makes the bytes when the array is written, so only one array's bytes exist at a time.
+    bytes: Box<dyn Fn() -> Vec<u8> + 'a>,
 }
 
 fn f32_bytes(values: impl Iterator<Item = f32>) -> Vec<u8> {
@@ -36,15 +37,9 @@ pub fn write_pack(
     provenance: Provenance,
 ) -> Result<Manifest, TetraError> {
     let vtu = "mesh.vtu";
-    let added = [
-        PointArray { name: "g".into(), components: 1, values: out.g.iter().map(|&x| x as f64).collect() },
-        PointArray {
-            name: "gradient".into(),
-            components: 3,
-            values: out.gradients.iter().flatten().map(|&x| x as f64).collect(),
-        },
-    ];
-    write_mesh(&dir.join(vtu), mesh, &added)?;
+    let gradients: Vec<f32> = out.gradients.iter().flatten().copied().collect();
+    write_mesh(&dir.join(vtu), mesh, &[], &[("g", 1, &out.g), ("gradient", 3, &gradients)])?;
+    drop(gradients);
     let arrays = [
         ArrayOut {
             name: "points",
@@ -53,7 +48,7 @@ pub fn write_pack(
             association: "point",
             components: 3,
             dtype: "f32",
-            bytes: f32_bytes(mesh.points.iter().flatten().map(|&x| x as f32)),
+            bytes: Box::new(|| f32_bytes(mesh.points.iter().flatten().map(|&x| x as f32))),
         },
         ArrayOut {
             name: "s_g",
@@ -62,7 +57,7 @@ pub fn write_pack(
             association: "point",
             components: 2,
             dtype: "f32",
-            bytes: f32_bytes(mesh.scalar.iter().zip(&out.g).flat_map(|(&s, &g)| [s, g])),
+            bytes: Box::new(|| f32_bytes(mesh.scalar.iter().zip(&out.g).flat_map(|(&s, &g)| [s, g]))),
         },
         ArrayOut {
             name: "gradient",
@@ -71,7 +66,7 @@ pub fn write_pack(
             association: "point",
             components: 3,
             dtype: "f32",
-            bytes: f32_bytes(out.gradients.iter().flatten().copied()),
+            bytes: Box::new(|| f32_bytes(out.gradients.iter().flatten().copied())),
         },
         ArrayOut {
             name: "tets",
@@ -80,7 +75,7 @@ pub fn write_pack(
             association: "cell",
             components: 4,
             dtype: "u32",
-            bytes: mesh.tets.iter().flatten().flat_map(|i| i.to_le_bytes()).collect(),
+            bytes: Box::new(|| mesh.tets.iter().flatten().flat_map(|i| i.to_le_bytes()).collect()),
         },
         ArrayOut {
             name: "cell_box",
@@ -89,7 +84,9 @@ pub fn write_pack(
             association: "cell",
             components: 4,
             dtype: "f32",
-            bytes: f32_bytes(out.cells.iter().flat_map(|c| [c.s_range[0], c.s_range[1], c.g_range[0], c.g_range[1]])),
+            bytes: Box::new(|| {
+                f32_bytes(out.cells.iter().flat_map(|c| [c.s_range[0], c.s_range[1], c.g_range[0], c.g_range[1]]))
+            }),
         },
         ArrayOut {
             name: "cell_edges",
@@ -98,19 +95,21 @@ pub fn write_pack(
             association: "cell",
             components: 2,
             dtype: "f32",
-            bytes: f32_bytes(out.cells.iter().flat_map(|c| [c.max_edge, c.s_min_diff])),
+            bytes: Box::new(|| f32_bytes(out.cells.iter().flat_map(|c| [c.max_edge, c.s_min_diff]))),
         },
     ];
     let mut entries = Vec::new();
     for a in arrays {
-        let count = a.bytes.len() / (4 * a.components);
+        let bytes = (a.bytes)();
+        let count = bytes.len() / (4 * a.components);
         let file = format!("{}.nrrd", a.name);
         let axes = [
             TableAxis { label: "component".into(), size: a.components, min: 0.0, max: a.components as f64 },
             TableAxis { label: a.association.into(), size: count, min: 0.0, max: count as f64 },
         ];
         let type_name = if a.dtype == "u32" { "uint32" } else { "float" };
-        write_table_bytes(&dir.join(&file), &axes, type_name, &a.bytes)?;
+        write_table_bytes(&dir.join(&file), &axes, type_name, &bytes)?;
+        drop(bytes);
         entries.push(MeshArrayEntry {
             name: a.name.into(),
             meaning: a.meaning.into(),

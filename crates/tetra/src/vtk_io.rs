@@ -198,22 +198,38 @@ fn point_arrays(path: &Path, data: &Attributes, n_points: usize) -> Result<Vec<P
     Ok(out)
 }
 
-/// Writes the mesh with its scalar, its other arrays and `added` point
-/// arrays: XML (`.vtu`, base64 binary) or legacy binary (`.vtk`) by the
-/// extension. Atomic.
-pub fn write_mesh(path: &Path, mesh: &TetMesh, added: &[PointArray]) -> Result<(), TetraError> {
+/// Writes the mesh with its scalar, its input arrays, `added` point arrays
+/// (f64) and `added_f32` ones (name, components, values): VTK XML (`.vtu`,
+/// streamed, see [`crate::vtu_writer`]) or legacy binary (`.vtk`, built in
+/// memory by vtkio: for small meshes) by the extension. Atomic.
+pub fn write_mesh(
+    path: &Path,
+    mesh: &TetMesh,
+    added: &[PointArray],
+    added_f32: &[(&str, usize, &[f32])],
+) -> Result<(), TetraError> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    let xml = match ext.as_str() {
-        "vtu" => true,
-        "vtk" => false,
+    match ext.as_str() {
+        "vtu" => {
+            mdtf_volume::write_file_atomically(path, |w| {
+                let mut w = std::io::BufWriter::new(w);
+                crate::vtu_writer::write_vtu(&mut w, mesh, added, added_f32)?;
+                std::io::Write::flush(&mut w)
+            })?;
+            return Ok(());
+        }
+        "vtk" => {}
         _ => return Err(TetraError::Invalid(format!("{}: write a .vtu or .vtk file", path.display()))),
-    };
+    }
     let mut point_data = Vec::new();
     if !mesh.arrays.iter().any(|a| a.name == mesh.scalar_name) {
         point_data.push(data_array(&mesh.scalar_name, 1, mesh.scalar.iter().map(|&v| v as f64).collect()));
     }
     for a in mesh.arrays.iter().chain(added) {
         point_data.push(data_array(&a.name, a.components, a.values.clone()));
+    }
+    for (name, components, values) in added_f32 {
+        point_data.push(data_array(name, *components, values.iter().map(|&v| v as f64).collect()));
     }
     let n = mesh.tets.len();
     let piece = UnstructuredGridPiece {
@@ -228,43 +244,17 @@ pub fn write_mesh(path: &Path, mesh: &TetMesh, added: &[PointArray]) -> Result<(
         data: Attributes { point: point_data, cell: Vec::new() },
     };
     let vtk = Vtk {
-        version: if xml { Version::new_xml(1, 0) } else { Version::new_legacy(5, 1) },
+        version: Version::new_legacy(5, 1),
         title: "mdtf tetrahedral mesh".into(),
-        byte_order: if xml { ByteOrder::LittleEndian } else { ByteOrder::BigEndian },
+        byte_order: ByteOrder::BigEndian,
         data: DataSet::inline(piece),
         file_path: None,
     };
     mdtf_volume::write_file_atomically(path, |w| {
-        let result = if xml {
-            let mut text = Vec::new();
-            vtk.write_xml(&mut text)
-                .map(|_| {
-                    signed_cell_indices(&mut text);
-                    text
-                })
-                .and_then(|text| w.write_all(&text).map_err(vtkio::Error::from))
-        } else {
-            use vtkio::writer::WriteVtk;
-            vtkio::writer::BinaryWriter(w).write_vtk(vtk).map(|_| ()).map_err(vtkio::Error::from)
-        };
-        result.map_err(|e| std::io::Error::other(e.to_string()))
+        use vtkio::writer::WriteVtk;
+        vtkio::writer::BinaryWriter(w).write_vtk(vtk).map(|_| ()).map_err(|e| std::io::Error::other(e.to_string()))
     })?;
     Ok(())
-}
-
-/// vtkio writes connectivity and offsets as UInt64; VTK and ParaView write
-/// Int64, and meshio turns UInt64 cells into floats (numpy mixes uint64 with
-/// int64 as float64). The values are below 2^63, so their little-endian bytes
-/// are the same either way: only the type attribute of the two arrays changes.
-fn signed_cell_indices(xml: &mut [u8]) {
-    for name in ["connectivity", "offsets"] {
-        let from = format!("type=\"UInt64\" Name=\"{name}\"");
-        let to = format!("type=\"Int64\" Name=\"{name}\" ");
-        if let Some(at) = xml.windows(from.len()).position(|w| w == from.as_bytes()) {
-            // same length (the trailing space pads it), so nothing moves
-            xml[at..at + to.len()].copy_from_slice(to.as_bytes());
-        }
-    }
 }
 
 fn data_array(name: &str, components: usize, values: Vec<f64>) -> Attribute {

@@ -179,14 +179,14 @@ fn vtu_and_vtk_round_trips_keep_points_cells_and_arrays() {
     let extra = [PointArray { name: "g".into(), components: 1, values: vec![1.5; mesh.points.len()] }];
     for name in ["m.vtu", "m.vtk"] {
         let path = dir.path().join(name);
-        write_mesh(&path, &mesh, &extra).unwrap();
+        write_mesh(&path, &mesh, &extra, &[("h", 1, &vec![0.5f32; mesh.points.len()])]).unwrap();
         let (back, report) = read_mesh(&path, Some("s")).unwrap();
         assert_eq!(report, MeshReport::default());
         assert_eq!(back.points, mesh.points, "{name}");
         assert_eq!(back.tets, mesh.tets, "{name}");
         assert_eq!(back.scalar, mesh.scalar, "{name}");
         let names: Vec<&str> = back.arrays.iter().map(|a| a.name.as_str()).collect();
-        assert_eq!(names, ["s", "velocity", "g"], "{name}");
+        assert_eq!(names, ["s", "velocity", "g", "h"], "{name}");
         assert_eq!(back.arrays[1], mesh.arrays[0], "{name}");
     }
 }

@@ -23,6 +23,12 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
     }
     let (Some(input), Some(output)) = (&args.input, &args.output) else { bail!("give an input and -o PACK_DIR") };
     let profile: Profile = args.profile.parse().map_err(anyhow::Error::msg)?;
+    if profile == Profile::ProjectedTetrahedra {
+        bail!(
+            "projected-tetrahedra packs hold a tetrahedral mesh: make them with `mdtf tetra MESH.vtu -o DIR` or `mdtf tetra --from-volume {} -o DIR`",
+            input.display()
+        );
+    }
     let (chans, fields) = progress.step("reading channels", || -> Result<ChannelsAndFields> {
         if input.is_dir() {
             let names = profile.channels(&[]);
@@ -64,7 +70,7 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         Some("f32") => Some(Dtype::F32),
         Some(other) => bail!("--dtype: unknown type '{other}' (u8, u16, f16, f32)"),
     };
-    let params = PackParams { profile, ranges, fields, dtype };
+    let params = PackParams { profile, ranges, fields, dtype, nifti: args.nifti };
     let m = progress.step("packing", || pack(&chans, &params, &luts, output, provenance, &BTreeMap::new()))?;
     if let Some(tf) = &args.tf
         && profile == Profile::GaussianTf
