@@ -664,13 +664,6 @@ fn validate_passes_on_a_correct_installation() {
     assert!(e.contains("at least 48"), "{e}");
 }
 
-/// Reads an attached-header NRRD of f32 samples written by mdtf (header, blank line, raw little-endian data).
-fn nrrd_f32(path: &std::path::Path) -> Vec<f32> {
-    let bytes = std::fs::read(path).unwrap();
-    let at = bytes.windows(2).position(|w| w == b"\n\n").unwrap() + 2;
-    bytes[at..].chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
-}
-
 #[test]
 fn tetra_meshes_a_volume_and_packs_s_g_boxes_and_tables() {
     let dir = tempfile::tempdir().unwrap();
@@ -711,16 +704,13 @@ fn tetra_meshes_a_volume_and_packs_s_g_boxes_and_tables() {
     assert_eq!(luts, ["pt_gaussian", "pt_triangle_rise", "pt_triangle_fall"]);
     // s is the volume's value at every point, g its gradient magnitude
     let volume = mdtf_volume::read(&vol, &mdtf_volume::ReadOptions::default()).unwrap();
-    let s_g = nrrd_f32(&pack.join("s_g.nrrd"));
+    let s_g = mdtf_e2e::nrrd_f32(&pack.join("s_g.nrrd"));
     let values: Vec<f32> = volume.fields[0].data.iter().copied().collect();
     assert_eq!(s_g.len(), 2 * values.len());
     assert!(s_g.chunks_exact(2).zip(&values).all(|(sg, v)| sg[0] == *v));
     // every cell box holds its vertices' (s, g)
-    let boxes = nrrd_f32(&pack.join("cell_box.nrrd"));
-    let tets_bytes = std::fs::read(pack.join("tets.nrrd")).unwrap();
-    let at = tets_bytes.windows(2).position(|w| w == b"\n\n").unwrap() + 2;
-    let tets: Vec<u32> =
-        tets_bytes[at..].chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+    let boxes = mdtf_e2e::nrrd_f32(&pack.join("cell_box.nrrd"));
+    let tets = mdtf_e2e::nrrd_u32(&pack.join("tets.nrrd"));
     for (t, b) in tets.chunks_exact(4).zip(boxes.chunks_exact(4)).step_by(97) {
         for &v in t {
             let (s, g) = (s_g[2 * v as usize], s_g[2 * v as usize + 1]);

@@ -4,7 +4,7 @@
 //! accuracy plus one quantisation step), not just exist.
 
 use mdtf_datagen::{MultiFieldPhantom, RadialPhantom, erf_sphere, min_extent, voxel_position};
-use mdtf_e2e::mdtf_ok;
+use mdtf_e2e::{mdtf_ok, nrrd_f32};
 use mdtf_pipeline::file::{PhantomKind, Pipeline, parse};
 use mdtf_volume::Geometry;
 use serde_json::Value;
@@ -195,12 +195,6 @@ fn peak_finding_pack_decodes_to_the_shells_and_their_inverse_gradient() {
     }
     let mean = sum / n as f64;
     assert!(mean <= 0.02, "1/g: mean relative error {mean} over {n} voxels (step {step})");
-}
-
-fn nrrd_f32(path: &Path) -> Vec<f32> {
-    let bytes = std::fs::read(path).unwrap();
-    let at = bytes.windows(2).position(|w| w == b"\n\n").unwrap() + 2;
-    bytes[at..].chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
 }
 
 #[test]

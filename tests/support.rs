@@ -1,7 +1,7 @@
 //! Helpers of the end-to-end tests: the `mdtf` binary and a Python with
 //! nibabel and pynrrd for cross-tool checks.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
 
@@ -72,4 +72,22 @@ pub fn run_python(script: &str, args: &[&str]) -> String {
     let out = Command::new(python()).arg("-c").arg(script).args(args).output().expect("run python");
     assert!(out.status.success(), "python failed:\n{}", String::from_utf8_lossy(&out.stderr));
     String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// The samples of an NRRD file with an attached header written by mdtf (raw
+/// encoding: the header ends at the first blank line).
+pub fn nrrd_payload(path: &Path) -> Vec<u8> {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let at = bytes.windows(2).position(|w| w == b"\n\n").expect("NRRD header end") + 2;
+    bytes[at..].to_vec()
+}
+
+/// Little-endian f32 samples of an attached-header NRRD.
+pub fn nrrd_f32(path: &Path) -> Vec<f32> {
+    nrrd_payload(path).chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
+}
+
+/// Little-endian u32 samples of an attached-header NRRD.
+pub fn nrrd_u32(path: &Path) -> Vec<u32> {
+    nrrd_payload(path).chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
 }
