@@ -382,7 +382,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
                 .map_err(|e| fail("preview")(e.to_string()))?;
         }
         let cam = mdtf_preview::Camera { azimuth: 30.0, elevation: 20.0, size: 512, step: 0.5 };
-        mdtf_preview::preview(&pdir, &dir.join("preview.png"), &cam, true)
+        mdtf_preview::preview_named(&pdir, &dir.join("preview.png"), &cam, true, &opts.output.join("pack"))
             .map_err(|e| fail("preview")(e.to_string()))?;
         // the contact sheet: every picture of the run side by side
         let mut pictures: Vec<PathBuf> = vec![dir.join("preview.png")];

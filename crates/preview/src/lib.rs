@@ -9,7 +9,7 @@ mod load;
 mod render;
 
 pub use load::{LoadedPack, Table, load};
-pub use render::{Camera, Classifier, render};
+pub use render::{Camera, Classifier, render, render_without_skipping};
 
 use mdtf_volume::{VolumeError, write_file_atomically};
 use std::path::Path;
@@ -101,12 +101,24 @@ pub fn write_png(path: &Path, size: usize, rgb: &[u8], description: &str) -> Res
 
 /// Loads the pack in `dir`, renders it and writes `out` (Gaussian TFs integrated analytically when `analytic`).
 pub fn preview(dir: &Path, out: &Path, cam: &Camera, analytic: bool) -> Result<(), PreviewError> {
+    preview_named(dir, out, cam, analytic, dir)
+}
+
+/// [`preview`], naming the pack `shown_as` in the PNG's description (a pack
+/// rendered in a staging folder is described by its final path).
+pub fn preview_named(
+    dir: &Path,
+    out: &Path,
+    cam: &Camera,
+    analytic: bool,
+    shown_as: &Path,
+) -> Result<(), PreviewError> {
     let pack = load(dir)?;
     let c = classifier(&pack, analytic)?;
     let img = render(&pack.channels, &c, cam);
     let text = format!(
         "mdtf preview of {} ({}), azimuth {} elevation {}, step {} voxel",
-        dir.display(),
+        shown_as.display(),
         pack.manifest.profile,
         cam.azimuth,
         cam.elevation,

@@ -225,6 +225,21 @@ fn coords(cell: &Cell, chans: &[Option<&[f32]>]) -> [f32; 4] {
 
 /// Renders `channels` (decoded or float, by name) with `classifier`; RGB8 pixels, rows from the top.
 pub fn render(channels: &BTreeMap<String, Volume>, classifier: &Classifier, cam: &Camera) -> Vec<u8> {
+    render_impl(channels, classifier, cam, true)
+}
+
+/// [`render`] without empty-space skipping: every sample classified (the
+/// reference the skipping is tested against; the same pixels, slower).
+pub fn render_without_skipping(channels: &BTreeMap<String, Volume>, classifier: &Classifier, cam: &Camera) -> Vec<u8> {
+    render_impl(channels, classifier, cam, false)
+}
+
+fn render_impl(
+    channels: &BTreeMap<String, Volume>,
+    classifier: &Classifier,
+    cam: &Camera,
+    skip_empty: bool,
+) -> Vec<u8> {
     let Some(any) = channels.values().next() else { return vec![0; cam.size * cam.size * 3] };
     let g = &any.geometry;
     let ext: Vec<f64> = (0..3).map(|a| (g.dims[a] as f64 - 1.0) * g.spacing[a]).collect();
@@ -261,9 +276,13 @@ pub fn render(channels: &BTreeMap<String, Volume>, classifier: &Classifier, cam:
     let half = half.map(|x| x / hl);
     let mut img = vec![0u8; cam.size * cam.size * 3];
     let skip = match classifier {
-        Classifier::Lut(t) => Some(visible_blocks(t, &table_chans, dims)),
+        Classifier::Lut(t) | Classifier::Chord { tf: t, .. } if skip_empty => {
+            Some(visible_blocks(t, &table_chans, dims))
+        }
         _ => None,
     };
+    // the chord from the previous sample leaves a block's value box unless both samples are in it
+    let chord_search = matches!(classifier, Classifier::Chord { find_peaks: true, .. });
     img.par_chunks_mut(cam.size * 3).enumerate().for_each(|(row, out)| {
         for col in 0..cam.size {
             let (u, v) = (
@@ -273,20 +292,28 @@ pub fn render(channels: &BTreeMap<String, Volume>, classifier: &Classifier, cam:
             let origin = [0, 1, 2].map(|a| centre[a] + u * right[a] + v * up[a] - radius * dir[a]);
             let (mut rgb, mut alpha) = ([0f64; 3], 0f64);
             let mut previous: Option<Vec<f64>> = None;
+            // the previous sample's cell and block (chord classifier)
+            let mut prev: Option<(Cell, usize)> = None;
             for s in 0..steps {
                 let pw = [0, 1, 2].map(|a| origin[a] + (s as f64 + 0.5) * step_world * dir[a]);
                 if (0..3).any(|a| pw[a] < 0.0 || pw[a] > ext[a]) {
                     previous = None;
+                    prev = None;
                     continue;
                 }
                 let p = [0, 1, 2].map(|a| pw[a] / g.spacing[a]);
-                if let Some((visible, nb)) = &skip {
-                    let b = [0, 1, 2].map(|a| ((p[a].max(0.0) as usize) / BLOCK).min(nb[a] - 1));
-                    if !visible[(b[2] * nb[1] + b[1]) * nb[0] + b[0]] {
-                        continue;
-                    }
-                }
                 let cell = Cell::at(dims, p);
+                let block = skip.as_ref().map_or(0, |(_, nb)| {
+                    let b = [0, 1, 2].map(|a| ((p[a].max(0.0) as usize) / BLOCK).min(nb[a] - 1));
+                    (b[2] * nb[1] + b[1]) * nb[0] + b[0]
+                });
+                let prev_here = prev.replace((cell, block));
+                if let Some((visible, _)) = &skip
+                    && !visible[block]
+                    && (!chord_search || prev_here.is_none_or(|(_, pb)| pb == block))
+                {
+                    continue;
+                }
                 let sample = |d: Option<&[f32]>| d.map_or(0.0, |d| cell.sample(d));
                 let ([r, gr, b], a) = match classifier {
                     Classifier::Lut(t) => {
@@ -319,13 +346,9 @@ pub fn render(channels: &BTreeMap<String, Volume>, classifier: &Classifier, cam:
                     Classifier::Chord { tf, cells_per_sample, find_peaks } => {
                         let f1 = coords(&cell, &table_chans);
                         let f1 = &f1[..tf.axes.len()];
-                        let f0 =
-                            if *find_peaks { previous.replace(f1.iter().map(|&x| x as f64).collect()) } else { None };
+                        let f0 = if *find_peaks { prev_here.map(|(c, _)| coords(&c, &table_chans)) } else { None };
                         let [r, gr, b, a] = match f0 {
-                            Some(f0) => {
-                                let f0: Vec<f32> = f0.iter().map(|&x| x as f32).collect();
-                                chord_peak(tf, &f0, f1, *cells_per_sample)
-                            }
+                            Some(f0) => chord_peak(tf, &f0[..tf.axes.len()], f1, *cells_per_sample),
                             None => lookup(tf, f1),
                         };
                         ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(cam.step))

@@ -42,12 +42,6 @@ fn decoded_pack_renders_like_the_float_fields() {
     eprintln!("mean |pack - float| = {mean:.3} / 255 over {} values ({lit} lit)", from_pack.len());
     assert!(lit > 1000, "the sphere is visible");
     assert!(mean <= 2.0, "{mean}");
-    // empty-space skipping (LUT classifier only) changes no pixel: the chord
-    // classifier without peak search looks up the same LUT at every sample, unskipped
-    if let mdtf_preview::Classifier::Lut(table) = &c {
-        let plain = mdtf_preview::Classifier::Chord { tf: table.clone(), cells_per_sample: 1.0, find_peaks: false };
-        assert_eq!(render(&loaded.channels, &plain, &cam), from_pack);
-    } else {
-        panic!("slicer-3dtf packs classify with a LUT");
-    }
+    // empty-space skipping changes no pixel
+    assert_eq!(mdtf_preview::render_without_skipping(&loaded.channels, &c, &cam), from_pack);
 }

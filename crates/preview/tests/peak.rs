@@ -102,6 +102,14 @@ fn chordal_peak_finding_finds_a_thin_2d_feature_that_coarse_sampling_misses() {
         "thin 2D feature, step 2 vs a step-0.05 reference ({n_ref} pixels): post-classification covers {post:.3}, chordal peak finding {peak:.3}"
     );
     assert!(n_ref > 300, "{n_ref}");
+    // empty-space skipping changes no pixel, with the chord search on or off
+    for find_peaks in [true, false] {
+        assert_eq!(
+            render(&channels, &classify(find_peaks), &cam(2.0)),
+            mdtf_preview::render_without_skipping(&channels, &classify(find_peaks), &cam(2.0)),
+            "find_peaks {find_peaks}"
+        );
+    }
     assert!(peak >= 0.95, "peak finding coverage {peak}");
     assert!(post <= 0.5 * peak, "post-classification should miss most of it: {post}");
 }
