@@ -316,6 +316,9 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
                 .map_err(|e| err(e.to_string()))?;
             write_hvol(&hdir, &hv).map_err(|e| err(e.to_string()))?;
             outputs.push("histogram/opacity.png".into());
+            // the pack needs only the 2D opacity: free the 3D counts (64 MiB at 256^3) now
+            let mut hv = hv;
+            hv.hist.counts = Vec::new();
             hvol_kept = Some(hv);
         }
         stage("histogram", t, n, outputs);
