@@ -442,7 +442,13 @@ pub fn gaussian_segment(seg: [f64; 5], widget: [f64; 5], table: Option<&Lut>) ->
 /// T(P, t) from the `pt_gaussian` table: bilinear between cell centres,
 /// linear extension beyond |t| > t_max (P clamped to the table's range).
 pub fn lookup_gaussian(lut: &Lut, p: f64, t: f64) -> f64 {
-    let (ta, pa) = (&lut.axes[0], &lut.axes[1]);
+    let (Some(ta), Some(pa)) = (lut.axes.first(), lut.axes.get(1)) else {
+        return gaussian_widget_integral(p, t);
+    };
+    if ta.size < 2 || pa.size < 1 || lut.values.len() < ta.size * pa.size {
+        // not a usable table: the exact integral
+        return gaussian_widget_integral(p, t);
+    }
     let t_max = ta.max;
     let (tc, tail) = if t > t_max {
         (t_max, (t - t_max) * (-p).exp())
