@@ -1,6 +1,6 @@
 //! The `mdtf` binary end to end: synth, info, convert, and its errors.
 
-use mdtf_e2e::{mdtf_err, mdtf_ok};
+use mdtf_e2e::{mdtf, mdtf_err, mdtf_ok};
 use mdtf_volume::{ReadOptions, read, read_scalar};
 use std::f64::consts::{PI, SQRT_2};
 
@@ -662,6 +662,15 @@ fn validate_passes_on_a_correct_installation() {
     assert!(dir.path().join("histogram/normal_vs_stretched.png").exists());
     let e = mdtf_err(&["validate", "--size", "16"]);
     assert!(e.contains("at least 48"), "{e}");
+    // a wrong parameter breaks its tolerance: central differences miss the g bound by 20x
+    let out = mdtf(&["validate", "--size", "64", "-o", dir.path().to_str().unwrap(), "--set", "derive.kernel=central"]);
+    assert!(!out.status.success(), "validate must fail with central differences");
+    let table = String::from_utf8_lossy(&out.stdout);
+    let g_line = table.lines().find(|l| l.starts_with("derive: mean |g error|")).unwrap_or_default();
+    assert!(g_line.ends_with("OUT OF TOLERANCE"), "{table}");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("out of tolerance"));
+    let e = mdtf_err(&["validate", "--size", "64", "--set", "derive.kernal=central"]);
+    assert!(e.contains("kernal"), "{e}");
 }
 
 #[test]

@@ -579,6 +579,11 @@ pub struct ValidateArgs {
     /// Folder for the boundary report and histogram pictures.
     #[arg(short, long, default_value = "out/validate", value_name = "DIR")]
     pub output: PathBuf,
+    /// Change a stage parameter, SECTION.KEY=VALUE as in pipeline files (sections derive,
+    /// boundary, tetra; repeatable): e.g. `--set derive.kernel=central` shows what a cruder
+    /// kernel costs against the same tolerances.
+    #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+    pub set: Vec<String>,
 }
 
 /// `mdtf preview`.

@@ -127,6 +127,14 @@ fn yes() -> bool {
 /// the value parsed as TOML, else taken as a string). Errors name the file's field.
 pub fn parse(text: &str, overrides: &[String]) -> Result<Pipeline, String> {
     let mut doc: toml::Table = toml::from_str(text).map_err(|e| e.to_string())?;
+    apply_overrides(&mut doc, overrides)?;
+    let text = toml::to_string(&doc).map_err(|e| e.to_string())?;
+    toml::from_str(&text).map_err(|e| e.to_string())
+}
+
+/// Sets "section.key=value" overrides (any depth; the value parsed as TOML,
+/// else taken as a string) in a TOML document.
+pub fn apply_overrides(doc: &mut toml::Table, overrides: &[String]) -> Result<(), String> {
     for o in overrides {
         let (key, value) = o.split_once('=').ok_or_else(|| format!("--set {o}: expected section.key=value"))?;
         let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {value}"))
@@ -135,7 +143,7 @@ pub fn parse(text: &str, overrides: &[String]) -> Result<Pipeline, String> {
             .unwrap_or_else(|| toml::Value::String(value.to_string()));
         let mut parts: Vec<&str> = key.split('.').collect();
         let last = parts.pop().ok_or_else(|| format!("--set {o}: empty key"))?;
-        let mut table = &mut doc;
+        let mut table = &mut *doc;
         for p in parts {
             table = table
                 .entry(p.to_string())
@@ -145,8 +153,7 @@ pub fn parse(text: &str, overrides: &[String]) -> Result<Pipeline, String> {
         }
         table.insert(last.to_string(), value);
     }
-    let text = toml::to_string(&doc).map_err(|e| e.to_string())?;
-    toml::from_str(&text).map_err(|e| e.to_string())
+    Ok(())
 }
 
 #[cfg(test)]

@@ -36,9 +36,33 @@ fn check(name: &str, measured: f64, tolerance: f64, at_most: bool) -> Check {
     Check { name: name.into(), measured, tolerance, at_most }
 }
 
-/// Runs the checks on an n^3 erf sphere (radius 0.3 n, sigma 3, values 0..255),
-/// writing the boundary report and histogram pictures into `dir`.
-pub fn validate(n: usize, dir: &Path) -> Result<Vec<Check>, String> {
+/// The stage parameters `mdtf validate` runs with: the defaults, or what
+/// `--set section.key=value` changes (sections `derive`, `boundary`, `tetra`
+/// as in pipeline files), so that a wrong parameter shows as a failed check.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ValidateParams {
+    /// `[derive]`: the kernel.
+    pub derive: crate::file::DeriveSection,
+    /// `[boundary]`: tracing parameters.
+    pub boundary: BoundaryParams,
+    /// `[tetra]`: tetrahedra per cell and the gradient method.
+    pub tetra: mdtf_tetra::TetraParams,
+}
+
+impl ValidateParams {
+    /// The defaults with `--set` overrides applied; unknown keys are named.
+    pub fn from_overrides(overrides: &[String]) -> Result<ValidateParams, String> {
+        let mut doc = toml::Table::new();
+        crate::file::apply_overrides(&mut doc, overrides)?;
+        let text = toml::to_string(&doc).map_err(|e| e.to_string())?;
+        toml::from_str(&text).map_err(|e| format!("--set: {e}"))
+    }
+}
+
+/// Runs the checks on an n^3 erf sphere (radius 0.3 n, sigma 3, values 0..255)
+/// with `params`, writing the boundary report and histogram pictures into `dir`.
+pub fn validate(n: usize, dir: &Path, params: &ValidateParams) -> Result<Vec<Check>, String> {
     if n < 48 {
         return Err(format!("--size {n}: the checks need at least 48 voxels per axis"));
     }
@@ -51,7 +75,11 @@ pub fn validate(n: usize, dir: &Path) -> Result<Vec<Check>, String> {
     let mut out = Vec::new();
 
     // derive
-    let d = DeriveParams { items: vec![Item::G, Item::F2, Item::Normal], ..Default::default() };
+    let kernel = match &params.derive.kernel {
+        Some(k) => k.parse().map_err(|e: mdtf_derive::UnknownKernel| e.to_string())?,
+        None => mdtf_derive::DEFAULT_KERNEL,
+    };
+    let d = DeriveParams { items: vec![Item::G, Item::F2, Item::Normal], kernel, ..Default::default() };
     let mut derived = mdtf_derive::run(&MultiField::from(value.clone()), &d).map_err(|e| e.to_string())?;
     let normal = derived.items.remove(2).1;
     let f2 = derived.items.remove(1).1.into_scalar().map_err(|e| e.to_string())?;
@@ -86,11 +114,9 @@ pub fn validate(n: usize, dir: &Path) -> Result<Vec<Check>, String> {
     out.push(check("derive: f'' zero crossing error, voxels", (crossing - expect).abs(), 0.02, true));
 
     // boundary
-    let b = mdtf_boundary::run(
-        &BoundaryInput { g: &g, f2: &f2, normal: &normal, value_range: 255.0 },
-        &BoundaryParams::default(),
-    )
-    .map_err(|e| e.to_string())?;
+    let b =
+        mdtf_boundary::run(&BoundaryInput { g: &g, f2: &f2, normal: &normal, value_range: 255.0 }, &params.boundary)
+            .map_err(|e| e.to_string())?;
     let hits: Vec<usize> =
         (0..b.hit.samples().len()).filter(|&i| b.hit.samples()[i] == HitCode::Hit as u8 as f32).collect();
     let mean_dot = hits.iter().map(|&i| b.dot.samples()[i] as f64).sum::<f64>() / hits.len().max(1) as f64;
@@ -201,18 +227,17 @@ pub fn validate(n: usize, dir: &Path) -> Result<Vec<Check>, String> {
         worst_g = worst_g.max((gp.segment_integral(&v1, &v2) - simpson).abs());
     }
     out.push(check("pack: Gaussian segment integral vs quadrature", worst_g, 1e-5, true));
-    out.push(check("tetra: vertex g mean rel. error", tetra_g_error(n)?, 0.02, true));
+    out.push(check("tetra: vertex g mean rel. error", tetra_g_error(n, &params.tetra)?, 0.02, true));
     out.push(check("tetra: F/B, Gaussian tables vs quadr.", tetra_table_error(), 1e-4, true));
     Ok(out)
 }
 
-/// Mean relative error of per-vertex g on the 6-tetrahedra mesh of an n^3
+/// Mean relative error of per-vertex g on the mesh (`params.tets` per cell) of an n^3
 /// erf sphere (radius 0.3 n, sigma 3) over the points with |x| < 2 sigma.
-fn tetra_g_error(n: usize) -> Result<f64, String> {
+fn tetra_g_error(n: usize, params: &mdtf_tetra::TetraParams) -> Result<f64, String> {
     let phantom = erf_sphere(Geometry::new([n; 3], [1.0; 3]), 0.3 * n as f64, 3.0, 0.0, 255.0, None);
-    let mesh =
-        mdtf_tetra::tetrahedralise(&phantom.volume(), mdtf_tetra::TetScheme::Six, "v").map_err(|e| e.to_string())?;
-    let g = mdtf_tetra::magnitudes(&mdtf_tetra::vertex_gradients(&mesh, mdtf_tetra::GradientMethod::LeastSquares));
+    let mesh = mdtf_tetra::tetrahedralise(&phantom.volume(), params.tets, "v").map_err(|e| e.to_string())?;
+    let g = mdtf_tetra::magnitudes(&mdtf_tetra::vertex_gradients(&mesh, params.gradient));
     let (mut sum, mut count) = (0.0, 0usize);
     for (p, &gv) in mesh.points.iter().zip(&g) {
         let truth = phantom.at(*p);

@@ -3,11 +3,13 @@
 use crate::args::ValidateArgs;
 use crate::progress::Progress;
 use anyhow::{Result, bail};
-use mdtf_pipeline::validate::validate;
+use mdtf_pipeline::validate::{ValidateParams, validate};
 
 /// Runs the checks and prints the table on stdout.
 pub fn run(args: &ValidateArgs, progress: &Progress) -> Result<()> {
-    let checks = progress.step("validating", || validate(args.size, &args.output)).map_err(anyhow::Error::msg)?;
+    let params = ValidateParams::from_overrides(&args.set).map_err(anyhow::Error::msg)?;
+    let checks =
+        progress.step("validating", || validate(args.size, &args.output, &params)).map_err(anyhow::Error::msg)?;
     progress.clear();
     println!("{:<48} {:>12} {:>14}  result", "check", "measured", "tolerance");
     for c in &checks {
