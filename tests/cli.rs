@@ -441,6 +441,20 @@ fn histogram_writes_pictures_counts_and_the_histogram_volume() {
     assert!(e.contains("degenerate"), "{e}");
     let e = mdtf_err(&["histogram", s.to_str().unwrap(), "-o", out.to_str().unwrap(), "--bins", "0"]);
     assert!(e.contains("zero bins"), "{e}");
+    // three fields: the 3D counts, the three projections, and the colour-volume picture
+    let mf = dir.path().join("m.nrrd");
+    mdtf_ok(&["synth", "multifield", "-o", mf.to_str().unwrap(), "--size", "24", "-q"]);
+    let h3 = dir.path().join("h3");
+    let args = ["histogram", mf.to_str().unwrap(), "-o", h3.to_str().unwrap(), "--axes", "a,b,c", "--bins", "32"];
+    mdtf_ok(&[&args[..], &["-q"]].concat());
+    for f in ["hist_a_b_c.nrrd", "hist_a_b.png", "hist_a_c.png", "hist_b_c.png", "hist_a_b_c_rgb.png"] {
+        assert!(h3.join(f).exists(), "{f}");
+    }
+    let decoder =
+        png::Decoder::new(std::io::BufReader::new(std::fs::File::open(h3.join("hist_a_b_c_rgb.png")).unwrap()));
+    let reader = decoder.read_info().unwrap();
+    let info = reader.info();
+    assert_eq!((info.width, info.height, info.color_type), (32 * 3 + 8, 32, png::ColorType::Rgb));
 }
 
 #[test]

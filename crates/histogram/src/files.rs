@@ -18,7 +18,8 @@ fn write_json(path: &Path, value: &serde_json::Value) -> Result<(), VolumeError>
     write_file_atomically(path, |w| w.write_all(text.as_bytes()))
 }
 
-/// Writes `hist_<axes>.{nrrd,json}` and, for 1D/2D, `.png` (and `.exr` for 2D) into `dir`.
+/// Writes `hist_<axes>.{nrrd,json}` and, for 1D/2D, `.png` (and `.exr` for 2D), for 3D the
+/// colour-volume picture `_rgb.png` of the three primary-plane projections, into `dir`.
 pub fn write_histogram(dir: &Path, h: &Histogram, scale: Scale) -> Result<(), VolumeError> {
     let stem: Vec<&str> = h.axes.iter().map(|a| a.name.as_str()).collect();
     let stem = format!("hist_{}", stem.join("_"));
@@ -33,6 +34,16 @@ pub fn write_histogram(dir: &Path, h: &Histogram, scale: Scale) -> Result<(), Vo
     }
     if h.axes.len() == 2 {
         write_exr(&dir.join(format!("{stem}.exr")), h)?;
+    }
+    if let Some(rgb) = h.rgb_projections(scale) {
+        let text = format!(
+            "primary-plane projections ({0}, {1}) | ({0}, {2}) | ({1}, {2}); {0} red, {1} green, {2} blue; {3}",
+            h.axes[0].name,
+            h.axes[1].name,
+            h.axes[2].name,
+            h.describe(scale)
+        );
+        crate::rgb::write_rgb_png(&dir.join(format!("{stem}_rgb.png")), &rgb, &text)?;
     }
     Ok(())
 }

@@ -11,12 +11,14 @@ mod count;
 mod files;
 mod hvol;
 mod image;
+mod rgb;
 
 pub use axis::{Axis, AxisSpec, DEFAULT_BINS, MAX_INTEGER_BINS};
 pub use count::{Histogram, count};
 pub use files::{write_histogram, write_hvol, write_stretched};
 pub use hvol::{HistogramVolume, HvolParams, histogram_volume};
 pub use image::{Grey, Scale, grey_level, side_by_side, write_exr, write_png};
+pub use rgb::{Rgb, write_rgb_png};
 
 /// Errors of the histogram stage.
 #[derive(Debug, thiserror::Error)]
