@@ -4,6 +4,11 @@
 //! boxes for conservative culling, and the `projected-tetrahedra` pack
 //! (arrays + the pre-integration tables of [`mdtf_pack::TetTableParams`]).
 //!
+//! The tables themselves, and the derivation of each integral from the
+//! paper (eq. 2-3, sections 4.2-4.4), are in `mdtf_pack`'s `tet_tables`
+//! module ([`mdtf_pack::front_back_tables`] and its siblings): they are pure
+//! functions of the transfer-function widgets, not of the mesh.
+//!
 //! Units: positions and lengths in world units, s in the input's units, g
 //! in s units per world unit.
 
@@ -141,8 +146,21 @@ pub struct TetraOutput {
 /// table uses `tf`'s `tf1d` over its `v_range`, or without one the example
 /// two-peak TF of [`Tf1d::two_peaks`] over the mesh's scalar range.
 pub fn run(mesh: &TetMesh, params: &TetraParams, tf: Option<&TfFile>) -> Result<TetraOutput, TetraError> {
+    run_with_progress(mesh, params, tf, &|_| {})
+}
+
+/// [`run`], calling `on_step` with the name of each step as it starts
+/// (gradients, cells, then each table), for progress on large meshes.
+pub fn run_with_progress(
+    mesh: &TetMesh,
+    params: &TetraParams,
+    tf: Option<&TfFile>,
+    on_step: &dyn Fn(&str),
+) -> Result<TetraOutput, TetraError> {
+    on_step("per-vertex gradients");
     let gradients = vertex_gradients(mesh, params.gradient);
     let g = magnitudes(&gradients);
+    on_step("cell boxes");
     let cells = cell_infos(mesh, &g);
     let max_edge_length = cells.iter().map(|c| c.max_edge as f64).fold(0.0, f64::max);
     let t = &params.tables;
@@ -174,6 +192,10 @@ pub fn run(mesh: &TetMesh, params: &TetraParams, tf: Option<&TfFile>) -> Result<
     }
     let mut luts = Vec::new();
     for table in &t.tables {
+        on_step(&format!(
+            "{} table",
+            serde_json::to_value(table).ok().and_then(|v| v.as_str().map(String::from)).unwrap_or_default()
+        ));
         match table {
             TetTable::FrontBack => luts.extend(mdtf_pack::front_back_tables(t.fb_size, tau_max, d_max)),
             TetTable::Gaussian => luts.push(mdtf_pack::gaussian_table(t.gaussian_size, t.p_max, t.t_max)),

@@ -51,7 +51,9 @@ pub fn run(args: &TetraArgs, progress: &Progress) -> Result<()> {
     if !summary.is_empty() {
         progress.note(&format!("{}: {summary}", source.display()));
     }
-    let out = progress.step("gradients, cells and tables", || mdtf_tetra::run(&mesh, &params, tf.as_ref()))?;
+    let out = progress.step("gradients, cells and tables", || {
+        mdtf_tetra::run_with_progress(&mesh, &params, tf.as_ref(), &|step| progress.message(step))
+    })?;
 
     let provenance = Provenance {
         mdtf_version: env!("CARGO_PKG_VERSION").into(),
