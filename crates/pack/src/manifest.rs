@@ -160,6 +160,7 @@ pub const MANIFEST_SCHEMA: &str = r##"{
     "profile": {"enum": ["slicer-3dtf", "distance-tf", "gaussian-tf", "peak-finding", "projected-tetrahedra"]},
     "geometry": {
       "type": "object",
+      "description": "the grid of the volume textures; projected-tetrahedra packs: the grid the mesh was made from, or for meshes read from files their bounding box as a 2x2x2 grid",
       "required": ["dims", "spacing", "origin", "world_from_voxel"],
       "properties": {
         "dims": {"type": "array", "items": {"type": "integer", "minimum": 1}, "minItems": 3, "maxItems": 3},
