@@ -25,7 +25,7 @@ pub use from_volume::{TetScheme, tetrahedralise};
 pub use gradient::{GradientMethod, VertexStars, magnitudes, tet_gradient, vertex_gradients};
 pub use mesh::{DEGENERATE_RATIO, MeshReport, PointArray, TetMesh, max_edge, six_volume};
 pub use pack_mesh::write_pack;
-pub use vtk_io::{read_mesh, write_mesh};
+pub use vtk_io::{MeshSummary, mesh_summary, read_mesh, write_mesh};
 
 use mdtf_pack::{Lut, TetTable, TetTableParams, Tf1d, TfFile};
 use serde::{Deserialize, Serialize};

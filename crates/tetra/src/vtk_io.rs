@@ -18,6 +18,57 @@ fn read_error(path: &Path, message: impl std::fmt::Display) -> TetraError {
 /// only one-component point array). Cells other than tetrahedra and
 /// zero-volume tetrahedra are skipped and counted in the report.
 pub fn read_mesh(path: &Path, scalar: Option<&str>) -> Result<(TetMesh, MeshReport), TetraError> {
+    piece_to_mesh(path, load_piece(path)?, scalar)
+}
+
+/// What a VTK unstructured grid holds, for `mdtf info`: no scalar chosen,
+/// nothing checked beyond what reading needs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeshSummary {
+    /// Number of points.
+    pub points: usize,
+    /// Cells by VTK cell type name.
+    pub cells: std::collections::BTreeMap<String, usize>,
+    /// Point arrays: name, components, finite min and max over all components.
+    pub arrays: Vec<(String, usize, f64, f64)>,
+    /// Bounding box of the points (min, max), world units.
+    pub bounds: ([f64; 3], [f64; 3]),
+}
+
+/// Reads a `.vtk`/`.vtu` file and summarises it.
+pub fn mesh_summary(path: &Path) -> Result<MeshSummary, TetraError> {
+    let piece = load_piece(path)?;
+    let coords: Vec<f64> =
+        piece.points.cast_into::<f64>().ok_or_else(|| read_error(path, "point coordinates are not numbers"))?;
+    let points = coords.len() / 3;
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in coords.chunks_exact(3) {
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+    }
+    let mut cells = std::collections::BTreeMap::new();
+    for t in &piece.cells.types {
+        *cells.entry(format!("{t:?}")).or_insert(0) += 1;
+    }
+    let arrays = point_arrays(path, &piece.data, points)?
+        .into_iter()
+        .map(|a| {
+            let (mn, mx) = a
+                .values
+                .iter()
+                .filter(|v| v.is_finite())
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+            (a.name, a.components, mn, mx)
+        })
+        .collect();
+    Ok(MeshSummary { points, cells, arrays, bounds: (lo, hi) })
+}
+
+/// The single unstructured-grid piece of a `.vtk`/`.vtu` file.
+fn load_piece(path: &Path) -> Result<UnstructuredGridPiece, TetraError> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     if ext != "vtk" && ext != "vtu" {
         return Err(read_error(path, "not a VTK unstructured grid: expected a .vtk (legacy) or .vtu (XML) file"));
@@ -53,8 +104,7 @@ pub fn read_mesh(path: &Path, scalar: Option<&str>) -> Result<(TetMesh, MeshRepo
     if pieces_in.len() != 1 {
         return Err(read_error(path, format!("{} pieces; mdtf reads single-piece grids", pieces_in.len())));
     }
-    let piece = pieces_in.remove(0);
-    piece_to_mesh(path, piece, scalar)
+    Ok(pieces_in.remove(0))
 }
 
 fn piece_to_mesh(

@@ -283,3 +283,20 @@ fn results_do_not_depend_on_the_thread_count() {
         .install(|| vertex_gradients(&mesh, GradientMethod::LeastSquares));
     assert_eq!(one, two);
 }
+
+#[test]
+fn mesh_summary_counts_cells_by_type_and_ranges_arrays() {
+    let dir = tempfile::tempdir().unwrap();
+    let head = "# vtk DataFile Version 4.2\nx\nASCII\nDATASET UNSTRUCTURED_GRID\nPOINTS 5 float\n0 0 0 1 0 0 0 1 0 0 0 1 2 2 3\n";
+    let text = format!(
+        "{head}CELLS 3 14\n4 0 1 2 3\n4 1 2 3 4\n3 0 1 2\nCELL_TYPES 3\n10\n10\n5\nPOINT_DATA 5\nSCALARS density float 1\nLOOKUP_TABLE default\n1 2 3 4 -5\n"
+    );
+    let path = dir.path().join("m.vtk");
+    std::fs::write(&path, text).unwrap();
+    let m = mdtf_tetra::mesh_summary(&path).unwrap();
+    assert_eq!(m.points, 5);
+    assert_eq!(m.cells.get("Tetra"), Some(&2));
+    assert_eq!(m.cells.get("Triangle"), Some(&1));
+    assert_eq!(m.arrays, vec![("density".to_string(), 1, -5.0, 4.0)]);
+    assert_eq!(m.bounds, ([0.0, 0.0, 0.0], [2.0, 2.0, 3.0]));
+}
