@@ -90,6 +90,14 @@ fn sphere(p: &Pipeline) -> RadialPhantom {
     erf_sphere(g.clone(), 0.3 * min_extent(&g), p.input.sigma, 0.0, 255.0, None)
 }
 
+/// Mean of |estimate - truth| / truth over the pairs (estimate, truth) where
+/// `keep`, and how many there were.
+fn mean_relative_error(pairs: impl Iterator<Item = (f64, f64, bool)>) -> (f64, usize) {
+    let (sum, n) =
+        pairs.filter(|p| p.2).fold((0.0, 0usize), |(s, n), (est, truth, _)| (s + (est - truth).abs() / truth, n + 1));
+    (sum / n as f64, n)
+}
+
 fn max_abs_error(decoded: &[f64], truth: impl Iterator<Item = f64>, mask: impl Iterator<Item = bool>) -> f64 {
     decoded.iter().zip(truth).zip(mask).filter(|(_, m)| *m).fold(0.0f64, |w, ((d, t), _)| w.max((d - t).abs()))
 }
@@ -164,14 +172,9 @@ fn gaussian_tf_pack_decodes_to_the_fields_and_their_multi_field_gradient() {
     let truth = ph.truth(&sampled);
     let (gn, step) = decode(&pack, &m, "gnorm");
     let peak = truth.gnorm.data.iter().fold(0.0f32, |a, &b| a.max(b)) as f64;
-    let (mut sum, mut n) = (0.0, 0);
-    for (d, &t) in gn.iter().zip(truth.gnorm.data.iter()) {
-        if t as f64 > 0.1 * peak {
-            sum += (d - t as f64).abs() / t as f64;
-            n += 1;
-        }
-    }
-    let mean = sum / n as f64;
+    let (mean, n) = mean_relative_error(
+        gn.iter().zip(truth.gnorm.data.iter()).map(|(&d, &t)| (d, t as f64, t as f64 > 0.1 * peak)),
+    );
     assert!(mean <= 0.02, "||G||: mean relative error {mean} over {n} voxels (step {step})");
 }
 
@@ -186,14 +189,7 @@ fn peak_finding_pack_decodes_to_the_shells_and_their_inverse_gradient() {
     let (v, sv) = decode(&pack, &m, "v");
     assert!(max_abs_error(&v, truth.iter().map(|t| t.v), std::iter::repeat(true)) <= 0.5 * sv + 1e-3);
     let (inv, step) = decode(&pack, &m, "inv_g");
-    let (mut sum, mut n) = (0.0, 0);
-    for (d, t) in inv.iter().zip(&truth) {
-        if t.g > 0.2 * peak_g {
-            sum += (d - 1.0 / t.g).abs() * t.g;
-            n += 1;
-        }
-    }
-    let mean = sum / n as f64;
+    let (mean, n) = mean_relative_error(inv.iter().zip(&truth).map(|(&d, t)| (d, 1.0 / t.g, t.g > 0.2 * peak_g)));
     assert!(mean <= 0.02, "1/g: mean relative error {mean} over {n} voxels (step {step})");
 }
 

@@ -104,15 +104,7 @@ pub fn side_by_side(a: &Grey, b: &Grey) -> Grey {
 
 /// Writes a grey PNG with `description` in a tEXt chunk ("Description"). Atomic.
 pub fn write_png(path: &Path, img: &Grey, description: &str) -> Result<(), VolumeError> {
-    write_file_atomically(path, |out| {
-        let mut enc = png::Encoder::new(out, img.width as u32, img.height as u32);
-        enc.set_color(png::ColorType::Grayscale);
-        enc.set_depth(png::BitDepth::Eight);
-        enc.add_text_chunk("Description".into(), description.to_string()).map_err(std::io::Error::other)?;
-        let mut writer = enc.write_header().map_err(std::io::Error::other)?;
-        writer.write_image_data(&img.pixels).map_err(std::io::Error::other)?;
-        writer.finish().map_err(std::io::Error::other)
-    })
+    mdtf_volume::write_png(path, img.width, img.height, mdtf_volume::PngColour::Grey, &img.pixels, description)
 }
 
 /// Writes a 2D histogram's counts as a one-channel ("Y") f32 OpenEXR image,

@@ -11,7 +11,7 @@
 
 use crate::count::Histogram;
 use crate::image::{Scale, grey_level};
-use mdtf_volume::{VolumeError, write_file_atomically};
+use mdtf_volume::VolumeError;
 use std::path::Path;
 
 /// An 8-bit RGB image, rows top to bottom.
@@ -95,15 +95,7 @@ impl Histogram {
 
 /// Writes an RGB PNG with `description` in a tEXt chunk. Atomic.
 pub fn write_rgb_png(path: &Path, img: &Rgb, description: &str) -> Result<(), VolumeError> {
-    write_file_atomically(path, |out| {
-        let mut enc = png::Encoder::new(out, img.width as u32, img.height as u32);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        enc.add_text_chunk("Description".into(), description.to_string()).map_err(std::io::Error::other)?;
-        let mut writer = enc.write_header().map_err(std::io::Error::other)?;
-        writer.write_image_data(&img.pixels).map_err(std::io::Error::other)?;
-        writer.finish().map_err(std::io::Error::other)
-    })
+    mdtf_volume::write_png(path, img.width, img.height, mdtf_volume::PngColour::Rgb, &img.pixels, description)
 }
 
 #[cfg(test)]

@@ -28,8 +28,7 @@ fn slicer_3dtf_256(bencher: divan::Bencher) {
     let n = 256;
     let chans = sphere_channels(n);
     let dir = tempfile::tempdir().expect("tempdir");
-    let params =
-        PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![], dtype: None, nifti: false };
+    let params = PackParams::new(Profile::Slicer3dtf);
     let prov =
         Provenance { mdtf_version: "bench".into(), input: None, input_sha256: None, stages: serde_json::Value::Null };
     bencher
@@ -42,8 +41,7 @@ fn slicer_3dtf_256(bencher: divan::Bencher) {
 fn slicer_3dtf_256_encode_only(bencher: divan::Bencher) {
     let n = 256;
     let chans = sphere_channels(n);
-    let params =
-        PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![], dtype: None, nifti: false };
+    let params = PackParams::new(Profile::Slicer3dtf);
     bencher
         .counter(ItemsCount::new(n * n * n))
         .bench(|| encode(&chans, &params, &BTreeMap::new()).map(|e| e.textures.len()));

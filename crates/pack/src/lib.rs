@@ -59,6 +59,14 @@ pub struct PackParams {
     pub nifti: bool,
 }
 
+impl PackParams {
+    /// `profile` with its own texture types, measured ranges (qbert clipping is the
+    /// caller's), the scalar "v" as the only field and no NIfTI copies.
+    pub fn new(profile: Profile) -> PackParams {
+        PackParams { profile, ranges: BTreeMap::new(), fields: Vec::new(), dtype: None, nifti: false }
+    }
+}
+
 /// Errors of the pack stage.
 #[derive(Debug, thiserror::Error)]
 pub enum PackError {

@@ -87,7 +87,7 @@ fn every_channel_decodes_within_half_a_step_from_the_manifest_alone() {
     ] {
         let dir = tempfile::tempdir().unwrap();
         let prov = Provenance { mdtf_version: "test".into(), input: None, input_sha256: None, stages: Value::Null };
-        let params = PackParams { profile, ranges: BTreeMap::new(), fields: fields.clone(), dtype: None, nifti: false };
+        let params = PackParams { fields: fields.clone(), ..PackParams::new(profile) };
         let m = pack(&chans, &params, &[], dir.path(), prov, &BTreeMap::new()).unwrap();
         if profile == Profile::GaussianTf {
             // five fields and ||G||: two RGBA16 textures
@@ -127,13 +127,7 @@ fn every_dtype_decodes_within_half_a_step() {
     for dtype in [Dtype::U8, Dtype::U16, Dtype::F16, Dtype::F32] {
         let dir = tempfile::tempdir().unwrap();
         let prov = Provenance { mdtf_version: "test".into(), input: None, input_sha256: None, stages: Value::Null };
-        let params = PackParams {
-            profile: Profile::Slicer3dtf,
-            ranges: BTreeMap::new(),
-            fields: vec![],
-            dtype: Some(dtype),
-            nifti: false,
-        };
+        let params = PackParams { dtype: Some(dtype), ..PackParams::new(Profile::Slicer3dtf) };
         let m = pack(&chans, &params, &[], dir.path(), prov, &BTreeMap::new()).unwrap();
         for name in ["v", "f2", "nx"] {
             let truth = &chans.iter().find(|(c, _)| c == name).unwrap().1;
@@ -179,40 +173,14 @@ fn missing_channels_are_named_with_their_stage() {
     let chans: Vec<(String, Volume)> = channels().into_iter().filter(|(c, _)| c != "g_hit" && c != "f2").collect();
     let dir = tempfile::tempdir().unwrap();
     let prov = Provenance { mdtf_version: "t".into(), input: None, input_sha256: None, stages: Value::Null };
-    let e = pack(
-        &chans,
-        &PackParams {
-            profile: Profile::DistanceTf,
-            ranges: BTreeMap::new(),
-            fields: vec![],
-            dtype: None,
-            nifti: false,
-        },
-        &[],
-        dir.path(),
-        prov.clone(),
-        &BTreeMap::new(),
-    )
-    .unwrap_err()
-    .to_string();
+    let e = pack(&chans, &PackParams::new(Profile::DistanceTf), &[], dir.path(), prov.clone(), &BTreeMap::new())
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("g_hit (made by the boundary stage)"), "{e}");
     let mut flat = channels();
     flat[0].1 = Volume::new(flat[0].1.geometry.clone(), Array3::from_elem(flat[0].1.data.dim(), 3.0)).unwrap();
-    let e = pack(
-        &flat,
-        &PackParams {
-            profile: Profile::Slicer3dtf,
-            ranges: BTreeMap::new(),
-            fields: vec![],
-            dtype: None,
-            nifti: false,
-        },
-        &[],
-        dir.path(),
-        prov,
-        &BTreeMap::new(),
-    )
-    .unwrap_err()
-    .to_string();
+    let e = pack(&flat, &PackParams::new(Profile::Slicer3dtf), &[], dir.path(), prov, &BTreeMap::new())
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("would lose all precision"), "{e}");
 }

@@ -110,12 +110,6 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let geo = input.geometry.clone();
     let n = geo.voxel_count();
     stage("input", t, n, vec![]);
-    let value_range = input.fields.first().map_or(0.0, |f| {
-        let (lo, hi) = f.data.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &x| {
-            if x.is_finite() { (l.min(x), h.max(x)) } else { (l, h) }
-        });
-        if hi >= lo { (hi - lo) as f64 } else { 0.0 }
-    });
 
     // which channels the later stages need
     let profile: Profile = p.pack.profile.parse().map_err(fail("pack"))?;
@@ -149,6 +143,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     } else {
         (input.into_scalar().map_err(|e| fail("input")(e.to_string()))?, None)
     };
+    let value_range = value.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
     if let Some(mf) = &input {
         for (k, f) in mf.fields.iter().enumerate() {
             if needs(&f.name)

@@ -11,7 +11,7 @@ mod render;
 pub use load::{LoadedPack, Table, load};
 pub use render::{Camera, Classifier, render, render_without_skipping};
 
-use mdtf_volume::{VolumeError, write_file_atomically};
+use mdtf_volume::VolumeError;
 use std::path::Path;
 
 /// Errors of the preview.
@@ -87,15 +87,7 @@ pub fn classifier(pack: &LoadedPack, analytic: bool) -> Result<Classifier, Previ
 
 /// Writes RGB8 pixels as a PNG. Atomic.
 pub fn write_png(path: &Path, size: usize, rgb: &[u8], description: &str) -> Result<(), PreviewError> {
-    write_file_atomically(path, |out| {
-        let mut enc = png::Encoder::new(out, size as u32, size as u32);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        enc.add_text_chunk("Description".into(), description.to_string()).map_err(std::io::Error::other)?;
-        let mut w = enc.write_header().map_err(std::io::Error::other)?;
-        w.write_image_data(rgb).map_err(std::io::Error::other)?;
-        w.finish().map_err(std::io::Error::other)
-    })?;
+    mdtf_volume::write_png(path, size, size, mdtf_volume::PngColour::Rgb, rgb, description)?;
     Ok(())
 }
 
@@ -172,15 +164,7 @@ pub fn contact_sheet(images: &[&Path], columns: usize, cell: usize, out: &Path) 
         }
     }
     let names: Vec<String> = images.iter().map(|p| p.display().to_string()).collect();
-    write_file_atomically(out, |o| {
-        let mut enc = png::Encoder::new(o, w as u32, h as u32);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        enc.add_text_chunk("Description".into(), format!("mdtf contact sheet: {}", names.join(", ")))
-            .map_err(std::io::Error::other)?;
-        let mut wr = enc.write_header().map_err(std::io::Error::other)?;
-        wr.write_image_data(&sheet).map_err(std::io::Error::other)?;
-        wr.finish().map_err(std::io::Error::other)
-    })?;
+    let text = format!("mdtf contact sheet: {}", names.join(", "));
+    mdtf_volume::write_png(out, w, h, mdtf_volume::PngColour::Rgb, &sheet, &text)?;
     Ok(())
 }

@@ -27,8 +27,7 @@ fn decoded_pack_renders_like_the_float_fields() {
     let dir = tempfile::tempdir().unwrap();
     let prov =
         Provenance { mdtf_version: "t".into(), input: None, input_sha256: None, stages: serde_json::Value::Null };
-    let params =
-        PackParams { profile: Profile::Slicer3dtf, ranges: BTreeMap::new(), fields: vec![], dtype: None, nifti: false };
+    let params = PackParams::new(Profile::Slicer3dtf);
     pack(&chans, &params, &tf.slicer_luts(), dir.path(), prov, &BTreeMap::new()).unwrap();
     let loaded = load(dir.path()).unwrap();
     let c = classifier(&loaded, true).unwrap();
