@@ -184,3 +184,27 @@ fn missing_channels_are_named_with_their_stage() {
         .to_string();
     assert!(e.contains("would lose all precision"), "{e}");
 }
+
+#[test]
+fn texture_by_texture_writing_equals_encoding_in_memory() {
+    // `pack` writes one texture at a time through PackWriter; `encode` holds
+    // them all. Same bytes, same manifest entries, for every profile.
+    let chans = channels();
+    for profile in [Profile::Slicer3dtf, Profile::DistanceTf] {
+        let params = PackParams::new(profile);
+        let dir = tempfile::tempdir().unwrap();
+        let prov = Provenance { mdtf_version: "test".into(), input: None, input_sha256: None, stages: Value::Null };
+        let manifest = pack(&chans, &params, &[], dir.path(), prov, &BTreeMap::new()).unwrap();
+        let encoded = mdtf_pack::encode(&chans, &params, &BTreeMap::new()).unwrap();
+        assert_eq!(manifest.textures.len(), encoded.textures.len(), "{profile}");
+        for ((layout, bytes), entry) in encoded.textures.iter().zip(&manifest.textures) {
+            assert_eq!(layout.name, entry.name);
+            assert_eq!(&std::fs::read(dir.path().join(&entry.data)).unwrap(), bytes, "{profile} {}", entry.name);
+        }
+        assert_eq!(
+            serde_json::to_value(&manifest.channels).unwrap(),
+            serde_json::to_value(&encoded.channels).unwrap(),
+            "{profile}"
+        );
+    }
+}

@@ -11,7 +11,7 @@ use mdtf_derive::{DeriveParams, Item, Kernel};
 use mdtf_histogram::{
     Axis, AxisSpec, HvolParams, Scale, count, histogram_volume, hit_mask, write_histogram, write_hvol, write_stretched,
 };
-use mdtf_pack::{PackParams, Profile, Provenance, pack, parse_tf};
+use mdtf_pack::{PackParams, PackWriter, Profile, Provenance, parse_tf};
 use mdtf_volume::{Geometry, MultiField, ReadOptions, Volume, WriteOptions, write_file_atomically};
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -144,15 +144,6 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         (input.into_scalar().map_err(|e| fail("input")(e.to_string()))?, None)
     };
     let value_range = value.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
-    if let Some(mf) = &input {
-        for (k, f) in mf.fields.iter().enumerate() {
-            if needs(&f.name)
-                && let Some(v) = mf.field_volume(k)
-            {
-                chans.insert(f.name.clone(), v);
-            }
-        }
-    }
 
     // derive (only the items the later stages use)
     let kernel: Kernel = match &p.derive.kernel {
@@ -166,7 +157,13 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     if tracing || needs("f2") {
         items.push(Item::F2);
     }
-    if tracing || ["nx", "ny", "nz"].iter().any(|c| needs(c)) {
+    // Without tracing, nothing before the pack reads the normals: they are
+    // derived just before the texture that holds them, after the textures
+    // before it are written and their channels freed (3 f32 volumes fewer at
+    // the memory peak).
+    let wants_normals = ["nx", "ny", "nz"].iter().any(|c| needs(c));
+    let defer_normals = wants_normals && !tracing && profile != Profile::ProjectedTetrahedra;
+    if tracing || (wants_normals && !defer_normals) {
         items.push(Item::Normal);
     }
     if needs("inv_g") {
@@ -203,10 +200,21 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         }
         stage("derive (multi-field)", t, n, vec![]);
     }
-    drop(input);
+    // the input's fields move into the channels once the multi-field derive is done with them
+    if let Some(mf) = input {
+        for f in mf.fields {
+            if needs(&f.name) {
+                chans.insert(f.name, Volume { geometry: geo.clone(), data: f.data });
+            }
+        }
+    }
     if needs("v") && !chans.contains_key("v") {
         let field = value_mf.fields.remove(0);
         chans.insert("v".into(), Volume { geometry: geo.clone(), data: field.data });
+    }
+    if !defer_normals {
+        // nothing reads the value volume from here on unless it is a channel
+        value_mf.fields.clear();
     }
 
     // pre-filter and boundary
@@ -352,14 +360,47 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         mdtf_tetra::write_pack(&pdir, &mesh, &report, &out, Some(&geo), provenance).map_err(|e| err(e.to_string()))?;
     } else {
         // the pack is the last stage to read the channels: they move into it
-        let pack_chans: Vec<(String, Volume)> =
+        let mut pack_chans: Vec<(String, Volume)> =
             profile.channels(&fields).into_iter().filter_map(|c| chans.remove(&c).map(|v| (c, v))).collect();
         let ranges = crate::pack_inputs::ranges(&pack_chans, &BTreeMap::new()).map_err(|e| err(e.to_string()))?;
         let alpha = p.pack.alpha.unwrap_or(AlphaMap::Linear { a: 1.0, dc: 3.0 });
         let luts = crate::pack_inputs::luts(profile, tf.as_ref(), &alpha, &pack_chans, &ranges, hvol_kept.as_ref())
             .map_err(|e| err(e.to_string()))?;
         let params = PackParams { profile, ranges, fields, dtype: None, nifti: p.pack.nifti };
-        pack(&pack_chans, &params, &luts, &pdir, provenance, &BTreeMap::new()).map_err(|e| err(e.to_string()))?;
+        let sources = BTreeMap::new();
+        let layouts = mdtf_pack::texture_layouts(&params);
+        let mut writer = PackWriter::new(&pdir, &params, geo.clone(), &sources);
+        let mut normals_pending = defer_normals;
+        for (i, layout) in layouts.iter().enumerate() {
+            let uses = |l: &mdtf_pack::TextureLayout, c: &str| l.components.iter().flatten().any(|x| x == c);
+            if normals_pending && ["nx", "ny", "nz"].iter().any(|c| uses(layout, c)) {
+                // the value volume is in the pack's channels, the others, or still in derive's input
+                let taken = pack_chans.iter().position(|(c, _)| c == "v").map(|k| pack_chans.remove(k).1);
+                let from_chans = taken.is_some();
+                let value = match taken.or_else(|| chans.remove("v")) {
+                    Some(v) => MultiField::from(v),
+                    None => MultiField { geometry: geo.clone(), fields: std::mem::take(&mut value_mf.fields) },
+                };
+                let d = DeriveParams { items: vec![Item::Normal], kernel, ..Default::default() };
+                let out = mdtf_derive::run(&value, &d).map_err(|e| fail("derive")(e.to_string()))?;
+                if from_chans && layouts[i..].iter().any(|l| uses(l, "v")) {
+                    let v = value.into_scalar().map_err(|e| err(e.to_string()))?;
+                    pack_chans.push(("v".into(), v));
+                }
+                if let Some((_, nm)) = out.items.into_iter().next() {
+                    for (c, f) in ["nx", "ny", "nz"].iter().zip(nm.fields) {
+                        pack_chans.push((c.to_string(), Volume { geometry: geo.clone(), data: f.data }));
+                    }
+                }
+                normals_pending = false;
+            }
+            writer
+                .add(layout, &|c: &str| pack_chans.iter().find(|(n, _)| n == c).map(|(_, v)| v))
+                .map_err(|e| err(e.to_string()))?;
+            // free what no later texture reads (the value stays while the normals are still to make)
+            pack_chans.retain(|(c, _)| layouts[i + 1..].iter().any(|l| uses(l, c)) || (normals_pending && c == "v"));
+        }
+        writer.finish(&luts, provenance).map_err(|e| err(e.to_string()))?;
     }
     stage(pack_stage, t, n, vec!["pack/manifest.json".into()]);
 

@@ -1,0 +1,318 @@
+//! One texture at a time: quantising a texture's channels into its bytes,
+//! writing it (raw + detached NRRD header, optionally NIfTI), and the
+//! manifest at the end. [`PackWriter`] lets a caller make each texture's
+//! channels just before it is written and free them right after, so a pack
+//! never needs every channel and every texture in memory together.
+
+use crate::manifest::{ChannelEntry, ChannelSource, Manifest, ManifestGeometry, Provenance, SCHEMA_ID, TextureEntry};
+use crate::profile::{Profile, TextureLayout, describe};
+use crate::quantise::{Decode, Dtype, decode_for};
+use crate::{Lut, PackError, PackParams};
+use mdtf_volume::{Geometry, Volume, VolumeError, write_file_atomically};
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// The textures of `params.profile`, in order, with `params.dtype` applied.
+pub fn texture_layouts(params: &PackParams) -> Vec<TextureLayout> {
+    let mut layouts = params.profile.layout(&params.fields);
+    if let Some(d) = params.dtype {
+        for layout in &mut layouts {
+            layout.dtype = d;
+        }
+    }
+    layouts
+}
+
+/// Quantises textures one by one, collecting the manifest's channel entries.
+pub(crate) struct TextureEncoder<'a> {
+    params: &'a PackParams,
+    geometry: Geometry,
+    sources: &'a BTreeMap<String, ChannelSource>,
+    /// Each channel's data range, measured once even when it sits in two textures.
+    measured: BTreeMap<String, [f64; 2]>,
+    /// One entry per (channel, texture, component) encoded so far.
+    pub entries: Vec<ChannelEntry>,
+}
+
+impl<'a> TextureEncoder<'a> {
+    pub fn new(
+        params: &'a PackParams,
+        geometry: Geometry,
+        sources: &'a BTreeMap<String, ChannelSource>,
+    ) -> TextureEncoder<'a> {
+        TextureEncoder { params, geometry, sources, measured: BTreeMap::new(), entries: Vec::new() }
+    }
+
+    /// The bytes of texture `layout` (components fastest, then x, y, z,
+    /// little-endian), its channels taken from `get`.
+    pub fn encode<'v>(
+        &mut self,
+        layout: &TextureLayout,
+        get: &dyn Fn(&str) -> Option<&'v Volume>,
+    ) -> Result<Vec<u8>, PackError> {
+        let geometry = &self.geometry;
+        let comps = layout.components.len();
+        let mut decodes = Vec::with_capacity(comps);
+        for (ci, c) in layout.components.iter().enumerate() {
+            let Some(c) = c else {
+                decodes.push(None);
+                continue;
+            };
+            let v = get(c).ok_or_else(|| PackError::MissingChannels {
+                profile: self.params.profile.to_string(),
+                missing: format!("{c} (made by the {} stage)", describe(c).2),
+            })?;
+            if !v.geometry.same_grid(geometry) {
+                return Err(PackError::Geometry(format!("channel {c} is not on the grid of the pack")));
+            }
+            let [min, max] = match self.params.ranges.get(c) {
+                Some(r) => *r,
+                // unit normals: the range is known, no pass over the data
+                None if matches!(c.as_str(), "nx" | "ny" | "nz") => [-1.0, 1.0],
+                None => *self
+                    .measured
+                    .entry(c.clone())
+                    .or_insert_with(|| v.finite_range().map_or([0.0, 0.0], |(lo, hi)| [lo as f64, hi as f64])),
+            };
+            let (meaning, units, stage, signed) = describe(c);
+            let d = decode_for(c, min, max, layout.dtype, signed)?;
+            let top = layout.dtype.max_code().unwrap_or(0.0);
+            self.entries.push(ChannelEntry {
+                name: c.to_string(),
+                meaning: meaning.into(),
+                units: units.into(),
+                texture: layout.name.clone(),
+                component: ci,
+                decode: d,
+                range: [d.offset, d.offset + d.scale * top],
+                source: self
+                    .sources
+                    .get(c)
+                    .cloned()
+                    .unwrap_or(ChannelSource { stage: stage.into(), params: serde_json::Value::Null }),
+            });
+            decodes.push(Some((v.samples(), d)));
+        }
+        let size = layout.dtype.size();
+        let [nx, ny, _] = geometry.dims;
+        let plane = nx * ny;
+        let mut bytes = vec![0u8; geometry.voxel_count() * comps * size];
+        bytes.par_chunks_mut(plane * comps * size).enumerate().for_each_init(
+            || vec![vec![0u32; nx]; comps],
+            |codes, (k, out)| {
+                for j in 0..ny {
+                    let row = (k * plane + j * nx)..(k * plane + (j + 1) * nx);
+                    for (ci, dec) in decodes.iter().enumerate() {
+                        match dec {
+                            Some((data, d)) => encode_row(&data[row.clone()], d, layout.dtype, &mut codes[ci]),
+                            None => codes[ci].fill(0),
+                        }
+                    }
+                    interleave(codes, size, &mut out[j * nx * comps * size..(j + 1) * nx * comps * size]);
+                }
+            },
+        );
+        Ok(bytes)
+    }
+}
+
+/// Writes a pack into a folder one texture at a time: [`PackWriter::add`]
+/// quantises and writes a texture and drops its bytes; [`PackWriter::finish`]
+/// writes the lookup tables and the manifest.
+pub struct PackWriter<'a> {
+    dir: &'a Path,
+    encoder: TextureEncoder<'a>,
+    textures: Vec<TextureEntry>,
+}
+
+impl<'a> PackWriter<'a> {
+    /// A writer of a `params` pack on `geometry` into `dir` (which must exist);
+    /// `sources` names the stage that made each channel (default: the usual one).
+    pub fn new(
+        dir: &'a Path,
+        params: &'a PackParams,
+        geometry: Geometry,
+        sources: &'a BTreeMap<String, ChannelSource>,
+    ) -> PackWriter<'a> {
+        PackWriter { dir, encoder: TextureEncoder::new(params, geometry, sources), textures: Vec::new() }
+    }
+
+    /// Quantises texture `layout` from the channels `get` gives and writes it.
+    pub fn add<'v>(
+        &mut self,
+        layout: &TextureLayout,
+        get: &dyn Fn(&str) -> Option<&'v Volume>,
+    ) -> Result<(), PackError> {
+        let bytes = self.encoder.encode(layout, get)?;
+        let (geometry, nifti) = (&self.encoder.geometry, self.encoder.params.nifti);
+        self.textures.push(write_texture(self.dir, geometry, layout, &bytes, nifti)?);
+        Ok(())
+    }
+
+    /// Writes the lookup tables and `manifest.json`; returns the manifest.
+    pub fn finish(self, luts: &[Lut], provenance: Provenance) -> Result<Manifest, PackError> {
+        let e = self.encoder;
+        write_manifest(self.dir, e.params.profile, &e.geometry, self.textures, e.entries, luts, provenance)
+    }
+}
+
+/// Writes one texture's bytes as `<name>.raw` with a detached NRRD header
+/// (and `<name>.nii` when `nifti`); returns its manifest entry.
+pub(crate) fn write_texture(
+    dir: &Path,
+    geometry: &Geometry,
+    layout: &TextureLayout,
+    bytes: &[u8],
+    nifti: bool,
+) -> Result<TextureEntry, PackError> {
+    let comps = layout.components.len();
+    let data_file = format!("{}.raw", layout.name);
+    let header_file = format!("{}.nhdr", layout.name);
+    write_file_atomically(&dir.join(&data_file), |w| w.write_all(bytes))?;
+    let type_name = match layout.dtype {
+        Dtype::U8 => "uint8",
+        Dtype::U16 | Dtype::F16 => "uint16",
+        Dtype::F32 => "float",
+    };
+    let order: Vec<String> = layout.components.iter().map(|c| c.clone().unwrap_or_else(|| "-".into())).collect();
+    let extra = [("mdtf_components", order.join(" ")), ("mdtf_dtype", format!("{:?}", layout.dtype).to_lowercase())];
+    let header = mdtf_volume::nrrd::texture_header(geometry, comps, type_name, &data_file, &extra);
+    write_file_atomically(&dir.join(&header_file), |w| w.write_all(header.as_bytes()))?;
+    let nifti = if nifti {
+        let file = format!("{}.nii", layout.name);
+        write_nifti_texture(&dir.join(&file), geometry, &layout.components, layout.dtype, bytes)?;
+        Some(file)
+    } else {
+        None
+    };
+    Ok(TextureEntry {
+        name: layout.name.clone(),
+        header: header_file,
+        data: data_file,
+        dims: geometry.dims,
+        components: comps,
+        component_order: layout.components.clone(),
+        dtype: layout.dtype,
+        nifti,
+    })
+}
+
+/// Writes the lookup tables and `manifest.json` of a pack whose textures are written.
+pub(crate) fn write_manifest(
+    dir: &Path,
+    profile: Profile,
+    geometry: &Geometry,
+    textures: Vec<TextureEntry>,
+    channels: Vec<ChannelEntry>,
+    luts: &[Lut],
+    provenance: Provenance,
+) -> Result<Manifest, PackError> {
+    let manifest = Manifest {
+        schema: SCHEMA_ID.into(),
+        profile: profile.to_string(),
+        geometry: ManifestGeometry {
+            dims: geometry.dims,
+            spacing: geometry.spacing,
+            origin: geometry.origin,
+            world_from_voxel: geometry.world_from_voxel(),
+        },
+        textures,
+        channels,
+        luts: luts.iter().map(|l| l.write(dir)).collect::<Result<_, _>>()?,
+        mesh: None,
+        provenance,
+    };
+    let json = serde_json::to_string_pretty(&manifest)
+        .map_err(|e| PackError::Io(VolumeError::Fields(format!("manifest: {e}"))))?;
+    write_file_atomically(&dir.join("manifest.json"), |w| w.write_all(json.as_bytes()))?;
+    Ok(manifest)
+}
+
+/// Codes of one row of one component. Integer codes are rounded in f64 (so
+/// every code is within half a step whatever the range) in a branch-free
+/// loop that vectorises; compiled for AVX-512/AVX2 too, picked at run time.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+avx2", "x86_64+avx2"))]
+fn encode_row(src: &[f32], d: &Decode, dtype: Dtype, codes: &mut [u32]) {
+    match dtype.max_code() {
+        Some(top) => {
+            let (off, inv) = (d.offset, 1.0 / d.scale);
+            // Adding 2^52 leaves the rounded (to nearest, ties to even: still within half a
+            // step) integer in the low mantissa bits: no float-to-int conversion, so no
+            // per-lane NaN handling, and the loop stays in SIMD registers.
+            const MAGIC: f64 = 4_503_599_627_370_496.0;
+            for (c, &v) in codes.iter_mut().zip(src) {
+                let x = (v as f64 - off) * inv;
+                let x = if x > 0.0 { x } else { 0.0 }; // NaN fails the comparison: code 0
+                let x = if x < top { x } else { top };
+                *c = (x + MAGIC).to_bits() as u32;
+            }
+        }
+        None => {
+            for (c, &v) in codes.iter_mut().zip(src) {
+                *c = d.code(v, dtype);
+            }
+        }
+    }
+}
+
+/// Interleaves per-component codes (each one row) into little-endian texture bytes.
+fn interleave(codes: &[Vec<u32>], size: usize, out: &mut [u8]) {
+    let comps = codes.len();
+    match (size, comps) {
+        (1, 4) => {
+            let n = out.len() / 4;
+            let (c0, c1, c2, c3) = (&codes[0][..n], &codes[1][..n], &codes[2][..n], &codes[3][..n]);
+            // one little-endian u32 per texel: shifts and ors that vectorise
+            for (i, px) in out.chunks_exact_mut(4).enumerate() {
+                let word = (c0[i] & 0xff) | (c1[i] & 0xff) << 8 | (c2[i] & 0xff) << 16 | (c3[i] & 0xff) << 24;
+                px.copy_from_slice(&word.to_le_bytes());
+            }
+        }
+        _ => {
+            for (i, px) in out.chunks_exact_mut(comps * size).enumerate() {
+                for (ci, code) in codes.iter().enumerate() {
+                    px[ci * size..(ci + 1) * size].copy_from_slice(&code[i].to_le_bytes()[..size]);
+                }
+            }
+        }
+    }
+}
+
+/// Writes one texture as NIfTI-1: a 4D volume with one component per
+/// volume (named after its channel), the stored codes as u8, u16 or f32.
+fn write_nifti_texture(
+    path: &Path,
+    geometry: &mdtf_volume::Geometry,
+    components: &[Option<String>],
+    dtype: Dtype,
+    bytes: &[u8],
+) -> Result<(), PackError> {
+    use mdtf_volume::{Field, MultiField, SampleType, WriteOptions};
+    let (size, ty) = match dtype {
+        Dtype::U8 => (1, SampleType::U8),
+        Dtype::U16 | Dtype::F16 => (2, SampleType::U16),
+        Dtype::F32 => (4, SampleType::F32),
+    };
+    let comps = components.len();
+    let mut fields = Vec::with_capacity(comps);
+    for (c, name) in components.iter().enumerate() {
+        let values: Vec<f32> = bytes
+            .chunks_exact(comps * size)
+            .map(|px| {
+                let b = &px[c * size..(c + 1) * size];
+                match size {
+                    1 => b[0] as f32,
+                    2 => u16::from_le_bytes([b[0], b[1]]) as f32,
+                    _ => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+                }
+            })
+            .collect();
+        let data = ndarray::Array3::from_shape_vec(geometry.shape(), values)
+            .map_err(|e| PackError::Geometry(format!("{}: {e}", path.display())))?;
+        fields.push(Field { name: name.clone().unwrap_or_else(|| "unused".into()), data });
+    }
+    let mf = MultiField { geometry: geometry.clone(), fields };
+    mdtf_volume::write(path, &mf, &WriteOptions { ty, gzip: false }, &[])?;
+    Ok(())
+}
