@@ -76,6 +76,21 @@ impl Binner {
             None
         }
     }
+
+    /// [`Binner::bin`] without a branch, for loops that vectorise: the bin
+    /// (clamped into range; meaningless when outside) and whether `v` is
+    /// inside [min, max] (false for NaN).
+    #[inline(always)]
+    pub fn bin_unchecked(&self, v: f32) -> (u32, bool) {
+        let v = v as f64;
+        let inside = v >= self.min && v <= self.max;
+        // floor, clamp, then the integer from the low mantissa bits of
+        // x + 2^52: no float-to-int conversion, so the loop stays in vector
+        // registers (NaN clamps to 0; it is outside anyway)
+        const MAGIC: f64 = 4_503_599_627_370_496.0;
+        let x = ((v - self.min) * self.scale).floor().max(0.0).min(self.last as f64);
+        ((x + MAGIC).to_bits() as u32, inside)
+    }
 }
 
 /// How to choose an axis's range and bins.
@@ -151,20 +166,12 @@ fn percentile_range(data: &[f32], lo: f64, hi: f64, clip: (f64, f64)) -> (f64, f
     }
     const FINE: usize = 1 << 16;
     let scale = FINE as f64 / (hi - lo);
-    let parts: Vec<Vec<u32>> = data
-        .par_chunks(1 << 22)
-        .map(|c| {
-            let mut local = vec![0u32; FINE];
-            for &v in c.iter().filter(|v| v.is_finite()) {
-                local[(((v as f64 - lo) * scale) as usize).min(FINE - 1)] += 1;
-            }
-            local
-        })
-        .collect();
-    let mut counts = vec![0u64; FINE];
-    for p in &parts {
-        counts.iter_mut().zip(p).for_each(|(c, &l)| *c += l as u64);
-    }
+    // the same counting as every histogram (non-finite samples fall outside)
+    let counts: Vec<u64> =
+        match Axis::new("fine", lo, hi, FINE).and_then(|a| crate::count::count(&[data], vec![a], None)) {
+            Ok(h) => h.counts.iter().map(|&c| c as u64).collect(),
+            Err(_) => return (lo, hi),
+        };
     let n: u64 = counts.iter().sum();
     let cut = |p: f64| (p / 100.0 * n as f64).floor() as u64;
     let (skip_lo, skip_hi) = (cut(clip.0), cut(clip.1));

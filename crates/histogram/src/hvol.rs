@@ -16,8 +16,8 @@
 //!   (default sigma) around the boundary, 0 in empty bins.
 
 use crate::HistogramError;
-use crate::axis::{Axis, AxisSpec};
-use crate::count::{Histogram, count};
+use crate::axis::{Axis, AxisSpec, Binner};
+use crate::count::{BIN_BLOCK, Histogram, OUTSIDE, bin_block, count};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -92,17 +92,12 @@ pub fn histogram_volume(
     // Sums per v bin and per (v, g) bin over the voxels inside all three ranges.
     let (nv, ng) = (av.bins, ag.bins);
     let part_len = n.div_ceil(PARTS).max(1);
-    let (bv_, bg_, bh_) = (av.binner(), ag.binner(), ah.binner());
+    let binners = [av.binner(), ag.binner(), ah.binner()];
+    // (v, g) index, v fastest; f'' only has to be inside its range
+    let strides = [1, nv as u32, 0];
     let parts: Vec<Sums> = (0..PARTS)
         .into_par_iter()
-        .map(|p| {
-            let mut s = Sums::new(nv, ng);
-            for i in (p * part_len).min(n)..((p + 1) * part_len).min(n) {
-                let (Some(bv), Some(bg), Some(_)) = (bv_.bin(v[i]), bg_.bin(g[i]), bh_.bin(h[i])) else { continue };
-                s.add(bv, bg, g[i] as f64, h[i] as f64);
-            }
-            s
-        })
+        .map(|p| sums_part(&[v, g, h], &binners, &strides, (p * part_len).min(n)..((p + 1) * part_len).min(n), nv, ng))
         .collect();
     let mut sums = Sums::new(nv, ng);
     for p in &parts {
@@ -161,6 +156,49 @@ pub fn histogram_volume(
     })
 }
 
+/// The sums over voxels `range`, binned in vectorised blocks; runs of
+/// voxels in one (v, g) bin are summed in registers and added once.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+avx2", "x86_64+avx2"))]
+fn sums_part(
+    channels: &[&[f32]; 3],
+    binners: &[Binner; 3],
+    strides: &[u32; 3],
+    range: std::ops::Range<usize>,
+    nv: usize,
+    ng: usize,
+) -> Sums {
+    let mut s = Sums::new(nv, ng);
+    let (g, h) = (channels[1], channels[2]);
+    let mut block = [0u32; BIN_BLOCK];
+    let mut run = Run { bin: OUTSIDE, count: 0, g: 0.0, h: 0.0 };
+    for start in range.clone().step_by(BIN_BLOCK) {
+        let out = &mut block[..BIN_BLOCK.min(range.end - start)];
+        bin_block(channels, binners, strides, None, start, out);
+        for (l, &bin) in out.iter().enumerate() {
+            if bin == OUTSIDE {
+                continue;
+            }
+            if bin != run.bin {
+                s.add(&run);
+                run = Run { bin, count: 0, g: 0.0, h: 0.0 };
+            }
+            run.count += 1;
+            run.g += g[start + l] as f64;
+            run.h += h[start + l] as f64;
+        }
+    }
+    s.add(&run);
+    s
+}
+
+/// Consecutive voxels in one (v, g) bin (index v + nv g): their count and sums of g and f''.
+struct Run {
+    bin: u32,
+    count: u64,
+    g: f64,
+    h: f64,
+}
+
 struct Sums {
     c_v: Vec<u64>,
     g_v: Vec<f64>,
@@ -182,14 +220,19 @@ impl Sums {
         }
     }
 
-    fn add(&mut self, bv: usize, bg: usize, g: f64, h: f64) {
-        self.c_v[bv] += 1;
-        self.g_v[bv] += g;
-        self.h_v[bv] += h;
-        let i = bg * self.c_v.len() + bv;
-        self.c_vg[i] += 1;
-        self.g_vg[i] += g;
-        self.h_vg[i] += h;
+    /// Adds a run of voxels of one (v, g) bin (nothing if it is empty).
+    fn add(&mut self, run: &Run) {
+        if run.count == 0 {
+            return;
+        }
+        let i = run.bin as usize;
+        let bv = i % self.c_v.len();
+        self.c_v[bv] += run.count;
+        self.g_v[bv] += run.g;
+        self.h_v[bv] += run.h;
+        self.c_vg[i] += run.count;
+        self.g_vg[i] += run.g;
+        self.h_vg[i] += run.h;
     }
 
     fn merge(&mut self, o: &Sums) {
