@@ -20,13 +20,21 @@ pub fn compute(
     let value = input.field_volume(0).ok_or_else(|| ChainError::Unknown("the input has no fields".into()))?;
     let needs = |n: &str| names.iter().any(|x| x == n);
     let tracing = needs("g_hit") || needs("hit") || needs("distance");
-    // one derive pass serves both the derivative channels and the tracing
-    let derived = if tracing || ["g", "f2", "nx", "ny", "nz", "inv_g"].iter().any(|n| needs(n)) {
-        let d = DeriveParams {
-            items: vec![Item::G, Item::F2, Item::Normal, Item::InvG],
-            kernel: kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
-            ..Default::default()
-        };
+    // one derive pass serves both the derivative channels and the tracing,
+    // computing only the items asked for (each is a full volume)
+    let mut items = Vec::new();
+    for (item, wanted) in [
+        (Item::G, tracing || needs("g")),
+        (Item::F2, tracing || needs("f2")),
+        (Item::Normal, tracing || ["nx", "ny", "nz"].iter().any(|n| needs(n))),
+        (Item::InvG, needs("inv_g")),
+    ] {
+        if wanted {
+            items.push(item);
+        }
+    }
+    let derived = if !items.is_empty() {
+        let d = DeriveParams { items, kernel: kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL), ..Default::default() };
         Some(mdtf_derive::run(&MultiField::from(value.clone()), &d)?)
     } else {
         None

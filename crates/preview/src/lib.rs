@@ -8,8 +8,8 @@
 mod load;
 mod render;
 
-pub use load::{LoadedPack, Table, load};
-pub use render::{Camera, Classifier, render, render_without_skipping};
+pub use load::{LoadedPack, Table, decode_channels, load, load_channels};
+pub use render::{Camera, Classifier, channels_read, render, render_without_skipping};
 
 use mdtf_volume::VolumeError;
 use std::path::Path;
@@ -105,8 +105,11 @@ pub fn preview_named(
     analytic: bool,
     shown_as: &Path,
 ) -> Result<(), PreviewError> {
-    let pack = load(dir)?;
+    // the classifier comes from the tables; then only the channels it and the shading read are decoded
+    let mut pack = load_channels(dir, &|_| false)?;
     let c = classifier(&pack, analytic)?;
+    let read = channels_read(&c);
+    pack.channels = decode_channels(dir, &pack.manifest, &|n| read.iter().any(|r| r == n))?;
     let img = render(&pack.channels, &c, cam);
     let text = format!(
         "mdtf preview of {} ({}), azimuth {} elevation {}, step {} voxel",

@@ -1,10 +1,12 @@
-//! Reading a pack back from its manifest alone: every channel decoded to
-//! f32 volumes, every lookup table to its values.
+//! Reading a pack back from its manifest alone: channels decoded to f32
+//! volumes (all of them, or only those a renderer reads), every lookup
+//! table to its values.
 
 use crate::PreviewError;
-use mdtf_pack::{Dtype, Manifest};
+use mdtf_pack::{ChannelEntry, Dtype, Manifest, TextureEntry};
 use mdtf_volume::{Geometry, Volume};
 use std::collections::BTreeMap;
+use std::io::Read;
 use std::path::Path;
 
 /// A decoded lookup table.
@@ -31,55 +33,99 @@ pub struct LoadedPack {
     pub gaussians: Option<Vec<mdtf_pack::GaussianPrimitive>>,
 }
 
+/// The channels of the pack in `dir` (described by `manifest`) that
+/// `wanted` accepts, decoded to f32 volumes.
+pub fn decode_channels(
+    dir: &Path,
+    manifest: &Manifest,
+    wanted: &dyn Fn(&str) -> bool,
+) -> Result<BTreeMap<String, Volume>, PreviewError> {
+    let g = &manifest.geometry;
+    let geometry = Geometry::from_affine(g.dims, [g.world_from_voxel[0], g.world_from_voxel[1], g.world_from_voxel[2]])
+        .ok_or_else(|| PreviewError::Pack("manifest.json: degenerate world_from_voxel".into()))?;
+    let mut channels = BTreeMap::new();
+    for tex in &manifest.textures {
+        // each channel from the first texture that holds it
+        let entries: Vec<&ChannelEntry> = manifest
+            .channels
+            .iter()
+            .filter(|c| c.texture == tex.name && wanted(&c.name) && !channels.contains_key(&c.name))
+            .collect();
+        if entries.is_empty() {
+            continue;
+        }
+        for (name, data) in decode_texture(&dir.join(&tex.data), tex, &entries, geometry.voxel_count())? {
+            let array = ndarray::Array3::from_shape_vec(geometry.shape(), data)
+                .map_err(|e| PreviewError::Pack(e.to_string()))?;
+            channels.insert(name, Volume { geometry: geometry.clone(), data: array });
+        }
+    }
+    Ok(channels)
+}
+
+/// Texels decoded per read while streaming a texture.
+const TEXELS_PER_READ: usize = 1 << 16;
+
+/// Decodes the channels `entries` of texture `tex` (`n` texels, file `path`)
+/// to f32 values, reading the file in pieces.
+fn decode_texture(
+    path: &Path,
+    tex: &TextureEntry,
+    entries: &[&ChannelEntry],
+    n: usize,
+) -> Result<Vec<(String, Vec<f32>)>, PreviewError> {
+    let size = match tex.dtype {
+        Dtype::U8 => 1,
+        Dtype::U16 | Dtype::F16 => 2,
+        Dtype::F32 => 4,
+    };
+    let texel = tex.components * size;
+    let fail = |e: std::io::Error| PreviewError::Pack(format!("{}: {e}", path.display()));
+    let mut file = std::fs::File::open(path).map_err(fail)?;
+    let len = file.metadata().map_err(fail)?.len();
+    if len != (n * texel) as u64 {
+        return Err(PreviewError::Pack(format!("{}: {len} bytes, the manifest describes {}", tex.data, n * texel)));
+    }
+    let mut out: Vec<Vec<f32>> = entries.iter().map(|_| vec![0f32; n]).collect();
+    let mut buf = vec![0u8; TEXELS_PER_READ * texel];
+    for start in (0..n).step_by(TEXELS_PER_READ) {
+        let count = TEXELS_PER_READ.min(n - start);
+        let piece = &mut buf[..count * texel];
+        file.read_exact(piece).map_err(fail)?;
+        for (ch, data) in entries.iter().zip(out.iter_mut()) {
+            for (i, o) in data[start..start + count].iter_mut().enumerate() {
+                let at = i * texel + ch.component * size;
+                let code = match size {
+                    1 => piece[at] as u32,
+                    2 => u16::from_le_bytes([piece[at], piece[at + 1]]) as u32,
+                    _ => u32::from_le_bytes([piece[at], piece[at + 1], piece[at + 2], piece[at + 3]]),
+                };
+                *o = ch.decode.value(code, tex.dtype) as f32;
+            }
+        }
+    }
+    Ok(entries.iter().map(|c| c.name.clone()).zip(out).collect())
+}
+
 fn read(path: &Path) -> Result<Vec<u8>, PreviewError> {
     std::fs::read(path).map_err(|e| PreviewError::Pack(format!("{}: {e}", path.display())))
 }
 
 /// Reads `dir/manifest.json` and decodes everything it lists.
 pub fn load(dir: &Path) -> Result<LoadedPack, PreviewError> {
+    load_channels(dir, &|_| true)
+}
+
+/// [`load`], decoding only the channels `wanted` accepts (tables and
+/// primitives are always read). Textures are decoded as they stream from
+/// disk, so no texture is ever held whole in memory: the pack costs its
+/// wanted channels as f32 and nothing more.
+pub fn load_channels(dir: &Path, wanted: &dyn Fn(&str) -> bool) -> Result<LoadedPack, PreviewError> {
     let text = String::from_utf8(read(&dir.join("manifest.json"))?)
         .map_err(|_| PreviewError::Pack("manifest.json is not UTF-8".into()))?;
     let manifest: Manifest =
         serde_json::from_str(&text).map_err(|e| PreviewError::Pack(format!("manifest.json: {e}")))?;
-    let g = &manifest.geometry;
-    let geometry = Geometry::from_affine(g.dims, [g.world_from_voxel[0], g.world_from_voxel[1], g.world_from_voxel[2]])
-        .ok_or_else(|| PreviewError::Pack("manifest.json: degenerate world_from_voxel".into()))?;
-    let n = geometry.voxel_count();
-    let mut channels = BTreeMap::new();
-    for tex in &manifest.textures {
-        let bytes = read(&dir.join(&tex.data))?;
-        let size = match tex.dtype {
-            Dtype::U8 => 1,
-            Dtype::U16 | Dtype::F16 => 2,
-            Dtype::F32 => 4,
-        };
-        if bytes.len() != n * tex.components * size {
-            return Err(PreviewError::Pack(format!(
-                "{}: {} bytes, the manifest describes {}",
-                tex.data,
-                bytes.len(),
-                n * tex.components * size
-            )));
-        }
-        for ch in manifest.channels.iter().filter(|c| c.texture == tex.name) {
-            if channels.contains_key(&ch.name) {
-                continue;
-            }
-            let mut data = vec![0f32; n];
-            for (i, o) in data.iter_mut().enumerate() {
-                let at = (i * tex.components + ch.component) * size;
-                let code = match size {
-                    1 => bytes[at] as u32,
-                    2 => u16::from_le_bytes([bytes[at], bytes[at + 1]]) as u32,
-                    _ => u32::from_le_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]]),
-                };
-                *o = ch.decode.value(code, tex.dtype) as f32;
-            }
-            let array = ndarray::Array3::from_shape_vec(geometry.shape(), data)
-                .map_err(|e| PreviewError::Pack(e.to_string()))?;
-            channels.insert(ch.name.clone(), Volume { geometry: geometry.clone(), data: array });
-        }
-    }
+    let channels = decode_channels(dir, &manifest, wanted)?;
     let mut tables = BTreeMap::new();
     for lut in &manifest.luts {
         // attached raw NRRD: the samples are the file's last cells x components x 4 bytes

@@ -223,6 +223,21 @@ fn coords(cell: &Cell, chans: &[Option<&[f32]>]) -> [f32; 4] {
     out
 }
 
+/// Channels the renderer reads besides the classifier's: shading (normals
+/// and g), the value, and the distance-tf pair.
+const SHADING_AND_PROFILE_CHANNELS: [&str; 7] = ["nx", "ny", "nz", "g", "v", "distance", "g_hit"];
+
+/// Names of every channel [`render`] reads with `classifier` (a pack may lack some).
+pub fn channels_read(classifier: &Classifier) -> Vec<String> {
+    let mut names: Vec<String> = SHADING_AND_PROFILE_CHANNELS.iter().map(|c| c.to_string()).collect();
+    match classifier {
+        Classifier::Lut(t) | Classifier::Chord { tf: t, .. } => names.extend(t.axes.iter().map(|(c, ..)| c.clone())),
+        Classifier::Gaussian { channels, .. } => names.extend(channels.iter().cloned()),
+        Classifier::Distance { .. } | Classifier::Peak { .. } => {}
+    }
+    names
+}
+
 /// Renders `channels` (decoded or float, by name) with `classifier`; RGB8 pixels, rows from the top.
 pub fn render(channels: &BTreeMap<String, Volume>, classifier: &Classifier, cam: &Camera) -> Vec<u8> {
     render_impl(channels, classifier, cam, true)

@@ -43,4 +43,11 @@ fn decoded_pack_renders_like_the_float_fields() {
     assert!(mean <= 2.0, "{mean}");
     // empty-space skipping changes no pixel
     assert_eq!(mdtf_preview::render_without_skipping(&loaded.channels, &c, &cam), from_pack);
+    // decoding only the channels the renderer reads (as `preview` does, streamed) changes no pixel
+    let read = mdtf_preview::channels_read(&c);
+    let some = mdtf_preview::load_channels(dir.path(), &|n| read.iter().any(|r| r == n) && n != "v").unwrap();
+    assert!(some.channels.contains_key("nx") && !some.channels.contains_key("v"));
+    let some = mdtf_preview::load_channels(dir.path(), &|n| read.iter().any(|r| r == n)).unwrap();
+    assert_eq!(some.channels.get("g"), loaded.channels.get("g"));
+    assert_eq!(render(&some.channels, &c, &cam), from_pack);
 }
