@@ -72,13 +72,7 @@ pub fn count(channels: &[&[f32]], axes: Vec<Axis>, mask: Option<&[bool]>) -> Res
     if channels.iter().any(|c| c.len() != n) || mask.is_some_and(|m| m.len() != n) {
         return Err(HistogramError::Geometry("channels (and mask) must have the same number of voxels".into()));
     }
-    let total_bins: usize = axes.iter().map(|a| a.bins).product();
-    if n as u64 >= u32::MAX as u64 {
-        return Err(HistogramError::Geometry(format!("{n} voxels: histograms count at most 2^32 - 1")));
-    }
-    if total_bins > 1 << 28 {
-        return Err(HistogramError::BadAxis(format!("{total_bins} bins is too many (at most 2^28)")));
-    }
+    let total_bins = check_size(n, &axes)?;
     let strides: Vec<usize> = axes
         .iter()
         .scan(1usize, |s, a| {
@@ -92,36 +86,71 @@ pub fn count(channels: &[&[f32]], axes: Vec<Axis>, mask: Option<&[bool]>) -> Res
     let part_len = n.div_ceil(parts).max(1);
     let range_of = |p: usize| (p * part_len).min(n)..((p + 1) * part_len).min(n);
     // One private table per worker, summed in a fixed order.
-    // Per-thread counts, each noting which blocks of bins it touched: a
-    // fresh (calloc) count array costs a page fault only where it is
-    // written, and the merge reads only touched blocks. Sparse histograms
-    // (the 16.7 M bins of a histogram volume) so never fault in or scan
-    // their empty pages.
-    let mut partial: Vec<(Vec<u32>, Vec<bool>)> = (0..parts)
+    let mut partial: Vec<SparseCounts> = (0..parts)
         .into_par_iter()
         .map(|p| {
-            let mut local = vec![0u32; total_bins];
-            let mut touched = vec![false; total_bins.div_ceil(MERGE_BLOCK)];
-            let mut add = |idx: usize, run: u32| {
-                local[idx] += run;
-                touched[idx / MERGE_BLOCK] = true;
-            };
-            count_part(channels, &binners, &strides, mask, range_of(p), &mut add);
-            (local, touched)
+            let mut local = SparseCounts::new(total_bins);
+            count_part(channels, &binners, &strides, mask, range_of(p), &mut |idx, run| local.add(idx, run));
+            local
         })
         .collect();
-    let (mut counts, _) = partial.swap_remove(0);
-    for (local, touched) in &partial {
-        for (b, _) in touched.iter().enumerate().filter(|(_, t)| **t) {
-            let block = b * MERGE_BLOCK..((b + 1) * MERGE_BLOCK).min(total_bins);
-            counts[block.clone()].iter_mut().zip(&local[block]).for_each(|(c, &l)| *c += l);
-        }
+    let mut counts = partial.swap_remove(0);
+    for local in &partial {
+        counts.merge(local);
     }
+    let counts = counts.counts;
     Ok(Histogram { axes, counts })
+}
+
+/// The number of bins of `axes`, checked together with the voxel count `n`
+/// against what u32 counts and indices hold.
+pub(crate) fn check_size(n: usize, axes: &[Axis]) -> Result<usize, HistogramError> {
+    let total_bins: usize = axes.iter().map(|a| a.bins).product();
+    if n as u64 >= u32::MAX as u64 {
+        return Err(HistogramError::Geometry(format!("{n} voxels: histograms count at most 2^32 - 1")));
+    }
+    if total_bins > 1 << 28 {
+        return Err(HistogramError::BadAxis(format!("{total_bins} bins is too many (at most 2^28)")));
+    }
+    Ok(total_bins)
 }
 
 /// Bins per block of the merge's touched-block bookkeeping (one 4 KiB page of u32 counts).
 const MERGE_BLOCK: usize = 1024;
+
+/// One thread's counts, noting which blocks of bins it touched. A fresh
+/// (calloc) count array costs a page fault only where it is written, and a
+/// merge reads only touched blocks, so sparse histograms (the 16.7 M bins of
+/// a histogram volume) never fault in or scan their empty pages.
+pub(crate) struct SparseCounts {
+    /// Counts per bin.
+    pub counts: Vec<u32>,
+    touched: Vec<bool>,
+}
+
+impl SparseCounts {
+    /// Zero counts over `bins` bins.
+    pub fn new(bins: usize) -> SparseCounts {
+        SparseCounts { counts: vec![0; bins], touched: vec![false; bins.div_ceil(MERGE_BLOCK)] }
+    }
+
+    /// Adds `run` to bin `idx`.
+    #[inline(always)]
+    pub fn add(&mut self, idx: usize, run: u32) {
+        self.counts[idx] += run;
+        self.touched[idx / MERGE_BLOCK] = true;
+    }
+
+    /// Adds `other`'s counts, block by touched block.
+    pub fn merge(&mut self, other: &SparseCounts) {
+        let n = self.counts.len();
+        for (b, _) in other.touched.iter().enumerate().filter(|(_, t)| **t) {
+            let block = b * MERGE_BLOCK..((b + 1) * MERGE_BLOCK).min(n);
+            self.counts[block.clone()].iter_mut().zip(&other.counts[block]).for_each(|(c, &o)| *c += o);
+            self.touched[b] = true;
+        }
+    }
+}
 
 /// Calls `add(bin index, n)` for every run of n consecutive counted voxels of `range` in one bin.
 fn count_part(

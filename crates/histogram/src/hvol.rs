@@ -17,7 +17,7 @@
 
 use crate::HistogramError;
 use crate::axis::{Axis, AxisSpec, Binner};
-use crate::count::{BIN_BLOCK, Histogram, OUTSIDE, bin_block, count};
+use crate::count::{BIN_BLOCK, Histogram, OUTSIDE, SparseCounts, bin_block, check_size};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -87,22 +87,48 @@ pub fn histogram_volume(
         AxisSpec { bins: Some(bins), ..AxisSpec::qbert(name) }.resolve(name, data)
     };
     let (av, ag, ah) = (axis("v", v, params.bins[0])?, axis("g", g, params.bins[1])?, axis("f2", h, params.bins[2])?);
-    let hist = count(&[v, g, h], vec![av.clone(), ag.clone(), ah.clone()], None)?;
+    let axes = vec![av.clone(), ag.clone(), ah.clone()];
+    let total_bins = check_size(n, &axes)?;
 
-    // Sums per v bin and per (v, g) bin over the voxels inside all three ranges.
+    // One pass: the (v, g, f'') counts, and sums per v bin and per (v, g) bin
+    // over the voxels inside all three ranges. The sums are kept per fixed
+    // part and merged in part order, so they do not depend on the thread
+    // count; the counts are integers, so one array per thread will do.
     let (nv, ng) = (av.bins, ag.bins);
     let part_len = n.div_ceil(PARTS).max(1);
     let binners = [av.binner(), ag.binner(), ah.binner()];
-    // (v, g) index, v fastest; f'' only has to be inside its range
-    let strides = [1, nv as u32, 0];
-    let parts: Vec<Sums> = (0..PARTS)
+    let strides = [1, nv as u32, (nv * ng) as u32];
+    // one count array per thread: each part of a thread's group adds to it
+    let threads = rayon::current_num_threads().clamp(1, PARTS);
+    let group = PARTS.div_ceil(threads);
+    let splits: Vec<(SparseCounts, Vec<(usize, Sums)>)> = (0..threads)
         .into_par_iter()
-        .map(|p| sums_part(&[v, g, h], &binners, &strides, (p * part_len).min(n)..((p + 1) * part_len).min(n), nv, ng))
+        .map(|t| {
+            let mut counts = SparseCounts::new(total_bins);
+            let sums = (t * group..((t + 1) * group).min(PARTS))
+                .map(|p| {
+                    let range = (p * part_len).min(n)..((p + 1) * part_len).min(n);
+                    (p, count_and_sum(&[v, g, h], &binners, &strides, range, nv, ng, &mut counts))
+                })
+                .collect();
+            (counts, sums)
+        })
         .collect();
+    let mut counts: Option<SparseCounts> = None;
+    let mut parts: Vec<(usize, Sums)> = Vec::with_capacity(PARTS);
+    for (c, s) in splits {
+        match &mut counts {
+            Some(all) => all.merge(&c),
+            None => counts = Some(c),
+        }
+        parts.extend(s);
+    }
+    parts.sort_by_key(|(p, _)| *p);
     let mut sums = Sums::new(nv, ng);
-    for p in &parts {
+    for (_, p) in &parts {
         sums.merge(p);
     }
+    let hist = Histogram { axes, counts: counts.map_or_else(|| vec![0; total_bins], |c| c.counts) };
 
     let mean = |sum: f64, c: u64| if c > 0 { sum / c as f64 } else { 0.0 };
     let mean_g_v: Vec<f64> = (0..nv).map(|b| mean(sums.g_v[b], sums.c_v[b])).collect();
@@ -156,21 +182,27 @@ pub fn histogram_volume(
     })
 }
 
-/// The sums over voxels `range`, binned in vectorised blocks; runs of
-/// voxels in one (v, g) bin are summed in registers and added once.
+/// Counts the voxels of `range` into `counts` (bin index v + nv (g + ng f''))
+/// and returns their sums. Binning is done in vectorised blocks; runs of
+/// voxels in one bin are summed in registers and added once.
+#[allow(clippy::too_many_arguments)]
 #[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+avx2", "x86_64+avx2"))]
-fn sums_part(
+fn count_and_sum(
     channels: &[&[f32]; 3],
     binners: &[Binner; 3],
     strides: &[u32; 3],
     range: std::ops::Range<usize>,
     nv: usize,
     ng: usize,
+    counts: &mut SparseCounts,
 ) -> Sums {
     let mut s = Sums::new(nv, ng);
     let (g, h) = (channels[1], channels[2]);
     let mut block = [0u32; BIN_BLOCK];
-    let mut run = Run { bin: OUTSIDE, count: 0, g: 0.0, h: 0.0 };
+    // the run lives in plain locals (in registers; a struct behind a
+    // reference was kept on the stack, putting a store and a load in the
+    // chain of every add)
+    let (mut bin_now, mut count, mut sum_g, mut sum_h) = (OUTSIDE, 0u64, 0.0f64, 0.0f64);
     for start in range.clone().step_by(BIN_BLOCK) {
         let out = &mut block[..BIN_BLOCK.min(range.end - start)];
         bin_block(channels, binners, strides, None, start, out);
@@ -178,20 +210,26 @@ fn sums_part(
             if bin == OUTSIDE {
                 continue;
             }
-            if bin != run.bin {
-                s.add(&run);
-                run = Run { bin, count: 0, g: 0.0, h: 0.0 };
+            if bin != bin_now {
+                if count > 0 {
+                    counts.add(bin_now as usize, count as u32);
+                    s.add(Run { bin: bin_now, count, g: sum_g, h: sum_h });
+                }
+                (bin_now, count, sum_g, sum_h) = (bin, 0, 0.0, 0.0);
             }
-            run.count += 1;
-            run.g += g[start + l] as f64;
-            run.h += h[start + l] as f64;
+            count += 1;
+            sum_g += g[start + l] as f64;
+            sum_h += h[start + l] as f64;
         }
     }
-    s.add(&run);
+    if count > 0 {
+        counts.add(bin_now as usize, count as u32);
+        s.add(Run { bin: bin_now, count, g: sum_g, h: sum_h });
+    }
     s
 }
 
-/// Consecutive voxels in one (v, g) bin (index v + nv g): their count and sums of g and f''.
+/// Consecutive voxels in one (v, g, f'') bin: their count and sums of g and f''.
 struct Run {
     bin: u32,
     count: u64,
@@ -220,13 +258,11 @@ impl Sums {
         }
     }
 
-    /// Adds a run of voxels of one (v, g) bin (nothing if it is empty).
-    fn add(&mut self, run: &Run) {
-        if run.count == 0 {
-            return;
-        }
-        let i = run.bin as usize;
-        let bv = i % self.c_v.len();
+    /// Adds a run of voxels of one bin (index v + nv (g + ng f'')).
+    fn add(&mut self, run: Run) {
+        let nv = self.c_v.len();
+        let i = run.bin as usize % self.c_vg.len();
+        let bv = i % nv;
         self.c_v[bv] += run.count;
         self.g_v[bv] += run.g;
         self.h_v[bv] += run.h;

@@ -96,6 +96,25 @@ fn position_function_recovers_the_signed_distance_and_sigma() {
     eprintln!("p(v,g) vs x: worst {worst:.4} voxel over {checked} bins");
     assert!(checked > 50);
     assert!(worst <= 0.1, "{worst}");
+    // the one-pass counts and sums against plain loops written here
+    assert_eq!(hv.hist, count(&[c.v.samples(), c.g.samples(), c.f2.samples()], hv.hist.axes.clone(), None).unwrap());
+    let ah = &hv.hist.axes[2];
+    let (mut n_v, mut g_v) = (vec![0u64; av.bins], vec![0.0f64; av.bins]);
+    let mut n_vg = vec![0u64; av.bins * ag.bins];
+    for i in 0..c.v.samples().len() {
+        let (v, g, h) = (c.v.samples()[i], c.g.samples()[i], c.f2.samples()[i]);
+        if let (Some(bv), Some(bg), Some(_)) = (av.bin(v), ag.bin(g), ah.bin(h)) {
+            n_v[bv] += 1;
+            g_v[bv] += g as f64;
+            n_vg[bg * av.bins + bv] += 1;
+        }
+    }
+    assert_eq!(hv.count_v, n_v);
+    assert_eq!(hv.count_vg, n_vg);
+    for b in 0..av.bins {
+        let want = if n_v[b] > 0 { g_v[b] / n_v[b] as f64 } else { 0.0 };
+        assert!((hv.mean_g_v[b] - want).abs() <= 1e-9 * want.abs().max(1.0), "bin {b}");
+    }
     // the default opacity is the tent of p
     for i in 0..hv.opacity.len() {
         if hv.count_vg[i] > 0 && ag.centre(i / av.bins) > 1.0 {
@@ -237,5 +256,22 @@ fn exr_holds_the_counts_as_f32() {
         for x in 0..5 {
             assert_eq!(values[(2 - y) * 5 + x], h.counts[y * 5 + x] as f32);
         }
+    }
+}
+
+#[test]
+fn histogram_volume_does_not_depend_on_the_thread_count() {
+    // f64 sums are kept per fixed part and merged in order; threads group the parts
+    let c = channels(erf_sphere(Geometry::new([48; 3], [1.0; 3]), 14.0, 2.0, 0.0, 255.0, None).volume());
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let hv = pool
+            .install(|| histogram_volume(c.v.samples(), c.g.samples(), c.f2.samples(), &HvolParams::default()))
+            .unwrap();
+        (hv.hist, hv.mean_g_v, hv.mean_h_v, hv.position, hv.sigma)
+    };
+    let one = run(1);
+    for threads in [2, 3, 5] {
+        assert_eq!(one, run(threads), "{threads} threads");
     }
 }
