@@ -668,6 +668,37 @@ fn a_failed_pipeline_run_changes_nothing() {
 }
 
 #[test]
+fn kept_normals_are_derived_before_the_keep_stage() {
+    // the slicer run derives normals late, just before their texture, unless a kept volume needs them
+    let dir = tempfile::tempdir().unwrap();
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().join("pipelines");
+    let out = dir.path().join("out");
+    let pipeline = root.join("slicer-3dtf.toml");
+    mdtf_ok(&[
+        "run",
+        pipeline.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--set",
+        "input.size=40",
+        "--set",
+        "keep=[\"nx\", \"ny\", \"nz\"]",
+        "-q",
+    ]);
+    let comp = |c: &str| read(&out.join(format!("volumes/{c}.nii.gz")), &ReadOptions::default()).unwrap();
+    let (nx, ny, nz) = (comp("nx"), comp("ny"), comp("nz"));
+    let unit = nx.fields[0]
+        .data
+        .iter()
+        .zip(ny.fields[0].data.iter())
+        .zip(nz.fields[0].data.iter())
+        .filter(|((x, y), z)| ((*x * *x + *y * *y + *z * *z) - 1.0).abs() < 1e-4)
+        .count();
+    assert!(unit > 40 * 40 * 40 / 4, "{unit} unit normals");
+    assert!(out.join("pack/normal.raw").exists());
+}
+
+#[test]
 fn validate_passes_on_a_correct_installation() {
     let dir = tempfile::tempdir().unwrap();
     let out = mdtf_ok(&["validate", "--size", "64", "-o", dir.path().to_str().unwrap()]);

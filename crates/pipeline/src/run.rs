@@ -162,7 +162,8 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     // before it are written and their channels freed (3 f32 volumes fewer at
     // the memory peak).
     let wants_normals = ["nx", "ny", "nz"].iter().any(|c| needs(c));
-    let defer_normals = wants_normals && !tracing && profile != Profile::ProjectedTetrahedra;
+    let kept_normal = p.keep.iter().any(|c| ["nx", "ny", "nz"].contains(&c.as_str()));
+    let defer_normals = wants_normals && !tracing && !kept_normal && profile != Profile::ProjectedTetrahedra;
     if tracing || (wants_normals && !defer_normals) {
         items.push(Item::Normal);
     }
