@@ -1,6 +1,6 @@
 //! The `mdtf` binary end to end: synth, info, convert, and its errors.
 
-use mdtf_e2e::{mdtf, mdtf_err, mdtf_ok};
+use mdtf_e2e::{mdtf, mdtf_err, mdtf_ok, shipped_pipeline};
 use mdtf_volume::{ReadOptions, read, read_scalar};
 use std::f64::consts::{PI, SQRT_2};
 
@@ -632,15 +632,14 @@ fn gaussian_and_peak_finding_profiles_pack_fields_and_tables() {
 fn a_failed_pipeline_run_changes_nothing() {
     // (tests/pipelines.rs runs every shipped pipeline and decodes its pack)
     let dir = tempfile::tempdir().unwrap();
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().join("pipelines");
     let out = dir.path().join("slicer-3dtf");
-    let pipeline = root.join("slicer-3dtf.toml");
+    let pipeline = shipped_pipeline("slicer-3dtf");
     mdtf_ok(&["run", pipeline.to_str().unwrap(), "-o", out.to_str().unwrap(), "--set", "input.size=40", "-q"]);
     // a failing run (unknown kernel) leaves the previous output untouched
     let before = std::fs::read(out.join("pack/manifest.json")).unwrap();
     let e = mdtf_err(&[
         "run",
-        root.join("slicer-3dtf.toml").to_str().unwrap(),
+        pipeline.to_str().unwrap(),
         "-o",
         out.to_str().unwrap(),
         "--set",
@@ -656,14 +655,7 @@ fn a_failed_pipeline_run_changes_nothing() {
         .filter(|e| e.file_name().to_string_lossy().starts_with(".mdtf-partial-"))
         .collect();
     assert!(left.is_empty(), "temporary run folders left behind");
-    let e = mdtf_err(&[
-        "run",
-        root.join("slicer-3dtf.toml").to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--set",
-        "input.sise=4",
-    ]);
+    let e = mdtf_err(&["run", pipeline.to_str().unwrap(), "-o", out.to_str().unwrap(), "--set", "input.sise=4"]);
     assert!(e.contains("sise"), "{e}");
 }
 
@@ -671,9 +663,8 @@ fn a_failed_pipeline_run_changes_nothing() {
 fn kept_normals_are_derived_before_the_keep_stage() {
     // the slicer run derives normals late, just before their texture, unless a kept volume needs them
     let dir = tempfile::tempdir().unwrap();
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().join("pipelines");
     let out = dir.path().join("out");
-    let pipeline = root.join("slicer-3dtf.toml");
+    let pipeline = shipped_pipeline("slicer-3dtf");
     mdtf_ok(&[
         "run",
         pipeline.to_str().unwrap(),

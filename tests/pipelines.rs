@@ -4,7 +4,7 @@
 //! accuracy plus one quantisation step), not just exist.
 
 use mdtf_datagen::{MultiFieldPhantom, RadialPhantom, erf_sphere, min_extent, voxel_position};
-use mdtf_e2e::{mdtf_ok, nrrd_f32};
+use mdtf_e2e::{mdtf_ok, nrrd_f32, pipelines_dir, shipped_pipeline};
 use mdtf_pipeline::file::{PhantomKind, Pipeline, parse};
 use mdtf_volume::Geometry;
 use serde_json::Value;
@@ -12,13 +12,9 @@ use std::path::{Path, PathBuf};
 
 const SIZE: usize = 40;
 
-fn pipelines_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().join("pipelines")
-}
-
 /// Runs `name`.toml at SIZE^3 and returns (its parsed file, the pack folder, the manifest).
 fn run(name: &str, dir: &Path) -> (Pipeline, PathBuf, Value) {
-    let file = pipelines_dir().join(format!("{name}.toml"));
+    let file = shipped_pipeline(name);
     let size = format!("input.size={SIZE}");
     let pipeline = parse(&std::fs::read_to_string(&file).unwrap(), std::slice::from_ref(&size)).unwrap();
     let out = dir.join(name);

@@ -5,6 +5,16 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
 
+/// The folder of the shipped pipeline files.
+pub fn pipelines_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().map_or_else(PathBuf::new, Path::to_path_buf).join("pipelines")
+}
+
+/// The shipped pipeline file `pipelines/<name>.toml`.
+pub fn shipped_pipeline(name: &str) -> PathBuf {
+    pipelines_dir().join(format!("{name}.toml"))
+}
+
 /// Path of the `mdtf` binary of this build, building it if `cargo test` has not.
 pub fn mdtf_path() -> PathBuf {
     static PATH: OnceLock<PathBuf> = OnceLock::new();
