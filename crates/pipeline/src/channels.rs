@@ -3,7 +3,8 @@
 
 use crate::boundary_chain::{self, BoundaryChainParams, ChainError};
 use mdtf_derive::{DeriveParams, Item};
-use mdtf_volume::{MultiField, Volume};
+use mdtf_volume::{Field, MultiField, Volume};
+use std::collections::BTreeMap;
 
 /// Channel names computed from a value volume (fields of a multi-field input are channels too).
 pub const CHANNEL_NAMES: &str = "v, g, f2, nx, ny, nz, inv_g, gnorm, g_hit, hit, distance";
@@ -17,7 +18,10 @@ pub fn compute(
     chain: &BoundaryChainParams,
 ) -> Result<Vec<(String, Volume)>, ChainError> {
     let kernel = chain.kernel;
-    let value = input.field_volume(0).ok_or_else(|| ChainError::Unknown("the input has no fields".into()))?;
+    let Some(first) = input.fields.first() else {
+        return Err(ChainError::Unknown("the input has no fields".into()));
+    };
+    let geometry = &input.geometry;
     let needs = |n: &str| names.iter().any(|x| x == n);
     let tracing = needs("g_hit") || needs("hit") || needs("distance");
     // one derive pass serves both the derivative channels and the tracing,
@@ -33,12 +37,24 @@ pub fn compute(
             items.push(item);
         }
     }
-    let derived = if !items.is_empty() {
+    // derived channels by name, moved out of the derive output (no copies)
+    let mut derived: BTreeMap<String, Volume> = BTreeMap::new();
+    if !items.is_empty() {
         let d = DeriveParams { items, kernel: kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL), ..Default::default() };
-        Some(mdtf_derive::run(&MultiField::from(value.clone()), &d)?)
-    } else {
-        None
-    };
+        let one_field;
+        let value_input = if input.fields.len() == 1 {
+            input
+        } else {
+            one_field = MultiField { geometry: geometry.clone(), fields: vec![first.clone()] };
+            &one_field
+        };
+        for (item, mf) in mdtf_derive::run(value_input, &d)?.items {
+            let comps: &[&str] = if item == Item::Normal { &["nx", "ny", "nz"] } else { &[item.name()] };
+            for (c, f) in comps.iter().zip(mf.fields) {
+                derived.insert(c.to_string(), Volume { geometry: geometry.clone(), data: f.data });
+            }
+        }
+    }
     let gnorm = if needs("gnorm") && input.fields.len() > 1 {
         let d = DeriveParams {
             items: vec![Item::Gnorm],
@@ -49,38 +65,41 @@ pub fn compute(
     } else {
         None
     };
-    let traced = match &derived {
-        Some(d) if tracing => {
-            let field = |item: Item, i: usize| {
-                d.get(item)
-                    .and_then(|m| m.field_volume(i))
-                    .ok_or_else(|| ChainError::Unknown(format!("derive gave no {item}")))
-            };
-            let normal =
-                d.get(Item::Normal).cloned().ok_or_else(|| ChainError::Unknown("derive gave no normal".into()))?;
-            let range = value.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
-            Some(boundary_chain::trace_derived(field(Item::G, 0)?, field(Item::F2, 0)?, normal, range, chain)?)
-        }
-        _ => None,
+    let traced = if tracing {
+        // the tracing consumes g, f'' and the normal: copied only if they are asked for too
+        let mut take = |c: &str| {
+            let v = if needs(c) { derived.get(c).cloned() } else { derived.remove(c) };
+            v.ok_or_else(|| ChainError::Unknown(format!("derive gave no {c}")))
+        };
+        let (g, f2) = (take("g")?, take("f2")?);
+        let fields = ["nx", "ny", "nz"]
+            .into_iter()
+            .map(|c| take(c).map(|v| Field { name: c.into(), data: v.data }))
+            .collect::<Result<Vec<_>, _>>()?;
+        let normal = MultiField { geometry: geometry.clone(), fields };
+        let range = mdtf_volume::finite_sample_range(first.data.as_slice().unwrap_or(&[]))
+            .map_or(0.0, |(lo, hi)| (hi - lo) as f64);
+        Some(boundary_chain::trace_derived(g, f2, normal, range, chain)?.boundary)
+    } else {
+        None
     };
-    let mut out = Vec::new();
+    let mut out: Vec<(String, Volume)> = Vec::with_capacity(names.len());
     for name in names {
+        if let Some((_, v)) = out.iter().find(|(c, _)| c == name) {
+            let v = v.clone();
+            out.push((name.clone(), v));
+            continue;
+        }
         let v = if let Some(i) = input.fields.iter().position(|f| &f.name == name) {
             input.field_volume(i)
         } else {
-            match (name.as_str(), &derived, &traced) {
-                ("v", _, _) => Some(value.clone()),
-                ("g", Some(d), _) => d.get(Item::G).and_then(|m| m.field_volume(0)),
-                ("f2", Some(d), _) => d.get(Item::F2).and_then(|m| m.field_volume(0)),
-                ("nx", Some(d), _) => d.get(Item::Normal).and_then(|m| m.field_volume(0)),
-                ("ny", Some(d), _) => d.get(Item::Normal).and_then(|m| m.field_volume(1)),
-                ("nz", Some(d), _) => d.get(Item::Normal).and_then(|m| m.field_volume(2)),
-                ("inv_g", Some(d), _) => d.get(Item::InvG).and_then(|m| m.field_volume(0)),
-                ("gnorm", _, _) => gnorm.clone(),
-                ("g_hit", _, Some(t)) => Some(t.boundary.g_hit.clone()),
-                ("hit", _, Some(t)) => Some(t.boundary.hit.clone()),
-                ("distance", _, Some(t)) => Some(t.boundary.distance.clone()),
-                _ => None,
+            match (name.as_str(), &traced) {
+                ("v", _) => input.field_volume(0),
+                ("gnorm", _) => gnorm.clone(),
+                ("g_hit", Some(t)) => Some(t.g_hit.clone()),
+                ("hit", Some(t)) => Some(t.hit.clone()),
+                ("distance", Some(t)) => Some(t.distance.clone()),
+                (other, _) => derived.remove(other),
             }
         };
         let fields: Vec<&str> = input.fields.iter().map(|f| f.name.as_str()).collect();
@@ -93,4 +112,33 @@ pub fn compute(
         out.push((name.clone(), v));
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mdtf_datagen::erf_sphere;
+    use mdtf_volume::Geometry;
+
+    #[test]
+    fn channels_equal_their_stages_outputs_in_the_order_asked() {
+        let v = erf_sphere(Geometry::new([24; 3], [1.0; 3]), 7.0, 1.5, 0.0, 100.0, None).volume();
+        let input = MultiField::from(v.clone());
+        let names: Vec<String> = ["nz", "g", "v", "distance", "g", "f2"].iter().map(|s| s.to_string()).collect();
+        let out = compute(&input, &names, &BoundaryChainParams::default()).unwrap();
+        assert_eq!(out.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>(), names);
+        // the same items from a direct derive call
+        let d = DeriveParams { items: vec![Item::G, Item::F2, Item::Normal], ..Default::default() };
+        let direct = mdtf_derive::run(&input, &d).unwrap();
+        let comp = |item: Item, c: usize| direct.get(item).unwrap().fields[c].data.clone();
+        assert_eq!(out[0].1.data, comp(Item::Normal, 2));
+        assert_eq!(out[1].1.data, comp(Item::G, 0));
+        assert_eq!(out[4].1.data, comp(Item::G, 0), "a channel asked for twice");
+        assert_eq!(out[5].1.data, comp(Item::F2, 0));
+        assert_eq!(out[2].1.data, v.data);
+        // the tracing ran (its accuracy is mdtf-boundary's tests' business)
+        assert!(out[3].1.data.iter().any(|&d| d > 0.0));
+        let e = compute(&input, &["nope".to_string()], &BoundaryChainParams::default()).unwrap_err().to_string();
+        assert!(e.contains("unknown channel 'nope'") && e.contains("distance"), "{e}");
+    }
 }

@@ -34,7 +34,7 @@ pub use io::{Format, WriteOptions, read, read_scalar, read_with_info, write, wri
 pub use limits::{available_memory, human_bytes};
 pub use nifti_io::{read_nifti, read_nifti_with_info, write_nifti};
 pub use png_out::{PngColour, write_png};
-pub use range::finite_range;
+pub use range::{finite_range, finite_sample_range};
 pub use raw::{RawSpec, read_raw};
 pub use samples::{FileInfo, NanPolicy, ReadOptions};
 pub use volume::{Field, MultiField, Volume};

@@ -10,6 +10,24 @@ pub fn finite_range(data: &[f32]) -> Option<(f32, f32)> {
         .reduce(|| Some((f32::INFINITY, f32::NEG_INFINITY)), |a, b| Some((a?.0.min(b?.0), a?.1.max(b?.1))))
 }
 
+/// Smallest and largest finite sample of `data`, skipping NaN and
+/// infinities (a second, filtering pass only when there are some), or None
+/// if there is no finite sample.
+pub fn finite_sample_range(data: &[f32]) -> Option<(f32, f32)> {
+    if let Some(r) = finite_range(data)
+        && r.0 <= r.1
+    {
+        return Some(r);
+    }
+    let mut lo = f32::INFINITY;
+    let mut hi = f32::NEG_INFINITY;
+    for &v in data.iter().filter(|v| v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    (lo <= hi).then_some((lo, hi))
+}
+
 /// Lanes of the block loop: two AVX-512 registers, so that the min, max and
 /// NaN chains of one register do not wait on the previous iteration's.
 const LANES: usize = 32;

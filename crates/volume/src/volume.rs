@@ -43,19 +43,7 @@ impl Volume {
 
     /// Smallest and largest finite sample, or None if there is none.
     pub fn finite_range(&self) -> Option<(f32, f32)> {
-        if let Some(r) = crate::range::finite_range(self.samples())
-            && r.0 <= r.1
-        {
-            return Some(r);
-        }
-        // Some samples are not finite (or none exist): the slow, filtering pass.
-        let mut lo = f32::INFINITY;
-        let mut hi = f32::NEG_INFINITY;
-        for &v in self.data.iter().filter(|v| v.is_finite()) {
-            lo = lo.min(v);
-            hi = hi.max(v);
-        }
-        (lo <= hi).then_some((lo, hi))
+        crate::range::finite_sample_range(self.samples())
     }
 
     /// Number of NaN or infinite samples.
