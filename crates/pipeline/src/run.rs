@@ -247,9 +247,16 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         let rdir = dir.join("boundary");
         std::fs::create_dir_all(&rdir).map_err(|e| fail("boundary")(e.to_string()))?;
         report.write(&rdir).map_err(|e| fail("boundary")(e.to_string()))?;
+        drop(filtered);
         for (c, v) in [("g_hit", out.g_hit), ("hit", out.hit), ("distance", out.distance)] {
             if needs(c) {
                 chans.insert(c.into(), v);
+            }
+        }
+        // derived only for the tracing: free them now
+        for c in ["g", "f2"] {
+            if !needs(c) {
+                chans.remove(c);
             }
         }
         stage("boundary", t, n, vec!["boundary/boundary_report.csv".into(), "boundary/boundary_report.png".into()]);
