@@ -25,6 +25,10 @@ impl Axis {
         if bins == 0 {
             return Err(HistogramError::BadAxis(format!("axis {name}: zero bins")));
         }
+        // (a histogram holds at most 2^28 bins in all; bin indices are u32)
+        if bins > 1 << 28 {
+            return Err(HistogramError::BadAxis(format!("axis {name}: {bins} bins is too many (at most 2^28)")));
+        }
         if !(min.is_finite() && max.is_finite() && max > min) {
             return Err(HistogramError::BadAxis(format!(
                 "axis {name}: range [{min}, {max}] is inverted, degenerate or not finite"
@@ -69,12 +73,8 @@ impl Binner {
     /// The bin of `v`, or None outside [min, max] (or NaN).
     #[inline(always)]
     pub fn bin(&self, v: f32) -> Option<usize> {
-        let v = v as f64;
-        if v >= self.min && v <= self.max {
-            Some((((v - self.min) * self.scale) as usize).min(self.last))
-        } else {
-            None
-        }
+        let (bin, inside) = self.bin_unchecked(v);
+        inside.then_some(bin as usize)
     }
 
     /// [`Binner::bin`] without a branch, for loops that vectorise: the bin
@@ -124,17 +124,9 @@ impl AxisSpec {
 
     /// Resolves the axis for `data` (NaN and infinities ignored).
     pub fn resolve(&self, name: &str, data: &[f32]) -> Result<Axis, HistogramError> {
-        let (lo, hi) = match mdtf_volume::finite_range(data) {
-            Some(r) => r,
-            None => {
-                // some samples are NaN or infinite: the slow pass that skips them
-                let finite = data.iter().copied().filter(|v| v.is_finite());
-                finite.fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), v| (l.min(v), h.max(v)))
-            }
-        };
-        if lo > hi {
+        let Some((lo, hi)) = mdtf_volume::finite_sample_range(data) else {
             return Err(HistogramError::BadAxis(format!("channel {name} has no finite samples")));
-        }
+        };
         let integer = self.bins.is_none()
             && self.range.is_none()
             && data.par_chunks(1 << 16).all(|c| c.iter().all(|v| !v.is_finite() || v.fract() == 0.0));

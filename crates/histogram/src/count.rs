@@ -105,14 +105,14 @@ pub fn count(channels: &[&[f32]], axes: Vec<Axis>, mask: Option<&[bool]>) -> Res
 /// The number of bins of `axes`, checked together with the voxel count `n`
 /// against what u32 counts and indices hold.
 pub(crate) fn check_size(n: usize, axes: &[Axis]) -> Result<usize, HistogramError> {
-    let total_bins: usize = axes.iter().map(|a| a.bins).product();
     if n as u64 >= u32::MAX as u64 {
         return Err(HistogramError::Geometry(format!("{n} voxels: histograms count at most 2^32 - 1")));
     }
-    if total_bins > 1 << 28 {
-        return Err(HistogramError::BadAxis(format!("{total_bins} bins is too many (at most 2^28)")));
+    let bins: Vec<String> = axes.iter().map(|a| a.bins.to_string()).collect();
+    match axes.iter().try_fold(1usize, |p, a| p.checked_mul(a.bins)) {
+        Some(total) if total <= 1 << 28 => Ok(total),
+        _ => Err(HistogramError::BadAxis(format!("{} bins is too many (at most 2^28)", bins.join(" x ")))),
     }
-    Ok(total_bins)
 }
 
 /// Bins per block of the merge's touched-block bookkeeping (one 4 KiB page of u32 counts).
@@ -207,6 +207,39 @@ pub(crate) fn bin_block<const N: usize>(
     }
 }
 
+/// Calls `on_run(bin, voxels)` for every run of consecutive voxels of
+/// `range` that share a bin (index as [`bin_block`] gives it), skipping
+/// voxels outside the ranges or the mask. Neighbouring voxels often share a
+/// bin (the background): a run is one call, where counting voxel by voxel
+/// would be a chain of increments of one counter through memory.
+#[inline(always)]
+pub(crate) fn for_each_run<const N: usize>(
+    channels: &[&[f32]; N],
+    binners: &[Binner; N],
+    strides: &[u32; N],
+    mask: Option<&[bool]>,
+    range: std::ops::Range<usize>,
+    mut on_run: impl FnMut(u32, std::ops::Range<usize>),
+) {
+    let mut block = [0u32; BIN_BLOCK];
+    let (mut bin, mut first) = (OUTSIDE, range.start);
+    for start in range.clone().step_by(BIN_BLOCK) {
+        let out = &mut block[..BIN_BLOCK.min(range.end - start)];
+        bin_block(channels, binners, strides, mask, start, out);
+        for (l, &here) in out.iter().enumerate() {
+            if here != bin {
+                if bin != OUTSIDE {
+                    on_run(bin, first..start + l);
+                }
+                (bin, first) = (here, start + l);
+            }
+        }
+    }
+    if bin != OUTSIDE {
+        on_run(bin, first..range.end);
+    }
+}
+
 /// [`count_part`] monomorphised per channel count so the axis loop unrolls.
 #[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+avx2", "x86_64+avx2"))]
 fn count_n<const N: usize, F: FnMut(usize, u32)>(
@@ -217,30 +250,8 @@ fn count_n<const N: usize, F: FnMut(usize, u32)>(
     range: std::ops::Range<usize>,
     add: &mut F,
 ) {
-    let ch: [&[f32]; N] = std::array::from_fn(|a| &channels[a][range.clone()]);
+    let ch: [&[f32]; N] = std::array::from_fn(|a| channels[a]);
     let bn: [Binner; N] = std::array::from_fn(|a| binners[a]);
     let st: [u32; N] = std::array::from_fn(|a| strides[a] as u32);
-    let m = mask.map(|m| &m[range.clone()]);
-    let mut block = [0u32; BIN_BLOCK];
-    let (mut last, mut run) = (OUTSIDE, 0u32);
-    for start in (0..range.len()).step_by(BIN_BLOCK) {
-        let out = &mut block[..BIN_BLOCK.min(range.len() - start)];
-        bin_block(&ch, &bn, &st, m, start, out);
-        // Neighbouring voxels often share a bin (the background): count a run
-        // in a register and add it once, instead of a chain of increments of
-        // one counter through memory.
-        for &idx in out.iter() {
-            if idx == last {
-                run += 1;
-            } else {
-                if run > 0 && last != OUTSIDE {
-                    add(last as usize, run);
-                }
-                (last, run) = (idx, 1);
-            }
-        }
-    }
-    if run > 0 && last != OUTSIDE {
-        add(last as usize, run);
-    }
+    for_each_run(&ch, &bn, &st, mask, range, |bin, voxels| add(bin as usize, voxels.len() as u32));
 }

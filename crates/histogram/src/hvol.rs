@@ -17,7 +17,7 @@
 
 use crate::HistogramError;
 use crate::axis::{Axis, AxisSpec, Binner};
-use crate::count::{BIN_BLOCK, Histogram, OUTSIDE, SparseCounts, bin_block, check_size};
+use crate::count::{Histogram, SparseCounts, check_size, for_each_run};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -183,8 +183,7 @@ pub fn histogram_volume(
 }
 
 /// Counts the voxels of `range` into `counts` (bin index v + nv (g + ng f''))
-/// and returns their sums. Binning is done in vectorised blocks; runs of
-/// voxels in one bin are summed in registers and added once.
+/// and returns their sums, a run of voxels in one bin at a time.
 #[allow(clippy::too_many_arguments)]
 #[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+avx2", "x86_64+avx2"))]
 fn count_and_sum(
@@ -198,34 +197,11 @@ fn count_and_sum(
 ) -> Sums {
     let mut s = Sums::new(nv, ng);
     let (g, h) = (channels[1], channels[2]);
-    let mut block = [0u32; BIN_BLOCK];
-    // the run lives in plain locals (in registers; a struct behind a
-    // reference was kept on the stack, putting a store and a load in the
-    // chain of every add)
-    let (mut bin_now, mut count, mut sum_g, mut sum_h) = (OUTSIDE, 0u64, 0.0f64, 0.0f64);
-    for start in range.clone().step_by(BIN_BLOCK) {
-        let out = &mut block[..BIN_BLOCK.min(range.end - start)];
-        bin_block(channels, binners, strides, None, start, out);
-        for (l, &bin) in out.iter().enumerate() {
-            if bin == OUTSIDE {
-                continue;
-            }
-            if bin != bin_now {
-                if count > 0 {
-                    counts.add(bin_now as usize, count as u32);
-                    s.add(Run { bin: bin_now, count, g: sum_g, h: sum_h });
-                }
-                (bin_now, count, sum_g, sum_h) = (bin, 0, 0.0, 0.0);
-            }
-            count += 1;
-            sum_g += g[start + l] as f64;
-            sum_h += h[start + l] as f64;
-        }
-    }
-    if count > 0 {
-        counts.add(bin_now as usize, count as u32);
-        s.add(Run { bin: bin_now, count, g: sum_g, h: sum_h });
-    }
+    let sum = |d: &[f32]| d.iter().fold(0.0f64, |acc, &x| acc + x as f64);
+    for_each_run(channels, binners, strides, None, range, |bin, voxels| {
+        counts.add(bin as usize, voxels.len() as u32);
+        s.add(Run { bin, count: voxels.len() as u64, g: sum(&g[voxels.clone()]), h: sum(&h[voxels]) });
+    });
     s
 }
 

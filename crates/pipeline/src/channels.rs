@@ -3,7 +3,7 @@
 
 use crate::boundary_chain::{self, BoundaryChainParams, ChainError};
 use mdtf_derive::{DeriveParams, Item};
-use mdtf_volume::{Field, MultiField, Volume};
+use mdtf_volume::{MultiField, Volume};
 use std::collections::BTreeMap;
 
 /// Channel names computed from a value volume (fields of a multi-field input are channels too).
@@ -48,12 +48,8 @@ pub fn compute(
             one_field = MultiField { geometry: geometry.clone(), fields: vec![first.clone()] };
             &one_field
         };
-        for (item, mf) in mdtf_derive::run(value_input, &d)?.items {
-            let comps: &[&str] = if item == Item::Normal { &["nx", "ny", "nz"] } else { &[item.name()] };
-            for (c, f) in comps.iter().zip(mf.fields) {
-                derived.insert(c.to_string(), Volume { geometry: geometry.clone(), data: f.data });
-            }
-        }
+        // every output field is named after its component: g, f2, nx, ny, nz, inv_g
+        derived.extend(mdtf_derive::run(value_input, &d)?.items.into_iter().flat_map(|(_, mf)| mf.into_volumes()));
     }
     let gnorm = if needs("gnorm") && input.fields.len() > 1 {
         let d = DeriveParams {
@@ -72,11 +68,9 @@ pub fn compute(
             v.ok_or_else(|| ChainError::Unknown(format!("derive gave no {c}")))
         };
         let (g, f2) = (take("g")?, take("f2")?);
-        let fields = ["nx", "ny", "nz"]
-            .into_iter()
-            .map(|c| take(c).map(|v| Field { name: c.into(), data: v.data }))
-            .collect::<Result<Vec<_>, _>>()?;
-        let normal = MultiField { geometry: geometry.clone(), fields };
+        let normal: Vec<(String, Volume)> =
+            ["nx", "ny", "nz"].into_iter().map(|c| take(c).map(|v| (c.to_string(), v))).collect::<Result<_, _>>()?;
+        let normal = MultiField::from_volumes(normal).map_err(|e| ChainError::Unknown(e.to_string()))?;
         let range = mdtf_volume::finite_sample_range(first.data.as_slice().unwrap_or(&[]))
             .map_or(0.0, |(lo, hi)| (hi - lo) as f64);
         Some(boundary_chain::trace_derived(g, f2, normal, range, chain)?.boundary)

@@ -261,12 +261,9 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         }
         stage("boundary", t, n, vec!["boundary/boundary_report.csv".into(), "boundary/boundary_report.png".into()]);
     }
-    if let Some(nm) = normal {
-        let geometry = nm.geometry;
-        for (c, f) in ["nx", "ny", "nz"].iter().zip(nm.fields) {
-            if needs(c) {
-                chans.insert(c.to_string(), Volume { geometry: geometry.clone(), data: f.data });
-            }
+    for (c, v) in normal.map(MultiField::into_volumes).unwrap_or_default() {
+        if needs(&c) {
+            chans.insert(c, v);
         }
     }
     let get = |c: &str| chans.get(c);
@@ -384,21 +381,13 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             if normals_pending && ["nx", "ny", "nz"].iter().any(|c| uses(layout, c)) {
                 // the value volume is in the pack's channels, the others, or still in derive's input
                 let taken = pack_chans.iter().position(|(c, _)| c == "v").map(|k| pack_chans.remove(k).1);
-                let from_chans = taken.is_some();
                 let value = match taken.or_else(|| chans.remove("v")) {
                     Some(v) => MultiField::from(v),
                     None => MultiField { geometry: geo.clone(), fields: std::mem::take(&mut value_mf.fields) },
                 };
-                let d = DeriveParams { items: vec![Item::Normal], kernel, ..Default::default() };
-                let out = mdtf_derive::run(&value, &d).map_err(|e| fail("derive")(e.to_string()))?;
-                if from_chans && layouts[i..].iter().any(|l| uses(l, "v")) {
-                    let v = value.into_scalar().map_err(|e| err(e.to_string()))?;
-                    pack_chans.push(("v".into(), v));
-                }
-                if let Some((_, nm)) = out.items.into_iter().next() {
-                    for (c, f) in ["nx", "ny", "nz"].iter().zip(nm.fields) {
-                        pack_chans.push((c.to_string(), Volume { geometry: geo.clone(), data: f.data }));
-                    }
+                pack_chans.extend(derive_normals(&value, kernel)?);
+                if layouts[i..].iter().any(|l| uses(l, "v")) {
+                    pack_chans.push(("v".into(), value.into_scalar().map_err(|e| err(e.to_string()))?));
                 }
                 normals_pending = false;
             }
@@ -462,6 +451,13 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         .map_err(|e| fail("report")(e.to_string()))?;
     mdtf_volume::publish_dir(tmp, &opts.output).map_err(|e| fail("output")(e.to_string()))?;
     Ok(report)
+}
+
+/// The unit normals (nx, ny, nz) of a one-field `value`, named.
+fn derive_normals(value: &MultiField, kernel: Kernel) -> Result<Vec<(String, Volume)>, RunError> {
+    let d = DeriveParams { items: vec![Item::Normal], kernel, ..Default::default() };
+    let out = mdtf_derive::run(value, &d).map_err(|e| fail("derive")(e.to_string()))?;
+    Ok(out.items.into_iter().flat_map(|(_, mf)| mf.into_volumes()).collect())
 }
 
 fn load_input(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(MultiField, String), RunError> {

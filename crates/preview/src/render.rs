@@ -306,8 +306,9 @@ fn render_impl(
             );
             let origin = [0, 1, 2].map(|a| centre[a] + u * right[a] + v * up[a] - radius * dir[a]);
             let (mut rgb, mut alpha) = ([0f64; 3], 0f64);
+            // the previous sample's TF coordinates (analytic Gaussian segments)
             let mut previous: Option<Vec<f64>> = None;
-            // the previous sample's cell and block (chord classifier)
+            // the previous sample's cell and block (chord and peak classifiers)
             let mut prev: Option<(Cell, usize)> = None;
             for s in 0..steps {
                 let pw = [0, 1, 2].map(|a| origin[a] + (s as f64 + 0.5) * step_world * dir[a]);
@@ -346,8 +347,11 @@ fn render_impl(
                     }
                     Classifier::Peak { peak_table, preintegration, find_peaks } => {
                         let v1 = sample(v_data);
-                        let v0 =
-                            if *find_peaks { previous.replace(vec![v1 as f64]).map(|p| p[0] as f32) } else { None };
+                        let v0 = if *find_peaks {
+                            prev_here.map(|(c, _)| v_data.map_or(0.0, |d| c.sample(d)))
+                        } else {
+                            None
+                        };
                         let at = match v0 {
                             Some(v0) => {
                                 let peak = lookup(peak_table, &[v0, v1])[3];

@@ -129,6 +129,12 @@ impl MultiField {
         Volume::new(geometry, data)
     }
 
+    /// Every field as a named scalar volume, moved (the inverse of [`MultiField::from_volumes`]).
+    pub fn into_volumes(self) -> Vec<(String, Volume)> {
+        let geometry = self.geometry;
+        self.fields.into_iter().map(|f| (f.name, Volume { geometry: geometry.clone(), data: f.data })).collect()
+    }
+
     /// Field `index` as a scalar volume (a copy).
     pub fn field_volume(&self, index: usize) -> Option<Volume> {
         self.fields.get(index).map(|f| Volume { geometry: self.geometry.clone(), data: f.data.clone() })
