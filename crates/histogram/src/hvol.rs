@@ -130,10 +130,11 @@ pub fn histogram_volume(
     }
     let hist = Histogram { axes, counts: counts.map_or_else(|| vec![0; total_bins], |c| c.counts) };
 
+    let (c_v, g_v, h_v) = sums.per_v(nv);
     let mean = |sum: f64, c: u64| if c > 0 { sum / c as f64 } else { 0.0 };
-    let mean_g_v: Vec<f64> = (0..nv).map(|b| mean(sums.g_v[b], sums.c_v[b])).collect();
-    let mean_h_v: Vec<f64> = (0..nv).map(|b| mean(sums.h_v[b], sums.c_v[b])).collect();
-    let filled = || (0..nv).filter(|&b| sums.c_v[b] > 0);
+    let mean_g_v: Vec<f64> = (0..nv).map(|b| mean(g_v[b], c_v[b])).collect();
+    let mean_h_v: Vec<f64> = (0..nv).map(|b| mean(h_v[b], c_v[b])).collect();
+    let filled = || (0..nv).filter(|&b| c_v[b] > 0);
     let max_g = filled().map(|b| mean_g_v[b]).fold(0.0, f64::max);
     let max_h = filled().map(|b| mean_h_v[b]).fold(f64::NEG_INFINITY, f64::max);
     let min_h = filled().map(|b| mean_h_v[b]).fold(f64::INFINITY, f64::min);
@@ -155,7 +156,7 @@ pub fn histogram_volume(
         // at the bin's centre g, so the default opacity is defined wherever v occurs.
         let (gm, hm) = if c > 0 {
             (sums.g_vg[i] / c as f64, sums.h_vg[i] / c as f64)
-        } else if sums.c_v[bv] > 0 {
+        } else if c_v[bv] > 0 {
             (ag.centre(bg), mean_h_v[bv])
         } else {
             continue;
@@ -169,7 +170,7 @@ pub fn histogram_volume(
     }
     Ok(HistogramVolume {
         hist,
-        count_v: sums.c_v,
+        count_v: c_v,
         mean_g_v,
         mean_h_v,
         sigma,
@@ -197,12 +198,29 @@ fn count_and_sum(
 ) -> Sums {
     let mut s = Sums::new(nv, ng);
     let (g, h) = (channels[1], channels[2]);
-    let sum = |d: &[f32]| d.iter().fold(0.0f64, |acc, &x| acc + x as f64);
     for_each_run(channels, binners, strides, None, range, |bin, voxels| {
         counts.add(bin as usize, voxels.len() as u32);
         s.add(Run { bin, count: voxels.len() as u64, g: sum(&g[voxels.clone()]), h: sum(&h[voxels]) });
     });
     s
+}
+
+/// Lanes of [`sum`]: eight f64 accumulators (one AVX-512 register), so that
+/// the background's long runs are not one chain of dependent additions.
+const SUM_LANES: usize = 8;
+
+/// The f64 sum of `d`, lane by lane in a fixed order (a run is summed the
+/// same way whichever thread counts it).
+#[inline(always)]
+fn sum(d: &[f32]) -> f64 {
+    let (chunks, tail) = d.as_chunks::<SUM_LANES>();
+    let mut lanes = [0.0f64; SUM_LANES];
+    for c in chunks {
+        for l in 0..SUM_LANES {
+            lanes[l] += c[l] as f64;
+        }
+    }
+    lanes.iter().chain(&[tail.iter().fold(0.0f64, |acc, &x| acc + x as f64)]).fold(0.0, |acc, &x| acc + x)
 }
 
 /// Consecutive voxels in one (v, g, f'') bin: their count and sums of g and f''.
@@ -213,10 +231,8 @@ struct Run {
     h: f64,
 }
 
+/// Per (v, g) bin sums; the per-v sums are taken from them at the end.
 struct Sums {
-    c_v: Vec<u64>,
-    g_v: Vec<f64>,
-    h_v: Vec<f64>,
     c_vg: Vec<u64>,
     g_vg: Vec<f64>,
     h_vg: Vec<f64>,
@@ -224,37 +240,37 @@ struct Sums {
 
 impl Sums {
     fn new(nv: usize, ng: usize) -> Sums {
-        Sums {
-            c_v: vec![0; nv],
-            g_v: vec![0.0; nv],
-            h_v: vec![0.0; nv],
-            c_vg: vec![0; nv * ng],
-            g_vg: vec![0.0; nv * ng],
-            h_vg: vec![0.0; nv * ng],
-        }
+        Sums { c_vg: vec![0; nv * ng], g_vg: vec![0.0; nv * ng], h_vg: vec![0.0; nv * ng] }
     }
 
     /// Adds a run of voxels of one bin (index v + nv (g + ng f'')).
+    #[inline(always)]
     fn add(&mut self, run: Run) {
-        let nv = self.c_v.len();
-        let i = run.bin as usize % self.c_vg.len();
-        let bv = i % nv;
-        self.c_v[bv] += run.count;
-        self.g_v[bv] += run.g;
-        self.h_v[bv] += run.h;
-        self.c_vg[i] += run.count;
-        self.g_vg[i] += run.g;
-        self.h_vg[i] += run.h;
+        // the (v, g) index is the bin modulo nv ng; u32, since bins are u32
+        let i = (run.bin % self.c_vg.len() as u32) as usize;
+        if let (Some(c), Some(g), Some(h)) = (self.c_vg.get_mut(i), self.g_vg.get_mut(i), self.h_vg.get_mut(i)) {
+            *c += run.count;
+            *g += run.g;
+            *h += run.h;
+        }
+    }
+
+    /// Count, g sum and f'' sum per v bin: the (v, g) sums of each v added
+    /// in g order (a fixed order, so the bits do not depend on the threads).
+    fn per_v(&self, nv: usize) -> (Vec<u64>, Vec<f64>, Vec<f64>) {
+        let (mut c, mut g, mut h) = (vec![0u64; nv], vec![0f64; nv], vec![0f64; nv]);
+        for i in 0..self.c_vg.len() {
+            let bv = i % nv;
+            c[bv] += self.c_vg[i];
+            g[bv] += self.g_vg[i];
+            h[bv] += self.h_vg[i];
+        }
+        (c, g, h)
     }
 
     fn merge(&mut self, o: &Sums) {
-        let add_u = |a: &mut Vec<u64>, b: &Vec<u64>| a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
-        let add_f = |a: &mut Vec<f64>, b: &Vec<f64>| a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
-        add_u(&mut self.c_v, &o.c_v);
-        add_f(&mut self.g_v, &o.g_v);
-        add_f(&mut self.h_v, &o.h_v);
-        add_u(&mut self.c_vg, &o.c_vg);
-        add_f(&mut self.g_vg, &o.g_vg);
-        add_f(&mut self.h_vg, &o.h_vg);
+        self.c_vg.iter_mut().zip(&o.c_vg).for_each(|(x, y)| *x += y);
+        self.g_vg.iter_mut().zip(&o.g_vg).for_each(|(x, y)| *x += y);
+        self.h_vg.iter_mut().zip(&o.h_vg).for_each(|(x, y)| *x += y);
     }
 }

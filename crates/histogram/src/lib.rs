@@ -10,6 +10,7 @@ mod axis;
 mod count;
 mod files;
 mod hvol;
+mod percentile;
 mod image;
 mod rgb;
 
