@@ -114,6 +114,105 @@ pub fn run_with_progress(
     previous: Option<DeriveOutput>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<DeriveOutput, DeriveError> {
+    let Prepared { items, layout, engine } = prepare(input, params)?;
+    let g = &input.geometry;
+    let [nx, ny, nz] = g.dims;
+    let plane = nx * ny;
+    let mut buffers = reuse_buffers(previous, layout.components(), plane * nz);
+    {
+        let mut per_slice: Vec<Vec<&mut [f32]>> = (0..nz).map(|_| Vec::with_capacity(buffers.len())).collect();
+        for buf in buffers.iter_mut() {
+            for (k, chunk) in buf.chunks_mut(plane).enumerate() {
+                per_slice[k].push(chunk);
+            }
+        }
+        let done = AtomicUsize::new(0);
+        per_slice.into_par_iter().enumerate().for_each_init(
+            || engine.scratch(),
+            |scratch, (k, mut outs)| {
+                engine::compute_slice(&engine, &layout, k, scratch, &mut outs);
+                progress(done.fetch_add(1, Ordering::Relaxed) + 1, nz);
+            },
+        );
+    }
+
+    let mut buffers = buffers.into_iter();
+    let mut out = Vec::with_capacity(items.len());
+    for &(item, _, n) in &layout.items {
+        let names: Vec<String> = if item == Item::Jacobian {
+            input.fields.iter().flat_map(|f| ["x", "y", "z"].map(|a| format!("d{}/d{a}", f.name))).collect()
+        } else {
+            item.components().iter().map(|s| s.to_string()).collect()
+        };
+        let mut comps = Vec::with_capacity(n);
+        for name in names {
+            let mut data = buffers.next().unwrap_or_default();
+            if item == Item::Shade {
+                finish_shade(&mut data);
+            }
+            let array = ndarray::Array3::from_shape_vec(g.shape(), data)
+                .map_err(|e| DeriveError::BadParameter(format!("internal shape error: {e}")))?;
+            comps.push(Field { name, data: array });
+        }
+        out.push((item, MultiField { geometry: g.clone(), fields: comps }));
+    }
+    Ok(DeriveOutput { items: out })
+}
+
+/// The derive pass without whole-volume outputs: computes `params.items`
+/// z-slice by z-slice into buffers of one slice (nx ny samples per
+/// component, x fastest; components in item order, e.g. `[g, f2]` for items
+/// g, f2) and hands each slice to `consume(state, k, components)`.
+///
+/// The nz slices are cut into `tasks` contiguous runs (at most nz), each
+/// worked by one rayon task in increasing k with its own `init(task)` state;
+/// the states come back in task order. What the consumer computes depends
+/// on the thread count only if it makes it so (floating-point sums should be
+/// kept per fixed slice range, not per task). `shade` is refused: it needs
+/// the whole volume's largest g first.
+pub fn stream_slices<S: Send>(
+    input: &MultiField,
+    params: &DeriveParams,
+    tasks: usize,
+    init: impl Fn(usize) -> S + Sync,
+    consume: impl Fn(&mut S, usize, &[Vec<f32>]) + Sync,
+) -> Result<Vec<S>, DeriveError> {
+    if params.items.contains(&Item::Shade) {
+        return Err(DeriveError::BadParameter(
+            "shade cannot be streamed slice by slice: it is scaled by the whole volume's largest g".into(),
+        ));
+    }
+    let Prepared { layout, engine, .. } = prepare(input, params)?;
+    let [nx, ny, nz] = input.geometry.dims;
+    let tasks = tasks.clamp(1, nz.max(1));
+    let per_task = nz.div_ceil(tasks);
+    Ok((0..tasks)
+        .into_par_iter()
+        .map(|t| {
+            let mut state = init(t);
+            let mut scratch = engine.scratch();
+            let mut slices: Vec<Vec<f32>> = (0..layout.components()).map(|_| vec![0.0f32; nx * ny]).collect();
+            for k in (t * per_task).min(nz)..((t + 1) * per_task).min(nz) {
+                let mut outs: Vec<&mut [f32]> = slices.iter_mut().map(|b| b.as_mut_slice()).collect();
+                engine::compute_slice(&engine, &layout, k, &mut scratch, &mut outs);
+                consume(&mut state, k, &slices);
+            }
+            state
+        })
+        .collect())
+}
+
+/// Everything one derive pass needs, checked: the items (deduplicated), where
+/// their components go, and the engine over the input's fields.
+struct Prepared<'a> {
+    items: Vec<Item>,
+    layout: Layout,
+    engine: Engine<'a>,
+}
+
+/// Checks `params` against `input` and builds the pass (shared by [`run`]
+/// and [`stream_slices`]).
+fn prepare<'a>(input: &'a MultiField, params: &DeriveParams) -> Result<Prepared<'a>, DeriveError> {
     let items = dedup(&params.items);
     if items.is_empty() {
         return Err(DeriveError::NoItems);
@@ -190,47 +289,7 @@ pub fn run_with_progress(
 
     let layout = Layout::new(&items, m, epsilon);
     let engine = Engine::new(fields, g.dims, params.border, Needs::of(&items), epsilon);
-    let [nx, ny, nz] = g.dims;
-    let plane = nx * ny;
-    let mut buffers = reuse_buffers(previous, layout.components(), plane * nz);
-    {
-        let mut per_slice: Vec<Vec<&mut [f32]>> = (0..nz).map(|_| Vec::with_capacity(buffers.len())).collect();
-        for buf in buffers.iter_mut() {
-            for (k, chunk) in buf.chunks_mut(plane).enumerate() {
-                per_slice[k].push(chunk);
-            }
-        }
-        let done = AtomicUsize::new(0);
-        per_slice.into_par_iter().enumerate().for_each_init(
-            || engine.scratch(),
-            |scratch, (k, mut outs)| {
-                engine::compute_slice(&engine, &layout, k, scratch, &mut outs);
-                progress(done.fetch_add(1, Ordering::Relaxed) + 1, nz);
-            },
-        );
-    }
-
-    let mut buffers = buffers.into_iter();
-    let mut out = Vec::with_capacity(items.len());
-    for &(item, _, n) in &layout.items {
-        let names: Vec<String> = if item == Item::Jacobian {
-            input.fields.iter().flat_map(|f| ["x", "y", "z"].map(|a| format!("d{}/d{a}", f.name))).collect()
-        } else {
-            item.components().iter().map(|s| s.to_string()).collect()
-        };
-        let mut comps = Vec::with_capacity(n);
-        for name in names {
-            let mut data = buffers.next().unwrap_or_default();
-            if item == Item::Shade {
-                finish_shade(&mut data);
-            }
-            let array = ndarray::Array3::from_shape_vec(g.shape(), data)
-                .map_err(|e| DeriveError::BadParameter(format!("internal shape error: {e}")))?;
-            comps.push(Field { name, data: array });
-        }
-        out.push((item, MultiField { geometry: g.clone(), fields: comps }));
-    }
-    Ok(DeriveOutput { items: out })
+    Ok(Prepared { items, layout, engine })
 }
 
 /// `count` buffers of `len` samples, taken from `previous` when it has exactly

@@ -342,6 +342,48 @@ fn results_are_bit_identical_with_one_and_two_threads() {
 }
 
 #[test]
+fn streamed_slices_equal_the_whole_volume_pass() {
+    let input = MultiField::from(RadialPhantom::tooth(Geometry::new([40, 36, 30], [1.0, 1.0, 1.5]), 2.0).volume());
+    let params = DeriveParams { items: vec![Item::G, Item::F2, Item::Normal], ..Default::default() };
+    let whole = run(&input, &params).unwrap();
+    let plane = 40 * 36;
+    for tasks in [1, 4, 100] {
+        // each task copies its slices into its own full-size volumes
+        let parts = mdtf_derive::stream_slices(
+            &input,
+            &params,
+            tasks,
+            |_| (vec![0.0f32; plane * 30 * 5], vec![false; 30]),
+            |(vols, seen), k, comps| {
+                assert_eq!(comps.len(), 5, "g, f2, nx, ny, nz");
+                for (c, slice) in comps.iter().enumerate() {
+                    vols[(c * 30 + k) * plane..(c * 30 + k + 1) * plane].copy_from_slice(slice);
+                }
+                seen[k] = true;
+            },
+        )
+        .unwrap();
+        assert_eq!(parts.len(), tasks.min(30));
+        let mut covered = 0;
+        for (vols, seen) in &parts {
+            for k in (0..30).filter(|&k| seen[k]) {
+                covered += 1;
+                let expected = whole.items.iter().flat_map(|(_, mf)| mf.fields.iter());
+                for (c, field) in expected.enumerate() {
+                    let want = &field.data.as_slice().unwrap()[k * plane..(k + 1) * plane];
+                    let got = &vols[(c * 30 + k) * plane..(c * 30 + k + 1) * plane];
+                    assert!(want.iter().zip(got).all(|(p, q)| p.to_bits() == q.to_bits()), "{} k {k}", field.name);
+                }
+            }
+        }
+        assert_eq!(covered, 30, "every slice exactly once");
+    }
+    let shade = DeriveParams { items: vec![Item::Shade], ..Default::default() };
+    let e = mdtf_derive::stream_slices(&input, &shade, 2, |_| (), |_, _, _| {}).unwrap_err();
+    assert!(e.to_string().contains("largest g"), "{e}");
+}
+
+#[test]
 fn derived_channels_follow_their_definitions() {
     let ph = erf_sphere(Geometry::new([40; 3], [1.0; 3]), 12.0, 2.0, 0.0, 100.0, None);
     let input = MultiField::from(ph.volume());

@@ -1,7 +1,7 @@
 //! Histogram axes: value ranges, bin counts and the binning rule.
 
 use crate::HistogramError;
-use rayon::prelude::*;
+use crate::percentile::ChannelStats;
 use serde::{Deserialize, Serialize};
 
 /// One axis: `bins` equal cells over [min, max]. A value v goes to bin
@@ -122,31 +122,13 @@ impl AxisSpec {
         AxisSpec { range: None, clip_percent: (p, p), bins: None }
     }
 
-    /// Resolves the axis for `data` (NaN and infinities ignored).
+    /// Resolves the axis for `data` (NaN and infinities ignored): the range
+    /// explicit or the finite range with the clip removed (exact order
+    /// statistics, see [`ChannelStats`]), the bins explicit, one per integer
+    /// for integer data, or [`DEFAULT_BINS`].
     pub fn resolve(&self, name: &str, data: &[f32]) -> Result<Axis, HistogramError> {
-        let Some((lo, hi)) = mdtf_volume::finite_sample_range(data) else {
-            return Err(HistogramError::BadAxis(format!("channel {name} has no finite samples")));
-        };
-        let integer = self.bins.is_none()
-            && self.range.is_none()
-            && data.par_chunks(1 << 16).all(|c| c.iter().all(|v| !v.is_finite() || v.fract() == 0.0));
-        let (min, max) = match self.range {
-            Some(r) => r,
-            None => crate::percentile::percentile_range(data, lo as f64, hi as f64, self.clip_percent),
-        };
-        let span = max - min;
-        let bins = match self.bins {
-            Some(b) => b,
-            None if integer && self.range.is_none() && span < MAX_INTEGER_BINS as f64 => {
-                // one bin per integer: cells centred on the integers
-                return Axis::new(name, min.floor() - 0.5, max.ceil() + 0.5, (max.ceil() - min.floor()) as usize + 1);
-            }
-            None => DEFAULT_BINS,
-        };
-        if span == 0.0 && self.range.is_none() {
-            return Axis::new(name, min - 0.5, max + 0.5, bins);
-        }
-        Axis::new(name, min, max, bins)
+        let clip = if self.range.is_some() { (0.0, 0.0) } else { self.clip_percent };
+        ChannelStats::of(data, clip).axis(self, name)
     }
 }
 

@@ -10,8 +10,8 @@ mod axis;
 mod count;
 mod files;
 mod hvol;
-mod percentile;
 mod image;
+mod percentile;
 mod rgb;
 
 pub use axis::{Axis, AxisSpec, DEFAULT_BINS, MAX_INTEGER_BINS};
@@ -19,6 +19,7 @@ pub use count::{Histogram, count};
 pub use files::{write_histogram, write_hvol, write_stretched};
 pub use hvol::{HistogramVolume, HvolParams, histogram_volume};
 pub use image::{Grey, Scale, grey_level, side_by_side, write_exr, write_png};
+pub use percentile::ChannelStats;
 pub use rgb::{Rgb, write_rgb_png};
 
 /// Errors of the histogram stage.
