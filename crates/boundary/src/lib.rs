@@ -33,7 +33,7 @@ use ndarray::Array3;
 use rayon::prelude::*;
 use sample::Grid;
 use serde::{Deserialize, Serialize};
-use trace::{Fields, TraceSettings, trace};
+use trace::{Fields, TraceSettings, trace_plane};
 
 /// The distance written where no boundary was kept.
 pub const NO_BOUNDARY: f32 = -1.0;
@@ -232,7 +232,7 @@ pub fn run(input: &BoundaryInput, params: &BoundaryParams) -> Result<BoundaryOut
     }
     let r = resolve(params, geo, input.value_range)?;
     fn grid<'v>(v: &'v Array3<f32>, dims: [usize; 3]) -> Grid<'v> {
-        Grid { data: v.as_slice().unwrap_or(&[]), dims }
+        Grid::new(v.as_slice().unwrap_or(&[]), dims)
     }
     let grid = |v| grid(v, geo.dims);
     let fields = Fields {
@@ -248,44 +248,32 @@ pub fn run(input: &BoundaryInput, params: &BoundaryParams) -> Result<BoundaryOut
         g_min: r.g_min as f32,
         g_hit_min: r.g_hit_min as f32,
     };
-    let [nx, ny, _] = geo.dims;
-    let plane = nx * ny;
+    let plane = geo.dims[0] * geo.dims[1];
     let mut distance = Volume::zeros(geo.clone());
     let mut g_hit = Volume::zeros(geo.clone());
     let mut hit = Volume::zeros(geo.clone());
     let mut dot = Volume::zeros(geo.clone());
+    let mut counts = TraceCounts::default();
     {
         let d = distance.data.as_slice_mut().unwrap_or(&mut []);
         let gh = g_hit.data.as_slice_mut().unwrap_or(&mut []);
         let h = hit.data.as_slice_mut().unwrap_or(&mut []);
         let dt = dot.data.as_slice_mut().unwrap_or(&mut []);
-        d.par_chunks_mut(plane)
+        let per_plane: Vec<TraceCounts> = d
+            .par_chunks_mut(plane)
             .zip(gh.par_chunks_mut(plane))
             .zip(h.par_chunks_mut(plane))
             .zip(dt.par_chunks_mut(plane))
             .enumerate()
-            .for_each(|(k, (((d, gh), h), dt))| {
-                // Untraced voxels keep these values; only voxels with g >= g_min are visited.
-                d.fill(NO_BOUNDARY);
-                let g_plane = &fields.g.data[k * plane..(k + 1) * plane];
-                for (o, &gv) in g_plane.iter().enumerate() {
-                    if gv >= settings.g_min {
-                        let t = trace(&fields, &settings, o % nx, o / nx, k);
-                        d[o] = t.distance;
-                        gh[o] = t.g_hit;
-                        h[o] = t.code as u8 as f32;
-                        dt[o] = t.dot;
-                    }
-                }
-            });
-    }
-    let mut counts = TraceCounts::default();
-    for &c in hit.samples() {
-        match c as u8 {
-            0 => counts.not_traced += 1,
-            1 => counts.hits += 1,
-            2 => counts.no_crossing += 1,
-            _ => counts.rejected += 1,
+            .map(|(k, (((d, gh), h), dt))| {
+                trace_plane(&fields, &settings, k, trace::PlaneOut { distance: d, g_hit: gh, hit: h, dot: dt })
+            })
+            .collect();
+        for c in per_plane {
+            counts.not_traced += c.not_traced;
+            counts.hits += c.hits;
+            counts.no_crossing += c.no_crossing;
+            counts.rejected += c.rejected;
         }
     }
     let hit_mask = |f: &dyn Fn(f32) -> f32| {

@@ -164,16 +164,15 @@ pub fn run_with_progress(
 /// component, x fastest; components in item order, e.g. `[g, f2]` for items
 /// g, f2) and hands each slice to `consume(state, k, components)`.
 ///
-/// The nz slices are cut into `tasks` contiguous runs (at most nz), each
-/// worked by one rayon task in increasing k with its own `init(task)` state;
-/// the states come back in task order. What the consumer computes depends
-/// on the thread count only if it makes it so (floating-point sums should be
-/// kept per fixed slice range, not per task). `shade` is refused: it needs
-/// the whole volume's largest g first.
+/// Each range of `slabs` (z-slice indices, clipped to the volume) is one
+/// rayon task, worked in increasing k with its own `init(task)` state; the
+/// states come back in slab order. Results depend on the thread count only
+/// if the slabs do: keep floating-point sums per fixed slab. `shade` is
+/// refused: it needs the whole volume's largest g first.
 pub fn stream_slices<S: Send>(
     input: &MultiField,
     params: &DeriveParams,
-    tasks: usize,
+    slabs: &[std::ops::Range<usize>],
     init: impl Fn(usize) -> S + Sync,
     consume: impl Fn(&mut S, usize, &[Vec<f32>]) + Sync,
 ) -> Result<Vec<S>, DeriveError> {
@@ -184,15 +183,14 @@ pub fn stream_slices<S: Send>(
     }
     let Prepared { layout, engine, .. } = prepare(input, params)?;
     let [nx, ny, nz] = input.geometry.dims;
-    let tasks = tasks.clamp(1, nz.max(1));
-    let per_task = nz.div_ceil(tasks);
-    Ok((0..tasks)
-        .into_par_iter()
-        .map(|t| {
+    Ok(slabs
+        .par_iter()
+        .enumerate()
+        .map(|(t, slab)| {
             let mut state = init(t);
             let mut scratch = engine.scratch();
             let mut slices: Vec<Vec<f32>> = (0..layout.components()).map(|_| vec![0.0f32; nx * ny]).collect();
-            for k in (t * per_task).min(nz)..((t + 1) * per_task).min(nz) {
+            for k in slab.start.min(nz)..slab.end.min(nz) {
                 let mut outs: Vec<&mut [f32]> = slices.iter_mut().map(|b| b.as_mut_slice()).collect();
                 engine::compute_slice(&engine, &layout, k, &mut scratch, &mut outs);
                 consume(&mut state, k, &slices);

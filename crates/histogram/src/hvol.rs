@@ -70,7 +70,107 @@ pub struct HistogramVolume {
 
 /// Number of fixed parts for floating-point sums: fixed so that the sums do
 /// not depend on the thread count.
-const PARTS: usize = 16;
+pub const HVOL_PARTS: usize = 16;
+
+/// The (v, g, f'') axes of a histogram volume.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HvolAxes {
+    /// Value axis.
+    pub v: Axis,
+    /// Gradient magnitude axis.
+    pub g: Axis,
+    /// Second directional derivative axis.
+    pub h: Axis,
+}
+
+impl HvolAxes {
+    /// The axes `params` asks for, with Teem qbert's clipping (0 / 0.002 / 0.004 percent), from stored channels.
+    pub fn of(v: &[f32], g: &[f32], h: &[f32], params: &HvolParams) -> Result<HvolAxes, HistogramError> {
+        let axis = |name: &str, data: &[f32], bins: usize| Self::spec(name, bins).resolve(name, data);
+        Ok(HvolAxes {
+            v: axis("v", v, params.bins[0])?,
+            g: axis("g", g, params.bins[1])?,
+            h: axis("f2", h, params.bins[2])?,
+        })
+    }
+
+    /// The axis spec of channel `name` ("v", "g" or "f2") with `bins` bins
+    /// (with [`ChannelStats::axis`](crate::ChannelStats::axis), for channels
+    /// that are streamed rather than stored).
+    pub fn spec(name: &str, bins: usize) -> AxisSpec {
+        AxisSpec { bins: Some(bins), ..AxisSpec::qbert(name) }
+    }
+
+    fn list(&self) -> Vec<Axis> {
+        vec![self.v.clone(), self.g.clone(), self.h.clone()]
+    }
+}
+
+/// Counts and sums of a histogram volume over the voxels one task has seen:
+/// feed it with [`HvolAccumulator::add`], then hand every task's
+/// accumulator to [`HvolAccumulator::finish`].
+pub struct HvolAccumulator {
+    axes: HvolAxes,
+    binners: [Binner; 3],
+    strides: [u32; 3],
+    counts: SparseCounts,
+    /// Sums per fixed part, in the order the parts were first seen.
+    parts: Vec<(usize, Sums)>,
+}
+
+impl HvolAccumulator {
+    /// An empty accumulator over `axes`, for volumes of `voxels` voxels.
+    pub fn new(axes: &HvolAxes, voxels: usize) -> Result<HvolAccumulator, HistogramError> {
+        let total_bins = check_size(voxels, &axes.list())?;
+        let (nv, ng) = (axes.v.bins, axes.g.bins);
+        Ok(HvolAccumulator {
+            axes: axes.clone(),
+            binners: [axes.v.binner(), axes.g.binner(), axes.h.binner()],
+            strides: [1, nv as u32, (nv * ng) as u32],
+            counts: SparseCounts::new(total_bins),
+            parts: Vec::new(),
+        })
+    }
+
+    /// Adds voxels (v, g and f'' of each) to the counts and to the sums of
+    /// fixed part `part` (< [`HVOL_PARTS`]). A part's voxels must always be
+    /// added in the same pieces and order for the sums to keep their bits;
+    /// which task adds them does not matter.
+    pub fn add(&mut self, part: usize, v: &[f32], g: &[f32], h: &[f32]) {
+        let (nv, ng) = (self.axes.v.bins, self.axes.g.bins);
+        let at = match self.parts.iter().position(|(p, _)| *p == part) {
+            Some(at) => at,
+            None => {
+                self.parts.push((part, Sums::new(nv, ng)));
+                self.parts.len() - 1
+            }
+        };
+        let n = v.len().min(g.len()).min(h.len());
+        count_and_sum(&[v, g, h], &self.binners, &self.strides, 0..n, &mut self.counts, &mut self.parts[at].1);
+    }
+
+    /// Merges the accumulators of every task (counts in any order, sums in
+    /// part order) and derives sigma, p(v, g) and the default opacity.
+    pub fn finish(tasks: Vec<HvolAccumulator>, params: &HvolParams) -> Result<HistogramVolume, HistogramError> {
+        let mut tasks = tasks.into_iter();
+        let Some(first) = tasks.next() else {
+            return Err(HistogramError::Degenerate("no voxels were counted".into()));
+        };
+        let HvolAccumulator { axes, mut counts, mut parts, .. } = first;
+        for t in tasks {
+            counts.merge(&t.counts);
+            parts.extend(t.parts);
+        }
+        parts.sort_by_key(|(p, _)| *p);
+        let (nv, ng) = (axes.v.bins, axes.g.bins);
+        let mut sums = Sums::new(nv, ng);
+        for (_, p) in &parts {
+            sums.merge(p);
+        }
+        let hist = Histogram { axes: axes.list(), counts: counts.counts };
+        derive_tables(hist, axes, sums, params)
+    }
+}
 
 /// Builds the histogram volume of value `v`, gradient magnitude `g` and second derivative `h`.
 pub fn histogram_volume(
@@ -83,53 +183,38 @@ pub fn histogram_volume(
     if g.len() != n || h.len() != n {
         return Err(HistogramError::Geometry("v, g and f2 must have the same number of voxels".into()));
     }
-    let axis = |name: &str, data: &[f32], bins: usize| {
-        AxisSpec { bins: Some(bins), ..AxisSpec::qbert(name) }.resolve(name, data)
-    };
-    let (av, ag, ah) = (axis("v", v, params.bins[0])?, axis("g", g, params.bins[1])?, axis("f2", h, params.bins[2])?);
-    let axes = vec![av.clone(), ag.clone(), ah.clone()];
-    let total_bins = check_size(n, &axes)?;
-
-    // One pass: the (v, g, f'') counts, and sums per v bin and per (v, g) bin
-    // over the voxels inside all three ranges. The sums are kept per fixed
-    // part and merged in part order, so they do not depend on the thread
-    // count; the counts are integers, so one array per thread will do.
-    let (nv, ng) = (av.bins, ag.bins);
-    let part_len = n.div_ceil(PARTS).max(1);
-    let binners = [av.binner(), ag.binner(), ah.binner()];
-    let strides = [1, nv as u32, (nv * ng) as u32];
-    // one count array per thread: each part of a thread's group adds to it
-    let threads = rayon::current_num_threads().clamp(1, PARTS);
-    let group = PARTS.div_ceil(threads);
-    let splits: Vec<(SparseCounts, Vec<(usize, Sums)>)> = (0..threads)
+    let axes = HvolAxes::of(v, g, h, params)?;
+    // One pass: the (v, g, f'') counts and the per-(v, g) sums over the
+    // voxels inside all three ranges. One accumulator per thread; the sums
+    // are kept per fixed part of the voxels, so they do not depend on the
+    // thread count.
+    let part_len = n.div_ceil(HVOL_PARTS).max(1);
+    let threads = rayon::current_num_threads().clamp(1, HVOL_PARTS);
+    let group = HVOL_PARTS.div_ceil(threads);
+    let tasks: Vec<HvolAccumulator> = (0..threads)
         .into_par_iter()
         .map(|t| {
-            let mut counts = SparseCounts::new(total_bins);
-            let sums = (t * group..((t + 1) * group).min(PARTS))
-                .map(|p| {
-                    let range = (p * part_len).min(n)..((p + 1) * part_len).min(n);
-                    (p, count_and_sum(&[v, g, h], &binners, &strides, range, nv, ng, &mut counts))
-                })
-                .collect();
-            (counts, sums)
+            let mut acc = HvolAccumulator::new(&axes, n)?;
+            for p in t * group..((t + 1) * group).min(HVOL_PARTS) {
+                let range = (p * part_len).min(n)..((p + 1) * part_len).min(n);
+                acc.add(p, &v[range.clone()], &g[range.clone()], &h[range]);
+            }
+            Ok(acc)
         })
-        .collect();
-    let mut counts: Option<SparseCounts> = None;
-    let mut parts: Vec<(usize, Sums)> = Vec::with_capacity(PARTS);
-    for (c, s) in splits {
-        match &mut counts {
-            Some(all) => all.merge(&c),
-            None => counts = Some(c),
-        }
-        parts.extend(s);
-    }
-    parts.sort_by_key(|(p, _)| *p);
-    let mut sums = Sums::new(nv, ng);
-    for (_, p) in &parts {
-        sums.merge(p);
-    }
-    let hist = Histogram { axes, counts: counts.map_or_else(|| vec![0; total_bins], |c| c.counts) };
+        .collect::<Result<_, HistogramError>>()?;
+    HvolAccumulator::finish(tasks, params)
+}
 
+/// sigma, p(v, g) and the default opacity from the merged counts and sums.
+fn derive_tables(
+    hist: Histogram,
+    axes: HvolAxes,
+    sums: Sums,
+    params: &HvolParams,
+) -> Result<HistogramVolume, HistogramError> {
+    let (av, ag) = (axes.v, axes.g);
+    let nv = av.bins;
+    let ng = ag.bins;
     let (c_v, g_v, h_v) = sums.per_v(nv);
     let mean = |sum: f64, c: u64| if c > 0 { sum / c as f64 } else { 0.0 };
     let mean_g_v: Vec<f64> = (0..nv).map(|b| mean(g_v[b], c_v[b])).collect();
@@ -184,25 +269,21 @@ pub fn histogram_volume(
 }
 
 /// Counts the voxels of `range` into `counts` (bin index v + nv (g + ng f''))
-/// and returns their sums, a run of voxels in one bin at a time.
-#[allow(clippy::too_many_arguments)]
+/// and adds their sums to `s`, a run of voxels in one bin at a time.
 #[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+avx2", "x86_64+avx2"))]
 fn count_and_sum(
     channels: &[&[f32]; 3],
     binners: &[Binner; 3],
     strides: &[u32; 3],
     range: std::ops::Range<usize>,
-    nv: usize,
-    ng: usize,
     counts: &mut SparseCounts,
-) -> Sums {
-    let mut s = Sums::new(nv, ng);
+    s: &mut Sums,
+) {
     let (g, h) = (channels[1], channels[2]);
     for_each_run(channels, binners, strides, None, range, |bin, voxels| {
         counts.add(bin as usize, voxels.len() as u32);
         s.add(Run { bin, count: voxels.len() as u64, g: sum(&g[voxels.clone()]), h: sum(&h[voxels]) });
     });
-    s
 }
 
 /// Lanes of [`sum`]: eight f64 accumulators (one AVX-512 register), so that

@@ -10,6 +10,7 @@ mod axis;
 mod count;
 mod files;
 mod hvol;
+mod hvol_derived;
 mod image;
 mod percentile;
 mod rgb;
@@ -17,7 +18,8 @@ mod rgb;
 pub use axis::{Axis, AxisSpec, DEFAULT_BINS, MAX_INTEGER_BINS};
 pub use count::{Histogram, count};
 pub use files::{write_histogram, write_hvol, write_stretched};
-pub use hvol::{HistogramVolume, HvolParams, histogram_volume};
+pub use hvol::{HVOL_PARTS, HistogramVolume, HvolAccumulator, HvolAxes, HvolParams, histogram_volume};
+pub use hvol_derived::histogram_volume_derived;
 pub use image::{Grey, Scale, grey_level, side_by_side, write_exr, write_png};
 pub use percentile::ChannelStats;
 pub use rgb::{Rgb, write_rgb_png};
@@ -34,6 +36,9 @@ pub enum HistogramError {
     /// The data hold nothing to measure.
     #[error("{0}")]
     Degenerate(String),
+    /// The derive pass of a histogram volume built straight from values failed.
+    #[error(transparent)]
+    Derive(#[from] mdtf_derive::DeriveError),
 }
 
 /// Voxels whose boundary tracing kept a hit (`hit` == 1), the mask of the stretched histogram.

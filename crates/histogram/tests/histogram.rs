@@ -275,3 +275,39 @@ fn histogram_volume_does_not_depend_on_the_thread_count() {
         assert_eq!(one, run(threads), "{threads} threads");
     }
 }
+
+#[test]
+fn histogram_volume_derived_on_the_fly_equals_the_stored_one() {
+    // 30 slices: the 16 fixed parts are uneven, and threads group them differently
+    let v = erf_sphere(Geometry::new([40, 44, 30], [1.0, 1.0, 1.2]), 12.0, 2.0, 0.0, 255.0, None).volume();
+    let c = channels(v.clone());
+    let stored = histogram_volume(c.v.samples(), c.g.samples(), c.f2.samples(), &HvolParams::default()).unwrap();
+    let input = MultiField::from(v);
+    let streamed = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| {
+            mdtf_histogram::histogram_volume_derived(&input, &DeriveParams::default(), &HvolParams::default())
+        })
+        .unwrap()
+    };
+    let s = streamed(2);
+    // the same axes (exact order statistics either way) and the same integer counts
+    assert_eq!(s.hist, stored.hist);
+    assert_eq!(s.count_vg, stored.count_vg);
+    assert_eq!(s.count_v, stored.count_v);
+    // sums differ only by their rounding (runs end at slice edges when streamed)
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(1.0);
+    assert!(close(s.sigma, stored.sigma), "{} {}", s.sigma, stored.sigma);
+    assert!(s.mean_g_v.iter().zip(&stored.mean_g_v).all(|(a, b)| close(*a, *b)));
+    assert!(s.mean_h_v.iter().zip(&stored.mean_h_v).all(|(a, b)| close(*a, *b)));
+    assert!(s.position.iter().zip(&stored.position).all(|(a, b)| (a - b).abs() <= 1e-4 * a.abs().max(1.0)));
+    // and the streamed sums keep their bits on any thread count
+    for threads in [1, 3, 5] {
+        let t = streamed(threads);
+        assert_eq!((&t.hist, &t.mean_g_v, &t.mean_h_v, &t.position), (&s.hist, &s.mean_g_v, &s.mean_h_v, &s.position));
+    }
+    // a multi-field input is refused by the derive pass
+    let two = MultiField::from_volumes(vec![("a".into(), c.v.clone()), ("b".into(), c.g.clone())]).unwrap();
+    let e = mdtf_histogram::histogram_volume_derived(&two, &DeriveParams::default(), &HvolParams::default());
+    assert!(e.unwrap_err().to_string().contains("one field"));
+}

@@ -4,12 +4,14 @@ use crate::args::{HistogramArgs, ScaleArg};
 use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
+use mdtf_derive::DeriveParams;
 use mdtf_histogram::{
-    Axis, AxisSpec, HvolParams, Scale, count, histogram_volume, hit_mask, write_histogram, write_hvol, write_stretched,
+    Axis, AxisSpec, HvolParams, Scale, count, histogram_volume_derived, hit_mask, write_histogram, write_hvol,
+    write_stretched,
 };
 use mdtf_pipeline::boundary_chain::BoundaryChainParams;
 use mdtf_pipeline::channels;
-use mdtf_volume::Volume;
+use mdtf_volume::{MultiField, Volume};
 
 fn spec_for(args: &HistogramArgs, i: usize, name: &str) -> Result<AxisSpec> {
     let mut spec = AxisSpec::qbert(name);
@@ -43,13 +45,6 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
     for extra in [&["v", "g"][..], &["g_hit", "hit"][..]].into_iter().filter(|_| args.stretched).flatten() {
         if !wanted.iter().any(|w| w == extra) {
             wanted.push(extra.to_string());
-        }
-    }
-    if args.hvol {
-        for c in ["v", "g", "f2"] {
-            if !wanted.iter().any(|w| w == c) {
-                wanted.push(c.to_string());
-            }
         }
     }
     let chans = progress.step("computing channels", || {
@@ -107,9 +102,17 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
         write_stretched(&args.output, &normal, &stretched, scale)?;
     }
     if args.hvol {
-        let (Some(v), Some(g), Some(f2)) = (get("v"), get("g"), get("f2")) else { bail!("hvol: missing channels") };
         let p = HvolParams { g_thresh: args.g_thresh, tent_width: args.tent_width, ..HvolParams::default() };
-        let hv = progress.step("histogram volume", || histogram_volume(v.samples(), g.samples(), f2.samples(), &p))?;
+        let d = DeriveParams { kernel: kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL), ..DeriveParams::default() };
+        // g and f'' are derived slice by slice and counted as they come, never stored whole
+        let value;
+        let values = if input.fields.len() == 1 {
+            &input
+        } else {
+            value = MultiField::from_volumes(vec![("v".into(), input.field_volume(0).context("no fields")?)])?;
+            &value
+        };
+        let hv = progress.step("histogram volume", || histogram_volume_derived(values, &d, &p))?;
         write_hvol(&args.output, &hv)?;
         progress.note(&format!("histogram volume: sigma {:.4} world units, g_thresh {:.4}", hv.sigma, hv.g_thresh));
     }
