@@ -38,7 +38,7 @@ use mdtf_volume::{Geometry, Volume, VolumeError};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
-use writer::{TextureEncoder, write_manifest, write_texture};
+use writer::{TextureBytes, TextureEncoder, write_manifest, write_texture};
 
 /// Parameters of the pack stage.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -154,7 +154,7 @@ pub fn write(encoded: &Encoded, luts: &[Lut], dir: &Path, provenance: Provenance
     let textures = encoded
         .textures
         .iter()
-        .map(|(layout, bytes)| write_texture(dir, &encoded.geometry, layout, bytes, encoded.nifti))
+        .map(|(layout, bytes)| write_texture(dir, &encoded.geometry, layout, TextureBytes::Whole(bytes), encoded.nifti))
         .collect::<Result<Vec<_>, _>>()?;
     write_manifest(dir, encoded.profile, &encoded.geometry, textures, encoded.channels.clone(), luts, provenance)
 }

@@ -11,6 +11,7 @@ use crate::{Lut, PackError, PackParams};
 use mdtf_volume::{Geometry, Volume, VolumeError, write_file_atomically};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
+use std::io::Write;
 use std::path::Path;
 
 /// The textures of `params.profile`, in order, with `params.dtype` applied.
@@ -44,16 +45,15 @@ impl<'a> TextureEncoder<'a> {
         TextureEncoder { params, geometry, sources, measured: BTreeMap::new(), entries: Vec::new() }
     }
 
-    /// The bytes of texture `layout` (components fastest, then x, y, z,
-    /// little-endian), its channels taken from `get`.
-    pub fn encode<'v>(
+    /// Checks texture `layout`'s channels (from `get`), measures their ranges
+    /// and records their manifest entries: what encoding the texture needs.
+    fn prepare<'v>(
         &mut self,
         layout: &TextureLayout,
         get: &dyn Fn(&str) -> Option<&'v Volume>,
-    ) -> Result<Vec<u8>, PackError> {
+    ) -> Result<Prepared<'v>, PackError> {
         let geometry = &self.geometry;
-        let comps = layout.components.len();
-        let mut decodes = Vec::with_capacity(comps);
+        let mut decodes = Vec::with_capacity(layout.components.len());
         for (ci, c) in layout.components.iter().enumerate() {
             let Some(c) = c else {
                 decodes.push(None);
@@ -94,18 +94,52 @@ impl<'a> TextureEncoder<'a> {
             });
             decodes.push(Some((v.samples(), d)));
         }
-        let size = layout.dtype.size();
-        let [nx, ny, _] = geometry.dims;
+        Ok(Prepared { dtype: layout.dtype, dims: geometry.dims, decodes })
+    }
+
+    /// The bytes of texture `layout` (components fastest, then x, y, z,
+    /// little-endian), its channels taken from `get`.
+    pub fn encode<'v>(
+        &mut self,
+        layout: &TextureLayout,
+        get: &dyn Fn(&str) -> Option<&'v Volume>,
+    ) -> Result<Vec<u8>, PackError> {
+        let p = self.prepare(layout, get)?;
+        let mut bytes = vec![0u8; p.plane_bytes() * p.dims[2]];
+        p.encode_planes(0, &mut bytes);
+        Ok(bytes)
+    }
+}
+
+/// z-slices quantised per write when a texture is streamed (4 MiB of RGBA8 at 256^2).
+const SLAB_PLANES: usize = 16;
+
+/// A texture ready to quantise: each component's samples and decode (None: unused, code 0).
+pub(crate) struct Prepared<'v> {
+    dtype: Dtype,
+    dims: [usize; 3],
+    decodes: Vec<Option<(&'v [f32], Decode)>>,
+}
+
+impl Prepared<'_> {
+    fn plane_bytes(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.decodes.len() * self.dtype.size()
+    }
+
+    /// Quantises z-slices `first..` into `out` (whole slices), in parallel over slices.
+    fn encode_planes(&self, first: usize, out: &mut [u8]) {
+        let (size, comps) = (self.dtype.size(), self.decodes.len());
+        let [nx, ny, _] = self.dims;
         let plane = nx * ny;
-        let mut bytes = vec![0u8; geometry.voxel_count() * comps * size];
-        bytes.par_chunks_mut(plane * comps * size).enumerate().for_each_init(
+        out.par_chunks_mut(self.plane_bytes().max(1)).enumerate().for_each_init(
             || vec![vec![0u32; nx]; comps],
-            |codes, (k, out)| {
+            |codes, (dk, out)| {
+                let k = first + dk;
                 for j in 0..ny {
                     let row = (k * plane + j * nx)..(k * plane + (j + 1) * nx);
-                    for (ci, dec) in decodes.iter().enumerate() {
+                    for (ci, dec) in self.decodes.iter().enumerate() {
                         match dec {
-                            Some((data, d)) => encode_row(&data[row.clone()], d, layout.dtype, &mut codes[ci]),
+                            Some((data, d)) => encode_row(&data[row.clone()], d, self.dtype, &mut codes[ci]),
                             None => codes[ci].fill(0),
                         }
                     }
@@ -113,7 +147,19 @@ impl<'a> TextureEncoder<'a> {
                 }
             },
         );
-        Ok(bytes)
+    }
+
+    /// Every slice into `out`, a slab of [`SLAB_PLANES`] at a time.
+    fn stream(&self, out: &mut dyn Write) -> std::io::Result<()> {
+        let nz = self.dims[2];
+        let mut slab = vec![0u8; self.plane_bytes() * SLAB_PLANES.min(nz)];
+        for first in (0..nz).step_by(SLAB_PLANES) {
+            let planes = SLAB_PLANES.min(nz - first);
+            let bytes = &mut slab[..planes * self.plane_bytes()];
+            self.encode_planes(first, bytes);
+            out.write_all(bytes)?;
+        }
+        Ok(())
     }
 }
 
@@ -138,15 +184,24 @@ impl<'a> PackWriter<'a> {
         PackWriter { dir, encoder: TextureEncoder::new(params, geometry, sources), textures: Vec::new() }
     }
 
-    /// Quantises texture `layout` from the channels `get` gives and writes it.
+    /// Quantises texture `layout` from the channels `get` gives and writes it,
+    /// a slab of z-slices at a time through one reused buffer (the whole
+    /// texture in memory only when NIfTI copies are asked for).
     pub fn add<'v>(
         &mut self,
         layout: &TextureLayout,
         get: &dyn Fn(&str) -> Option<&'v Volume>,
     ) -> Result<(), PackError> {
-        let bytes = self.encoder.encode(layout, get)?;
-        let (geometry, nifti) = (&self.encoder.geometry, self.encoder.params.nifti);
-        self.textures.push(write_texture(self.dir, geometry, layout, &bytes, nifti)?);
+        if self.encoder.params.nifti {
+            // the NIfTI copy holds the components slowest: it needs the whole texture
+            let bytes = self.encoder.encode(layout, get)?;
+            let geometry = &self.encoder.geometry;
+            self.textures.push(write_texture(self.dir, geometry, layout, TextureBytes::Whole(&bytes), true)?);
+            return Ok(());
+        }
+        let prepared = self.encoder.prepare(layout, get)?;
+        let geometry = &self.encoder.geometry;
+        self.textures.push(write_texture(self.dir, geometry, layout, TextureBytes::Streamed(&prepared), false)?);
         Ok(())
     }
 
@@ -157,19 +212,29 @@ impl<'a> PackWriter<'a> {
     }
 }
 
+/// A texture's bytes: encoded already, or quantised slab by slab as they are written.
+pub(crate) enum TextureBytes<'a, 'v> {
+    Whole(&'a [u8]),
+    Streamed(&'a Prepared<'v>),
+}
+
 /// Writes one texture's bytes as `<name>.raw` with a detached NRRD header
-/// (and `<name>.nii` when `nifti`); returns its manifest entry.
+/// (and `<name>.nii` when `nifti`, which needs [`TextureBytes::Whole`]);
+/// returns its manifest entry.
 pub(crate) fn write_texture(
     dir: &Path,
     geometry: &Geometry,
     layout: &TextureLayout,
-    bytes: &[u8],
+    bytes: TextureBytes,
     nifti: bool,
 ) -> Result<TextureEntry, PackError> {
     let comps = layout.components.len();
     let data_file = format!("{}.raw", layout.name);
     let header_file = format!("{}.nhdr", layout.name);
-    write_file_atomically(&dir.join(&data_file), |w| w.write_all(bytes))?;
+    write_file_atomically(&dir.join(&data_file), |w| match &bytes {
+        TextureBytes::Whole(b) => w.write_all(b),
+        TextureBytes::Streamed(p) => p.stream(w),
+    })?;
     let type_name = match layout.dtype {
         Dtype::U8 => "uint8",
         Dtype::U16 | Dtype::F16 => "uint16",
@@ -179,12 +244,13 @@ pub(crate) fn write_texture(
     let extra = [("mdtf_components", order.join(" ")), ("mdtf_dtype", format!("{:?}", layout.dtype).to_lowercase())];
     let header = mdtf_volume::nrrd::texture_header(geometry, comps, type_name, &data_file, &extra);
     write_file_atomically(&dir.join(&header_file), |w| w.write_all(header.as_bytes()))?;
-    let nifti = if nifti {
-        let file = format!("{}.nii", layout.name);
-        write_nifti_texture(&dir.join(&file), geometry, &layout.components, layout.dtype, bytes)?;
-        Some(file)
-    } else {
-        None
+    let nifti = match (nifti, &bytes) {
+        (true, TextureBytes::Whole(b)) => {
+            let file = format!("{}.nii", layout.name);
+            write_nifti_texture(&dir.join(&file), geometry, &layout.components, layout.dtype, b)?;
+            Some(file)
+        }
+        _ => None,
     };
     Ok(TextureEntry {
         name: layout.name.clone(),
