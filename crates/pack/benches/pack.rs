@@ -36,7 +36,7 @@ fn slicer_3dtf_256(bencher: divan::Bencher) {
         .bench(|| pack(&chans, &params, &[], dir.path(), prov.clone(), &BTreeMap::new()).map(|m| m.textures.len()));
 }
 
-/// The quantisation pass alone (in memory, no files), same data.
+/// The quantisation pass alone into whole in-memory textures (fresh memory: page faults included), same data.
 #[divan::bench(sample_count = 5, sample_size = 1)]
 fn slicer_3dtf_256_encode_only(bencher: divan::Bencher) {
     let n = 256;
@@ -45,6 +45,24 @@ fn slicer_3dtf_256_encode_only(bencher: divan::Bencher) {
     bencher
         .counter(ItemsCount::new(n * n * n))
         .bench(|| encode(&chans, &params, &BTreeMap::new()).map(|e| e.textures.len()));
+}
+
+/// The quantisation pass as `pack` runs it, textures streamed a slab of
+/// z-slices at a time through one reused buffer, here into a sink that only
+/// looks at the bytes (no files, no whole-texture memory), same data.
+#[divan::bench(sample_count = 5, sample_size = 1)]
+fn slicer_3dtf_256_encode_streamed(bencher: divan::Bencher) {
+    let n = 256;
+    let chans = sphere_channels(n);
+    let params = PackParams::new(Profile::Slicer3dtf);
+    bencher.counter(ItemsCount::new(n * n * n)).bench(|| {
+        let mut bytes = 0usize;
+        mdtf_pack::encode_streamed(&chans, &params, &BTreeMap::new(), &mut |_, slab| {
+            bytes += divan::black_box(slab).len();
+            Ok(())
+        })
+        .map(|_| bytes)
+    });
 }
 
 /// The 256 x 256 pre-integration table of a 256-sample TF (target: < 100 ms).

@@ -148,6 +148,25 @@ pub fn encode(
     Ok(Encoded { profile: params.profile, geometry, textures, channels: encoder.entries, nifti: params.nifti })
 }
 
+/// [`encode`] without whole textures in memory: each texture's bytes go to
+/// `sink(layout, bytes)` in order, a slab of z-slices at a time (for a
+/// renderer that uploads textures as they come). Returns the channel
+/// entries of the manifest.
+pub fn encode_streamed(
+    channels: &[(String, Volume)],
+    params: &PackParams,
+    sources: &BTreeMap<String, ChannelSource>,
+    sink: &mut dyn FnMut(&TextureLayout, &[u8]) -> std::io::Result<()>,
+) -> Result<Vec<ChannelEntry>, PackError> {
+    let geometry = check_channels(channels, params)?;
+    let get = |n: &str| channels.iter().find(|(c, _)| c == n).map(|(_, v)| v);
+    let mut encoder = TextureEncoder::new(params, geometry, sources);
+    for layout in texture_layouts(params) {
+        encoder.stream(&layout, &get, &mut |bytes| sink(&layout, bytes))?;
+    }
+    Ok(encoder.entries)
+}
+
 /// Writes encoded textures (raw + detached NRRD header each), the lookup
 /// tables and `manifest.json` into `dir`. Returns the manifest.
 pub fn write(encoded: &Encoded, luts: &[Lut], dir: &Path, provenance: Provenance) -> Result<Manifest, PackError> {

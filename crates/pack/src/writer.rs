@@ -11,7 +11,6 @@ use crate::{Lut, PackError, PackParams};
 use mdtf_volume::{Geometry, Volume, VolumeError, write_file_atomically};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
-use std::io::Write;
 use std::path::Path;
 
 /// The textures of `params.profile`, in order, with `params.dtype` applied.
@@ -97,6 +96,18 @@ impl<'a> TextureEncoder<'a> {
         Ok(Prepared { dtype: layout.dtype, dims: geometry.dims, decodes })
     }
 
+    /// Quantises texture `layout` into `sink`, a slab of z-slices at a time
+    /// (the bytes of [`TextureEncoder::encode`], in order).
+    pub fn stream<'v>(
+        &mut self,
+        layout: &TextureLayout,
+        get: &dyn Fn(&str) -> Option<&'v Volume>,
+        sink: &mut dyn FnMut(&[u8]) -> std::io::Result<()>,
+    ) -> Result<(), PackError> {
+        let p = self.prepare(layout, get)?;
+        p.stream(sink).map_err(|e| PackError::Io(VolumeError::Fields(format!("texture {}: {e}", layout.name))))
+    }
+
     /// The bytes of texture `layout` (components fastest, then x, y, z,
     /// little-endian), its channels taken from `get`.
     pub fn encode<'v>(
@@ -150,14 +161,14 @@ impl Prepared<'_> {
     }
 
     /// Every slice into `out`, a slab of [`SLAB_PLANES`] at a time.
-    fn stream(&self, out: &mut dyn Write) -> std::io::Result<()> {
+    pub(crate) fn stream(&self, out: &mut dyn FnMut(&[u8]) -> std::io::Result<()>) -> std::io::Result<()> {
         let nz = self.dims[2];
         let mut slab = vec![0u8; self.plane_bytes() * SLAB_PLANES.min(nz)];
         for first in (0..nz).step_by(SLAB_PLANES) {
             let planes = SLAB_PLANES.min(nz - first);
             let bytes = &mut slab[..planes * self.plane_bytes()];
             self.encode_planes(first, bytes);
-            out.write_all(bytes)?;
+            out(bytes)?;
         }
         Ok(())
     }
@@ -233,7 +244,7 @@ pub(crate) fn write_texture(
     let header_file = format!("{}.nhdr", layout.name);
     write_file_atomically(&dir.join(&data_file), |w| match &bytes {
         TextureBytes::Whole(b) => w.write_all(b),
-        TextureBytes::Streamed(p) => p.stream(w),
+        TextureBytes::Streamed(p) => p.stream(&mut |b| w.write_all(b)),
     })?;
     let type_name = match layout.dtype {
         Dtype::U8 => "uint8",
