@@ -84,6 +84,11 @@ pub fn segment(tf: &Tf1d, sf: f64, sb: f64, d: f64) -> [f64; 4] {
 
 /// [`segment`] with every piece attenuating by at most e^(-1 / `pieces_per_depth`)
 /// (2: [`segment`]; 4 for about eight times less error at twice the work).
+///
+/// Compiled for AVX-512 and AVX2 as well as the baseline (rounding is an
+/// instruction there, not a library call), picked at run time; no FMA, so
+/// every path gives the same bits.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+avx2", "x86_64+avx2"))]
 pub(crate) fn segment_in_pieces(tf: &Tf1d, sf: f64, sb: f64, d: f64, pieces_per_depth: f64) -> [f64; 4] {
     let n = tf.samples.len().max(2);
     let span = (n - 1) as f64;
@@ -109,10 +114,12 @@ pub(crate) fn segment_in_pieces(tf: &Tf1d, sf: f64, sb: f64, d: f64, pieces_per_
             continue;
         }
         // the TF is linear on this piece: interpolate instead of looking it up
-        let pieces = (0.5 * pieces_per_depth * d * (va[3] + vb[3]) * (t1 - t0)).ceil().max(1.0) as usize;
+        let depth = 0.5 * pieces_per_depth * d * (va[3] + vb[3]) * (t1 - t0);
+        // (NaN: one piece)
+        let pieces = if depth > 1.0 { depth.ceil() as usize } else { 1 };
         let dv = [vb[0] - va[0], vb[1] - va[1], vb[2] - va[2], vb[3] - va[3]];
-        let h = (t1 - t0) / pieces as f64;
-        let df = 1.0 / pieces as f64;
+        // one piece is the common case (a short piece of a long segment): no divisions
+        let (h, df) = if pieces == 1 { (t1 - t0, 1.0) } else { ((t1 - t0) / pieces as f64, 1.0 / pieces as f64) };
         for p in 0..pieces {
             let fa = p as f64 * df;
             let tau_a = va[3] + fa * dv[3];
