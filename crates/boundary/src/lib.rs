@@ -6,7 +6,9 @@
 //! and f'' by trilinear interpolation, follows the direction in which g
 //! increases (the sign of f'' at the voxel: f'' = n^T H n is the derivative
 //! of g along n), and at the first sign change of f'' refines the zero
-//! crossing (Illinois regula falsi, tolerance 1e-3 voxel by default). g at the hit is
+//! crossing (Illinois regula falsi, tolerance 1e-3 voxel by default; along
+//! a ray the trilinear f'' is one cubic per cell, so steps and refinement
+//! evaluate a polynomial and read memory once per cell). g at the hit is
 //! read by tricubic (Catmull-Rom) interpolation, since trilinear
 //! interpolation flattens g's peak by up to 4 % at sigma = 3 voxels; hits
 //! whose g is below `g_hit_min` (noise, phantom edges) are rejected.
@@ -112,6 +114,15 @@ pub struct TraceCounts {
     pub no_crossing: u64,
     /// Traced voxels whose zero crossing had g below g_hit_min.
     pub rejected: u64,
+}
+
+impl std::ops::AddAssign for TraceCounts {
+    fn add_assign(&mut self, o: TraceCounts) {
+        self.not_traced += o.not_traced;
+        self.hits += o.hits;
+        self.no_crossing += o.no_crossing;
+        self.rejected += o.rejected;
+    }
 }
 
 impl TraceCounts {
@@ -270,10 +281,7 @@ pub fn run(input: &BoundaryInput, params: &BoundaryParams) -> Result<BoundaryOut
             })
             .collect();
         for c in per_plane {
-            counts.not_traced += c.not_traced;
-            counts.hits += c.hits;
-            counts.no_crossing += c.no_crossing;
-            counts.rejected += c.rejected;
+            counts += c;
         }
     }
     let hit_mask = |f: &dyn Fn(f32) -> f32| {
