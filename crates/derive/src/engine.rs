@@ -130,6 +130,9 @@ pub(crate) struct Engine<'a> {
     ry: usize,
     /// Every field's x value kernel is the identity (interpolating kernels).
     x_identity: bool,
+    /// Every field's z value kernel is the identity: the z-filtered value
+    /// rows are the input rows themselves, read in place instead of copied.
+    z_identity: bool,
 }
 
 const C00: usize = 0;
@@ -210,7 +213,8 @@ impl<'a> Engine<'a> {
         let pad = fields.iter().map(|f| f.stencil.x.radius()).max().unwrap_or(0);
         let ry = fields.iter().map(|f| f.stencil.y.radius()).max().unwrap_or(0);
         let x_identity = fields.iter().all(|f| f.stencil.x.d0 == [(0, 1.0)]);
-        Engine { fields, dims, border, needs, epsilon, pad, ry, x_identity }
+        let z_identity = fields.iter().all(|f| f.stencil.z.d0 == [(0, 1.0)]);
+        Engine { fields, dims, border, needs, epsilon, pad, ry, x_identity, z_identity }
     }
 
     fn z_types(&self) -> usize {
@@ -276,7 +280,7 @@ impl<'a> Engine<'a> {
         for j in 0..ny {
             for (field, fs) in self.fields.iter().zip(scratch.fields.iter_mut()) {
                 self.z_row(field, fs, k, j as isize + ry);
-                self.row(field, fs, j);
+                self.row(field, fs, k, j);
             }
             emit(j, scratch);
         }
@@ -297,7 +301,7 @@ impl<'a> Engine<'a> {
         let slot = self.slot(p);
         let st = &field.stencil;
         let ztaps = [&st.z.d0, &st.z.d1, &st.z.d2];
-        for t in 0..self.z_types() {
+        for t in usize::from(self.z_identity)..self.z_types() {
             let at = |o: isize| {
                 let kk = border.index(k as isize + o, nz);
                 let start = (kk * ny + jj) * nx;
@@ -309,9 +313,9 @@ impl<'a> Engine<'a> {
 
     /// y-filters the ring rows around row j into a padded row (border values in the padding).
     #[inline(always)]
-    fn y_pass(&self, dst: &mut [f32], ring: &[Vec<f32>], ytaps: &Taps, j: usize) {
+    fn y_pass<'r>(&self, dst: &mut [f32], rows: impl Fn(isize) -> &'r [f32], ytaps: &Taps) {
         let (nx, pad, border) = (self.dims[0], self.pad, self.border);
-        combine(&mut dst[pad..pad + nx], ytaps, |o| ring[self.slot(j as isize + o)].as_slice());
+        combine(&mut dst[pad..pad + nx], ytaps, rows);
         for p in 0..pad {
             dst[pad - 1 - p] = dst[pad + border.index(-1 - p as isize, nx)];
             dst[pad + nx + p] = dst[pad + border.index((nx + p) as isize, nx)];
@@ -320,20 +324,32 @@ impl<'a> Engine<'a> {
 
     /// Fills the derivative rows of output row j from the z-filtered planes.
     #[inline(always)]
-    fn row(&self, field: &FieldInput, fs: &mut FieldScratch, j: usize) {
+    fn row(&self, field: &FieldInput, fs: &mut FieldScratch, k: usize, j: usize) {
         let (pad, n) = (self.pad, self.needs);
+        let [nx, ny, _] = self.dims;
         let st = &field.stencil;
         let FieldScratch { z, c, rows } = fs;
+        // the z-filtered rows at y offset o from j: the ring, or for an
+        // identity z value kernel the input rows of slice k themselves
+        let ring = |t: usize| {
+            let z = &z[t];
+            move |o: isize| z[self.slot(j as isize + o)].as_slice()
+        };
+        let input = |o: isize| {
+            let start = (k * ny + self.border.index(j as isize + o, ny)) * nx;
+            &field.data[start..start + nx]
+        };
+        let z0 = |o: isize| if self.z_identity { input(o) } else { ring(0)(o) };
         // y pass: combination (z order, y order) as a padded row.
-        self.y_pass(&mut c[C00], &z[0], &st.y.d0, j);
+        self.y_pass(&mut c[C00], z0, &st.y.d0);
         if n.grad || n.hessian {
-            self.y_pass(&mut c[C01], &z[0], &st.y.d1, j);
-            self.y_pass(&mut c[C10], &z[1], &st.y.d0, j);
+            self.y_pass(&mut c[C01], z0, &st.y.d1);
+            self.y_pass(&mut c[C10], ring(1), &st.y.d0);
         }
         if n.hessian {
-            self.y_pass(&mut c[C02], &z[0], &st.y.d2, j);
-            self.y_pass(&mut c[C20], &z[2], &st.y.d0, j);
-            self.y_pass(&mut c[C11], &z[1], &st.y.d1, j);
+            self.y_pass(&mut c[C02], z0, &st.y.d2);
+            self.y_pass(&mut c[C20], ring(2), &st.y.d0);
+            self.y_pass(&mut c[C11], ring(1), &st.y.d1);
         }
         // x pass: shifted reads of the padded rows. With an identity x value
         // kernel the x0 rows are the middles of the padded rows (see `view`).
