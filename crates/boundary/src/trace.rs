@@ -99,10 +99,7 @@ pub(crate) fn trace_plane(f: &Fields, s: &TraceSettings, k: usize, out: PlaneOut
 fn trace(f: &Fields, s: &TraceSettings, i: usize, j: usize, k: usize) -> Trace {
     let dims = f.g.dims;
     let index = (k * dims[1] + j) * dims[0] + i;
-    let g0 = f.g.data[index];
-    if g0.is_nan() || g0 < s.g_min {
-        return Trace::miss(HitCode::NotTraced);
-    }
+    // (the caller traces only voxels with g >= g_min)
     let n = [f.n[0].data[index], f.n[1].data[index], f.n[2].data[index]];
     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
     if len.is_nan() || len <= 0.0 {

@@ -20,6 +20,7 @@ use crate::axis::{Axis, AxisSpec, Binner};
 use crate::count::{Histogram, SparseCounts, check_size, for_each_run};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::ops::Range;
 
 /// Parameters of the histogram volume.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -188,21 +189,32 @@ pub fn histogram_volume(
     // voxels inside all three ranges. One accumulator per thread; the sums
     // are kept per fixed part of the voxels, so they do not depend on the
     // thread count.
-    let part_len = n.div_ceil(HVOL_PARTS).max(1);
-    let threads = rayon::current_num_threads().clamp(1, HVOL_PARTS);
-    let group = HVOL_PARTS.div_ceil(threads);
-    let tasks: Vec<HvolAccumulator> = (0..threads)
+    let parts = fixed_parts(n);
+    let tasks: Vec<HvolAccumulator> = part_groups(rayon::current_num_threads())
         .into_par_iter()
-        .map(|t| {
+        .map(|group| {
             let mut acc = HvolAccumulator::new(&axes, n)?;
-            for p in t * group..((t + 1) * group).min(HVOL_PARTS) {
-                let range = (p * part_len).min(n)..((p + 1) * part_len).min(n);
+            for p in group {
+                let range = parts[p].clone();
                 acc.add(p, &v[range.clone()], &g[range.clone()], &h[range]);
             }
             Ok(acc)
         })
         .collect::<Result<_, HistogramError>>()?;
     HvolAccumulator::finish(tasks, params)
+}
+
+/// [`HVOL_PARTS`] contiguous ranges covering `0..len` (voxels, or z-slices
+/// when streamed; some empty when len is smaller).
+pub(crate) fn fixed_parts(len: usize) -> Vec<Range<usize>> {
+    (0..HVOL_PARTS).map(|p| p * len / HVOL_PARTS..(p + 1) * len / HVOL_PARTS).collect()
+}
+
+/// The part indices grouped into one run of whole parts per thread, so that
+/// no part's sums are split between tasks.
+pub(crate) fn part_groups(threads: usize) -> Vec<Range<usize>> {
+    let per = HVOL_PARTS.div_ceil(threads.clamp(1, HVOL_PARTS));
+    (0..HVOL_PARTS).step_by(per).map(|first| first..(first + per).min(HVOL_PARTS)).collect()
 }
 
 /// sigma, p(v, g) and the default opacity from the merged counts and sums.

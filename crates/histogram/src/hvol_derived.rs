@@ -8,7 +8,7 @@
 //! plus the histogram.
 
 use crate::HistogramError;
-use crate::hvol::{HVOL_PARTS, HistogramVolume, HvolAccumulator, HvolAxes, HvolParams};
+use crate::hvol::{HistogramVolume, HvolAccumulator, HvolAxes, HvolParams, fixed_parts, part_groups};
 use crate::percentile::ChannelStats;
 use mdtf_derive::{DeriveParams, Item};
 use mdtf_volume::MultiField;
@@ -71,29 +71,29 @@ pub fn histogram_volume_derived(
     HvolAccumulator::finish(tasks.into_iter().collect::<Result<_, _>>()?, params)
 }
 
-/// [`HVOL_PARTS`] contiguous z-slice ranges covering `nz` slices (some empty when nz is smaller).
-fn fixed_parts(nz: usize) -> Vec<Range<usize>> {
-    (0..HVOL_PARTS).map(|p| p * nz / HVOL_PARTS..(p + 1) * nz / HVOL_PARTS).collect()
-}
-
-/// One slab per thread, each a run of whole parts, so that no part's sums
-/// are split between tasks.
+/// One slab of z-slices per thread, each a run of whole `parts`, so that no
+/// part's sums are split between tasks.
 fn task_slabs(parts: &[Range<usize>], threads: usize) -> Vec<Range<usize>> {
-    let per = parts.len().div_ceil(threads.clamp(1, parts.len().max(1)));
-    parts.chunks(per.max(1)).map(|c| c[0].start..c[c.len() - 1].end).collect()
+    part_groups(threads).into_iter().map(|group| parts[group.start].start..parts[group.end - 1].end).collect()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::HVOL_PARTS;
 
     #[test]
-    fn parts_cover_the_slices_once_and_slabs_never_split_a_part() {
+    fn parts_cover_the_slices_once_and_groups_never_split_a_part() {
         for nz in [1, 5, 16, 30, 257] {
             let parts = fixed_parts(nz);
             assert_eq!(parts.iter().map(|p| p.len()).sum::<usize>(), nz);
             assert!(parts.windows(2).all(|w| w[0].end == w[1].start));
             for threads in [1, 2, 3, 7, 64] {
+                let groups = part_groups(threads);
+                assert_eq!(groups.first().map(|g| g.start), Some(0));
+                assert_eq!(groups.last().map(|g| g.end), Some(HVOL_PARTS));
+                assert!(groups.windows(2).all(|w| w[0].end == w[1].start), "threads {threads}");
+                assert!(groups.len() <= threads.max(1), "threads {threads}");
                 let slabs = task_slabs(&parts, threads);
                 assert_eq!(slabs.first().map(|s| s.start), Some(0));
                 assert_eq!(slabs.last().map(|s| s.end), Some(nz));

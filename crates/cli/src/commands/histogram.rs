@@ -109,7 +109,7 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
         let values = if input.fields.len() == 1 {
             &input
         } else {
-            value = MultiField::from_volumes(vec![("v".into(), input.field_volume(0).context("no fields")?)])?;
+            value = MultiField::from(input.field_volume(0).context("the input has no fields")?);
             &value
         };
         let hv = progress.step("histogram volume", || histogram_volume_derived(values, &d, &p))?;
