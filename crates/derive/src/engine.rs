@@ -3,12 +3,13 @@
 //! every derivative the requested items need in one sweep over the data.
 //!
 //! Per thread and field the working set is a ring of 3 x (2 R_y + 1)
-//! z-filtered rows plus a few padded rows (a few tens of KiB: it stays in
+//! z-filtered rows plus a few more rows (a few tens of KiB: it stays in
 //! L1/L2), so there are no full-volume or even full-plane temporaries. Every
 //! voxel's arithmetic is the same whatever slice order or thread runs it, so
 //! results are bit-identical for any thread count.
 
 use crate::border::Border;
+use crate::fused::{self, Combinations, Spare};
 use crate::items::Needs;
 use crate::kernel::{AxisTaps, Taps};
 use crate::measures::Layout;
@@ -27,8 +28,9 @@ pub(crate) struct FieldInput<'a> {
     pub stencil: Stencil,
 }
 
-/// Derivative rows of one field at the current output row; vectors that the
-/// requested items do not need stay empty.
+/// Derivative rows of one field at the current output row, computed by the x
+/// pass; vectors that the requested items do not need (or that an identity x
+/// value kernel lets the y-filtered rows stand in for) stay empty.
 #[derive(Debug, Default)]
 pub(crate) struct Rows {
     pub value: Vec<f32>,
@@ -47,9 +49,10 @@ pub(crate) struct Rows {
 }
 
 /// Borrowed derivative rows of one field at the current output row (each nx
-/// samples; empty where not needed). Where the x value kernel is the
-/// identity, value, gy, gz, hyy, hzz and hyz are views of the y-filtered
-/// rows instead of copies.
+/// samples; empty where not needed). Some are views of rows computed earlier
+/// in the pass, or of the input itself, rather than copies: with an identity
+/// x value kernel value, gy, gz, hyy, hzz and hyz are the y-filtered rows,
+/// and with an identity y value kernel those are the z-filtered rows.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct RowsView<'s> {
     pub value: &'s [f32],
@@ -71,7 +74,9 @@ struct FieldScratch {
     /// Ring of z-filtered rows (value, first, second derivative along z):
     /// row position p (j + dy, unclamped) lives in slot (p + R_y) mod (2 R_y + 1).
     z: [Vec<Vec<f32>>; 3],
-    /// y-then-z combinations as padded rows: 00, 01, 10, 02, 20, 11 (z order, y order).
+    /// y-then-z combinations 00, 01, 10, 02, 20, 11 (z order, y order), nx
+    /// samples each; empty where not needed, and 00, 10, 20 also where an
+    /// identity y value kernel lets the z-filtered rows stand in.
     c: [Vec<f32>; 6],
     rows: Rows,
 }
@@ -79,44 +84,57 @@ struct FieldScratch {
 /// Per-thread working memory of the engine.
 pub(crate) struct Scratch {
     fields: Vec<FieldScratch>,
-    pad: usize,
-    x_identity: bool,
+    spare: Spare,
 }
 
-impl Scratch {
-    /// Derivative rows of field `f` for the row just computed.
-    pub fn rows(&self, f: usize) -> RowsView<'_> {
-        self.fields[f].view(self.pad, self.x_identity)
-    }
+/// The derivative rows of every field at output row (k, j), as `slice`
+/// hands them to its caller.
+pub(crate) struct RowSet<'s, 'a> {
+    engine: &'s Engine<'a>,
+    fields: &'s [FieldScratch],
+    k: usize,
+    j: usize,
 }
 
-impl FieldScratch {
-    fn view(&self, pad: usize, x_identity: bool) -> RowsView<'_> {
-        let (r, c) = (&self.rows, &self.c);
-        let mid = |k: usize, own| x0_row(c, k, own, pad, x_identity);
+impl<'s> RowSet<'s, '_> {
+    /// Derivative rows of field `f`.
+    #[inline(always)]
+    pub fn field(&self, f: usize) -> RowsView<'s> {
+        let e = self.engine;
+        let (field, fs) = (&e.fields[f], &self.fields[f]);
+        let n = e.needs;
+        let combination = |c: usize| e.combination(field, fs, c, self.k, self.j);
+        let x0 = |c: usize, own: &'s Vec<f32>| if e.x_identity { combination(c) } else { own.as_slice() };
+        let r = &fs.rows;
+        let none: &'s [f32] = &[];
+        let (grad, hess) = (n.grad, n.hessian);
         RowsView {
-            value: mid(C00, &r.value),
+            value: if n.value { x0(C00, &r.value) } else { none },
             gx: &r.gx,
-            gy: mid(C01, &r.gy),
-            gz: mid(C10, &r.gz),
+            gy: if grad { x0(C01, &r.gy) } else { none },
+            gz: if grad { x0(C10, &r.gz) } else { none },
             g: &r.g,
             g_inv: &r.g_inv,
             hxx: &r.hxx,
-            hyy: mid(C02, &r.hyy),
-            hzz: mid(C20, &r.hzz),
+            hyy: if hess { x0(C02, &r.hyy) } else { none },
+            hzz: if hess { x0(C20, &r.hzz) } else { none },
             hxy: &r.hxy,
             hxz: &r.hxz,
-            hyz: mid(C11, &r.hyz),
+            hyz: if hess { x0(C11, &r.hyz) } else { none },
         }
     }
-}
 
-/// The x0-filtered row of combination `k`: the middle of the padded row when
-/// the x value kernel is the identity, else the row computed into `own`.
-#[inline(always)]
-fn x0_row<'s>(c: &'s [Vec<f32>; 6], k: usize, own: &'s [f32], pad: usize, x_identity: bool) -> &'s [f32] {
-    let row = &c[k];
-    if x_identity && !row.is_empty() { &row[pad..row.len() - pad] } else { own }
+    /// Writes g, the normal and f'' of field 0 at this row (a fused engine
+    /// computes only the y-then-z combinations; see [`fused`]).
+    #[inline(always)]
+    pub fn fused_g_normal_f2(&self, out: fused::FusedOut) {
+        let e = self.engine;
+        let (field, fs) = (&e.fields[0], &self.fields[0]);
+        let c = |c: usize| e.combination(field, fs, c, self.k, self.j);
+        let combinations =
+            Combinations { c00: c(C00), c01: c(C01), c10: c(C10), c02: c(C02), c20: c(C20), c11: c(C11) };
+        fused::g_normal_f2(&field.stencil.x, &combinations, e.border, e.epsilon, out);
+    }
 }
 
 /// The fused derivative pass over a volume of dims (nx, ny, nz).
@@ -126,13 +144,18 @@ pub(crate) struct Engine<'a> {
     border: Border,
     needs: Needs,
     epsilon: f32,
-    pad: usize,
     ry: usize,
     /// Every field's x value kernel is the identity (interpolating kernels).
     x_identity: bool,
+    /// Every field's y value kernel is the identity: the z-filtered rows
+    /// stand in for the y-then-z combinations 00, 10 and 20.
+    y_identity: bool,
     /// Every field's z value kernel is the identity: the z-filtered value
     /// rows are the input rows themselves, read in place instead of copied.
     z_identity: bool,
+    /// The caller writes g, normal and f'' straight from the y-then-z
+    /// combinations ([`RowSet::fused_g_normal_f2`]): no x pass here.
+    fused: bool,
 }
 
 const C00: usize = 0;
@@ -144,7 +167,8 @@ const C11: usize = 5;
 
 /// out = sum of w * src_at(o) over the taps (o, w), in tap order. Up to five
 /// taps are summed in one loop (one store per sample instead of one per tap);
-/// longer kernels (Gaussians) accumulate five taps at a time.
+/// longer kernels (Gaussians) accumulate five taps at a time. The sum is
+/// left to right either way, as in [`edge_sample`].
 #[inline(always)]
 fn combine<'s>(out: &mut [f32], taps: &Taps, src_at: impl Fn(isize) -> &'s [f32]) {
     let n = out.len();
@@ -194,27 +218,64 @@ fn combine<'s>(out: &mut [f32], taps: &Taps, src_at: impl Fn(isize) -> &'s [f32]
     }
 }
 
-/// x-filters a padded row (`pad` border samples each side) into `dst`.
+/// One x-filtered sample at `i` whose taps reach past an end of `src`,
+/// through the border policy; summed in the order [`combine`] sums.
+#[inline]
+fn edge_sample(taps: &Taps, src: &[f32], i: usize, border: Border) -> f32 {
+    let at = |o: isize| src[border.index(i as isize + o, src.len())];
+    match taps.split_first() {
+        None => 0.0,
+        Some((&(o0, w0), rest)) => rest.iter().fold(w0 * at(o0), |acc, &(o, w)| acc + w * at(o)),
+    }
+}
+
+/// x-filters one row `src` into `dst` (both nx samples): the samples whose
+/// taps stay inside the row in one vectorised sweep, the few at each end
+/// through the border policy.
 #[inline(always)]
-fn x_pass(dst: &mut [f32], src: &[f32], xtaps: &Taps, pad: usize) {
-    combine(dst, xtaps, |o| &src[(pad as isize + o) as usize..]);
+fn x_pass(dst: &mut [f32], src: &[f32], taps: &Taps, border: Border) {
+    let nx = src.len();
+    let r = taps.iter().map(|(o, _)| o.unsigned_abs()).max().unwrap_or(0);
+    let lo = r.min(nx);
+    let hi = nx.saturating_sub(r).max(lo);
+    if hi > lo {
+        combine(&mut dst[lo..hi], taps, |o| &src[(lo as isize + o) as usize..]);
+    }
+    for i in (0..lo).chain(hi..nx) {
+        dst[i] = edge_sample(taps, src, i, border);
+    }
 }
 
 impl<'a> Engine<'a> {
     /// An engine for these fields (all of dims `dims`) computing what `needs` asks.
     /// `epsilon`: g below it counts as 0 for the inverse gradient row.
+    /// `fused`: stop each row after the y pass (see [`Engine::fusable`]).
     pub fn new(
         fields: Vec<FieldInput<'a>>,
         dims: [usize; 3],
         border: Border,
         needs: Needs,
         epsilon: f32,
+        fused: bool,
     ) -> Engine<'a> {
-        let pad = fields.iter().map(|f| f.stencil.x.radius()).max().unwrap_or(0);
         let ry = fields.iter().map(|f| f.stencil.y.radius()).max().unwrap_or(0);
-        let x_identity = fields.iter().all(|f| f.stencil.x.d0 == [(0, 1.0)]);
-        let z_identity = fields.iter().all(|f| f.stencil.z.d0 == [(0, 1.0)]);
-        Engine { fields, dims, border, needs, epsilon, pad, ry, x_identity, z_identity }
+        let identity = |taps: &Taps| taps.as_slice() == [(0, 1.0)];
+        let x_identity = fields.iter().all(|f| identity(&f.stencil.x.d0));
+        let y_identity = fields.iter().all(|f| identity(&f.stencil.y.d0));
+        let z_identity = fields.iter().all(|f| identity(&f.stencil.z.d0));
+        let fused = fused && Engine::fusable(&fields);
+        Engine { fields, dims, border, needs, epsilon, ry, x_identity, y_identity, z_identity, fused }
+    }
+
+    /// Whether the fused g / normal / f'' loop can serve these fields: one
+    /// field whose x taps [`fused::supports`].
+    pub fn fusable(fields: &[FieldInput]) -> bool {
+        matches!(fields, [f] if fused::supports(&f.stencil.x))
+    }
+
+    /// Whether rows stop after the y pass for the fused loop.
+    pub fn is_fused(&self) -> bool {
+        self.fused
     }
 
     fn z_types(&self) -> usize {
@@ -231,9 +292,9 @@ impl<'a> Engine<'a> {
     pub fn scratch(&self) -> Scratch {
         let nx = self.dims[0];
         let ring = 2 * self.ry + 1;
-        let padded = nx + 2 * self.pad;
         let n = self.needs;
         let row = |needed: bool| if needed { vec![0.0f32; nx] } else { Vec::new() };
+        let x0_row = |needed: bool| row(needed && !self.x_identity);
         let fields = self
             .fields
             .iter()
@@ -241,35 +302,38 @@ impl<'a> Engine<'a> {
                 z: std::array::from_fn(|t| if t < self.z_types() { vec![vec![0.0; nx]; ring] } else { Vec::new() }),
                 c: std::array::from_fn(|c| {
                     let needed = match c {
-                        C00 => true,
-                        C01 | C10 => n.grad || n.hessian,
+                        C00 => !self.y_identity,
+                        C01 => n.grad || n.hessian,
+                        C10 => (n.grad || n.hessian) && !self.y_identity,
+                        C20 => n.hessian && !self.y_identity,
                         _ => n.hessian,
                     };
-                    if needed { vec![0.0; padded] } else { Vec::new() }
+                    row(needed)
                 }),
                 rows: Rows {
-                    value: row(n.value),
+                    value: x0_row(n.value),
                     gx: row(n.grad),
-                    gy: row(n.grad),
-                    gz: row(n.grad),
+                    gy: x0_row(n.grad),
+                    gz: x0_row(n.grad),
                     g: row(n.grad),
                     g_inv: row(n.grad),
                     hxx: row(n.hessian),
-                    hyy: row(n.hessian),
-                    hzz: row(n.hessian),
+                    hyy: x0_row(n.hessian),
+                    hzz: x0_row(n.hessian),
                     hxy: row(n.hessian),
                     hxz: row(n.hessian),
-                    hyz: row(n.hessian),
+                    hyz: x0_row(n.hessian),
                 },
             })
             .collect();
-        Scratch { fields, pad: self.pad, x_identity: self.x_identity }
+        Scratch { fields, spare: Spare::new(if self.fused { nx } else { 0 }) }
     }
 
-    /// Computes output slice `k`, calling `emit(j, scratch)` after each row j.
-    /// Always inlined, so that it is compiled for the caller's target features.
+    /// Computes output slice `k`, calling `emit(j, rows, spare)` after each
+    /// row j. Always inlined, so that it is compiled for the caller's target
+    /// features.
     #[inline(always)]
-    pub fn slice(&self, k: usize, scratch: &mut Scratch, mut emit: impl FnMut(usize, &Scratch)) {
+    pub fn slice(&self, k: usize, scratch: &mut Scratch, mut emit: impl FnMut(usize, &RowSet, &mut Spare)) {
         let ny = self.dims[1];
         let ry = self.ry as isize;
         for (field, fs) in self.fields.iter().zip(scratch.fields.iter_mut()) {
@@ -282,7 +346,7 @@ impl<'a> Engine<'a> {
                 self.z_row(field, fs, k, j as isize + ry);
                 self.row(field, fs, k, j);
             }
-            emit(j, scratch);
+            emit(j, &RowSet { engine: self, fields: &scratch.fields, k, j }, &mut scratch.spare);
         }
     }
 
@@ -311,80 +375,113 @@ impl<'a> Engine<'a> {
         }
     }
 
-    /// y-filters the ring rows around row j into a padded row (border values in the padding).
+    /// The z-filtered row of derivative order `t` at row position p of slice
+    /// k: a ring slot, or for an identity z value kernel the input row itself.
     #[inline(always)]
-    fn y_pass<'r>(&self, dst: &mut [f32], rows: impl Fn(isize) -> &'r [f32], ytaps: &Taps) {
-        let (nx, pad, border) = (self.dims[0], self.pad, self.border);
-        combine(&mut dst[pad..pad + nx], ytaps, rows);
-        for p in 0..pad {
-            dst[pad - 1 - p] = dst[pad + border.index(-1 - p as isize, nx)];
-            dst[pad + nx + p] = dst[pad + border.index((nx + p) as isize, nx)];
+    fn z_filtered<'s>(
+        &'s self,
+        field: &'s FieldInput,
+        z: &'s [Vec<Vec<f32>>; 3],
+        t: usize,
+        k: usize,
+        p: isize,
+    ) -> &'s [f32] {
+        if t == 0 && self.z_identity {
+            let [nx, ny, _] = self.dims;
+            let start = (k * ny + self.border.index(p, ny)) * nx;
+            &field.data[start..start + nx]
+        } else {
+            &z[t][self.slot(p)]
         }
     }
 
-    /// Fills the derivative rows of output row j from the z-filtered planes.
+    /// The y-then-z combination `c` at output row (k, j): computed into the
+    /// scratch, or for an identity y value kernel the z-filtered row itself.
+    #[inline(always)]
+    fn combination<'s>(
+        &'s self,
+        field: &'s FieldInput,
+        fs: &'s FieldScratch,
+        c: usize,
+        k: usize,
+        j: usize,
+    ) -> &'s [f32] {
+        let z_order = match c {
+            C00 => 0,
+            C10 => 1,
+            C20 => 2,
+            _ => return &fs.c[c],
+        };
+        if self.y_identity { self.z_filtered(field, &fs.z, z_order, k, j as isize) } else { &fs.c[c] }
+    }
+
+    /// Fills the derivative rows of output row j from the z-filtered rows.
     #[inline(always)]
     fn row(&self, field: &FieldInput, fs: &mut FieldScratch, k: usize, j: usize) {
-        let (pad, n) = (self.pad, self.needs);
-        let [nx, ny, _] = self.dims;
+        let (n, border, y_identity) = (self.needs, self.border, self.y_identity);
         let st = &field.stencil;
-        let FieldScratch { z, c, rows } = fs;
-        // the z-filtered rows at y offset o from j: the ring, or for an
-        // identity z value kernel the input rows of slice k themselves
-        let ring = |t: usize| {
-            let z = &z[t];
-            move |o: isize| z[self.slot(j as isize + o)].as_slice()
-        };
-        let input = |o: isize| {
-            let start = (k * ny + self.border.index(j as isize + o, ny)) * nx;
-            &field.data[start..start + nx]
-        };
-        let z0 = |o: isize| if self.z_identity { input(o) } else { ring(0)(o) };
-        // y pass: combination (z order, y order) as a padded row.
-        self.y_pass(&mut c[C00], z0, &st.y.d0);
-        if n.grad || n.hessian {
-            self.y_pass(&mut c[C01], z0, &st.y.d1);
-            self.y_pass(&mut c[C10], ring(1), &st.y.d0);
+        {
+            // y pass: combination (z order, y order) from the z-filtered rows around j.
+            let FieldScratch { z, c, .. } = &mut *fs;
+            let z = &*z;
+            let around = |t: usize| move |o: isize| self.z_filtered(field, z, t, k, j as isize + o);
+            let [c00, c01, c10, c02, c20, c11] = c;
+            if !y_identity {
+                combine(c00, &st.y.d0, around(0));
+            }
+            if n.grad || n.hessian {
+                combine(c01, &st.y.d1, around(0));
+                if !y_identity {
+                    combine(c10, &st.y.d0, around(1));
+                }
+            }
+            if n.hessian {
+                combine(c02, &st.y.d2, around(0));
+                if !y_identity {
+                    combine(c20, &st.y.d0, around(2));
+                }
+                combine(c11, &st.y.d1, around(1));
+            }
         }
-        if n.hessian {
-            self.y_pass(&mut c[C02], z0, &st.y.d2);
-            self.y_pass(&mut c[C20], ring(2), &st.y.d0);
-            self.y_pass(&mut c[C11], ring(1), &st.y.d1);
+        if self.fused {
+            return;
         }
-        // x pass: shifted reads of the padded rows. With an identity x value
-        // kernel the x0 rows are the middles of the padded rows (see `view`).
+        // x pass. With an identity x value kernel the x0 rows are the
+        // combinations themselves (see `RowSet::field`).
         let copy_x0 = !self.x_identity;
+        let mut rows = std::mem::take(&mut fs.rows);
+        let combination = |c: usize| self.combination(field, fs, c, k, j);
         if n.value && copy_x0 {
-            x_pass(&mut rows.value, &c[C00], &st.x.d0, pad);
+            x_pass(&mut rows.value, combination(C00), &st.x.d0, border);
         }
         if n.grad {
-            x_pass(&mut rows.gx, &c[C00], &st.x.d1, pad);
+            x_pass(&mut rows.gx, combination(C00), &st.x.d1, border);
             if copy_x0 {
-                x_pass(&mut rows.gy, &c[C01], &st.x.d0, pad);
-                x_pass(&mut rows.gz, &c[C10], &st.x.d0, pad);
+                x_pass(&mut rows.gy, combination(C01), &st.x.d0, border);
+                x_pass(&mut rows.gz, combination(C10), &st.x.d0, border);
             }
         }
         if n.hessian {
-            x_pass(&mut rows.hxx, &c[C00], &st.x.d2, pad);
-            x_pass(&mut rows.hxy, &c[C01], &st.x.d1, pad);
-            x_pass(&mut rows.hxz, &c[C10], &st.x.d1, pad);
+            x_pass(&mut rows.hxx, combination(C00), &st.x.d2, border);
+            x_pass(&mut rows.hxy, combination(C01), &st.x.d1, border);
+            x_pass(&mut rows.hxz, combination(C10), &st.x.d1, border);
             if copy_x0 {
-                x_pass(&mut rows.hyy, &c[C02], &st.x.d0, pad);
-                x_pass(&mut rows.hzz, &c[C20], &st.x.d0, pad);
-                x_pass(&mut rows.hyz, &c[C11], &st.x.d0, pad);
+                x_pass(&mut rows.hyy, combination(C02), &st.x.d0, border);
+                x_pass(&mut rows.hzz, combination(C20), &st.x.d0, border);
+                x_pass(&mut rows.hyz, combination(C11), &st.x.d0, border);
             }
         }
         if n.grad {
-            let Rows { g, g_inv, gx, gy, gz, .. } = rows;
-            let gy = x0_row(c, C01, gy, pad, self.x_identity);
-            let gz = x0_row(c, C10, gz, pad, self.x_identity);
+            let Rows { g, g_inv, gx, gy, gz, .. } = &mut rows;
+            let gy = if copy_x0 { gy.as_slice() } else { combination(C01) };
+            let gz = if copy_x0 { gz.as_slice() } else { combination(C10) };
             let eps = self.epsilon;
-            for ((((g, gi), x), y), zz) in g.iter_mut().zip(g_inv.iter_mut()).zip(gx.iter()).zip(gy).zip(gz) {
-                *g = (x * x + y * y + zz * zz).sqrt();
-                // a select, not a branch, so the loop vectorises
-                *gi = if *g >= eps { 1.0 / *g } else { 0.0 };
+            for ((((g, gi), &x), &y), &z) in g.iter_mut().zip(g_inv.iter_mut()).zip(gx.iter()).zip(gy).zip(gz) {
+                *g = fused::magnitude(x, y, z);
+                *gi = fused::inverse(*g, eps);
             }
         }
+        fs.rows = rows;
     }
 }
 
@@ -399,5 +496,5 @@ pub(crate) fn compute_slice(
     scratch: &mut Scratch,
     outs: &mut [&mut [f32]],
 ) {
-    engine.slice(k, scratch, |j, s| layout.write_row(s, j, outs));
+    engine.slice(k, scratch, |j, rows, spare| layout.write_row(rows, j, outs, spare));
 }

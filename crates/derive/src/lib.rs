@@ -15,6 +15,7 @@
 
 mod border;
 mod engine;
+mod fused;
 mod items;
 mod kernel;
 mod measures;
@@ -285,8 +286,9 @@ fn prepare<'a>(input: &'a MultiField, params: &DeriveParams) -> Result<Prepared<
         if normalise { 1e-6 / g.min_spacing() as f32 } else { 1e-6 * span / g.min_spacing() as f32 }
     });
 
-    let layout = Layout::new(&items, m, epsilon);
-    let engine = Engine::new(fields, g.dims, params.border, Needs::of(&items), epsilon);
+    let fused = measures::fusable_items(&items) && Engine::fusable(&fields);
+    let engine = Engine::new(fields, g.dims, params.border, Needs::of(&items), epsilon, fused);
+    let layout = Layout::new(&items, m, epsilon, engine.is_fused());
     Ok(Prepared { items, layout, engine })
 }
 

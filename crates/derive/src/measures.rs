@@ -1,6 +1,7 @@
 //! Per-row evaluation of the requested items from the derivative rows.
 
-use crate::engine::Scratch;
+use crate::engine::RowSet;
+use crate::fused::{FusedOut, Spare, Voxel};
 use crate::items::Item;
 
 /// Where each requested item's components go in the list of output buffers.
@@ -12,13 +13,31 @@ pub(crate) struct Layout {
     pub epsilon: f32,
     /// Number of fields (for the Jacobian's components).
     pub fields: usize,
+    /// Where g, normal and f'' go when the engine is fused (its items are a
+    /// subset of those three), else None.
+    pub fused: Option<FusedSlots>,
+}
+
+/// Output component indices of the fused loop's items (None: not requested).
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct FusedSlots {
+    pub g: Option<usize>,
+    pub normal: Option<usize>,
+    pub f2: Option<usize>,
+}
+
+/// Whether the fused loop should compute all of `items`: f2 (whose Hessian
+/// the loop always computes) with at most g and the normal besides.
+pub(crate) fn fusable_items(items: &[Item]) -> bool {
+    items.contains(&Item::F2) && items.iter().all(|i| matches!(i, Item::G | Item::Normal | Item::F2))
 }
 
 impl Layout {
-    /// Lays out `items` for `fields` input fields.
-    pub fn new(items: &[Item], fields: usize, epsilon: f32) -> Layout {
+    /// Lays out `items` for `fields` input fields; `fused`: the engine
+    /// leaves g, normal and f'' to [`RowSet::fused_g_normal_f2`].
+    pub fn new(items: &[Item], fields: usize, epsilon: f32, fused: bool) -> Layout {
         let mut next = 0;
-        let items = items
+        let items: Vec<(Item, usize, usize)> = items
             .iter()
             .map(|&item| {
                 let n = if item == Item::Jacobian { 3 * fields } else { item.components().len() };
@@ -27,7 +46,11 @@ impl Layout {
                 entry
             })
             .collect();
-        Layout { items, epsilon, fields }
+        let fused = fused.then(|| {
+            let slot = |item: Item| items.iter().find(|e| e.0 == item).map(|e| e.1);
+            FusedSlots { g: slot(Item::G), normal: slot(Item::Normal), f2: slot(Item::F2) }
+        });
+        Layout { items, epsilon, fields, fused }
     }
 
     /// Total number of output components.
@@ -37,9 +60,12 @@ impl Layout {
 
     /// Writes row `j` of every item into `outs` (one slice per component, each one z-slice).
     #[inline(always)]
-    pub fn write_row(&self, scratch: &Scratch, j: usize, outs: &mut [&mut [f32]]) {
+    pub fn write_row(&self, rows: &RowSet, j: usize, outs: &mut [&mut [f32]], spare: &mut Spare) {
+        if let Some(slots) = self.fused {
+            return write_fused(rows, slots, j, outs, spare);
+        }
         let eps = self.epsilon;
-        let r = scratch.rows(0);
+        let r = rows.field(0);
         let nx = r.value.len().max(r.gx.len()).max(r.hxx.len());
         let span = j * nx..(j + 1) * nx;
         for &(item, first, n) in &self.items {
@@ -71,12 +97,18 @@ impl Layout {
                     let (hxx, hyy, hzz) = (&r.hxx[..nx], &r.hyy[..nx], &r.hzz[..nx]);
                     let (hxy, hxz, hyz) = (&r.hxy[..nx], &r.hxz[..nx], &r.hyz[..nx]);
                     for i in 0..out.len().min(nx) {
-                        let (x, y, z) = (gx[i], gy[i], gz[i]);
-                        let q = x * x * hxx[i]
-                            + y * y * hyy[i]
-                            + z * z * hzz[i]
-                            + 2.0 * (x * y * hxy[i] + x * z * hxz[i] + y * z * hyz[i]);
-                        out[i] = q * gi[i] * gi[i];
+                        let v = Voxel {
+                            gx: gx[i],
+                            gy: gy[i],
+                            gz: gz[i],
+                            hxx: hxx[i],
+                            hyy: hyy[i],
+                            hzz: hzz[i],
+                            hxy: hxy[i],
+                            hxz: hxz[i],
+                            hyz: hyz[i],
+                        };
+                        out[i] = v.f2(gi[i]);
                     }
                 }
                 Item::Laplacian => {
@@ -95,7 +127,7 @@ impl Layout {
                     for (i, o) in out.iter_mut().enumerate() {
                         let mut m = [0.0f32; 6]; // xx xy xz yy yz zz
                         for f in 0..self.fields {
-                            let rf = scratch.rows(f);
+                            let rf = rows.field(f);
                             let (x, y, z) = (rf.gx[i], rf.gy[i], rf.gz[i]);
                             m[0] += x * x;
                             m[1] += x * y;
@@ -111,7 +143,7 @@ impl Layout {
                 }
                 Item::Jacobian => {
                     for f in 0..n / 3 {
-                        let rf = scratch.rows(f);
+                        let rf = rows.field(f);
                         outs[first + 3 * f][span.clone()].copy_from_slice(rf.gx);
                         outs[first + 3 * f + 1][span.clone()].copy_from_slice(rf.gy);
                         outs[first + 3 * f + 2][span.clone()].copy_from_slice(rf.gz);
@@ -120,6 +152,32 @@ impl Layout {
             }
         }
     }
+}
+
+/// Row `j` of the fused items: the requested ones into `outs`, the others
+/// into spare rows.
+#[inline(always)]
+fn write_fused(rows: &RowSet, slots: FusedSlots, j: usize, outs: &mut [&mut [f32]], spare: &mut Spare) {
+    let [s_g, s_n0, s_n1, s_n2, s_f2] = &mut spare.0;
+    let nx = s_g.len();
+    let span = j * nx..(j + 1) * nx;
+    let (mut g, mut f2, mut normal) = (None, None, [None, None, None]);
+    for (index, out) in outs.iter_mut().enumerate() {
+        let row = &mut out[span.clone()];
+        if slots.g == Some(index) {
+            g = Some(row);
+        } else if slots.f2 == Some(index) {
+            f2 = Some(row);
+        } else if let Some(c) = slots.normal.and_then(|first| index.checked_sub(first)).filter(|c| *c < 3) {
+            normal[c] = Some(row);
+        }
+    }
+    let [n0, n1, n2] = normal;
+    rows.fused_g_normal_f2(FusedOut {
+        g: g.unwrap_or(s_g),
+        normal: [n0.unwrap_or(s_n0), n1.unwrap_or(s_n1), n2.unwrap_or(s_n2)],
+        f2: f2.unwrap_or(s_f2),
+    });
 }
 
 /// Turns g (stored in the shade buffer during the pass) into the shading

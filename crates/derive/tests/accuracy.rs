@@ -328,15 +328,51 @@ fn multi_field_gnorm_is_within_a_thousandth_of_the_analytic_value() {
 #[test]
 fn results_are_bit_identical_with_one_and_two_threads() {
     let input = MultiField::from(RadialPhantom::tooth(Geometry::new([40, 36, 30], [1.0, 1.0, 1.5]), 2.0).volume());
-    let params = DeriveParams { items: vec![Item::G, Item::F2, Item::Normal, Item::Shade], ..Default::default() };
-    let with = |threads| {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-        pool.install(|| run(&input, &params).unwrap())
-    };
-    let (a, b) = (with(1), with(2));
-    for ((_, x), (_, y)) in a.items.iter().zip(&b.items) {
-        for (fx, fy) in x.fields.iter().zip(&y.fields) {
-            assert!(fx.data.iter().zip(fy.data.iter()).all(|(p, q)| p.to_bits() == q.to_bits()), "{}", fx.name);
+    // with shade: the general pass; g, f2 and normal alone: the fused loop
+    for items in [vec![Item::G, Item::F2, Item::Normal, Item::Shade], vec![Item::G, Item::F2, Item::Normal]] {
+        let params = DeriveParams { items, ..Default::default() };
+        let with = |threads| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| run(&input, &params).unwrap())
+        };
+        let (a, b) = (with(1), with(2));
+        for ((_, x), (_, y)) in a.items.iter().zip(&b.items) {
+            for (fx, fy) in x.fields.iter().zip(&y.fields) {
+                assert!(fx.data.iter().zip(fy.data.iter()).all(|(p, q)| p.to_bits() == q.to_bits()), "{}", fx.name);
+            }
+        }
+    }
+}
+
+/// Components of `item` in `out`, as raw bits.
+fn bits(out: &mdtf_derive::DeriveOutput, item: Item) -> Vec<Vec<u32>> {
+    let fields = &out.get(item).unwrap().fields;
+    fields.iter().map(|f| f.data.iter().map(|v| v.to_bits()).collect()).collect()
+}
+
+#[test]
+fn fused_g_normal_f2_loop_equals_the_general_pass_bit_for_bit() {
+    // f2, alone or with g and the normal, takes the fused loop for central,
+    // central4 and catmull-rom; adding the Laplacian forces the general
+    // pass. 5 samples along x leave central4 one interior sample.
+    for dims in [[5, 6, 5], [11, 9, 8], [37, 6, 5]] {
+        let input = MultiField::from(random_volume(dims, [0.7, 1.0, 1.6], 9));
+        for name in ["central", "central4", "catmull-rom", "bspline3"] {
+            for border in [Border::Clamp, Border::Mirror, Border::Wrap] {
+                let params = |items: Vec<Item>| DeriveParams {
+                    items,
+                    kernel: name.parse().unwrap(),
+                    border,
+                    ..Default::default()
+                };
+                let general = run(&input, &params(vec![Item::G, Item::Normal, Item::F2, Item::Laplacian])).unwrap();
+                let fused = run(&input, &params(vec![Item::F2, Item::G, Item::Normal])).unwrap();
+                for item in [Item::G, Item::Normal, Item::F2] {
+                    assert!(bits(&fused, item) == bits(&general, item), "{name} {dims:?} {border:?} {item}");
+                    let alone = run(&input, &params(vec![item])).unwrap();
+                    assert!(bits(&alone, item) == bits(&general, item), "{name} {dims:?} {border:?} {item} alone");
+                }
+            }
         }
     }
 }
