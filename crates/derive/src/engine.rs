@@ -7,6 +7,11 @@
 //! L1/L2), so there are no full-volume or even full-plane temporaries. Every
 //! voxel's arithmetic is the same whatever slice order or thread runs it, so
 //! results are bit-identical for any thread count.
+//!
+//! When f'' is requested with at most g and the normal besides (and the
+//! kernel suits it), rows stop after the y pass and the caller's
+//! [`RowSet::fused_g_normal_f2`] does the x pass and the measures in one
+//! voxel loop (see [`crate::fused`]).
 
 use crate::border::Border;
 use crate::fused::{self, Combinations, Spare};
@@ -294,7 +299,9 @@ impl<'a> Engine<'a> {
         let ring = 2 * self.ry + 1;
         let n = self.needs;
         let row = |needed: bool| if needed { vec![0.0f32; nx] } else { Vec::new() };
-        let x0_row = |needed: bool| row(needed && !self.x_identity);
+        // the x pass's rows (none for the fused loop, which keeps them in registers)
+        let x_row = |needed: bool| row(needed && !self.fused);
+        let x0_row = |needed: bool| x_row(needed && !self.x_identity);
         let fields = self
             .fields
             .iter()
@@ -312,16 +319,16 @@ impl<'a> Engine<'a> {
                 }),
                 rows: Rows {
                     value: x0_row(n.value),
-                    gx: row(n.grad),
+                    gx: x_row(n.grad),
                     gy: x0_row(n.grad),
                     gz: x0_row(n.grad),
-                    g: row(n.grad),
-                    g_inv: row(n.grad),
-                    hxx: row(n.hessian),
+                    g: x_row(n.grad),
+                    g_inv: x_row(n.grad),
+                    hxx: x_row(n.hessian),
                     hyy: x0_row(n.hessian),
                     hzz: x0_row(n.hessian),
-                    hxy: row(n.hessian),
-                    hxz: row(n.hessian),
+                    hxy: x_row(n.hessian),
+                    hxz: x_row(n.hessian),
                     hyz: x0_row(n.hessian),
                 },
             })

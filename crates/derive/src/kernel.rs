@@ -17,7 +17,7 @@ pub const GAUSS_CUT: f64 = 4.0;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "String", into = "String")]
 pub enum Kernel {
-    /// Central differences: f' = (f[i+1] - f[i-1]) / 2, f'' = f[i+1] - 2 f[i] + f[i-1]. Second-order accurate.
+    /// Central differences: `f' = (f[i+1] - f[i-1]) / 2`, `f'' = f[i+1] - 2 f[i] + f[i-1]`. Second-order accurate.
     Central,
     /// Fourth-order accurate 5-point differences; mixed second derivatives from products of first-derivative stencils.
     Central4,
