@@ -134,7 +134,8 @@ impl Cell {
         let mut t = [0f32; 3];
         for a in 0..3 {
             let x = p[a].clamp(0.0, (dims[a] - 1) as f64);
-            let f = (x.floor() as usize).min(dims[a].saturating_sub(2));
+            // x >= 0 (or NaN, which casts to 0 either way): truncation is floor
+            let f = (x as usize).min(dims[a].saturating_sub(2));
             i0[a] = f;
             t[a] = (x - f as f64) as f32;
         }
@@ -157,6 +158,21 @@ impl Cell {
     }
 }
 
+/// The first sample index s (samples at origin + (s + 1/2) step dir) that
+/// can lie inside the box [0, ext]: one before the ray's entry by the slab
+/// test (the caller still tests every sample), 0 if it never enters.
+fn first_step(origin: [f64; 3], dir: [f64; 3], ext: &[f64], step: f64) -> usize {
+    let mut t_enter = 0.0f64;
+    for a in 0..3 {
+        if dir[a] != 0.0 {
+            let (t1, t2) = ((0.0 - origin[a]) / dir[a], (ext[a] - origin[a]) / dir[a]);
+            t_enter = t_enter.max(t1.min(t2));
+        }
+    }
+    let s = (t_enter / step - 0.5).floor() - 1.0;
+    if s.is_finite() && s > 0.0 { s as usize } else { 0 }
+}
+
 /// Edge of the blocks of empty-space skipping, voxels.
 const BLOCK: usize = 8;
 
@@ -166,38 +182,66 @@ const BLOCK: usize = 8;
 /// min..max of each channel, so a block whose box of LUT cells holds only
 /// zero opacity is skipped without changing a pixel.
 fn visible_blocks(t: &Table, chans: &[Option<&[f32]>], dims: [usize; 3]) -> (Vec<bool>, [usize; 3]) {
+    per_block(dims, |lo, hi| {
+        let cells: Vec<(usize, usize)> = t
+            .axes
+            .iter()
+            .enumerate()
+            .map(|(k, axis)| {
+                let (vmin, vmax) = chans[k].map_or((0.0, 0.0), |d| block_range(d, dims, lo, hi));
+                (table_cell(axis, vmin), table_cell(axis, vmax))
+            })
+            .collect();
+        any_opaque(t, &cells, 0, 0, 1)
+    })
+}
+
+/// For the distance classifier: per block (as [`visible_blocks`]), whether
+/// alpha_d can be non-zero there. alpha_d is 0 where the interpolated
+/// distance is negative (no boundary), so a block whose distances are all
+/// negative, or whose non-negative ones fall only on transparent alpha_d
+/// cells, changes no pixel.
+fn visible_distance_blocks(alpha_d: &Table, distance: &[f32], dims: [usize; 3]) -> (Vec<bool>, [usize; 3]) {
+    per_block(dims, |lo, hi| {
+        let (dmin, dmax) = block_range(distance, dims, lo, hi);
+        let Some(axis) = alpha_d.axes.first() else { return true };
+        dmax >= 0.0 && any_opaque(alpha_d, &[(table_cell(axis, dmin.max(0.0)), table_cell(axis, dmax))], 0, 0, 1)
+    })
+}
+
+/// `visible(lo, hi)` for every block of BLOCK^3 cells (voxel ranges lo..hi
+/// per axis, the next voxel included), in parallel; and the block counts.
+fn per_block(dims: [usize; 3], visible: impl Fn([usize; 3], [usize; 3]) -> bool + Sync) -> (Vec<bool>, [usize; 3]) {
     let nb = dims.map(|n| n.saturating_sub(1).max(1).div_ceil(BLOCK));
     let mut out = vec![false; nb[0] * nb[1] * nb[2]];
     out.par_iter_mut().enumerate().for_each(|(b, o)| {
         let (bx, by, bz) = (b % nb[0], (b / nb[0]) % nb[1], b / (nb[0] * nb[1]));
         let lo = [bx * BLOCK, by * BLOCK, bz * BLOCK];
         let hi = [0, 1, 2].map(|a| ((lo[a] + BLOCK) + 1).min(dims[a]));
-        let mut cells: Vec<(usize, usize)> = Vec::with_capacity(t.axes.len());
-        for (k, (_, n, min, max)) in t.axes.iter().enumerate() {
-            let (mut vmin, mut vmax) = (f32::INFINITY, f32::NEG_INFINITY);
-            match chans[k] {
-                Some(d) => {
-                    for z in lo[2]..hi[2] {
-                        for y in lo[1]..hi[1] {
-                            let row = (z * dims[1] + y) * dims[0];
-                            for &v in &d[row + lo[0]..row + hi[0]] {
-                                vmin = vmin.min(v);
-                                vmax = vmax.max(v);
-                            }
-                        }
-                    }
-                }
-                None => (vmin, vmax) = (0.0, 0.0),
-            }
-            let cell = |x: f32| {
-                let c = ((x as f64 - min) / (max - min) * *n as f64).floor();
-                if c.is_nan() { 0 } else { c.clamp(0.0, (*n - 1) as f64) as usize }
-            };
-            cells.push((cell(vmin), cell(vmax)));
-        }
-        *o = any_opaque(t, &cells, 0, 0, 1);
+        *o = visible(lo, hi);
     });
     (out, nb)
+}
+
+/// Smallest and largest sample of `d` in the voxel box lo..hi (NaN ignored).
+fn block_range(d: &[f32], dims: [usize; 3], lo: [usize; 3], hi: [usize; 3]) -> (f32, f32) {
+    let (mut vmin, mut vmax) = (f32::INFINITY, f32::NEG_INFINITY);
+    for z in lo[2]..hi[2] {
+        for y in lo[1]..hi[1] {
+            let row = (z * dims[1] + y) * dims[0];
+            for &v in &d[row + lo[0]..row + hi[0]] {
+                vmin = vmin.min(v);
+                vmax = vmax.max(v);
+            }
+        }
+    }
+    (vmin, vmax)
+}
+
+/// The table cell of value x along `axis` (clamped, as [`lookup`] picks it).
+fn table_cell((_, n, min, max): &(String, usize, f64, f64), x: f32) -> usize {
+    let c = ((x as f64 - min) / (max - min) * *n as f64).floor();
+    if c.is_nan() { 0 } else { c.clamp(0.0, (*n - 1) as f64) as usize }
 }
 
 /// Whether the LUT has a non-zero opacity in the box `cells` (per axis, from `axis` on).
@@ -294,6 +338,9 @@ fn render_impl(
         Classifier::Lut(t) | Classifier::Chord { tf: t, .. } if skip_empty => {
             Some(visible_blocks(t, &table_chans, dims))
         }
+        Classifier::Distance { alpha_d, .. } if skip_empty => {
+            distance.map(|d| visible_distance_blocks(alpha_d, d, dims))
+        }
         _ => None,
     };
     // the chord from the previous sample leaves a block's value box unless both samples are in it
@@ -310,23 +357,36 @@ fn render_impl(
             let mut previous: Option<Vec<f64>> = None;
             // the previous sample's cell and block (chord and peak classifiers)
             let mut prev: Option<(Cell, usize)> = None;
-            for s in 0..steps {
+            let mut entered = false;
+            for s in first_step(origin, dir, &ext, step_world)..steps {
                 let pw = [0, 1, 2].map(|a| origin[a] + (s as f64 + 0.5) * step_world * dir[a]);
                 if (0..3).any(|a| pw[a] < 0.0 || pw[a] > ext[a]) {
-                    previous = None;
-                    prev = None;
+                    // the samples inside the box are one run of s (it is convex,
+                    // and pw is monotone in s per axis): once out, done
+                    if entered {
+                        break;
+                    }
                     continue;
                 }
+                entered = true;
                 let p = [0, 1, 2].map(|a| pw[a] / g.spacing[a]);
-                let cell = Cell::at(dims, p);
                 let block = skip.as_ref().map_or(0, |(_, nb)| {
                     let b = [0, 1, 2].map(|a| ((p[a].max(0.0) as usize) / BLOCK).min(nb[a] - 1));
                     (b[2] * nb[1] + b[1]) * nb[0] + b[0]
                 });
+                if let Some((visible, _)) = &skip
+                    && !visible[block]
+                    && !chord_search
+                {
+                    // (only the chord search reads the previous sample across a skip)
+                    prev = None;
+                    continue;
+                }
+                let cell = Cell::at(dims, p);
                 let prev_here = prev.replace((cell, block));
                 if let Some((visible, _)) = &skip
                     && !visible[block]
-                    && (!chord_search || prev_here.is_none_or(|(_, pb)| pb == block))
+                    && prev_here.is_none_or(|(_, pb)| pb == block)
                 {
                     continue;
                 }
