@@ -102,8 +102,9 @@ fn lookup(t: &Table, coords: &[f32]) -> [f32; 4] {
     let mut idx = 0usize;
     let mut stride = 1usize;
     for (k, (_, cells, min, max)) in t.axes.iter().enumerate() {
-        let x = ((coords[k] as f64 - min) / (max - min) * *cells as f64).floor();
-        let i = if x.is_nan() { 0 } else { x.clamp(0.0, (*cells - 1) as f64) as usize };
+        let x = (coords[k] as f64 - min) / (max - min) * *cells as f64;
+        // clamped first, so truncation is floor (NaN casts to cell 0)
+        let i = x.clamp(0.0, (*cells - 1) as f64) as usize;
         idx += i * stride;
         stride *= cells;
     }
@@ -182,6 +183,7 @@ const BLOCK: usize = 8;
 /// min..max of each channel, so a block whose box of LUT cells holds only
 /// zero opacity is skipped without changing a pixel.
 fn visible_blocks(t: &Table, chans: &[Option<&[f32]>], dims: [usize; 3]) -> (Vec<bool>, [usize; 3]) {
+    let opaque = OpaqueCells::new(t);
     per_block(dims, |lo, hi| {
         let cells: Vec<(usize, usize)> = t
             .axes
@@ -192,7 +194,7 @@ fn visible_blocks(t: &Table, chans: &[Option<&[f32]>], dims: [usize; 3]) -> (Vec
                 (table_cell(axis, vmin), table_cell(axis, vmax))
             })
             .collect();
-        any_opaque(t, &cells, 0, 0, 1)
+        opaque.any(&cells)
     })
 }
 
@@ -202,10 +204,11 @@ fn visible_blocks(t: &Table, chans: &[Option<&[f32]>], dims: [usize; 3]) -> (Vec
 /// negative, or whose non-negative ones fall only on transparent alpha_d
 /// cells, changes no pixel.
 fn visible_distance_blocks(alpha_d: &Table, distance: &[f32], dims: [usize; 3]) -> (Vec<bool>, [usize; 3]) {
+    let opaque = OpaqueCells::new(alpha_d);
     per_block(dims, |lo, hi| {
         let (dmin, dmax) = block_range(distance, dims, lo, hi);
         let Some(axis) = alpha_d.axes.first() else { return true };
-        dmax >= 0.0 && any_opaque(alpha_d, &[(table_cell(axis, dmin.max(0.0)), table_cell(axis, dmax))], 0, 0, 1)
+        dmax >= 0.0 && opaque.any(&[(table_cell(axis, dmin.max(0.0)), table_cell(axis, dmax))])
     })
 }
 
@@ -240,17 +243,70 @@ fn block_range(d: &[f32], dims: [usize; 3], lo: [usize; 3], hi: [usize; 3]) -> (
 
 /// The table cell of value x along `axis` (clamped, as [`lookup`] picks it).
 fn table_cell((_, n, min, max): &(String, usize, f64, f64), x: f32) -> usize {
-    let c = ((x as f64 - min) / (max - min) * *n as f64).floor();
-    if c.is_nan() { 0 } else { c.clamp(0.0, (*n - 1) as f64) as usize }
+    ((x as f64 - min) / (max - min) * *n as f64).clamp(0.0, (*n - 1) as f64) as usize
 }
 
-/// Whether the LUT has a non-zero opacity in the box `cells` (per axis, from `axis` on).
-fn any_opaque(t: &Table, cells: &[(usize, usize)], axis: usize, offset: usize, stride: usize) -> bool {
-    if axis == cells.len() {
-        return if t.components == 4 { t.values[offset * 4 + 3] > 0.0 } else { t.values[offset] > 0.0 };
+/// Where a table (of up to 3 axes) has non-zero opacity, as a summed-area
+/// table of opaque-cell counts: whether a box of cells holds any opaque one
+/// costs 8 reads, where walking the box could cost all its cells (a 2D TF
+/// over (v, 1/g) has boxes of thousands of cells where g is small).
+struct OpaqueCells {
+    /// Cells per axis, padded to 3 axes with 1; None for tables of more axes.
+    n: Option<[usize; 3]>,
+    /// Opaque cells with indices below (x, y, z) per axis, at
+    /// ((z (ny + 1)) + y) (nx + 1) + x.
+    below: Vec<u32>,
+}
+
+impl OpaqueCells {
+    fn new(t: &Table) -> OpaqueCells {
+        if t.axes.len() > 3 {
+            return OpaqueCells { n: None, below: Vec::new() };
+        }
+        let n: [usize; 3] = std::array::from_fn(|a| t.axes.get(a).map_or(1, |axis| axis.1));
+        let (px, py) = (n[0] + 1, n[1] + 1);
+        let mut below = vec![0u32; px * py * (n[2] + 1)];
+        let at = |x: usize, y: usize, z: usize| (z * py + y) * px + x;
+        for z in 0..n[2] {
+            for y in 0..n[1] {
+                for x in 0..n[0] {
+                    let cell = (z * n[1] + y) * n[0] + x;
+                    let alpha = if t.components == 4 { t.values[cell * 4 + 3] } else { t.values[cell] };
+                    // inclusion-exclusion over the seven lower neighbours
+                    let sum = u32::from(alpha > 0.0) as i64
+                        + below[at(x, y + 1, z + 1)] as i64
+                        + below[at(x + 1, y, z + 1)] as i64
+                        + below[at(x + 1, y + 1, z)] as i64
+                        - below[at(x, y, z + 1)] as i64
+                        - below[at(x, y + 1, z)] as i64
+                        - below[at(x + 1, y, z)] as i64
+                        + below[at(x, y, z)] as i64;
+                    below[at(x + 1, y + 1, z + 1)] = sum as u32;
+                }
+            }
+        }
+        OpaqueCells { n: Some(n), below }
     }
-    let (lo, hi) = cells[axis];
-    (lo..=hi).any(|i| any_opaque(t, cells, axis + 1, offset + i * stride, stride * t.axes[axis].1))
+
+    /// Whether any cell in the box (inclusive index ranges per axis, one
+    /// per table axis) is opaque. Tables of more than 3 axes: always true.
+    fn any(&self, cells: &[(usize, usize)]) -> bool {
+        let Some(n) = self.n else { return true };
+        // half-open ranges; an axis the table lacks (size 1) is 0..1
+        let r: [(usize, usize); 3] = std::array::from_fn(|a| cells.get(a).map_or((0, 1), |&(lo, hi)| (lo, hi + 1)));
+        if (0..3).any(|a| r[a].0 >= r[a].1 || r[a].1 > n[a]) {
+            return false;
+        }
+        let (px, py) = (n[0] + 1, n[1] + 1);
+        let at = |x: usize, y: usize, z: usize| self.below[(z * py + y) * px + x] as i64;
+        let ((x0, x1), (y0, y1), (z0, z1)) = (r[0], r[1], r[2]);
+        let count = at(x1, y1, z1) - at(x0, y1, z1) - at(x1, y0, z1) - at(x1, y1, z0)
+            + at(x0, y0, z1)
+            + at(x0, y1, z0)
+            + at(x1, y0, z0)
+            - at(x0, y0, z0);
+        count > 0
+    }
 }
 
 /// The samples of the channels a table is indexed by (None: the pack lacks it, read as 0).
@@ -355,8 +411,10 @@ fn render_impl(
             let (mut rgb, mut alpha) = ([0f64; 3], 0f64);
             // the previous sample's TF coordinates (analytic Gaussian segments)
             let mut previous: Option<Vec<f64>> = None;
-            // the previous sample's cell and block (chord and peak classifiers)
+            // the previous sample's cell and block (chord and peak classifiers),
+            // and its TF coordinates once the chord classifier computed them
             let mut prev: Option<(Cell, usize)> = None;
+            let mut prev_coords: Option<[f32; 4]> = None;
             let mut entered = false;
             for s in first_step(origin, dir, &ext, step_world)..steps {
                 let pw = [0, 1, 2].map(|a| origin[a] + (s as f64 + 0.5) * step_world * dir[a]);
@@ -384,6 +442,7 @@ fn render_impl(
                 }
                 let cell = Cell::at(dims, p);
                 let prev_here = prev.replace((cell, block));
+                let prev_coords_here = prev_coords.take();
                 if let Some((visible, _)) = &skip
                     && !visible[block]
                     && prev_here.is_none_or(|(_, pb)| pb == block)
@@ -423,9 +482,14 @@ fn render_impl(
                         ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(cam.step))
                     }
                     Classifier::Chord { tf, cells_per_sample, find_peaks } => {
-                        let f1 = coords(&cell, &table_chans);
-                        let f1 = &f1[..tf.axes.len()];
-                        let f0 = if *find_peaks { prev_here.map(|(c, _)| coords(&c, &table_chans)) } else { None };
+                        let f1_all = coords(&cell, &table_chans);
+                        prev_coords = Some(f1_all);
+                        let f1 = &f1_all[..tf.axes.len()];
+                        let f0 = if *find_peaks {
+                            prev_here.map(|(c, _)| prev_coords_here.unwrap_or_else(|| coords(&c, &table_chans)))
+                        } else {
+                            None
+                        };
                         let [r, gr, b, a] = match f0 {
                             Some(f0) => chord_peak(tf, &f0[..tf.axes.len()], f1, *cells_per_sample),
                             None => lookup(tf, f1),
@@ -484,4 +548,49 @@ fn render_impl(
         }
     });
     img
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Whether any cell of the box is opaque, by walking it.
+    fn walk(t: &Table, cells: &[(usize, usize)], axis: usize, offset: usize, stride: usize) -> bool {
+        if axis == cells.len() {
+            return if t.components == 4 { t.values[offset * 4 + 3] > 0.0 } else { t.values[offset] > 0.0 };
+        }
+        let (lo, hi) = cells[axis];
+        (lo..=hi).any(|i| walk(t, cells, axis + 1, offset + i * stride, stride * t.axes[axis].1))
+    }
+
+    #[test]
+    fn opaque_cell_counts_answer_boxes_as_walking_them_does() {
+        let mut state = 3u64;
+        let mut next = |m: usize| {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 33) as usize) % m
+        };
+        for sizes in [vec![9], vec![7, 5], vec![4, 6, 3], vec![16, 16]] {
+            for components in [1, 4] {
+                let cells: usize = sizes.iter().product();
+                // sparse opacity, so that many boxes are empty
+                let values: Vec<f32> = (0..cells * components)
+                    .map(|i| if i % components == components - 1 && next(7) == 0 { 0.5 } else { 0.0 })
+                    .collect();
+                let axes = sizes.iter().map(|&n| ("c".to_string(), n, 0.0, 1.0)).collect();
+                let t = Table { axes, components, values };
+                let opaque = OpaqueCells::new(&t);
+                for _ in 0..300 {
+                    let b: Vec<(usize, usize)> = sizes
+                        .iter()
+                        .map(|&n| {
+                            let (p, q) = (next(n), next(n));
+                            (p.min(q), p.max(q))
+                        })
+                        .collect();
+                    assert_eq!(opaque.any(&b), walk(&t, &b, 0, 0, 1), "{sizes:?} {components} {b:?}");
+                }
+            }
+        }
+    }
 }
