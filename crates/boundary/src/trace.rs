@@ -72,38 +72,61 @@ pub(crate) fn trace_plane(f: &Fields, s: &TraceSettings, k: usize, out: PlaneOut
     let plane = &f.g.data[k * nx * ny..(k + 1) * nx * ny];
     out.distance.fill(crate::NO_BOUNDARY);
     let mut counts = crate::TraceCounts { not_traced: (nx * ny) as u64, ..Default::default() };
+    let mut store = |o: usize, t: Trace| {
+        out.distance[o] = t.distance;
+        out.g_hit[o] = t.g_hit;
+        out.hit[o] = t.code as u8 as f32;
+        out.dot[o] = t.dot;
+        match t.code {
+            HitCode::NotTraced => return,
+            HitCode::Hit => counts.hits += 1,
+            HitCode::NoCrossing => counts.no_crossing += 1,
+            HitCode::Rejected => counts.rejected += 1,
+        }
+        counts.not_traced -= 1;
+    };
+    // The rays first, then what is read at their hits: the hits' reads are
+    // independent of each other there, so their cache misses overlap
+    // instead of waiting behind each ray's stepping.
+    let mut crossings: Vec<(usize, Crossing)> = Vec::new();
     for j in 0..ny {
         for i in 0..nx {
             let o = j * nx + i;
             if plane[o] >= s.g_min {
-                let t = trace(f, s, i, j, k);
-                out.distance[o] = t.distance;
-                out.g_hit[o] = t.g_hit;
-                out.hit[o] = t.code as u8 as f32;
-                out.dot[o] = t.dot;
-                match t.code {
-                    HitCode::NotTraced => continue,
-                    HitCode::Hit => counts.hits += 1,
-                    HitCode::NoCrossing => counts.no_crossing += 1,
-                    HitCode::Rejected => counts.rejected += 1,
+                match march(f, s, i, j, k) {
+                    Ok(c) => crossings.push((o, c)),
+                    Err(code) => store(o, Trace::miss(code)),
                 }
-                counts.not_traced -= 1;
             }
         }
+    }
+    for (o, c) in &crossings {
+        store(*o, at_hit(f, s, c));
     }
     counts
 }
 
-/// Traces voxel (i, j, k).
+/// Where a ray crossed f'' = 0.
+#[derive(Debug, Clone, Copy)]
+struct Crossing {
+    /// Distance along the ray, world units.
+    distance: f32,
+    /// The crossing, voxel coordinates.
+    hit: [f32; 3],
+    /// Unit normal at the ray's voxel.
+    n: [f32; 3],
+}
+
+/// Traces voxel (i, j, k) to its zero crossing, or the code of why there is none.
 #[inline(always)]
-fn trace(f: &Fields, s: &TraceSettings, i: usize, j: usize, k: usize) -> Trace {
+fn march(f: &Fields, s: &TraceSettings, i: usize, j: usize, k: usize) -> Result<Crossing, HitCode> {
     let dims = f.g.dims;
     let index = (k * dims[1] + j) * dims[0] + i;
     // (the caller traces only voxels with g >= g_min)
     let n = [f.n[0].data[index], f.n[1].data[index], f.n[2].data[index]];
     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
     if len.is_nan() || len <= 0.0 {
-        return Trace::miss(HitCode::NotTraced);
+        return Err(HitCode::NotTraced);
     }
     let n = [n[0] / len, n[1] / len, n[2] / len];
     let origin = [i as f32, j as f32, k as f32];
@@ -141,9 +164,17 @@ fn trace(f: &Fields, s: &TraceSettings, i: usize, j: usize, k: usize) -> Trace {
         }
     }
     let Some(d) = root else {
-        return Trace::miss(HitCode::NoCrossing);
+        return Err(HitCode::NoCrossing);
     };
     let hit = [origin[0] + d * dir[0], origin[1] + d * dir[1], origin[2] + d * dir[2]];
+    Ok(Crossing { distance: d, hit, n })
+}
+
+/// g at a crossing (rejected below g_hit_min) and the dot product of the
+/// ray's normal with the normal there.
+#[inline(always)]
+fn at_hit(f: &Fields, s: &TraceSettings, c: &Crossing) -> Trace {
+    let Crossing { distance: d, hit, n } = *c;
     // Tricubic: trilinear interpolation flattens g's peak by up to 4% at sigma = 3 voxels.
     let g_hit = f.g.tricubic(hit);
     if g_hit < s.g_hit_min {
