@@ -132,6 +132,14 @@ pub fn load_channels(dir: &Path, wanted: &dyn Fn(&str) -> bool) -> Result<Loaded
         let bytes = read(&dir.join(&lut.file_f32))?;
         let cells: usize = lut.axes.iter().map(|a| a.size).product();
         let comps = lut.components;
+        if cells == 0 || !(1..=4).contains(&comps) {
+            return Err(PreviewError::Pack(format!(
+                "{}: {} components over axes of sizes {:?} (need 1 to 4 components and no empty axis)",
+                lut.name,
+                comps,
+                lut.axes.iter().map(|a| a.size).collect::<Vec<_>>()
+            )));
+        }
         let len = cells * comps * 4;
         if bytes.len() < len {
             return Err(PreviewError::Pack(format!("{}: shorter than its {} samples", lut.file_f32, cells * comps)));

@@ -51,3 +51,29 @@ fn decoded_pack_renders_like_the_float_fields() {
     assert_eq!(some.channels.get("g"), loaded.channels.get("g"));
     assert_eq!(render(&some.channels, &c, &cam), from_pack);
 }
+
+#[test]
+fn a_table_with_an_empty_axis_is_refused_not_a_panic() {
+    let t = erf_sphere(Geometry::new([12; 3], [1.0; 3]), 4.0, 1.5, 0.0, 255.0, None).truth();
+    let mut chans =
+        vec![("v".to_string(), t.v.clone()), ("g".to_string(), t.g.clone()), ("f2".to_string(), t.f2.clone())];
+    for (i, name) in ["nx", "ny", "nz"].iter().enumerate() {
+        chans
+            .push((name.to_string(), Volume { geometry: t.v.geometry.clone(), data: t.normal.fields[i].data.clone() }));
+    }
+    let tf = parse_tf(
+        r#"{"v_range": [0, 255], "g_range": [0, 80], "f2_range": [-20, 20],
+            "widgets": [{"type": "triangle", "v0": 128, "width": 60, "g_high": 60, "alpha": 0.6, "colour": [1, 0.7, 0.4]}]}"#,
+    )
+    .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let prov =
+        Provenance { mdtf_version: "t".into(), input: None, input_sha256: None, stages: serde_json::Value::Null };
+    pack(&chans, &PackParams::new(Profile::Slicer3dtf), &tf.slicer_luts(), dir.path(), prov, &BTreeMap::new()).unwrap();
+    let path = dir.path().join("manifest.json");
+    let mut manifest: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    manifest["luts"][0]["axes"][0]["size"] = serde_json::json!(0);
+    std::fs::write(&path, manifest.to_string()).unwrap();
+    let e = load(dir.path()).unwrap_err().to_string();
+    assert!(e.contains("no empty axis"), "{e}");
+}
