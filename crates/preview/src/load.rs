@@ -43,6 +43,12 @@ pub fn decode_channels(
     let g = &manifest.geometry;
     let geometry = Geometry::from_affine(g.dims, [g.world_from_voxel[0], g.world_from_voxel[1], g.world_from_voxel[2]])
         .ok_or_else(|| PreviewError::Pack("manifest.json: degenerate world_from_voxel".into()))?;
+    let voxels = g.dims.iter().try_fold(1usize, |n, &d| n.checked_mul(d)).ok_or_else(|| {
+        PreviewError::Pack(format!("manifest.json: dims {:?} hold more voxels than this machine can count", g.dims))
+    })?;
+    if voxels == 0 {
+        return Err(PreviewError::Pack(format!("manifest.json: dims {:?} hold no voxel", g.dims)));
+    }
     let mut channels = BTreeMap::new();
     for tex in &manifest.textures {
         // each channel from the first texture that holds it
@@ -54,7 +60,7 @@ pub fn decode_channels(
         if entries.is_empty() {
             continue;
         }
-        for (name, data) in decode_texture(&dir.join(&tex.data), tex, &entries, geometry.voxel_count())? {
+        for (name, data) in decode_texture(&dir.join(&tex.data), tex, &entries, voxels)? {
             let array = ndarray::Array3::from_shape_vec(geometry.shape(), data)
                 .map_err(|e| PreviewError::Pack(e.to_string()))?;
             channels.insert(name, Volume { geometry: geometry.clone(), data: array });
@@ -80,11 +86,21 @@ fn decode_texture(
         Dtype::F32 => 4,
     };
     let texel = tex.components * size;
+    if let Some(ch) = entries.iter().find(|c| c.component >= tex.components) {
+        return Err(PreviewError::Pack(format!(
+            "channel {} is component {} of texture {}, which has {}",
+            ch.name, ch.component, tex.name, tex.components
+        )));
+    }
     let fail = |e: std::io::Error| PreviewError::Pack(format!("{}: {e}", path.display()));
     let mut file = std::fs::File::open(path).map_err(fail)?;
     let len = file.metadata().map_err(fail)?.len();
-    if len != (n * texel) as u64 {
-        return Err(PreviewError::Pack(format!("{}: {len} bytes, the manifest describes {}", tex.data, n * texel)));
+    let expected = n.checked_mul(texel).and_then(|b| u64::try_from(b).ok());
+    if expected != Some(len) {
+        return Err(PreviewError::Pack(format!(
+            "{}: {len} bytes, the manifest describes {n} texels of {texel} bytes",
+            tex.data
+        )));
     }
     let mut out: Vec<Vec<f32>> = entries.iter().map(|_| vec![0f32; n]).collect();
     let mut buf = vec![0u8; TEXELS_PER_READ * texel];

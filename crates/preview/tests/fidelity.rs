@@ -53,7 +53,7 @@ fn decoded_pack_renders_like_the_float_fields() {
 }
 
 #[test]
-fn a_table_with_an_empty_axis_is_refused_not_a_panic() {
+fn malformed_manifests_are_refused_not_a_panic() {
     let t = erf_sphere(Geometry::new([12; 3], [1.0; 3]), 4.0, 1.5, 0.0, 255.0, None).truth();
     let mut chans =
         vec![("v".to_string(), t.v.clone()), ("g".to_string(), t.g.clone()), ("f2".to_string(), t.f2.clone())];
@@ -71,9 +71,21 @@ fn a_table_with_an_empty_axis_is_refused_not_a_panic() {
         Provenance { mdtf_version: "t".into(), input: None, input_sha256: None, stages: serde_json::Value::Null };
     pack(&chans, &PackParams::new(Profile::Slicer3dtf), &tf.slicer_luts(), dir.path(), prov, &BTreeMap::new()).unwrap();
     let path = dir.path().join("manifest.json");
-    let mut manifest: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
-    manifest["luts"][0]["axes"][0]["size"] = serde_json::json!(0);
-    std::fs::write(&path, manifest.to_string()).unwrap();
-    let e = load(dir.path()).unwrap_err().to_string();
+    let good: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let broken = |edit: &dyn Fn(&mut serde_json::Value)| {
+        let mut manifest = good.clone();
+        edit(&mut manifest);
+        std::fs::write(&path, manifest.to_string()).unwrap();
+        load(dir.path()).unwrap_err().to_string()
+    };
+    let e = broken(&|m| m["luts"][0]["axes"][0]["size"] = serde_json::json!(0));
     assert!(e.contains("no empty axis"), "{e}");
+    let e = broken(&|m| m["channels"][0]["component"] = serde_json::json!(9));
+    assert!(e.contains("component 9 of texture"), "{e}");
+    let e = broken(&|m| m["geometry"]["dims"] = serde_json::json!([1usize << 22, 1usize << 22, 1usize << 22]));
+    assert!(e.contains("more voxels than this machine can count"), "{e}");
+    let e = broken(&|m| m["geometry"]["dims"] = serde_json::json!([12, 0, 12]));
+    assert!(e.contains("hold no voxel"), "{e}");
+    let e = broken(&|m| m["geometry"]["dims"] = serde_json::json!([13, 12, 12]));
+    assert!(e.contains("bytes, the manifest describes"), "{e}");
 }
