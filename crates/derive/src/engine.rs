@@ -152,9 +152,14 @@ pub(crate) struct Engine<'a> {
     ry: usize,
     /// Every field's x value kernel is the identity (interpolating kernels).
     x_identity: bool,
-    /// Every field's y value kernel is the identity: the z-filtered rows
-    /// stand in for the y-then-z combinations 00, 10 and 20.
-    y_identity: bool,
+    /// The fused loop reads the y-then-z combinations 00, 10 and 20 as the
+    /// z-filtered rows themselves (every field's y value kernel is the
+    /// identity); the general pass copies them into padded rows.
+    borrow_y0: bool,
+    /// Border samples each side of the combination rows: the x taps'
+    /// radius for the general pass, so that its x pass runs over whole rows
+    /// without end cases; 0 for the fused loop, which handles the ends.
+    pad: usize,
     /// Every field's z value kernel is the identity: the z-filtered value
     /// rows are the input rows themselves, read in place instead of copied.
     z_identity: bool,
@@ -223,32 +228,10 @@ fn combine<'s>(out: &mut [f32], taps: &Taps, src_at: impl Fn(isize) -> &'s [f32]
     }
 }
 
-/// One x-filtered sample at `i` whose taps reach past an end of `src`,
-/// through the border policy; summed in the order [`combine`] sums.
-#[inline]
-fn edge_sample(taps: &Taps, src: &[f32], i: usize, border: Border) -> f32 {
-    let at = |o: isize| src[border.index(i as isize + o, src.len())];
-    match taps.split_first() {
-        None => 0.0,
-        Some((&(o0, w0), rest)) => rest.iter().fold(w0 * at(o0), |acc, &(o, w)| acc + w * at(o)),
-    }
-}
-
-/// x-filters one row `src` into `dst` (both nx samples): the samples whose
-/// taps stay inside the row in one vectorised sweep, the few at each end
-/// through the border policy.
+/// x-filters a padded row (`pad` border samples each side) into `dst`.
 #[inline(always)]
-fn x_pass(dst: &mut [f32], src: &[f32], taps: &Taps, border: Border) {
-    let nx = src.len();
-    let r = taps.iter().map(|(o, _)| o.unsigned_abs()).max().unwrap_or(0);
-    let lo = r.min(nx);
-    let hi = nx.saturating_sub(r).max(lo);
-    if hi > lo {
-        combine(&mut dst[lo..hi], taps, |o| &src[(lo as isize + o) as usize..]);
-    }
-    for i in (0..lo).chain(hi..nx) {
-        dst[i] = edge_sample(taps, src, i, border);
-    }
+fn x_pass(dst: &mut [f32], src: &[f32], xtaps: &Taps, pad: usize) {
+    combine(dst, xtaps, |o| &src[(pad as isize + o) as usize..]);
 }
 
 impl<'a> Engine<'a> {
@@ -269,7 +252,9 @@ impl<'a> Engine<'a> {
         let y_identity = fields.iter().all(|f| identity(&f.stencil.y.d0));
         let z_identity = fields.iter().all(|f| identity(&f.stencil.z.d0));
         let fused = fused && Engine::fusable(&fields);
-        Engine { fields, dims, border, needs, epsilon, ry, x_identity, y_identity, z_identity, fused }
+        let borrow_y0 = fused && y_identity;
+        let pad = if fused { 0 } else { fields.iter().map(|f| f.stencil.x.radius()).max().unwrap_or(0) };
+        Engine { fields, dims, border, needs, epsilon, ry, x_identity, borrow_y0, pad, z_identity, fused }
     }
 
     /// Whether the fused g / normal / f'' loop can serve these fields: one
@@ -309,13 +294,13 @@ impl<'a> Engine<'a> {
                 z: std::array::from_fn(|t| if t < self.z_types() { vec![vec![0.0; nx]; ring] } else { Vec::new() }),
                 c: std::array::from_fn(|c| {
                     let needed = match c {
-                        C00 => !self.y_identity,
+                        C00 => !self.borrow_y0,
                         C01 => n.grad || n.hessian,
-                        C10 => (n.grad || n.hessian) && !self.y_identity,
-                        C20 => n.hessian && !self.y_identity,
+                        C10 => (n.grad || n.hessian) && !self.borrow_y0,
+                        C20 => n.hessian && !self.borrow_y0,
                         _ => n.hessian,
                     };
-                    row(needed)
+                    if needed { vec![0.0f32; nx + 2 * self.pad] } else { Vec::new() }
                 }),
                 rows: Rows {
                     value: x0_row(n.value),
@@ -413,19 +398,34 @@ impl<'a> Engine<'a> {
         k: usize,
         j: usize,
     ) -> &'s [f32] {
+        let own = || {
+            let row = &fs.c[c];
+            if row.is_empty() { row.as_slice() } else { &row[self.pad..row.len() - self.pad] }
+        };
         let z_order = match c {
             C00 => 0,
             C10 => 1,
             C20 => 2,
-            _ => return &fs.c[c],
+            _ => return own(),
         };
-        if self.y_identity { self.z_filtered(field, &fs.z, z_order, k, j as isize) } else { &fs.c[c] }
+        if self.borrow_y0 { self.z_filtered(field, &fs.z, z_order, k, j as isize) } else { own() }
+    }
+
+    /// y-filters the rows `rows(o)` around row j into a padded row (border values in the padding).
+    #[inline(always)]
+    fn y_pass<'r>(&self, dst: &mut [f32], rows: impl Fn(isize) -> &'r [f32], ytaps: &Taps) {
+        let (nx, pad, border) = (self.dims[0], self.pad, self.border);
+        combine(&mut dst[pad..pad + nx], ytaps, rows);
+        for p in 0..pad {
+            dst[pad - 1 - p] = dst[pad + border.index(-1 - p as isize, nx)];
+            dst[pad + nx + p] = dst[pad + border.index((nx + p) as isize, nx)];
+        }
     }
 
     /// Fills the derivative rows of output row j from the z-filtered rows.
     #[inline(always)]
     fn row(&self, field: &FieldInput, fs: &mut FieldScratch, k: usize, j: usize) {
-        let (n, border, y_identity) = (self.needs, self.border, self.y_identity);
+        let (n, pad, borrow_y0) = (self.needs, self.pad, self.borrow_y0);
         let st = &field.stencil;
         {
             // y pass: combination (z order, y order) from the z-filtered rows around j.
@@ -433,21 +433,21 @@ impl<'a> Engine<'a> {
             let z = &*z;
             let around = |t: usize| move |o: isize| self.z_filtered(field, z, t, k, j as isize + o);
             let [c00, c01, c10, c02, c20, c11] = c;
-            if !y_identity {
-                combine(c00, &st.y.d0, around(0));
+            if !borrow_y0 {
+                self.y_pass(c00, around(0), &st.y.d0);
             }
             if n.grad || n.hessian {
-                combine(c01, &st.y.d1, around(0));
-                if !y_identity {
-                    combine(c10, &st.y.d0, around(1));
+                self.y_pass(c01, around(0), &st.y.d1);
+                if !borrow_y0 {
+                    self.y_pass(c10, around(1), &st.y.d0);
                 }
             }
             if n.hessian {
-                combine(c02, &st.y.d2, around(0));
-                if !y_identity {
-                    combine(c20, &st.y.d0, around(2));
+                self.y_pass(c02, around(0), &st.y.d2);
+                if !borrow_y0 {
+                    self.y_pass(c20, around(2), &st.y.d0);
                 }
-                combine(c11, &st.y.d1, around(1));
+                self.y_pass(c11, around(1), &st.y.d1);
             }
         }
         if self.fused {
@@ -458,24 +458,25 @@ impl<'a> Engine<'a> {
         let copy_x0 = !self.x_identity;
         let mut rows = std::mem::take(&mut fs.rows);
         let combination = |c: usize| self.combination(field, fs, c, k, j);
+        let padded = |c: usize| fs.c[c].as_slice();
         if n.value && copy_x0 {
-            x_pass(&mut rows.value, combination(C00), &st.x.d0, border);
+            x_pass(&mut rows.value, padded(C00), &st.x.d0, pad);
         }
         if n.grad {
-            x_pass(&mut rows.gx, combination(C00), &st.x.d1, border);
+            x_pass(&mut rows.gx, padded(C00), &st.x.d1, pad);
             if copy_x0 {
-                x_pass(&mut rows.gy, combination(C01), &st.x.d0, border);
-                x_pass(&mut rows.gz, combination(C10), &st.x.d0, border);
+                x_pass(&mut rows.gy, padded(C01), &st.x.d0, pad);
+                x_pass(&mut rows.gz, padded(C10), &st.x.d0, pad);
             }
         }
         if n.hessian {
-            x_pass(&mut rows.hxx, combination(C00), &st.x.d2, border);
-            x_pass(&mut rows.hxy, combination(C01), &st.x.d1, border);
-            x_pass(&mut rows.hxz, combination(C10), &st.x.d1, border);
+            x_pass(&mut rows.hxx, padded(C00), &st.x.d2, pad);
+            x_pass(&mut rows.hxy, padded(C01), &st.x.d1, pad);
+            x_pass(&mut rows.hxz, padded(C10), &st.x.d1, pad);
             if copy_x0 {
-                x_pass(&mut rows.hyy, combination(C02), &st.x.d0, border);
-                x_pass(&mut rows.hzz, combination(C20), &st.x.d0, border);
-                x_pass(&mut rows.hyz, combination(C11), &st.x.d0, border);
+                x_pass(&mut rows.hyy, padded(C02), &st.x.d0, pad);
+                x_pass(&mut rows.hzz, padded(C20), &st.x.d0, pad);
+                x_pass(&mut rows.hyz, padded(C11), &st.x.d0, pad);
             }
         }
         if n.grad {
