@@ -5,9 +5,10 @@
 //! The general pass x-filters each derivative into its own row, then
 //! derives g, 1/g, the normal and f'' in separate sweeps: about twenty
 //! loads and ten stores per voxel of L1 traffic besides the outputs. For
-//! this, the most common request, one loop reads the nine filtered rows it
-//! needs and writes only the outputs, which roughly halves the pass's
-//! arithmetic. The sums and measures are the same expressions in the same
+//! this, the most common request, one loop reads the six filtered rows it
+//! needs and writes only the outputs (central g + f'' + normal at 256^3:
+//! 7-21 % faster than the general pass, run alongside). The sums and
+//! measures are the same expressions in the same
 //! order as the general pass (`combine` in the engine, and [`Voxel`]), so
 //! the bits are the same.
 
