@@ -8,9 +8,8 @@
 //! this, the most common request, one loop reads the six filtered rows it
 //! needs and writes only the outputs (central g + f'' + normal at 256^3:
 //! 7-21 % faster than the general pass, run alongside). The sums and
-//! measures are the same expressions in the same
-//! order as the general pass (`combine` in the engine, and [`Voxel`]), so
-//! the bits are the same.
+//! measures are the same expressions in the same order as the general pass
+//! (`combine` in the engine, and [`Voxel`]), so the bits are the same.
 
 use crate::border::Border;
 use crate::kernel::{AxisTaps, Taps};
