@@ -79,7 +79,15 @@ fn load_piece(path: &Path) -> Result<UnstructuredGridPiece, TetraError> {
     // vtkio asserts on some malformed inputs; a panic there is a bad file, not a bug of ours
     let imported = std::panic::catch_unwind(|| Vtk::import(path))
         .map_err(|_| read_error(path, "malformed VTK file (the parser gave up)"))?;
-    let mut vtk = imported.map_err(|e| read_error(path, format!("cannot parse: {e}")))?;
+    let mut vtk = imported.map_err(|e| {
+        read_error(
+            path,
+            format!(
+                "cannot parse: {e} (the parser's words; check that the file is complete and that \
+                 its point and cell counts match the data)"
+            ),
+        )
+    })?;
     vtk.load_all_pieces().map_err(|e| read_error(path, format!("cannot load pieces: {e}")))?;
     let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
         return Err(read_error(path, "the file holds no UNSTRUCTURED_GRID (only unstructured grids are meshes here)"));
