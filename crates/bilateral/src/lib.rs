@@ -102,6 +102,19 @@ pub enum BilateralError {
         /// Volume size along that axis.
         size: usize,
     },
+    /// The neighbourhood holds more voxels than a filter may have.
+    #[error(
+        "--sigma-d {sigma_d} gives a neighbourhood box of {radius:?} voxels' radius, more than {max} neighbours; \
+         a smaller --sigma-d (in world units) is needed"
+    )]
+    TooManyNeighbours {
+        /// The spatial sigma.
+        sigma_d: f64,
+        /// Radius in voxels per axis.
+        radius: [usize; 3],
+        /// The most neighbours allowed.
+        max: usize,
+    },
     /// The input holds NaN or infinite samples.
     #[error("the input holds NaN or infinite samples")]
     NonFinite,
@@ -117,13 +130,22 @@ struct Neighbour {
     w: f32,
 }
 
-/// The neighbours each mode uses, in a fixed order (z, then y, then x).
-fn neighbours(spacing: [f64; 3], sigma_d: f64, k: f64, mode: Mode) -> ([usize; 3], Vec<Neighbour>) {
+/// The neighbourhood's radius in voxels per axis, and its cut in units of sigma_d.
+fn radius(spacing: [f64; 3], sigma_d: f64, k: f64, mode: Mode) -> ([usize; 3], f64) {
     let cut = match mode {
         Mode::Exact => k,
         Mode::Fast => FAST_CUT.min(k),
     };
-    let radius = spacing.map(|s| (cut * sigma_d / s - 1e-9).ceil().max(0.0) as usize);
+    (spacing.map(|s| (cut * sigma_d / s - 1e-9).ceil().max(0.0) as usize), cut)
+}
+
+/// The most neighbours a filter may have (a box of 255^3; far beyond any
+/// useful sigma_d, and a bound on the neighbour list's memory).
+const MAX_NEIGHBOURS: usize = 255 * 255 * 255;
+
+/// The neighbours each mode uses, in a fixed order (z, then y, then x).
+fn neighbours(spacing: [f64; 3], sigma_d: f64, k: f64, mode: Mode) -> ([usize; 3], Vec<Neighbour>) {
+    let (radius, cut) = self::radius(spacing, sigma_d, k, mode);
     let mut out = Vec::new();
     let r = radius.map(|r| r as isize);
     for dz in -r[2]..=r[2] {
@@ -167,7 +189,9 @@ pub fn run(input: &Volume, params: &BilateralParams) -> Result<Volume, Bilateral
     let Some((lo, hi)) = mdtf_volume::finite_range(input.samples()) else {
         return Err(BilateralError::NonFinite);
     };
-    let (radius, nbrs) = neighbours(g.spacing, params.sigma_d, params.k, params.mode);
+    // checked before the neighbour list is built: a huge sigma_d would
+    // otherwise ask for a list larger than memory
+    let (radius, _) = radius(g.spacing, params.sigma_d, params.k, params.mode);
     for a in 0..3 {
         if radius[a] >= g.dims[a] && g.dims[a] > 1 {
             return Err(BilateralError::RadiusTooLarge {
@@ -178,6 +202,11 @@ pub fn run(input: &Volume, params: &BilateralParams) -> Result<Volume, Bilateral
             });
         }
     }
+    let box_size = radius.iter().try_fold(1usize, |n, &r| n.checked_mul(r.checked_mul(2)?.checked_add(1)?));
+    if box_size.is_none_or(|n| n > MAX_NEIGHBOURS) {
+        return Err(BilateralError::TooManyNeighbours { sigma_d: params.sigma_d, radius, max: MAX_NEIGHBOURS });
+    }
+    let (radius, nbrs) = neighbours(g.spacing, params.sigma_d, params.k, params.mode);
     let sigma_r = match params.range_units {
         RangeUnits::Value => params.sigma_r,
         RangeUnits::Fraction => params.sigma_r * (hi as f64 - lo as f64),

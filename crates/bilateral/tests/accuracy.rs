@@ -192,6 +192,13 @@ fn bad_parameters_are_named() {
     assert!(e.contains("--sigma-r"), "{e}");
     let e = run(&v, &BilateralParams { sigma_d: 4.0, ..Default::default() }).unwrap_err();
     assert!(matches!(e, BilateralError::RadiusTooLarge { radius: 10, axis: 'x', .. }), "{e}");
+    // a huge sigma is refused before its neighbour list is built (it asked for more memory than there is)
+    let e = run(&v, &BilateralParams { sigma_d: 1e9, ..Default::default() }).unwrap_err();
+    assert!(matches!(e, BilateralError::RadiusTooLarge { axis: 'x', .. }), "{e}");
+    // a one-sample axis with a large radius: the neighbourhood box is too big even though no axis is exceeded
+    let flat = Volume::new(Geometry::new([200, 200, 1], [0.01, 0.01, 0.01]), Array3::zeros((1, 200, 200))).unwrap();
+    let e = run(&flat, &BilateralParams { sigma_d: 0.6, ..Default::default() }).unwrap_err();
+    assert!(matches!(e, BilateralError::TooManyNeighbours { radius: [150, 150, 150], .. }), "{e}");
     let mut nan = v.clone();
     nan.data[[1, 1, 1]] = f32::INFINITY;
     assert!(matches!(run(&nan, &BilateralParams::default()), Err(BilateralError::NonFinite)));
