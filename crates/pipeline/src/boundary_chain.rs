@@ -42,21 +42,40 @@ pub struct BoundaryChainOutput {
     pub boundary: BoundaryOutput,
 }
 
-/// Errors of the chain, by stage.
+/// Errors of the chain, by stage. The stage's error is in the message, not
+/// a `source()` as well, so that a printed chain does not say it twice.
 #[derive(Debug, thiserror::Error)]
 pub enum ChainError {
     /// The derive stage failed.
     #[error("derive: {0}")]
-    Derive(#[from] DeriveError),
+    Derive(DeriveError),
     /// The pre-filter failed.
     #[error("pre-filter: {0}")]
-    Bilateral(#[from] BilateralError),
+    Bilateral(BilateralError),
     /// Tracing failed.
     #[error("boundary: {0}")]
-    Boundary(#[from] BoundaryError),
+    Boundary(BoundaryError),
     /// A request the chain does not know.
     #[error("{0}")]
     Unknown(String),
+}
+
+impl From<DeriveError> for ChainError {
+    fn from(e: DeriveError) -> Self {
+        ChainError::Derive(e)
+    }
+}
+
+impl From<BilateralError> for ChainError {
+    fn from(e: BilateralError) -> Self {
+        ChainError::Bilateral(e)
+    }
+}
+
+impl From<BoundaryError> for ChainError {
+    fn from(e: BoundaryError) -> Self {
+        ChainError::Boundary(e)
+    }
 }
 
 /// Runs derive, the optional pre-filter and tracing on a value volume.
