@@ -28,7 +28,9 @@ pub enum VolumeError {
         message: String,
     },
     /// Fewer sample bytes than the header promises.
-    #[error("{path}: truncated data: the header promises {expected} bytes of samples, the file holds {found}")]
+    #[error(
+        "{path}: truncated data: the header (or the raw layout given) promises {expected} bytes of samples, the file holds {found}"
+    )]
     Truncated {
         /// The file concerned.
         path: PathBuf,
