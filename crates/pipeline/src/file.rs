@@ -126,10 +126,16 @@ fn yes() -> bool {
 /// Parses a pipeline file after applying `overrides` ("section.key=value",
 /// the value parsed as TOML, else taken as a string). Errors name the file's field.
 pub fn parse(text: &str, overrides: &[String]) -> Result<Pipeline, String> {
+    if overrides.is_empty() {
+        // straight from the text, so that errors point at the file's own lines
+        return toml::from_str(text).map_err(|e| e.to_string());
+    }
     let mut doc: toml::Table = toml::from_str(text).map_err(|e| e.to_string())?;
     apply_overrides(&mut doc, overrides)?;
-    let text = toml::to_string(&doc).map_err(|e| e.to_string())?;
-    toml::from_str(&text).map_err(|e| e.to_string())
+    toml::Value::Table(doc).try_into().map_err(|e: toml::de::Error| {
+        let message = e.to_string().split_whitespace().collect::<Vec<_>>().join(" ");
+        format!("{message} (with the --set overrides applied)")
+    })
 }
 
 /// Sets "section.key=value" overrides (any depth; the value parsed as TOML,
@@ -169,6 +175,13 @@ mod tests {
         assert_eq!(p.boundary.g_min, Some(2.5));
         assert_eq!(p.derive.kernel.as_deref(), Some("central"));
         let e = parse(text, &["input.sise=3".into()]).unwrap_err();
-        assert!(e.contains("sise"), "{e}");
+        assert!(e.contains("sise") && e.contains("--set"), "{e}");
+    }
+
+    #[test]
+    fn an_unknown_key_is_shown_at_its_own_line_of_the_file() {
+        let text = "[pack]\nprofile = \"slicer-3dtf\"\n[input]\nsize = 64\nbogus=1\n";
+        let e = parse(text, &[]).unwrap_err();
+        assert!(e.contains("line 5") && e.contains("bogus=1"), "{e}");
     }
 }
