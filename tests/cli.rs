@@ -803,3 +803,23 @@ fn tetra_refuses_bad_meshes_and_writes_nothing() {
         .filter(|e| e.as_ref().is_ok_and(|e| e.file_name().to_string_lossy().starts_with(".mdtf-partial-")));
     assert_eq!(left.count(), 0);
 }
+
+#[test]
+fn preview_refuses_bad_views_steps_and_sizes_before_reading_the_pack() {
+    let dir = tempfile::tempdir().unwrap();
+    let pack = dir.path().join("no-pack");
+    let png = dir.path().join("p.png");
+    for (extra, want) in [
+        (["--step", "1e-6"], "--step must be 0.01 to 16 voxels"),
+        (["--view", "nan,20"], "azimuth must be a finite number of degrees"),
+        (["--view", "x,20"], "azimuth 'x' is not a number"),
+        (["--view", "30"], "expected AZIMUTH,ELEVATION"),
+        (["--size", "4"], "--size 4 must be 8 to 4096"),
+    ] {
+        let mut args = vec!["preview", pack.to_str().unwrap(), "-o", png.to_str().unwrap()];
+        args.extend(extra);
+        let e = mdtf_err(&args);
+        assert!(e.contains(want), "{extra:?}: {e}");
+    }
+    assert!(!png.exists());
+}

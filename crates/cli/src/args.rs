@@ -608,7 +608,7 @@ pub struct PreviewArgs {
     /// Image size in pixels (square).
     #[arg(long, default_value_t = 512)]
     pub size: usize,
-    /// Sample spacing along rays, voxels.
+    /// Sample spacing along rays, voxels (0.01 to 16).
     #[arg(long, default_value_t = 0.5)]
     pub step: f64,
     /// Between-sample classification: gaussian-tf integrates the primitives along each segment
