@@ -441,6 +441,9 @@ fn histogram_writes_pictures_counts_and_the_histogram_volume() {
     assert!(e.contains("degenerate"), "{e}");
     let e = mdtf_err(&["histogram", s.to_str().unwrap(), "-o", out.to_str().unwrap(), "--bins", "0"]);
     assert!(e.contains("zero bins"), "{e}");
+    // more bin counts than axes is a mistake, not something to ignore
+    let e = mdtf_err(&["histogram", s.to_str().unwrap(), "-o", out.to_str().unwrap(), "--bins", "4,4,4"]);
+    assert!(e.contains("--bins: give one value (for all axes) or one per axis (2 axes: v, g), got 3"), "{e}");
     // three fields: the 3D counts, the three projections, and the colour-volume picture
     let mf = dir.path().join("m.nrrd");
     mdtf_ok(&["synth", "multifield", "-o", mf.to_str().unwrap(), "--size", "24", "-q"]);

@@ -38,6 +38,15 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
     if args.axes.is_empty() || args.axes.len() > 3 {
         bail!("--axes: give 1 to 3 channels, got {}", args.axes.len());
     }
+    for (flag, given) in [("--bins", args.bins.len()), ("--range", args.range.len())] {
+        if given > 1 && given != args.axes.len() {
+            bail!(
+                "{flag}: give one value (for all axes) or one per axis ({} axes: {}), got {given}",
+                args.axes.len(),
+                args.axes.join(", ")
+            );
+        }
+    }
     let scale = if args.scale == ScaleArg::Linear { Scale::Linear } else { Scale::Log };
     let (input, _) = progress.step("reading", || read_input(&args.input, &args.read, &read_options(&args.read)))?;
     let kernel = args.kernel.as_deref().map(str::parse).transpose()?;
