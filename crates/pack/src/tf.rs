@@ -179,6 +179,9 @@ pub fn parse_tf(text: &str) -> Result<TfFile, String> {
                 ));
             }
         });
+        if let Some(w) = widgets.last() {
+            check_widget(w).map_err(|e| format!("at widgets[{i}].{e}"))?;
+        }
     }
     let tf = TfFile {
         v_range: raw.v_range,
@@ -200,6 +203,42 @@ pub fn parse_tf(text: &str) -> Result<TfFile, String> {
         }
     }
     Ok(tf)
+}
+
+/// A widget's values that would draw nothing, or something else than meant
+/// (the field and why), checked once at parsing.
+fn check_widget(w: &Widget) -> Result<(), String> {
+    let unit = |name: &str, x: f64| {
+        if (0.0..=1.0).contains(&x) { Ok(()) } else { Err(format!("{name}: {x} is not in [0, 1]")) }
+    };
+    let positive = |name: &str, x: f64| {
+        if x.is_finite() && x > 0.0 { Ok(()) } else { Err(format!("{name}: {x} must be positive")) }
+    };
+    let colour = |c: &[f64; 3]| c.iter().try_for_each(|&x| unit("colour", x));
+    match w {
+        Widget::Triangle(t) => {
+            positive("width", t.width)?;
+            positive("g_high", t.g_high)?;
+            if !(t.g_low.is_finite() && t.g_low >= 0.0 && t.g_low < t.g_high) {
+                return Err(format!("g_low: {} must be in [0, g_high = {})", t.g_low, t.g_high));
+            }
+            unit("alpha", t.alpha)?;
+            colour(&t.colour)
+        }
+        Widget::Rectangle(r) => {
+            positive("half_size[0]", r.half_size[0])?;
+            positive("half_size[1]", r.half_size[1])?;
+            unit("alpha", r.alpha)?;
+            colour(&r.colour)
+        }
+        Widget::Gaussian(gp) => {
+            // alpha_max is an extinction per voxel of path here (it may exceed 1)
+            if !(gp.alpha_max.is_finite() && gp.alpha_max >= 0.0) {
+                return Err(format!("alpha_max: {} must be a non-negative number", gp.alpha_max));
+            }
+            colour(&gp.colour)
+        }
+    }
 }
 
 impl TfFile {
@@ -459,5 +498,20 @@ mod tests {
         assert!(parse_tf(&bad).unwrap_err().starts_with("at widgets[2].type"));
         let bad = EXAMPLE.replace("\"boundary_emphasis\": 0.25", "\"boundary_emphasis\": 2");
         assert!(parse_tf(&bad).unwrap_err().contains("boundary_emphasis"));
+    }
+
+    #[test]
+    fn widget_values_that_draw_nothing_or_out_of_range_are_refused() {
+        for (from, to, want) in [
+            ("\"width\": 30", "\"width\": -5", "at widgets[0].width: -5 must be positive"),
+            ("\"g_low\": 5", "\"g_low\": 40", "at widgets[0].g_low: 40 must be in [0, g_high = 35)"),
+            ("\"alpha\": 0.8", "\"alpha\": 2", "at widgets[0].alpha: 2 is not in [0, 1]"),
+            ("\"colour\": [1, 0.5, 0]", "\"colour\": [1, 5, 0]", "at widgets[0].colour: 5 is not in [0, 1]"),
+        ] {
+            assert!(EXAMPLE.contains(from), "{from}");
+            let e = parse_tf(&EXAMPLE.replacen(from, to, 1)).unwrap_err();
+            assert_eq!(e, want);
+        }
+        assert!(parse_tf(EXAMPLE).is_ok());
     }
 }
