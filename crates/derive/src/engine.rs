@@ -178,7 +178,7 @@ const C11: usize = 5;
 /// out = sum of w * src_at(o) over the taps (o, w), in tap order. Up to five
 /// taps are summed in one loop (one store per sample instead of one per tap);
 /// longer kernels (Gaussians) accumulate five taps at a time. The sum is
-/// left to right either way, as in [`edge_sample`].
+/// left to right either way, as the fused loop's `dot` sums.
 #[inline(always)]
 fn combine<'s>(out: &mut [f32], taps: &Taps, src_at: impl Fn(isize) -> &'s [f32]) {
     let n = out.len();
@@ -237,7 +237,8 @@ fn x_pass(dst: &mut [f32], src: &[f32], xtaps: &Taps, pad: usize) {
 impl<'a> Engine<'a> {
     /// An engine for these fields (all of dims `dims`) computing what `needs` asks.
     /// `epsilon`: g below it counts as 0 for the inverse gradient row.
-    /// `fused`: stop each row after the y pass (see [`Engine::fusable`]).
+    /// `fused`: stop each row after the y pass; only for fields that are
+    /// [`Engine::fusable`].
     pub fn new(
         fields: Vec<FieldInput<'a>>,
         dims: [usize; 3],
@@ -251,7 +252,6 @@ impl<'a> Engine<'a> {
         let x_identity = fields.iter().all(|f| identity(&f.stencil.x.d0));
         let y_identity = fields.iter().all(|f| identity(&f.stencil.y.d0));
         let z_identity = fields.iter().all(|f| identity(&f.stencil.z.d0));
-        let fused = fused && Engine::fusable(&fields);
         let borrow_y0 = fused && y_identity;
         let pad = if fused { 0 } else { fields.iter().map(|f| f.stencil.x.radius()).max().unwrap_or(0) };
         Engine { fields, dims, border, needs, epsilon, ry, x_identity, borrow_y0, pad, z_identity, fused }
@@ -261,11 +261,6 @@ impl<'a> Engine<'a> {
     /// field whose x taps [`fused::supports`].
     pub fn fusable(fields: &[FieldInput]) -> bool {
         matches!(fields, [f] if fused::supports(&f.stencil.x))
-    }
-
-    /// Whether rows stop after the y pass for the fused loop.
-    pub fn is_fused(&self) -> bool {
-        self.fused
     }
 
     fn z_types(&self) -> usize {

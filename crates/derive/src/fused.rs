@@ -96,9 +96,7 @@ pub(crate) fn supports(x: &AxisTaps) -> bool {
 /// `x` (see [`supports`]; other tap counts write nothing).
 #[inline(always)]
 pub(crate) fn g_normal_f2(x: &AxisTaps, c: &Combinations, border: Border, epsilon: f32, out: FusedOut) {
-    if (x.d1.len(), x.d2.len()) == (2, 3) {
-        row::<2, 3>(&x.d1, &x.d2, c, border, epsilon, out);
-    }
+    row::<2, 3>(&x.d1, &x.d2, c, border, epsilon, out);
 }
 
 /// Sum of w * s(t) over the taps, left to right (as `combine` sums).

@@ -288,7 +288,7 @@ fn prepare<'a>(input: &'a MultiField, params: &DeriveParams) -> Result<Prepared<
 
     let fused = measures::fusable_items(&items) && Engine::fusable(&fields);
     let engine = Engine::new(fields, g.dims, params.border, Needs::of(&items), epsilon, fused);
-    let layout = Layout::new(&items, m, epsilon, engine.is_fused());
+    let layout = Layout::new(&items, m, epsilon, fused);
     Ok(Prepared { items, layout, engine })
 }
 

@@ -20,6 +20,9 @@ pub enum PreviewError {
     /// The pack is incomplete or inconsistent.
     #[error("{0}")]
     Pack(String),
+    /// The camera is out of range (see [`Camera::check`]).
+    #[error("{0}")]
+    BadView(String),
     /// The profile has no preview yet.
     #[error("no preview for profile {0} yet")]
     Unsupported(String),
@@ -105,6 +108,7 @@ pub fn preview_named(
     analytic: bool,
     shown_as: &Path,
 ) -> Result<(), PreviewError> {
+    cam.check().map_err(PreviewError::BadView)?;
     // the classifier comes from the tables; then only the channels it and the shading read are decoded
     let mut pack = load_channels(dir, &|_| false)?;
     let c = classifier(&pack, analytic)?;

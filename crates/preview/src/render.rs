@@ -22,6 +22,27 @@ pub struct Camera {
     pub step: f64,
 }
 
+impl Camera {
+    /// Refuses views that would render nothing meaningful or take hours:
+    /// non-finite angles, a size outside 8 to 4096 pixels, a step outside
+    /// 0.01 to 16 voxels (a ray of a 256^3 volume at 0.01 already takes
+    /// 90 000 samples).
+    pub fn check(&self) -> Result<(), String> {
+        for (name, v) in [("azimuth", self.azimuth), ("elevation", self.elevation)] {
+            if !v.is_finite() {
+                return Err(format!("--view: {name} must be a finite number of degrees, got {v}"));
+            }
+        }
+        if !(8..=4096).contains(&self.size) {
+            return Err(format!("--size {} must be 8 to 4096 pixels", self.size));
+        }
+        if !(self.step.is_finite() && (0.01..=16.0).contains(&self.step)) {
+            return Err(format!("--step must be 0.01 to 16 voxels, got {}", self.step));
+        }
+        Ok(())
+    }
+}
+
 /// How samples become colour and opacity.
 #[derive(Debug, Clone)]
 pub enum Classifier {

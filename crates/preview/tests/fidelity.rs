@@ -89,3 +89,20 @@ fn malformed_manifests_are_refused_not_a_panic() {
     let e = broken(&|m| m["geometry"]["dims"] = serde_json::json!([13, 12, 12]));
     assert!(e.contains("bytes, the manifest describes"), "{e}");
 }
+
+#[test]
+fn a_camera_out_of_range_is_refused_before_the_pack_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("no-pack");
+    let png = dir.path().join("p.png");
+    let good = Camera { azimuth: 30.0, elevation: 20.0, size: 64, step: 0.5 };
+    for (cam, want) in [
+        (Camera { step: 1e-6, ..good }, "--step must be 0.01 to 16 voxels"),
+        (Camera { elevation: f64::INFINITY, ..good }, "elevation must be a finite number"),
+        (Camera { size: 4, ..good }, "--size 4 must be 8 to 4096"),
+    ] {
+        let e = mdtf_preview::preview(&missing, &png, &cam, true).unwrap_err().to_string();
+        assert!(e.contains(want), "{e}");
+    }
+    assert!(good.check().is_ok());
+}
