@@ -25,7 +25,7 @@ pub const BORDER_NAMES: &str = "clamp, mirror, wrap";
 
 impl Border {
     /// Maps index `i` (possibly outside) into 0..n; n >= 1.
-    #[inline(always)]
+    #[inline]
     pub fn index(self, i: isize, n: usize) -> usize {
         let n = n as isize;
         let r = match self {
