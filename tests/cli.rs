@@ -161,7 +161,7 @@ fn convert_refuses_nan_unless_asked_and_never_overwrites_its_input() {
     assert_eq!(v.samples(), &[1.0, 0.0]);
     let before = std::fs::read(&p).unwrap();
     let e = mdtf_err(&["convert", p.to_str().unwrap(), p.to_str().unwrap(), "--nan", "zero"]);
-    assert!(e.contains("refusing to overwrite an input"), "{e}");
+    assert!(e.contains("refusing to overwrite") && e.contains("an input of this run"), "{e}");
     assert_eq!(std::fs::read(&p).unwrap(), before);
 }
 

@@ -10,6 +10,7 @@
 mod gaussian;
 mod lut;
 mod manifest;
+mod manifest_check;
 mod profile;
 mod quantise;
 mod tables;
@@ -23,6 +24,7 @@ pub use manifest::{
     ChannelEntry, ChannelSource, MANIFEST_SCHEMA, Manifest, ManifestGeometry, MeshArrayEntry, MeshEntry, Provenance,
     SCHEMA_ID, TextureEntry,
 };
+pub use manifest_check::ManifestError;
 pub use profile::{PROFILE_NAMES, Profile, TextureLayout, describe};
 pub use quantise::{Decode, Dtype, QuantiseError, decode_for};
 pub use tables::{Tf1d, peak_table, peaks, preintegration_table, segment, segment_by_midpoint};

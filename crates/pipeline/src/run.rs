@@ -12,7 +12,7 @@ use mdtf_histogram::{
     Axis, AxisSpec, HvolParams, Scale, count, histogram_volume, hit_mask, write_histogram, write_hvol, write_stretched,
 };
 use mdtf_pack::{PackParams, PackWriter, Profile, Provenance, parse_tf};
-use mdtf_volume::{Geometry, MultiField, ReadOptions, Volume, WriteOptions, write_file_atomically};
+use mdtf_volume::{Geometry, Inputs, MultiField, OutputFolder, ReadOptions, Volume, WriteOptions, write_file_atomically};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -89,8 +89,9 @@ pub struct RunOptions {
 pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<RunReport, RunError> {
     let start = Instant::now();
     let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
-    let tmp = mdtf_volume::staging_dir(&opts.output).map_err(|e| fail("output")(e.to_string()))?;
-    let dir = tmp.path();
+    let inputs = run_inputs(p, opts, &base);
+    let out = OutputFolder::begin(&opts.output, &inputs).map_err(|e| fail("output")(e.to_string()))?;
+    let dir = out.path();
     let mut stages = Vec::new();
     let mut stage = |name: &str, t: Instant, voxels: usize, outputs: Vec<String>| {
         let seconds = t.elapsed().as_secs_f64();
@@ -449,8 +450,20 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let json = serde_json::to_string_pretty(&report).map_err(|e| fail("report")(e.to_string()))?;
     write_file_atomically(&dir.join("run_report.json"), |w| w.write_all(json.as_bytes()))
         .map_err(|e| fail("report")(e.to_string()))?;
-    mdtf_volume::publish_dir(tmp, &opts.output).map_err(|e| fail("output")(e.to_string()))?;
+    out.publish(&inputs).map_err(|e| fail("output")(e.to_string()))?;
     Ok(report)
+}
+
+/// Every file a run reads: the pipeline file, the input and the TF file.
+fn run_inputs(p: &Pipeline, opts: &RunOptions, base: &Path) -> Inputs {
+    let mut inputs = Inputs::of(&[&opts.pipeline_path]);
+    if let Some(f) = opts.input.clone().or_else(|| p.input.file.as_ref().map(|f| base.join(f))) {
+        inputs.add(&f);
+    }
+    if let Some(tf) = &p.pack.tf {
+        inputs.add(&base.join(tf));
+    }
+    inputs
 }
 
 /// The unit normals (nx, ny, nz) of a one-field `value`, named.
@@ -469,6 +482,12 @@ fn load_input(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(MultiFiel
     let i = &p.input;
     if i.size < 8 || i.size > 1024 {
         return Err(fail("input")(format!("phantom size {} must be 8 to 1024", i.size)));
+    }
+    if !(i.sigma.is_finite() && i.sigma > 0.0) {
+        return Err(fail("input")(format!("phantom sigma {} must be a positive number of voxels", i.sigma)));
+    }
+    if !(i.noise.is_finite() && i.noise >= 0.0) {
+        return Err(fail("input")(format!("phantom noise {} must be zero or a positive standard deviation", i.noise)));
     }
     let geo = Geometry::new([i.size; 3], [1.0; 3]);
     let name = format!("built-in {:?} phantom, {}^3, sigma {}", i.phantom, i.size, i.sigma);

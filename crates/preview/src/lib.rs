@@ -109,6 +109,7 @@ pub fn preview_named(
     shown_as: &Path,
 ) -> Result<(), PreviewError> {
     cam.check().map_err(PreviewError::BadView)?;
+    mdtf_volume::Inputs::of(&[dir]).refuse_target(out)?;
     // the classifier comes from the tables; then only the channels it and the shading read are decoded
     let mut pack = load_channels(dir, &|_| false)?;
     let c = classifier(&pack, analytic)?;

@@ -7,7 +7,7 @@ use mdtf_pack::{ChannelEntry, Dtype, Manifest, TextureEntry};
 use mdtf_volume::{Geometry, Volume};
 use std::collections::BTreeMap;
 use std::io::Read;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// A decoded lookup table.
 #[derive(Debug, Clone, PartialEq)]
@@ -60,7 +60,7 @@ pub fn decode_channels(
         if entries.is_empty() {
             continue;
         }
-        for (name, data) in decode_texture(&dir.join(&tex.data), tex, &entries, voxels)? {
+        for (name, data) in decode_texture(&pack_file(dir, &tex.data)?, tex, &entries, voxels)? {
             let array = ndarray::Array3::from_shape_vec(geometry.shape(), data)
                 .map_err(|e| PreviewError::Pack(e.to_string()))?;
             channels.insert(name, Volume { geometry: geometry.clone(), data: array });
@@ -123,6 +123,19 @@ fn decode_texture(
     Ok(entries.iter().map(|c| c.name.clone()).zip(out).collect())
 }
 
+/// `dir/name`, refused when a link takes it outside the pack folder (the
+/// manifest check already refuses names that climb out).
+fn pack_file(dir: &Path, name: &str) -> Result<PathBuf, PreviewError> {
+    let path = dir.join(name);
+    let (Ok(inside), Ok(root)) = (path.canonicalize(), dir.canonicalize()) else {
+        return Ok(path); // missing: opening it reports the error with the name
+    };
+    if !inside.starts_with(&root) {
+        return Err(PreviewError::Pack(format!("{name} is a link to {}, outside the pack folder", inside.display())));
+    }
+    Ok(path)
+}
+
 fn read(path: &Path) -> Result<Vec<u8>, PreviewError> {
     std::fs::read(path).map_err(|e| PreviewError::Pack(format!("{}: {e}", path.display())))
 }
@@ -141,11 +154,12 @@ pub fn load_channels(dir: &Path, wanted: &dyn Fn(&str) -> bool) -> Result<Loaded
         .map_err(|_| PreviewError::Pack("manifest.json is not UTF-8".into()))?;
     let manifest: Manifest =
         serde_json::from_str(&text).map_err(|e| PreviewError::Pack(format!("manifest.json: {e}")))?;
+    manifest.check().map_err(|e| PreviewError::Pack(e.to_string()))?;
     let channels = decode_channels(dir, &manifest, wanted)?;
     let mut tables = BTreeMap::new();
     for lut in &manifest.luts {
         // attached raw NRRD: the samples are the file's last cells x components x 4 bytes
-        let bytes = read(&dir.join(&lut.file_f32))?;
+        let bytes = read(&pack_file(dir, &lut.file_f32)?)?;
         let cells: usize = lut.axes.iter().map(|a| a.size).product();
         let comps = lut.components;
         if cells == 0 || !(1..=4).contains(&comps) {

@@ -195,6 +195,15 @@ fn first_step(origin: [f64; 3], dir: [f64; 3], ext: &[f64], step: f64) -> usize 
     if s.is_finite() && s > 0.0 { s as usize } else { 0 }
 }
 
+/// Samples per ray allowed per voxel of the grid's diagonal and per unit of
+/// step: more than any grid with spacings within a ratio of 8 needs.
+const MAX_STEPS_PER_DIAGONAL_VOXEL: f64 = 8.0;
+
+/// Length of the grid's diagonal in voxels (at least 1).
+fn dims_diagonal(dims: [usize; 3]) -> f64 {
+    dims.iter().map(|&d| (d.max(1) as f64 - 1.0).powi(2)).sum::<f64>().sqrt().max(1.0)
+}
+
 /// Edge of the blocks of empty-space skipping, voxels.
 const BLOCK: usize = 8;
 
@@ -391,7 +400,15 @@ fn render_impl(
     ];
     let up = [-up[0], -up[1], -up[2]];
     let l_min = g.min_spacing();
-    let step_world = cam.step * l_min;
+    // A ray crosses at most the diagonal; in voxels that is bounded by the
+    // grid, but in steps of the smallest spacing it grows with the spacings'
+    // ratio (a manifest may claim any). Cap the samples per ray at a fixed
+    // multiple of the voxel diagonal, widening the step (with its opacity
+    // correction) only for grids more anisotropic than that.
+    let diag_voxels = dims_diagonal(g.dims);
+    let max_steps = (MAX_STEPS_PER_DIAGONAL_VOXEL * diag_voxels / cam.step).ceil();
+    let step_world = (cam.step * l_min).max(2.0 * radius / max_steps);
+    let step_vox = step_world / l_min;
     let steps = (2.0 * radius / step_world).ceil() as usize;
     let get = |n: &str| channels.get(n);
     let data = |n: &str| get(n).map(|v| v.samples());
@@ -475,7 +492,7 @@ fn render_impl(
                     Classifier::Lut(t) => {
                         let [r, gr, b, a] = lookup(t, &coords(&cell, &table_chans));
                         // opacity correction: the TF's opacity is per voxel (L_min) of path
-                        ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(cam.step))
+                        ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(step_vox))
                     }
                     Classifier::Distance { alpha_u, alpha_d } => {
                         let d = sample(distance);
@@ -483,7 +500,7 @@ fn render_impl(
                         let u = alpha_u
                             .as_ref()
                             .map_or([1.0, 1.0, 1.0, 1.0], |t| lookup(t, &[sample(v_data), sample(g_hit)]));
-                        ([u[0], u[1], u[2]], 1.0 - (1.0 - ((u[3] * ad) as f64).min(0.999)).powf(cam.step))
+                        ([u[0], u[1], u[2]], 1.0 - (1.0 - ((u[3] * ad) as f64).min(0.999)).powf(step_vox))
                     }
                     Classifier::Peak { peak_table, preintegration, find_peaks } => {
                         let v1 = sample(v_data);
@@ -500,7 +517,7 @@ fn render_impl(
                             None => v1,
                         };
                         let [r, gr, b, a] = lookup(preintegration, &[at, at]);
-                        ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(cam.step))
+                        ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(step_vox))
                     }
                     Classifier::Chord { tf, cells_per_sample, find_peaks } => {
                         let f1_all = coords(&cell, &table_chans);
@@ -515,7 +532,7 @@ fn render_impl(
                             Some(f0) => chord_peak(tf, &f0[..tf.axes.len()], f1, *cells_per_sample),
                             None => lookup(tf, f1),
                         };
-                        ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(cam.step))
+                        ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(step_vox))
                     }
                     Classifier::Gaussian { primitives, channels: _, analytic } => {
                         let v: Vec<f64> = table_chans.iter().map(|&c| sample(c) as f64).collect();
@@ -533,7 +550,7 @@ fn render_impl(
                         }
                         let colour = if depth > 0.0 { c.map(|x| (x / depth) as f32) } else { [0.0; 3] };
                         // eq. 15: alpha = 1 - exp(-l sum tau_i rho'_i), l = the step in voxels
-                        (colour, 1.0 - (-depth * cam.step).exp())
+                        (colour, 1.0 - (-depth * step_vox).exp())
                     }
                 };
                 if a <= 0.0 {

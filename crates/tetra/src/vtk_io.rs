@@ -67,6 +67,29 @@ pub fn mesh_summary(path: &Path) -> Result<MeshSummary, TetraError> {
     Ok(MeshSummary { points, cells, arrays, bounds: (lo, hi) })
 }
 
+thread_local! {
+    /// Set while this thread runs the VTK parser inside [`catch_quietly`].
+    static PARSING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Runs `f`, turning a panic into `Err` without the panic message reaching
+/// the user's terminal (other threads' panics are reported as before).
+fn catch_quietly<R>(f: impl FnOnce() -> R + std::panic::UnwindSafe) -> std::thread::Result<R> {
+    static HOOK: std::sync::Once = std::sync::Once::new();
+    HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !PARSING.with(std::cell::Cell::get) {
+                previous(info);
+            }
+        }));
+    });
+    PARSING.with(|p| p.set(true));
+    let result = std::panic::catch_unwind(f);
+    PARSING.with(|p| p.set(false));
+    result
+}
+
 /// The single unstructured-grid piece of a `.vtk`/`.vtu` file.
 fn load_piece(path: &Path) -> Result<UnstructuredGridPiece, TetraError> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
@@ -77,7 +100,7 @@ fn load_piece(path: &Path) -> Result<UnstructuredGridPiece, TetraError> {
         return Err(read_error(path, "no such file"));
     }
     // vtkio asserts on some malformed inputs; a panic there is a bad file, not a bug of ours
-    let imported = std::panic::catch_unwind(|| Vtk::import(path))
+    let imported = catch_quietly(|| Vtk::import(path))
         .map_err(|_| read_error(path, "malformed VTK file (the parser gave up)"))?;
     let mut vtk = imported.map_err(|e| {
         read_error(

@@ -116,10 +116,70 @@ pub enum VolumeError {
         path: PathBuf,
     },
     /// Writing would overwrite an input of the run.
-    #[error("{path}: refusing to overwrite an input file")]
+    #[error("{path}: refusing to overwrite {input}, an input of this run (choose another output name)")]
     WouldOverwriteInput {
-        /// The file concerned.
+        /// The file that would be written.
         path: PathBuf,
+        /// The input it is (the same file under this name).
+        input: PathBuf,
+    },
+    /// Another run holds the lock of this output.
+    #[error("{path}: another mdtf run is writing this output now; wait for it to finish or choose another output")]
+    OutputBusy {
+        /// The output concerned.
+        path: PathBuf,
+    },
+    /// The output folder exists and has no mdtf marker.
+    #[error(
+        "{path}: the folder exists and was not made by mdtf (it holds {entries}); mdtf replaces only folders it made: choose a new output folder, or empty this one yourself"
+    )]
+    OutputNotOurs {
+        /// The output folder.
+        path: PathBuf,
+        /// Some of the files it holds.
+        entries: String,
+    },
+    /// An mdtf output folder to which someone added files.
+    #[error(
+        "{path}: this mdtf output folder also holds files mdtf did not write ({entries}); move them out or choose another output folder"
+    )]
+    OutputHasForeignFiles {
+        /// The output folder.
+        path: PathBuf,
+        /// Some of the files mdtf did not write.
+        entries: String,
+    },
+    /// The output folder holds an input of the run.
+    #[error(
+        "{path}: the output folder holds {input}, an input of this run; mdtf never deletes an input: choose another output folder"
+    )]
+    OutputHoldsInput {
+        /// The output folder.
+        path: PathBuf,
+        /// The input inside it.
+        input: PathBuf,
+    },
+    /// The output folder is the working folder or one of its parents.
+    #[error("{path}: the output folder is the current folder or holds it; choose a new folder")]
+    OutputHoldsWorkingDir {
+        /// The output folder.
+        path: PathBuf,
+    },
+    /// The output path names a file or a link where a folder is needed.
+    #[error("{path}: exists and is not a folder (a file or a link); choose another output folder")]
+    OutputNotAFolder {
+        /// The output path.
+        path: PathBuf,
+    },
+    /// A detached data file would overwrite a file that is not the data of the header being replaced.
+    #[error(
+        "{path}: the data file exists and does not belong to {header}; mdtf will not overwrite it (choose another output name)"
+    )]
+    DataFileInTheWay {
+        /// The data file.
+        path: PathBuf,
+        /// The header to be written.
+        header: PathBuf,
     },
     /// A sample cannot be stored exactly in the requested integer type.
     #[error(

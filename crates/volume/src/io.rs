@@ -1,6 +1,6 @@
 //! Reading and writing by file name: the extension picks the format.
 
-use crate::atomic::refuse_overwriting_inputs;
+use crate::output::Inputs;
 use crate::dtype::SampleType;
 use crate::error::{Result, VolumeError};
 use crate::nifti_io::{read_nifti_with_info, write_nifti};
@@ -85,9 +85,14 @@ impl Default for WriteOptions {
 }
 
 /// Writes a (multi-field) volume by extension, atomically, refusing to
-/// overwrite any of `inputs`.
+/// overwrite any of `inputs` (compared by identity, detached data files
+/// included, on both sides).
 pub fn write(path: &Path, mf: &MultiField, opts: &WriteOptions, inputs: &[&Path]) -> Result<()> {
-    refuse_overwriting_inputs(path, inputs)?;
+    let inputs = Inputs::of(inputs);
+    inputs.refuse_target(path)?;
+    if let Some(data) = crate::nrrd::planned_data_file(path, opts.gzip) {
+        inputs.refuse_target(&data)?;
+    }
     let encoding = if opts.gzip { Encoding::Gzip } else { Encoding::Raw };
     match Format::from_path(path) {
         Some(Format::Nifti | Format::NiftiGz) => write_nifti(path, mf, opts.ty),

@@ -12,7 +12,6 @@
 //! Every error is a [`VolumeError`] naming the file; no reader panics on a
 //! malformed file.
 
-mod atomic;
 mod dtype;
 mod error;
 mod geometry;
@@ -20,18 +19,19 @@ mod io;
 mod limits;
 mod nifti_io;
 pub mod nrrd;
+pub mod output;
 mod png_out;
 mod range;
 mod raw;
 mod samples;
 mod volume;
 
-pub use atomic::{publish_dir, refuse_overwriting_inputs, staging_dir, write_file_atomically};
 pub use dtype::{Endian, SAMPLE_TYPE_NAMES, SampleType};
 pub use error::{Result, VolumeError};
 pub use geometry::Geometry;
 pub use io::{Format, WriteOptions, read, read_scalar, read_with_info, write, write_volume};
 pub use limits::{available_memory, human_bytes};
+pub use output::{Inputs, OutputFolder, write_file_atomically};
 pub use nifti_io::{read_nifti, read_nifti_with_info, write_nifti};
 pub use png_out::{PngColour, write_png};
 pub use range::{finite_range, finite_sample_range};

@@ -6,7 +6,7 @@
 //! read and decoded here, so that a truncated or hostile file is an error
 //! with numbers rather than an allocation or a panic.
 
-use crate::atomic::write_file_atomically;
+use crate::output::write_file_atomically;
 use crate::dtype::{Endian, SampleType, first_unrepresentable};
 use crate::error::{Result, VolumeError};
 use crate::geometry::Geometry;
@@ -49,6 +49,17 @@ pub fn read_nifti_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiFie
     let got = read_up_to(&mut src, &mut head).map_err(|e| stream_error(path, e, compressed))?;
     if got < HEADER_BYTES {
         return Err(VolumeError::header(path, format!("only {got} bytes, a NIfTI-1 header needs 348")));
+    }
+    let sizeof_hdr = [i32::from_le_bytes([head[0], head[1], head[2], head[3]]), i32::from_be_bytes([head[0], head[1], head[2], head[3]])];
+    if !sizeof_hdr.contains(&(HEADER_BYTES as i32)) {
+        return Err(VolumeError::header(
+            path,
+            format!(
+                "not a NIfTI-1 file: its first 4 bytes (sizeof_hdr) read {} (little-endian), not 348{}",
+                sizeof_hdr[0],
+                if sizeof_hdr.contains(&540) { "; this looks like NIfTI-2, which is not supported" } else { "" }
+            ),
+        ));
     }
     let header =
         NiftiHeader::from_reader(&head[..]).map_err(|e| VolumeError::Nifti { path: path.to_path_buf(), cause: e })?;
@@ -101,7 +112,13 @@ fn stream_error(path: &Path, e: std::io::Error, compressed: bool) -> VolumeError
 fn layout_of(path: &Path, h: &NiftiHeader) -> Result<SampleLayout> {
     let rank = h.dim[0] as usize;
     if !(1..=7).contains(&rank) {
-        return Err(VolumeError::header(path, format!("dim[0] = {} (the rank) must be 1 to 7", h.dim[0])));
+        // The byte order is guessed from dim[0], so an out-of-range rank shows byte-swapped.
+        let (a, b) = (h.dim[0], h.dim[0].swap_bytes());
+        let (as_stored, other) = if b < a { (b, a) } else { (a, b) };
+        return Err(VolumeError::header(
+            path,
+            format!("dim[0] (the number of dimensions) is {as_stored} ({other} in the other byte order); it must be 1 to 7"),
+        ));
     }
     let raw: Vec<u64> = h.dim[1..=rank].iter().map(|&d| d as u64).collect();
     // dim is stored as i16 on disk; the crate reads it as u16, so negative values show as > 32767.

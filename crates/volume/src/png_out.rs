@@ -1,7 +1,7 @@
 //! 8-bit PNG pictures (histograms, previews), written atomically with a
 //! description in a tEXt chunk.
 
-use crate::atomic::write_file_atomically;
+use crate::output::write_file_atomically;
 use crate::error::Result;
 use std::path::Path;
 

@@ -98,19 +98,14 @@ pub fn read_decoded(
 ) -> Result<Vec<Array3<f32>>> {
     let [nx, ny, nz] = layout.dims;
     let total = nx * ny * nz * layout.fields;
-    let mut all = Vec::new();
-    all.try_reserve_exact(total).map_err(|_| VolumeError::TooLarge {
-        path: path.to_path_buf(),
-        dims: format!("{nx}x{ny}x{nz}"),
-        needed: crate::limits::human_bytes(total as u128 * 4),
-        available: "less".into(),
-    })?;
-    all.resize(total, 0.0f32);
+    // The array grows with the samples actually read: a short file that
+    // claims a huge grid fails as truncated before much is allocated.
+    let mut all: Vec<f32> = Vec::new();
     let size = layout.ty.size();
     let chunk = 1 << 16;
     let mut buf = vec![0u8; chunk * size];
-    let mut done = 0usize;
-    while done < total {
+    while all.len() < total {
+        let done = all.len();
         let n = chunk.min(total - done);
         let bytes = &mut buf[..n * size];
         let got = read_fully(src, bytes).map_err(|e| {
@@ -123,8 +118,14 @@ pub fn read_decoded(
                 found: (done * size + got) as u64,
             });
         }
+        all.try_reserve(n).map_err(|_| VolumeError::TooLarge {
+            path: path.to_path_buf(),
+            dims: format!("{nx}x{ny}x{nz}"),
+            needed: crate::limits::human_bytes(total as u128 * 4),
+            available: "less".into(),
+        })?;
+        all.resize(done + n, 0.0);
         decode_samples(bytes, layout.ty, layout.endian, &mut all[done..done + n]);
-        done += n;
     }
     finish_fields(path, all, layout, opts)
 }

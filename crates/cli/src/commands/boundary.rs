@@ -6,7 +6,7 @@ use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
 use mdtf_boundary::{AlphaMap, BoundaryInput, BoundaryOutput, BoundaryParams};
 use mdtf_pipeline::boundary_chain::{self, BoundaryChainParams, Prefilter};
-use mdtf_volume::{MultiField, Volume, WriteOptions, write};
+use mdtf_volume::{Inputs, MultiField, OutputFolder, Volume, WriteOptions, write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -43,11 +43,14 @@ fn scalar(path: &Path, args: &BoundaryArgs) -> Result<Volume> {
 /// Runs the chain (or tracing alone on given g, f'', normal) and writes the outputs.
 pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
     let p = params(args)?;
+    let given: Vec<&Path> =
+        [&args.input, &args.g, &args.f2, &args.normal].into_iter().flatten().map(PathBuf::as_path).collect();
+    let inputs = Inputs::of(&given);
+    let folder = OutputFolder::begin(&args.output, &inputs)?;
+    let report_folder = args.report.as_ref().map(|d| OutputFolder::begin(d, &inputs)).transpose()?;
     let start = Instant::now();
-    let mut inputs: Vec<PathBuf> = Vec::new();
     let (out, g) = match (&args.input, &args.g, &args.f2, &args.normal) {
         (Some(input), None, None, None) => {
-            inputs.push(input.clone());
             let value = progress.step("reading", || scalar(input, args))?;
             let chain = BoundaryChainParams {
                 kernel: args.kernel.as_deref().map(str::parse).transpose()?,
@@ -63,7 +66,6 @@ pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
                     "--kernel and --prefilter apply when deriving from a value volume, not to given --g/--f2/--normal"
                 );
             }
-            inputs.extend([g.clone(), f2.clone(), normal.clone()]);
             let (gv, f2v) = progress.step("reading", || -> Result<_> { Ok((scalar(g, args)?, scalar(f2, args)?)) })?;
             let nv = read_input(normal, &args.read, &read_options(&args.read))?.0;
             let input = BoundaryInput { g: &gv, f2: &f2v, normal: &nv, value_range: args.value_range.unwrap_or(255.0) };
@@ -73,7 +75,11 @@ pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
         _ => bail!("give either a value volume, or all of --g, --f2 and --normal"),
     };
     let seconds = start.elapsed().as_secs_f64();
-    write_outputs(args, &out, &g, &inputs, progress)?;
+    write_outputs(&out, &g, folder.path(), args.format.extension(), report_folder.as_ref().map(OutputFolder::path), &given, progress)?;
+    folder.publish(&inputs)?;
+    if let Some(r) = report_folder {
+        r.publish(&inputs)?;
+    }
     let c = out.counts;
     progress.note(&format!(
         "traced {} voxels in {seconds:.2} s: {} boundaries kept, {} rejected (g at the hit < {:.3}), {} without a zero crossing within {:.3}; \
@@ -91,15 +97,14 @@ pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
 }
 
 fn write_outputs(
-    args: &BoundaryArgs,
     out: &BoundaryOutput,
     g: &Volume,
-    inputs: &[PathBuf],
+    dir: &Path,
+    ext: &str,
+    report_dir: Option<&Path>,
+    inputs: &[&Path],
     progress: &Progress,
 ) -> Result<()> {
-    std::fs::create_dir_all(&args.output)
-        .with_context(|| format!("cannot create output folder {}", args.output.display()))?;
-    let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
     let mut files: Vec<(String, &Volume)> = vec![
         ("distance".into(), &out.distance),
         ("g_hit".into(), &out.g_hit),
@@ -112,28 +117,18 @@ fn write_outputs(
     for (name, v) in &out.alpha {
         files.push((name.clone(), v));
     }
-    let mut written = Vec::new();
-    let result = progress.step("writing", || -> Result<()> {
+    progress.step("writing", || -> Result<()> {
         for (name, v) in &files {
-            let path = args.output.join(format!("{name}{}", args.format.extension()));
-            write(&path, &MultiField::from((*v).clone()), &WriteOptions::default(), &inputs)
+            let path = dir.join(format!("{name}{ext}"));
+            write(&path, &MultiField::from((*v).clone()), &WriteOptions::default(), inputs)
                 .context("cannot write the output")?;
-            written.push(path);
         }
-        if let Some(dir) = &args.report {
-            std::fs::create_dir_all(dir).with_context(|| format!("cannot create report folder {}", dir.display()))?;
+        if let Some(report_dir) = report_dir {
             let report = out.report(g);
-            report.write(dir).context("cannot write the report")?;
+            report.write(report_dir).context("cannot write the report")?;
             progress
                 .note(&format!("mean dot product {:.6} over {} voxels with a boundary", report.mean_dot, report.hits));
         }
         Ok(())
-    });
-    if let Err(e) = result {
-        for p in &written {
-            let _ = std::fs::remove_file(p);
-        }
-        return Err(e);
-    }
-    Ok(())
+    })
 }

@@ -5,7 +5,7 @@ use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
 use mdtf_derive::{BORDER_NAMES, Border, DeriveParams, Item, Kernel, run_with_progress};
-use mdtf_volume::{MultiField, WriteOptions, write};
+use mdtf_volume::{Inputs, MultiField, OutputFolder, WriteOptions, write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -25,6 +25,9 @@ pub fn params(args: &DeriveArgs) -> Result<DeriveParams> {
 /// Reads the inputs, derives, writes one file per item.
 pub fn run(args: &DeriveArgs, progress: &Progress) -> Result<()> {
     let params = params(args)?;
+    let given: Vec<&Path> = args.inputs.iter().map(PathBuf::as_path).collect();
+    let inputs = Inputs::of(&given);
+    let folder = OutputFolder::begin(&args.output, &inputs)?;
     let opts = read_options(&args.read);
     let input = progress.step("reading", || read_inputs(args, &opts))?;
     let input = select_field(input, args.field.as_deref())?;
@@ -36,25 +39,14 @@ pub fn run(args: &DeriveArgs, progress: &Progress) -> Result<()> {
         .context("cannot derive")?;
     let seconds = start.elapsed().as_secs_f64();
 
-    std::fs::create_dir_all(&args.output)
-        .with_context(|| format!("cannot create output folder {}", args.output.display()))?;
-    let inputs: Vec<&Path> = args.inputs.iter().map(PathBuf::as_path).collect();
-    let mut written: Vec<PathBuf> = Vec::new();
-    let result = progress.step("writing", || -> Result<()> {
+    progress.step("writing", || -> Result<()> {
         for (item, mf) in &out.items {
-            let path = args.output.join(format!("{}{}", item.name(), args.format.extension()));
-            write(&path, mf, &WriteOptions::default(), &inputs).context("cannot write the output")?;
-            written.push(path);
+            let path = folder.path().join(format!("{}{}", item.name(), args.format.extension()));
+            write(&path, mf, &WriteOptions::default(), &given).context("cannot write the output")?;
         }
         Ok(())
-    });
-    if let Err(e) = result {
-        // Leave no half set of outputs behind.
-        for p in &written {
-            let _ = std::fs::remove_file(p);
-        }
-        return Err(e);
-    }
+    })?;
+    folder.publish(&inputs)?;
     progress.note(&format!(
         "derived {} with {} in {:.2} s ({:.0} Mvoxel/s) into {}",
         out.items.iter().map(|(i, _)| i.name()).collect::<Vec<_>>().join(", "),

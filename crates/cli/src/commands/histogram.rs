@@ -11,7 +11,8 @@ use mdtf_histogram::{
 };
 use mdtf_pipeline::boundary_chain::BoundaryChainParams;
 use mdtf_pipeline::channels;
-use mdtf_volume::{MultiField, Volume};
+use mdtf_volume::{Inputs, MultiField, OutputFolder, Volume};
+use std::path::{Path, PathBuf};
 
 fn spec_for(args: &HistogramArgs, i: usize, name: &str) -> Result<AxisSpec> {
     let mut spec = AxisSpec::qbert(name);
@@ -48,6 +49,10 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
         }
     }
     let scale = if args.scale == ScaleArg::Linear { Scale::Linear } else { Scale::Log };
+    let given: Vec<&Path> = [Some(&args.input), args.mask.as_ref()].into_iter().flatten().map(PathBuf::as_path).collect();
+    let inputs = Inputs::of(&given);
+    let folder = OutputFolder::begin(&args.output, &inputs)?;
+    let out = folder.path();
     let (input, _) = progress.step("reading", || read_input(&args.input, &args.read, &read_options(&args.read)))?;
     let kernel = args.kernel.as_deref().map(str::parse).transpose()?;
     let mut wanted: Vec<String> = args.axes.clone();
@@ -70,7 +75,6 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
         }
         None => None,
     };
-    std::fs::create_dir_all(&args.output).with_context(|| format!("cannot create {}", args.output.display()))?;
 
     let axes_of = |names: &[String]| -> Result<Vec<Axis>> {
         names
@@ -85,10 +89,10 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
     let axes = axes_of(&args.axes)?;
     let data: Vec<&[f32]> = args.axes.iter().filter_map(|n| get(n).map(Volume::samples)).collect();
     let h = progress.step("counting", || count(&data, axes, mask.as_deref()))?;
-    write_histogram(&args.output, &h, scale)?;
+    write_histogram(out, &h, scale)?;
     if h.axes.len() == 3 {
         for (a, b) in [(0, 1), (0, 2), (1, 2)] {
-            write_histogram(&args.output, &h.project(a, b), scale)?;
+            write_histogram(out, &h.project(a, b), scale)?;
         }
     }
     progress.note(&format!("{}: {} voxels counted", h.describe(scale), h.total()));
@@ -108,7 +112,7 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
         let mut stretched_axes = shared;
         stretched_axes[1].name = "g_hit".into();
         let stretched = count(&[v.samples(), g_hit.samples()], stretched_axes, Some(&traced))?;
-        write_stretched(&args.output, &normal, &stretched, scale)?;
+        write_stretched(out, &normal, &stretched, scale)?;
     }
     if args.hvol {
         let p = HvolParams { g_thresh: args.g_thresh, tent_width: args.tent_width, ..HvolParams::default() };
@@ -122,8 +126,9 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
             &value
         };
         let hv = progress.step("histogram volume", || histogram_volume_derived(values, &d, &p))?;
-        write_hvol(&args.output, &hv)?;
+        write_hvol(out, &hv)?;
         progress.note(&format!("histogram volume: sigma {:.4} world units, g_thresh {:.4}", hv.sigma, hv.g_thresh));
     }
+    folder.publish(&inputs)?;
     Ok(())
 }

@@ -8,9 +8,9 @@ use mdtf_boundary::AlphaMap;
 use mdtf_pack::{Dtype, MANIFEST_SCHEMA, PackParams, Profile, Provenance, pack, parse_tf, sha256_file};
 use mdtf_pipeline::boundary_chain::BoundaryChainParams;
 use mdtf_pipeline::{channels, pack_inputs};
-use mdtf_volume::Volume;
+use mdtf_volume::{Inputs, OutputFolder, Volume};
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Named channels, and the field names of a multi-field input (empty for a scalar one).
 type ChannelsAndFields = (Vec<(String, Volume)>, Vec<String>);
@@ -29,6 +29,9 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
             input.display()
         );
     }
+    let given: Vec<&Path> = [Some(input), args.tf.as_ref()].into_iter().flatten().map(PathBuf::as_path).collect();
+    let inputs = Inputs::of(&given);
+    let folder = OutputFolder::begin(output, &inputs)?;
     let (chans, fields) = progress.step("reading channels", || -> Result<ChannelsAndFields> {
         if input.is_dir() {
             let names = profile.channels(&[]);
@@ -44,7 +47,6 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         ranges.insert(name.to_string(), [a.trim().parse::<f64>()?, b.trim().parse::<f64>()?]);
     }
     let ranges = pack_inputs::ranges(&chans, &ranges)?;
-    std::fs::create_dir_all(output).with_context(|| format!("cannot create {}", output.display()))?;
     let provenance = Provenance {
         mdtf_version: env!("CARGO_PKG_VERSION").into(),
         input: Some(input.display().to_string()),
@@ -71,15 +73,16 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         Some(other) => bail!("--dtype: unknown type '{other}' (u8, u16, f16, f32)"),
     };
     let params = PackParams { profile, ranges, fields, dtype, nifti: args.nifti };
-    let m = progress.step("packing", || pack(&chans, &params, &luts, output, provenance, &BTreeMap::new()))?;
+    let m = progress.step("packing", || pack(&chans, &params, &luts, folder.path(), provenance, &BTreeMap::new()))?;
     if let Some(tf) = &args.tf
         && profile == Profile::GaussianTf
     {
         let text = std::fs::read_to_string(tf)?;
         let gaussians = parse_tf(&text).map_err(anyhow::Error::msg)?.gaussians();
         let json = serde_json::to_string_pretty(&gaussians)?;
-        mdtf_volume::write_file_atomically(&output.join("gaussians.json"), |w| w.write_all(json.as_bytes()))?;
+        mdtf_volume::write_file_atomically(&folder.path().join("gaussians.json"), |w| w.write_all(json.as_bytes()))?;
     }
+    folder.publish(&inputs)?;
     progress.note(&format!(
         "packed {} textures ({}) and manifest.json into {}",
         m.textures.len(),

@@ -5,7 +5,7 @@ use crate::input::{parse_size, parse_spacing, parse_triple, sample_type};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
 use mdtf_datagen::{MultiFieldPhantom, RadialPhantom, add_gaussian_noise, erf_sphere, min_extent};
-use mdtf_volume::{Format, Geometry, MultiField, SampleType, Volume, WriteOptions, write, write_volume};
+use mdtf_volume::{Format, Geometry, Inputs, OutputFolder, MultiField, SampleType, Volume, WriteOptions, write, write_volume};
 use std::path::{Path, PathBuf};
 
 /// Generates the phantom and, if asked, its truth.
@@ -20,10 +20,8 @@ pub fn run(args: &SynthArgs, progress: &Progress) -> Result<()> {
     }
     let geometry = Geometry::new(dims, spacing).with_origin(origin);
     let opts = WriteOptions { ty: sample_type(args.out_type), gzip: args.gzip };
-    let truth_dir = args.truth.as_deref();
-    if let Some(dir) = truth_dir {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create truth folder {}", dir.display()))?;
-    }
+    let truth_folder = args.truth.as_deref().map(|d| OutputFolder::begin(d, &Inputs::new())).transpose()?;
+    let truth_dir = truth_folder.as_ref().map(OutputFolder::path);
     let truth_path = |dir: &Path, name: &str| -> PathBuf { dir.join(format!("{name}{}", format.extension())) };
     let write_truth = |name: &str, mf: MultiField| -> Result<()> {
         if let Some(dir) = truth_dir {
@@ -81,8 +79,9 @@ pub fn run(args: &SynthArgs, progress: &Progress) -> Result<()> {
         }
     }
     progress.note(&format!("wrote {}", args.output.display()));
-    if let Some(dir) = truth_dir {
-        progress.note(&format!("wrote analytic truth into {}", dir.display()));
+    if let (Some(folder), Some(shown)) = (truth_folder, &args.truth) {
+        folder.publish(&Inputs::new())?;
+        progress.note(&format!("wrote analytic truth into {}", shown.display()));
     }
     Ok(())
 }

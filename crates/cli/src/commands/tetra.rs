@@ -5,6 +5,7 @@ use crate::input::{parse_size, read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result};
 use mdtf_pack::{Provenance, TetTable, parse_tf, sha256_file};
+use mdtf_volume::{Inputs, OutputFolder};
 use mdtf_tetra::{MeshReport, TetMesh, TetraParams, read_mesh, tetrahedralise, write_pack};
 
 /// Reads or meshes the input, computes everything, writes the pack folder atomically.
@@ -33,6 +34,8 @@ pub fn run(args: &TetraArgs, progress: &Progress) -> Result<()> {
         None => None,
     };
 
+    let inputs = Inputs::of(&[args.input.as_deref(), args.from_volume.as_deref(), args.tf.as_deref()].into_iter().flatten().collect::<Vec<_>>());
+    let folder = OutputFolder::begin(&args.output, &inputs)?;
     let (mesh, report, grid, source): (TetMesh, MeshReport, _, _) = match (&args.input, &args.from_volume) {
         (Some(path), _) => {
             let (mesh, report) = progress.step("reading the mesh", || read_mesh(path, args.scalar.as_deref()))?;
@@ -61,10 +64,9 @@ pub fn run(args: &TetraArgs, progress: &Progress) -> Result<()> {
         input_sha256: sha256_file(&source).ok(),
         stages: serde_json::json!({ "tetra": params }),
     };
-    let staging = mdtf_volume::staging_dir(&args.output)?;
     progress
-        .step("writing the pack", || write_pack(staging.path(), &mesh, &report, &out, grid.as_ref(), provenance))?;
-    mdtf_volume::publish_dir(staging, &args.output)?;
+        .step("writing the pack", || write_pack(folder.path(), &mesh, &report, &out, grid.as_ref(), provenance))?;
+    folder.publish(&inputs)?;
     let g_max = out.g.iter().copied().fold(0.0f32, f32::max);
     progress.note(&format!(
         "{} points, {} tetrahedra (longest edge {:.4}), g up to {g_max:.4}; tables: {}; pack in {}",

@@ -47,7 +47,7 @@ pub struct NrrdHeader {
     pub field_names: Option<Vec<String>>,
 }
 
-const MAX_HEADER_BYTES: usize = 1 << 20;
+pub(crate) const MAX_HEADER_BYTES: usize = 1 << 20;
 
 fn sample_type_of(name: &str) -> Option<SampleType> {
     let t = match name.trim() {

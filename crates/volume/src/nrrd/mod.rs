@@ -12,7 +12,7 @@ mod table;
 pub use header::{Encoding, NrrdHeader, read_header};
 pub use table::{TableAxis, write_counts_nrrd, write_table_bytes, write_table_nrrd};
 
-use crate::atomic::write_file_atomically;
+use crate::output::{FileId, OutputLock, StagedFile, publish_pair, sweep, write_file_atomically};
 use crate::dtype::{Endian, SampleType, encode_samples, first_unrepresentable};
 use crate::error::{Result, VolumeError};
 use crate::geometry::Geometry;
@@ -265,11 +265,7 @@ pub fn write_nrrd(path: &Path, mf: &MultiField, ty: SampleType, encoding: Encodi
             return Err(VolumeError::NotRepresentable { path: path.to_path_buf(), value, index, target: ty.name() });
         }
     }
-    let detached = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("nhdr"));
-    let data_name = detached.then(|| {
-        let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "data".into());
-        format!("{stem}{}", if encoding == Encoding::Gzip { ".raw.gz" } else { ".raw" })
-    });
+    let data_name = data_file_name(path, encoding == Encoding::Gzip);
     let header = header_text(mf, ty, encoding, data_name.as_deref());
     let slices: Vec<&[f32]> = mf.fields.iter().map(|f| f.data.as_slice().unwrap_or(&[])).collect();
     let write_samples = |w: &mut dyn Write| -> std::io::Result<()> {
@@ -290,10 +286,73 @@ pub fn write_nrrd(path: &Path, mf: &MultiField, ty: SampleType, encoding: Encodi
         }),
         Some(name) => {
             let data_path = path.parent().unwrap_or(Path::new("")).join(name);
-            write_file_atomically(&data_path, write_samples)?;
-            write_file_atomically(path, |w| w.write_all(header.as_bytes()))
+            let _lock = OutputLock::acquire(path)?;
+            let old_data = data_file_of_old_header(path, &data_path)?;
+            let data = StagedFile::write(&data_path, write_samples)?;
+            let staged_header = StagedFile::write(path, |w| w.write_all(header.as_bytes()))?;
+            publish_pair(staged_header, data, old_data.as_deref())?;
+            sweep(path);
+            Ok(())
         }
     }
+}
+
+/// The name of the data file mdtf writes beside a `.nhdr` header (none for
+/// an attached `.nrrd`).
+fn data_file_name(path: &Path, gzip: bool) -> Option<String> {
+    let detached = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("nhdr"));
+    detached.then(|| {
+        let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "data".into());
+        format!("{stem}{}", if gzip { ".raw.gz" } else { ".raw" })
+    })
+}
+
+/// The data file that writing `path` as NRRD would also write, if any.
+pub fn planned_data_file(path: &Path, gzip: bool) -> Option<PathBuf> {
+    data_file_name(path, gzip).map(|n| path.parent().unwrap_or(Path::new("")).join(n))
+}
+
+/// Whether the data file about to be written may be: it must be new, or be
+/// the data file of the header being replaced (or a link to it). Returns the
+/// old data file when the old header names it.
+fn data_file_of_old_header(header: &Path, data: &Path) -> Result<Option<PathBuf>> {
+    let Some(data_id) = FileId::of(data) else { return Ok(None) };
+    let named = detached_data_files(header);
+    if named.iter().any(|d| FileId::of(d).as_ref() == Some(&data_id)) {
+        Ok(named.into_iter().find(|d| FileId::of(d).as_ref() == Some(&data_id)))
+    } else {
+        Err(VolumeError::DataFileInTheWay { path: data.to_path_buf(), header: header.to_path_buf() })
+    }
+}
+
+/// The data files a detached header names (empty for an attached header, a
+/// file that is not NRRD, or multi-file data that mdtf does not read).
+pub fn detached_data_files(header: &Path) -> Vec<PathBuf> {
+    let Ok(file) = std::fs::File::open(header) else { return Vec::new() };
+    let mut reader = BufReader::new(file.take(header::MAX_HEADER_BYTES as u64 + 1));
+    let Ok(h) = read_header(header, &mut reader) else { return Vec::new() };
+    match h.data_file {
+        Some(name) if !name.starts_with("LIST") && !name.contains('%') => {
+            vec![header.parent().unwrap_or(Path::new(".")).join(name)]
+        }
+        _ => Vec::new(),
+    }
+}
+
+/// A detached header's text with its data file line naming `data_file`.
+pub(crate) fn with_data_file(text: &str, data_file: &str) -> String {
+    let mut out = String::with_capacity(text.len() + data_file.len());
+    for line in text.lines() {
+        let key = line.split(':').next().unwrap_or("").trim().to_ascii_lowercase();
+        if key == "data file" || key == "datafile" {
+            out.push_str("data file: ");
+            out.push_str(data_file);
+        } else {
+            out.push_str(line);
+        }
+        out.push('\n');
+    }
+    out
 }
 
 fn header_text(mf: &MultiField, ty: SampleType, encoding: Encoding, data_file: Option<&str>) -> String {

@@ -1,7 +1,7 @@
 //! NRRD for tables that are not volumes: histogram counts and lookup
 //! tables, with `axis mins` / `axis maxs` / `labels` describing each axis.
 
-use crate::atomic::write_file_atomically;
+use crate::output::write_file_atomically;
 use crate::error::Result;
 use std::path::Path;
 
