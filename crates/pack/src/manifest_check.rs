@@ -65,7 +65,10 @@ impl Manifest {
         }
         for c in &self.channels {
             let Some(t) = self.textures.iter().find(|t| t.name == c.texture) else {
-                return bad(format!("channel {} names texture {}, which the manifest does not list", c.name, c.texture));
+                return bad(format!(
+                    "channel {} names texture {}, which the manifest does not list",
+                    c.name, c.texture
+                ));
             };
             if c.component >= t.components {
                 return bad(format!(

@@ -12,7 +12,9 @@ use mdtf_histogram::{
     Axis, AxisSpec, HvolParams, Scale, count, histogram_volume, hit_mask, write_histogram, write_hvol, write_stretched,
 };
 use mdtf_pack::{PackParams, PackWriter, Profile, Provenance, parse_tf};
-use mdtf_volume::{Geometry, Inputs, MultiField, OutputFolder, ReadOptions, Volume, WriteOptions, write_file_atomically};
+use mdtf_volume::{
+    Geometry, Inputs, MultiField, OutputFolder, ReadOptions, Volume, WriteOptions, write_file_atomically,
+};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -100,8 +100,8 @@ fn load_piece(path: &Path) -> Result<UnstructuredGridPiece, TetraError> {
         return Err(read_error(path, "no such file"));
     }
     // vtkio asserts on some malformed inputs; a panic there is a bad file, not a bug of ours
-    let imported = catch_quietly(|| Vtk::import(path))
-        .map_err(|_| read_error(path, "malformed VTK file (the parser gave up)"))?;
+    let imported =
+        catch_quietly(|| Vtk::import(path)).map_err(|_| read_error(path, "malformed VTK file (the parser gave up)"))?;
     let mut vtk = imported.map_err(|e| {
         read_error(
             path,

@@ -1,10 +1,10 @@
 //! Reading and writing by file name: the extension picks the format.
 
-use crate::output::Inputs;
 use crate::dtype::SampleType;
 use crate::error::{Result, VolumeError};
 use crate::nifti_io::{read_nifti_with_info, write_nifti};
 use crate::nrrd::{Encoding, read_nrrd_with_info, write_nrrd};
+use crate::output::Inputs;
 use crate::samples::{FileInfo, ReadOptions};
 use crate::volume::{MultiField, Volume};
 use std::path::Path;

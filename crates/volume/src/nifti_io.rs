@@ -6,11 +6,11 @@
 //! read and decoded here, so that a truncated or hostile file is an error
 //! with numbers rather than an allocation or a panic.
 
-use crate::output::write_file_atomically;
 use crate::dtype::{Endian, SampleType, first_unrepresentable};
 use crate::error::{Result, VolumeError};
 use crate::geometry::Geometry;
 use crate::limits::check_dims;
+use crate::output::write_file_atomically;
 use crate::samples::{
     FieldAxis, FileInfo, ReadOptions, SampleLayout, drain_rest, open_maybe_gz, read_decoded, write_fields,
 };
@@ -50,7 +50,10 @@ pub fn read_nifti_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiFie
     if got < HEADER_BYTES {
         return Err(VolumeError::header(path, format!("only {got} bytes, a NIfTI-1 header needs 348")));
     }
-    let sizeof_hdr = [i32::from_le_bytes([head[0], head[1], head[2], head[3]]), i32::from_be_bytes([head[0], head[1], head[2], head[3]])];
+    let sizeof_hdr = [
+        i32::from_le_bytes([head[0], head[1], head[2], head[3]]),
+        i32::from_be_bytes([head[0], head[1], head[2], head[3]]),
+    ];
     if !sizeof_hdr.contains(&(HEADER_BYTES as i32)) {
         return Err(VolumeError::header(
             path,
@@ -117,7 +120,9 @@ fn layout_of(path: &Path, h: &NiftiHeader) -> Result<SampleLayout> {
         let (as_stored, other) = if b < a { (b, a) } else { (a, b) };
         return Err(VolumeError::header(
             path,
-            format!("dim[0] (the number of dimensions) is {as_stored} ({other} in the other byte order); it must be 1 to 7"),
+            format!(
+                "dim[0] (the number of dimensions) is {as_stored} ({other} in the other byte order); it must be 1 to 7"
+            ),
         ));
     }
     let raw: Vec<u64> = h.dim[1..=rank].iter().map(|&d| d as u64).collect();

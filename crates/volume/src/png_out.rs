@@ -1,8 +1,8 @@
 //! 8-bit PNG pictures (histograms, previews), written atomically with a
 //! description in a tEXt chunk.
 
-use crate::output::write_file_atomically;
 use crate::error::Result;
+use crate::output::write_file_atomically;
 use std::path::Path;
 
 /// Samples per pixel of an 8-bit PNG.

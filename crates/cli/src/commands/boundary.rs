@@ -75,7 +75,15 @@ pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
         _ => bail!("give either a value volume, or all of --g, --f2 and --normal"),
     };
     let seconds = start.elapsed().as_secs_f64();
-    write_outputs(&out, &g, folder.path(), args.format.extension(), report_folder.as_ref().map(OutputFolder::path), &given, progress)?;
+    write_outputs(
+        &out,
+        &g,
+        folder.path(),
+        args.format.extension(),
+        report_folder.as_ref().map(OutputFolder::path),
+        &given,
+        progress,
+    )?;
     folder.publish(&inputs)?;
     if let Some(r) = report_folder {
         r.publish(&inputs)?;

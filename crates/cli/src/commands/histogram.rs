@@ -49,7 +49,8 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
         }
     }
     let scale = if args.scale == ScaleArg::Linear { Scale::Linear } else { Scale::Log };
-    let given: Vec<&Path> = [Some(&args.input), args.mask.as_ref()].into_iter().flatten().map(PathBuf::as_path).collect();
+    let given: Vec<&Path> =
+        [Some(&args.input), args.mask.as_ref()].into_iter().flatten().map(PathBuf::as_path).collect();
     let inputs = Inputs::of(&given);
     let folder = OutputFolder::begin(&args.output, &inputs)?;
     let out = folder.path();

@@ -5,7 +5,9 @@ use crate::input::{parse_size, parse_spacing, parse_triple, sample_type};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
 use mdtf_datagen::{MultiFieldPhantom, RadialPhantom, add_gaussian_noise, erf_sphere, min_extent};
-use mdtf_volume::{Format, Geometry, Inputs, OutputFolder, MultiField, SampleType, Volume, WriteOptions, write, write_volume};
+use mdtf_volume::{
+    Format, Geometry, Inputs, MultiField, OutputFolder, SampleType, Volume, WriteOptions, write, write_volume,
+};
 use std::path::{Path, PathBuf};
 
 /// Generates the phantom and, if asked, its truth.

@@ -5,8 +5,8 @@ use crate::input::{parse_size, read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result};
 use mdtf_pack::{Provenance, TetTable, parse_tf, sha256_file};
-use mdtf_volume::{Inputs, OutputFolder};
 use mdtf_tetra::{MeshReport, TetMesh, TetraParams, read_mesh, tetrahedralise, write_pack};
+use mdtf_volume::{Inputs, OutputFolder};
 
 /// Reads or meshes the input, computes everything, writes the pack folder atomically.
 pub fn run(args: &TetraArgs, progress: &Progress) -> Result<()> {
@@ -34,7 +34,12 @@ pub fn run(args: &TetraArgs, progress: &Progress) -> Result<()> {
         None => None,
     };
 
-    let inputs = Inputs::of(&[args.input.as_deref(), args.from_volume.as_deref(), args.tf.as_deref()].into_iter().flatten().collect::<Vec<_>>());
+    let inputs = Inputs::of(
+        &[args.input.as_deref(), args.from_volume.as_deref(), args.tf.as_deref()]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>(),
+    );
     let folder = OutputFolder::begin(&args.output, &inputs)?;
     let (mesh, report, grid, source): (TetMesh, MeshReport, _, _) = match (&args.input, &args.from_volume) {
         (Some(path), _) => {
@@ -64,8 +69,7 @@ pub fn run(args: &TetraArgs, progress: &Progress) -> Result<()> {
         input_sha256: sha256_file(&source).ok(),
         stages: serde_json::json!({ "tetra": params }),
     };
-    progress
-        .step("writing the pack", || write_pack(folder.path(), &mesh, &report, &out, grid.as_ref(), provenance))?;
+    progress.step("writing the pack", || write_pack(folder.path(), &mesh, &report, &out, grid.as_ref(), provenance))?;
     folder.publish(&inputs)?;
     let g_max = out.g.iter().copied().fold(0.0f32, f32::max);
     progress.note(&format!(

@@ -262,7 +262,13 @@ fn parse_header(path: &Path, lines: &[String]) -> Result<NrrdHeader> {
                 ));
             }
             "kinds" => h.kinds = Some(value.split_whitespace().map(|s| s.to_ascii_lowercase()).collect()),
-            "data file" | "datafile" => h.data_file = Some(value.to_string()),
+            "data file" | "datafile" => {
+                h.data_file = Some(value.to_string());
+                if value.starts_with("LIST") {
+                    // the remaining lines are the data files' names, not fields
+                    break;
+                }
+            }
             "byte skip" | "byteskip" => h.byte_skip = value.parse().map_err(|_| bad("byte skip"))?,
             "line skip" | "lineskip" => h.line_skip = value.parse().map_err(|_| bad("line skip"))?,
             _ => {} // content, units, centers, labels ...: informative only

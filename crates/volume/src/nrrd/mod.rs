@@ -12,11 +12,11 @@ mod table;
 pub use header::{Encoding, NrrdHeader, read_header};
 pub use table::{TableAxis, write_counts_nrrd, write_table_bytes, write_table_nrrd};
 
-use crate::output::{FileId, OutputLock, StagedFile, publish_pair, sweep, write_file_atomically};
 use crate::dtype::{Endian, SampleType, encode_samples, first_unrepresentable};
 use crate::error::{Result, VolumeError};
 use crate::geometry::Geometry;
 use crate::limits::check_dims;
+use crate::output::{FileId, OutputLock, StagedFile, publish_pair, sweep, write_file_atomically};
 use crate::samples::{
     FieldAxis, FileInfo, ReadOptions, SampleLayout, decode_fields, drain_rest, read_decoded, write_fields,
 };
@@ -51,7 +51,8 @@ pub fn read_nrrd_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiFiel
                 ));
             }
             let dp = path.parent().unwrap_or(Path::new(".")).join(name);
-            let f = std::fs::File::open(&dp).map_err(|e| VolumeError::io(&dp, e))?;
+            let f = std::fs::File::open(&dp)
+                .map_err(|e| VolumeError::header(path, format!("cannot open its data file {}: {e}", dp.display())))?;
             (dp, Box::new(BufReader::new(f)))
         }
     };
@@ -292,6 +293,7 @@ pub fn write_nrrd(path: &Path, mf: &MultiField, ty: SampleType, encoding: Encodi
             let staged_header = StagedFile::write(path, |w| w.write_all(header.as_bytes()))?;
             publish_pair(staged_header, data, old_data.as_deref())?;
             sweep(path);
+            sweep(&data_path);
             Ok(())
         }
     }
@@ -318,6 +320,13 @@ pub fn planned_data_file(path: &Path, gzip: bool) -> Option<PathBuf> {
 fn data_file_of_old_header(header: &Path, data: &Path) -> Result<Option<PathBuf>> {
     let Some(data_id) = FileId::of(data) else { return Ok(None) };
     let named = detached_data_files(header);
+    // A header left pointing at a partial link by a killed write: `data` is
+    // the new data that write had already put in place.
+    let at_partial_link =
+        |d: &PathBuf| d.file_name().is_some_and(|n| n.to_string_lossy().starts_with(crate::output::PARTIAL_PREFIX));
+    if !named.is_empty() && named.iter().all(at_partial_link) {
+        return Ok(None);
+    }
     if named.iter().any(|d| FileId::of(d).as_ref() == Some(&data_id)) {
         Ok(named.into_iter().find(|d| FileId::of(d).as_ref() == Some(&data_id)))
     } else {

@@ -1,8 +1,8 @@
 //! NRRD for tables that are not volumes: histogram counts and lookup
 //! tables, with `axis mins` / `axis maxs` / `labels` describing each axis.
 
-use crate::output::write_file_atomically;
 use crate::error::Result;
+use crate::output::write_file_atomically;
 use std::path::Path;
 
 /// One axis of a table: its label and the value range its samples cover

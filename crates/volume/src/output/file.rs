@@ -22,7 +22,9 @@ impl StagedFile {
     /// Writes the bytes `fill` produces into a partial file beside `target`.
     pub(crate) fn write(target: &Path, fill: impl FnOnce(&mut dyn Write) -> std::io::Result<()>) -> Result<Self> {
         let (parent, name) = super::parent_and_name(target)?;
-        let tmp = staging::builder(&prefix_for(&name.to_string_lossy())).tempfile_in(&parent).map_err(|e| VolumeError::io(target, e))?;
+        let tmp = staging::builder(&prefix_for(&name.to_string_lossy()))
+            .tempfile_in(&parent)
+            .map_err(|e| VolumeError::io(target, e))?;
         let (file, partial) = tmp.keep().map_err(|e| VolumeError::io(target, e.error))?;
         register(&partial);
         let staged = StagedFile { partial, target: parent.join(&name), published: false };

@@ -115,10 +115,9 @@ impl Inputs {
     /// Refuses `target` when it is one of the inputs.
     pub fn refuse_target(&self, target: &Path) -> Result<()> {
         match self.find(target) {
-            Some(input) => Err(VolumeError::WouldOverwriteInput {
-                path: target.to_path_buf(),
-                input: input.to_path_buf(),
-            }),
+            Some(input) => {
+                Err(VolumeError::WouldOverwriteInput { path: target.to_path_buf(), input: input.to_path_buf() })
+            }
             None => Ok(()),
         }
     }

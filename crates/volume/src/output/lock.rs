@@ -39,6 +39,8 @@ impl OutputLock {
                 Err(_) => return Ok(OutputLock { path, file }),
             }
             if still_named(&file, &path) {
+                // listed, so that a signal handler removes it with the partial outputs
+                super::staging::register(&path);
                 return Ok(OutputLock { path, file });
             }
         }
@@ -64,9 +66,11 @@ fn still_named(file: &File, path: &Path) -> bool {
 impl Drop for OutputLock {
     fn drop(&mut self) {
         // Unlink while still holding the lock; a waiting run then re-opens.
+        let mut live = super::staging::live();
         if still_named(&self.file, &self.path) {
             let _ = std::fs::remove_file(&self.path);
         }
+        super::staging::unregister_locked(&mut live, &self.path);
     }
 }
 
