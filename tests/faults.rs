@@ -148,3 +148,55 @@ fn a_second_run_into_an_output_being_written_is_refused_at_once() {
     assert_complete_run_output(&dir.path().join("out"), "after both");
     assert_eq!(leftovers(dir.path()), Vec::<String>::new());
 }
+
+/// Mounts a small tmpfs at `dir`; false where mounting is not permitted.
+fn mount_small_disk(dir: &Path, mib: usize) -> bool {
+    Command::new("mount")
+        .args(["-t", "tmpfs", "-o", &format!("size={mib}m"), "tmpfs", dir.to_str().unwrap()])
+        .output()
+        .is_ok_and(|o| o.status.success())
+}
+
+#[test]
+fn a_full_disk_leaves_the_old_output_and_nothing_partial() {
+    let dir = tempfile::tempdir().unwrap();
+    let disk = dir.path().join("disk");
+    std::fs::create_dir(&disk).unwrap();
+    if !mount_small_disk(&disk, 4) {
+        eprintln!("skipped: this machine does not permit mounting a tmpfs (needs root)");
+        return;
+    }
+    let pipeline = shipped_pipeline("distance-tf");
+    let run = |size: &str| {
+        Command::new(mdtf_path())
+            .args(["run", pipeline.to_str().unwrap(), "-o", "out", "--set", &format!("input.size={size}"), "-q"])
+            .current_dir(&disk)
+            .output()
+            .unwrap()
+    };
+    let small = run("16");
+    let result = std::panic::catch_unwind(|| {
+        assert!(small.status.success(), "{}", String::from_utf8_lossy(&small.stderr));
+        let before = std::fs::read(disk.join("out/run_report.json")).unwrap();
+        let big = run("96");
+        let err = String::from_utf8_lossy(&big.stderr);
+        assert_eq!(big.status.code(), Some(1), "{err}");
+        assert!(err.contains("No space left"), "{err}");
+        assert_eq!(std::fs::read(disk.join("out/run_report.json")).unwrap(), before);
+        assert_complete_run_output(&disk.join("out"), "after the full disk");
+        assert_eq!(leftovers(&disk), Vec::<String>::new());
+        // a new folder that cannot be filled is not left behind, half or empty
+        let derive = Command::new(mdtf_path())
+            .args(["synth", "erf-sphere", "-o", "big.nii", "--size", "160", "-q"])
+            .current_dir(&disk)
+            .output()
+            .unwrap();
+        assert_eq!(derive.status.code(), Some(1));
+        assert!(!disk.join("big.nii").exists());
+        assert_eq!(leftovers(&disk), Vec::<String>::new());
+    });
+    let _ = Command::new("umount").arg(&disk).status();
+    if let Err(e) = result {
+        std::panic::resume_unwind(e);
+    }
+}
