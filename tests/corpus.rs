@@ -300,11 +300,13 @@ fn readers() -> Vec<Case> {
         }),
         // legacy VTK and VTU meshes
         info_of("empty.vtk", Vec::new(), &["empty.vtk"]),
-        info_of("notvtk.vtk", b"hello\nworld\n".to_vec(), &["parse"]),
-        info_of("points.vtk", tet_vtk("CELLS 1 5\n4 0 1 2 3\n").replace("POINTS 4", "POINTS 9").into_bytes(), &["parse"]),
-        info_of("minus.vtk", tet_vtk("CELLS 1 5\n4 0 1 2 -1\n").into_bytes(), &["parse"]),
-        info_of("hugecount.vtk", tet_vtk("CELLS 1 5\n4 0 1 2 3\n").replace("POINTS 4", "POINTS 999999999999").into_bytes(), &["parse"]),
-        info_of("cut.vtk", tet_vtk("CELLS 1 5\n4 0 1 2 3\n").as_bytes()[..120].to_vec(), &["parse"]),
+        info_of("notvtk.vtk", b"hello\nworld\n".to_vec(), &["first line", "legacy VTK"]),
+        info_of("points.vtk", tet_vtk("CELLS 1 5\n4 0 1 2 3\n").replace("POINTS 4", "POINTS 9").into_bytes(), &["POINTS 9 needs 27 numbers"]),
+        info_of("minus.vtk", tet_vtk("CELLS 1 5\n4 0 1 2 -1\n").into_bytes(), &["point index -1 is out of range"]),
+        info_of("hugecount.vtk", tet_vtk("CELLS 1 5\n4 0 1 2 3\n").replace("POINTS 4", "POINTS 999999999999").into_bytes(), &["needs 2999999999997 numbers"]),
+        info_of("cut.vtk", tet_vtk("CELLS 1 5\n4 0 1 2 3\n").as_bytes()[..120].to_vec(), &["ends before its CELL_TYPES"]),
+        info_of("nan.vtk", tet_vtk("CELLS 1 5\n4 0 1 2 3\n").replacen("1 0 0", "nan 0 0", 1).into_bytes(), &["'nan' is not a finite number"]),
+        info_of("pointdata.vtk", tet_vtk("CELLS 1 5\n4 0 1 2 3\n").replace("POINT_DATA 4", "POINT_DATA 5").into_bytes(), &["POINT_DATA 5, but the file has 4 points"]),
         info_of(
             "grid.vtk",
             b"# vtk DataFile Version 4.2\nx\nASCII\nDATASET STRUCTURED_POINTS\nDIMENSIONS 2 2 2\nSPACING 1 1 1\nORIGIN 0 0 0\n".to_vec(),

@@ -15,6 +15,7 @@
 mod cells;
 mod from_volume;
 mod gradient;
+mod legacy_check;
 mod mesh;
 mod pack_mesh;
 mod vtk_io;

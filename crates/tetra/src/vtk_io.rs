@@ -103,13 +103,20 @@ fn load_piece(path: &Path) -> Result<UnstructuredGridPiece, TetraError> {
     let imported =
         catch_quietly(|| Vtk::import(path)).map_err(|_| read_error(path, "malformed VTK file (the parser gave up)"))?;
     let mut vtk = imported.map_err(|e| {
-        read_error(
-            path,
-            format!(
-                "cannot parse: {e} (the parser's words; check that the file is complete and that \
-                 its point and cell counts match the data)"
+        let explained = (ext == "vtk")
+            .then(|| std::fs::read(path).ok())
+            .flatten()
+            .and_then(|bytes| crate::legacy_check::explain(&String::from_utf8_lossy(&bytes)));
+        match explained {
+            Some(why) => read_error(path, format!("malformed legacy VTK: {why}")),
+            None => read_error(
+                path,
+                format!(
+                    "cannot parse: {e} (the parser's words; check that the file is complete and that \
+                     its point and cell counts match the data)"
+                ),
             ),
-        )
+        }
     })?;
     vtk.load_all_pieces().map_err(|e| read_error(path, format!("cannot load pieces: {e}")))?;
     let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
