@@ -37,7 +37,7 @@ impl Manifest {
             return bad(format!("geometry dims {:?} hold no voxel", g.dims));
         }
         if g.dims.iter().try_fold(1usize, |n, &d| n.checked_mul(d)).is_none() {
-            return bad(format!("geometry dims {:?} hold more voxels than can be counted", g.dims));
+            return bad(format!("geometry dims {:?} hold more voxels than this machine can count", g.dims));
         }
         if !g.spacing.iter().all(|s| s.is_finite() && *s > 0.0) {
             return bad(format!("geometry spacing {:?} must be positive and finite", g.spacing));

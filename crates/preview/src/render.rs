@@ -199,6 +199,28 @@ fn first_step(origin: [f64; 3], dir: [f64; 3], ext: &[f64], step: f64) -> usize 
 /// step: more than any grid with spacings within a ratio of 8 needs.
 const MAX_STEPS_PER_DIAGONAL_VOXEL: f64 = 8.0;
 
+/// The sampling of every ray: step in world units and in units of the
+/// smallest spacing (for the opacity correction), and samples per ray.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct RaySteps {
+    world: f64,
+    voxels: f64,
+    count: usize,
+}
+
+/// A ray crosses at most the diagonal (2 `radius`, world units). In voxels
+/// that is bounded by the grid, but in steps of the smallest spacing it grows
+/// with the spacings' ratio, which a manifest may claim to be anything. The
+/// samples per ray are capped at a fixed multiple of the voxel diagonal,
+/// widening the step (and its opacity correction) only for grids more
+/// anisotropic than that.
+fn ray_steps(g: &mdtf_volume::Geometry, radius: f64, step: f64) -> RaySteps {
+    let l_min = g.min_spacing();
+    let max_steps = (MAX_STEPS_PER_DIAGONAL_VOXEL * dims_diagonal(g.dims) / step).ceil();
+    let world = (step * l_min).max(2.0 * radius / max_steps);
+    RaySteps { world, voxels: world / l_min, count: (2.0 * radius / world).ceil() as usize }
+}
+
 /// Length of the grid's diagonal in voxels (at least 1).
 fn dims_diagonal(dims: [usize; 3]) -> f64 {
     dims.iter().map(|&d| (d.max(1) as f64 - 1.0).powi(2)).sum::<f64>().sqrt().max(1.0)
@@ -399,17 +421,7 @@ fn render_impl(
         dir[0] * right[1] - dir[1] * right[0],
     ];
     let up = [-up[0], -up[1], -up[2]];
-    let l_min = g.min_spacing();
-    // A ray crosses at most the diagonal; in voxels that is bounded by the
-    // grid, but in steps of the smallest spacing it grows with the spacings'
-    // ratio (a manifest may claim any). Cap the samples per ray at a fixed
-    // multiple of the voxel diagonal, widening the step (with its opacity
-    // correction) only for grids more anisotropic than that.
-    let diag_voxels = dims_diagonal(g.dims);
-    let max_steps = (MAX_STEPS_PER_DIAGONAL_VOXEL * diag_voxels / cam.step).ceil();
-    let step_world = (cam.step * l_min).max(2.0 * radius / max_steps);
-    let step_vox = step_world / l_min;
-    let steps = (2.0 * radius / step_world).ceil() as usize;
+    let RaySteps { world: step_world, voxels: step_vox, count: steps } = ray_steps(g, radius, cam.step);
     let get = |n: &str| channels.get(n);
     let data = |n: &str| get(n).map(|v| v.samples());
     let (nx, ny, nz, gch) = (data("nx"), data("ny"), data("nz"), data("g"));
@@ -591,6 +603,26 @@ fn render_impl(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn rays_take_the_asked_step_and_a_bounded_count_on_any_grid() {
+        let radius = |g: &mdtf_volume::Geometry| {
+            (0..3).map(|a| ((g.dims[a] as f64 - 1.0) * g.spacing[a]).powi(2)).sum::<f64>().sqrt() / 2.0
+        };
+        let iso = mdtf_volume::Geometry::new([64, 64, 64], [0.5, 0.5, 0.5]);
+        let r = ray_steps(&iso, radius(&iso), 0.5);
+        assert_eq!((r.world, r.voxels), (0.25, 0.5));
+        // spacings 1 : 8 still sample at the asked step
+        let aniso = mdtf_volume::Geometry::new([64, 64, 64], [1.0, 1.0, 8.0]);
+        assert_eq!(ray_steps(&aniso, radius(&aniso), 0.5).voxels, 0.5);
+        // a claimed spacing of 1e7 (or 1e19) beside 1 no longer means 1e7 times the samples
+        for big in [1e7, 1e19] {
+            let g = mdtf_volume::Geometry::new([16, 16, 16], [big, 1.0, 1.0]);
+            let r = ray_steps(&g, radius(&g), 0.5);
+            let bound = MAX_STEPS_PER_DIAGONAL_VOXEL * dims_diagonal(g.dims) / 0.5 + 1.0;
+            assert!(r.count as f64 <= bound, "{big}: {} samples per ray", r.count);
+        }
+    }
 
     /// Whether any cell of the box is opaque, by walking it.
     fn walk(t: &Table, cells: &[(usize, usize)], axis: usize, offset: usize, stride: usize) -> bool {
