@@ -12,7 +12,8 @@
 //! `cargo test` runs a short round ([`SHORT_CASES`] per reader, proptest
 //! seeds); `cargo test --release -p mdtf-e2e --test fuzz -- --ignored
 //! --nocapture` runs the long one, `MDTF_FUZZ_CASES` per reader
-//! (1,000,000 by default), and prints cases and time per reader.
+//! (1,000,000 by default), and prints cases and time per reader
+//! (`MDTF_FUZZ_ONLY=VTK` runs the readers whose name holds "VTK").
 
 use peak_alloc::PeakAlloc;
 use rand::{Rng, SeedableRng};
@@ -414,7 +415,8 @@ fn run_all(cases: usize, print: bool) {
     // panics are caught and counted; their messages would only flood the output
     std::panic::set_hook(Box::new(|_| {}));
     let mut failed = Vec::new();
-    for (k, reader) in readers.iter().enumerate() {
+    let only = std::env::var("MDTF_FUZZ_ONLY").unwrap_or_default();
+    for (k, reader) in readers.iter().enumerate().filter(|(_, r)| r.name.contains(only.as_str())) {
         let round = fuzz(reader, cases, 0x6d64_7466 + k as u64);
         if print {
             println!(

@@ -8,7 +8,17 @@ use std::path::PathBuf;
 /// (NIfTI, NRRD, raw), measures derivatives, filters, traces boundaries,
 /// builds histograms and packs textures for renderers.
 #[derive(Debug, Parser)]
-#[command(name = "mdtf", version, propagate_version = true, max_term_width = 100)]
+#[command(
+    name = "mdtf",
+    version,
+    propagate_version = true,
+    max_term_width = 100,
+    after_help = "Outputs: every file is written under a temporary name beside it and renamed into place; an \
+output folder is built beside its target and swapped in in one step, so a failed or interrupted run leaves the old \
+output as it was and nothing partial. mdtf replaces only folders it made (they hold a .mdtf-output list of their \
+files) and never an input: a folder of yours, one holding an input, one you added files to, or the current folder \
+is refused. One run at a time per output; Ctrl-C removes the partial output."
+)]
 pub struct Cli {
     #[command(flatten)]
     pub global: GlobalArgs,
@@ -543,10 +553,12 @@ pub struct PackArgs {
 #[derive(Debug, Args)]
 #[command(
     after_help = "A pipeline file (TOML) names the input (a file, or a built-in phantom), the stage parameters\n\
-([derive], [prefilter], [boundary], [histogram], [pack]) and the channels to keep as volumes. The run\n\
-writes into a temporary folder beside OUT and renames it to OUT at the end, so a failed run leaves OUT as\n\
-it was. OUT holds pack/ (textures + manifest.json), histogram/, boundary/ (the Fig. 2 report), volumes/\n\
-(kept channels) and run_report.json (per stage: wall time, voxels/s, peak memory, outputs).\n\n\
+([derive], [prefilter], [boundary], [histogram], [pack]) and the channels to keep as volumes.\n\
+The run writes into a temporary folder beside OUT and swaps it in at the end, so a failed run\n\
+leaves OUT as it was. OUT must be new, empty or an earlier mdtf output holding no input\n\
+(mdtf --help says why). OUT holds pack/ (textures + manifest.json), histogram/, boundary/ (the\n\
+Fig. 2 report), volumes/ (kept channels) and run_report.json (per stage: wall time, voxels/s,\n\
+peak memory, outputs).\n\n\
 Examples:\n  mdtf run pipelines/slicer-3dtf.toml\n  mdtf run pipelines/distance-tf.toml --input ct.nii.gz -o ct-pack\n  \
     mdtf run pipelines/slicer-3dtf.toml --set input.size=64 --set derive.kernel=central"
 )]

@@ -47,7 +47,12 @@ pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
         [&args.input, &args.g, &args.f2, &args.normal].into_iter().flatten().map(PathBuf::as_path).collect();
     let inputs = Inputs::of(&given);
     let folder = OutputFolder::begin(&args.output, &inputs)?;
-    let report_folder = args.report.as_ref().map(|d| OutputFolder::begin(d, &inputs)).transpose()?;
+    // a report inside the output folder (often the folder itself) is written with it
+    let report_inside = args.report.as_ref().and_then(|r| r.strip_prefix(&args.output).ok()).map(Path::to_path_buf);
+    let report_folder = match (&args.report, &report_inside) {
+        (Some(d), None) => Some(OutputFolder::begin(d, &inputs)?),
+        _ => None,
+    };
     let start = Instant::now();
     let (out, g) = match (&args.input, &args.g, &args.f2, &args.normal) {
         (Some(input), None, None, None) => {
@@ -75,15 +80,12 @@ pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
         _ => bail!("give either a value volume, or all of --g, --f2 and --normal"),
     };
     let seconds = start.elapsed().as_secs_f64();
-    write_outputs(
-        &out,
-        &g,
-        folder.path(),
-        args.format.extension(),
-        report_folder.as_ref().map(OutputFolder::path),
-        &given,
-        progress,
-    )?;
+    let report_dir = match (&report_folder, &report_inside) {
+        (Some(f), _) => Some(f.path().to_path_buf()),
+        (None, Some(rel)) => Some(folder.path().join(rel)),
+        (None, None) => None,
+    };
+    write_outputs(&out, &g, folder.path(), args.format.extension(), report_dir.as_deref(), &given, progress)?;
     folder.publish(&inputs)?;
     if let Some(r) = report_folder {
         r.publish(&inputs)?;
@@ -133,6 +135,8 @@ fn write_outputs(
         }
         if let Some(report_dir) = report_dir {
             let report = out.report(g);
+            std::fs::create_dir_all(report_dir)
+                .with_context(|| format!("cannot create the report folder {}", report_dir.display()))?;
             report.write(report_dir).context("cannot write the report")?;
             progress
                 .note(&format!("mean dot product {:.6} over {} voxels with a boundary", report.mean_dot, report.hits));
