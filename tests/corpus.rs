@@ -105,11 +105,14 @@ fn manifest_edit(dir: &Path, edit: impl Fn(&mut serde_json::Value)) {
     std::fs::write(&p, serde_json::to_string_pretty(&m).unwrap()).unwrap();
 }
 
+/// Prepares a case's folder and returns the command's arguments.
+type Setup = Box<dyn Fn(&Path) -> Vec<String>>;
+
 /// One case: prepares its folder, returns the arguments, and the words the
 /// message must hold (the file's name among them).
 struct Case {
     name: &'static str,
-    setup: Box<dyn Fn(&Path) -> Vec<String>>,
+    setup: Setup,
     expect: Vec<&'static str>,
 }
 

@@ -38,13 +38,16 @@ const DEFLATE_MAX_RATIO: usize = 1032;
 /// Cases per reader in `cargo test`.
 const SHORT_CASES: usize = 300;
 
+/// Reads one input (writing it to a file first where the reader needs one).
+type ReadOne = Box<dyn Fn(&[u8]) + Send + Sync>;
+
 /// One reader under test: seeds, and how to read one input.
 struct Reader {
     name: &'static str,
     seeds: Vec<Vec<u8>>,
     text: bool,
     gzip: bool,
-    read: Box<dyn Fn(&[u8]) + Send + Sync>,
+    read: ReadOne,
 }
 
 const INTERESTING_TEXT: &[&str] = &[

@@ -72,7 +72,9 @@ pub fn python() -> String {
     match ok {
         Ok(o) if o.status.success() => py,
         _ => panic!(
-            "{py} lacks nibabel/pynrrd/numpy/meshio: run `{py} -m pip install nibabel pynrrd numpy meshio` (or set MDTF_PYTHON)"
+            "{py} lacks nibabel, pynrrd, numpy or meshio, the reference readers of the interop tests: run the tests with \
+             `bash tests/run.sh`, which installs them (tests/requirements.txt) into target/test-venv, or set MDTF_PYTHON to a \
+             Python that has them"
         ),
     }
 }

@@ -140,7 +140,7 @@ fn walk(t: &mut Tokens) -> Result<(), String> {
                         }
                         let per: usize =
                             k.parse().map_err(|_| format!("line {l}: cell {c}: '{k}' is not a point count"))?;
-                        used += 1 + per;
+                        used = used.saturating_add(1).saturating_add(per);
                         if used > size {
                             return Err(format!(
                                 "line {l}: cell {c} goes past the {size} numbers CELLS {n} {size} announces"
@@ -249,6 +249,7 @@ mod tests {
                 "CELL_TYPES 2, but CELLS has 1 cells",
             ),
             (mesh(pts, "CELLS x 5\n"), "CELLS count 'x' is not a whole number"),
+            (mesh(pts, "CELLS 1 5\n18446744073709551615 0 1 2 3\n"), "cell 0 goes past the 5 numbers"),
         ];
         for (text, want) in cases {
             let got = explain(&text).unwrap_or_default();

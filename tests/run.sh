@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# The README's test command: sets up what the tests need, then runs them all.
+#
+#   bash tests/run.sh [extra cargo test arguments]
+#
+# - a virtual environment with the pinned reference packages of
+#   tests/requirements.txt (created once in target/test-venv, or $MDTF_VENV;
+#   rebuilt when the requirements change), exported as MDTF_PYTHON;
+# - Debian's python3-venv when the interpreter cannot make one (as root with
+#   apt-get; otherwise the command to run is printed);
+# - cargo test --workspace.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+say() { printf '== %s\n' "$*" >&2; }
+die() { printf 'error: %s\n' "$*" >&2; exit 1; }
+
+command -v cargo >/dev/null || die "cargo is missing: install the Rust toolchain (https://rustup.rs), then run this again"
+command -v python3 >/dev/null || {
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    say "installing python3 (apt-get)"
+    apt-get update -qq && apt-get install -y -qq python3 python3-venv >/dev/null
+  else
+    die "python3 is missing: install it (Debian/Ubuntu: sudo apt-get install python3 python3-venv)"
+  fi
+}
+
+venv="${MDTF_VENV:-$PWD/target/test-venv}"
+stamp="$venv/.requirements"
+if [ ! -x "$venv/bin/python" ] || ! cmp -s tests/requirements.txt "$stamp"; then
+  say "python packages for the interop tests ($venv)"
+  rm -rf "$venv"
+  mkdir -p "$(dirname "$venv")"
+  if ! python3 -m venv "$venv" 2>/dev/null; then
+    rm -rf "$venv"
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+      say "installing python3-venv (apt-get)"
+      apt-get update -qq && apt-get install -y -qq python3-venv >/dev/null
+      python3 -m venv "$venv"
+    else
+      die "python3 cannot create a virtual environment: install python3-venv (sudo apt-get install python3-venv)"
+    fi
+  fi
+  "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r tests/requirements.txt \
+    || die "pip could not install tests/requirements.txt into $venv"
+  cp tests/requirements.txt "$stamp"
+fi
+export MDTF_PYTHON="$venv/bin/python"
+
+say "cargo test --workspace"
+exec cargo test --workspace --locked "$@"
