@@ -176,12 +176,48 @@ fn check_replaceable(target: &Path, shown: &Path, inputs: &Inputs) -> Result<()>
     let Some(listed) = listed else {
         return Err(VolumeError::OutputNotOurs { path: shown.to_path_buf(), entries: name_some(&files) });
     };
-    let foreign: Vec<String> =
-        files.into_iter().filter(|f| f != MARKER_NAME && listed.binary_search(f).is_err()).collect();
+    let mut nested = NestedMarkers::default();
+    let foreign: Vec<String> = files
+        .into_iter()
+        .filter(|f| f != MARKER_NAME && listed.binary_search(f).is_err() && !nested.owns(target, f))
+        .collect();
     if foreign.is_empty() {
         Ok(())
     } else {
         Err(VolumeError::OutputHasForeignFiles { path: shown.to_path_buf(), entries: name_some(&foreign) })
+    }
+}
+
+/// Markers of mdtf output folders nested inside another (e.g. `mdtf
+/// validate`'s default `out/validate`): their files are mdtf's too.
+#[derive(Default)]
+struct NestedMarkers {
+    read: std::collections::HashMap<String, Option<Vec<String>>>,
+}
+
+impl NestedMarkers {
+    /// Whether a marker in one of the folders above `file` (relative to `root`) lists it.
+    fn owns(&mut self, root: &Path, file: &str) -> bool {
+        // partial outputs and locks of runs into a nested folder are mdtf's
+        let left_by_mdtf = |c: &str| {
+            c.starts_with(super::staging::PARTIAL_PREFIX) || (c.starts_with('.') && c.ends_with(".mdtf-lock"))
+        };
+        if file.split('/').any(left_by_mdtf) {
+            return true;
+        }
+        let mut cut = file.len();
+        while let Some(slash) = file[..cut].rfind('/') {
+            let (dir, rest) = (&file[..slash], &file[slash + 1..]);
+            let listed = self.read.entry(dir.to_string()).or_insert_with(|| read_marker(&root.join(dir)));
+            if rest == MARKER_NAME && listed.is_some() {
+                return true;
+            }
+            if listed.as_ref().is_some_and(|l| l.binary_search(&rest.to_string()).is_ok()) {
+                return true;
+            }
+            cut = slash;
+        }
+        false
     }
 }
 
@@ -240,6 +276,21 @@ mod tests {
         assert!(matches!(e, VolumeError::OutputHoldsInput { .. }), "{e}");
         assert_eq!(std::fs::read(user.join("scan.nii")).unwrap(), b"scan");
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2, "no partial folder is left");
+    }
+
+    #[test]
+    fn an_mdtf_folder_inside_an_mdtf_folder_is_mdtf_s_too() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("out");
+        publish_with(&target, &Inputs::new(), "a.txt", b"1").unwrap();
+        publish_with(&target.join("validate"), &Inputs::new(), "v.txt", b"2").unwrap();
+        publish_with(&target, &Inputs::new(), "b.txt", b"3").unwrap();
+        assert!(!target.join("validate").exists());
+        // but a file of the user's beside the nested marker is not
+        publish_with(&target.join("validate"), &Inputs::new(), "v.txt", b"2").unwrap();
+        std::fs::write(target.join("validate/mine.txt"), b"user").unwrap();
+        let e = publish_with(&target, &Inputs::new(), "c.txt", b"4").unwrap_err();
+        assert!(e.to_string().contains("validate/mine.txt"), "{e}");
     }
 
     #[test]
