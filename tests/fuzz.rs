@@ -454,3 +454,47 @@ fn long_fuzz_round() {
     let cases = std::env::var("MDTF_FUZZ_CASES").ok().and_then(|s| s.parse().ok()).unwrap_or(1_000_000);
     run_all(cases, true);
 }
+
+/// Heap a reader may take for a small file claiming a huge grid.
+const CLAIM_BOUND: usize = 64 << 20;
+
+#[test]
+fn a_small_file_claiming_800_cubed_costs_little_memory() {
+    use mdtf_volume::{Endian, RawSpec, ReadOptions, SampleType, read, read_raw};
+    let seeds = Seeds::new();
+    let dir = scratch();
+    let mut nii = seeds.bytes("a.nii");
+    for (k, v) in [3i16, 800, 800, 800].iter().enumerate() {
+        nii[40 + 2 * k..42 + 2 * k].copy_from_slice(&v.to_le_bytes());
+    }
+    nii.resize(16 * 1024, 0);
+    let mut gz_nrrd =
+        b"NRRD0004\ntype: float\ndimension: 3\nsizes: 800 800 800\nendian: little\nencoding: gzip\n\n".to_vec();
+    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    std::io::Write::write_all(&mut enc, &[0u8; 16]).unwrap();
+    gz_nrrd.extend(enc.finish().unwrap());
+    let cases: [(&str, Vec<u8>); 3] = [("claim.nii", nii), ("claim.nrrd", gz_nrrd), ("claim.raw", vec![0u8; 4096])];
+    for (name, bytes) in cases {
+        let path = dir.path().join(name);
+        std::fs::write(&path, &bytes).unwrap();
+        let base = PEAK.current_usage();
+        PEAK.reset_peak_usage();
+        let result = if name.ends_with(".raw") {
+            let spec = RawSpec {
+                dims: [800; 3],
+                ty: SampleType::F32,
+                endian: Endian::Little,
+                spacing: [1.0; 3],
+                origin: [0.0; 3],
+                byte_skip: 0,
+            };
+            read_raw(&path, &spec, &ReadOptions::default()).map(|_| ())
+        } else {
+            read(&path, &ReadOptions::default()).map(|_| ())
+        };
+        let peak = PEAK.peak_usage().saturating_sub(base);
+        let e = result.expect_err(name).to_string();
+        assert!(e.contains("truncated"), "{name}: {e}");
+        assert!(peak < CLAIM_BOUND, "{name} ({} bytes) took {peak} bytes of heap", bytes.len());
+    }
+}
