@@ -30,22 +30,25 @@ fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Option<Vec<u8>>> {
 
 /// Valid small inputs, made once: an 8^3 sphere as NIfTI, NRRD and
 /// `.nhdr`+`.raw`, a slicer-3dtf pack of it, and a one-tetrahedron mesh.
+/// They live in the build's own scratch folder (a static is never dropped,
+/// so a temporary folder would be left in the user's TMPDIR).
 fn base() -> &'static Path {
-    static BASE: OnceLock<tempfile::TempDir> = OnceLock::new();
+    static BASE: OnceLock<PathBuf> = OnceLock::new();
     BASE.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("corpus-base");
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
         let run = |args: &[&str]| {
-            let out = Command::new(mdtf_path()).args(args).current_dir(dir.path()).output().unwrap();
+            let out = Command::new(mdtf_path()).args(args).current_dir(&dir).output().unwrap();
             assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
         };
         run(&["synth", "erf-sphere", "-o", "v.nii", "--size", "8", "--sigma", "1", "-q"]);
         run(&["convert", "v.nii", "v.nrrd", "-q"]);
         run(&["convert", "v.nii", "v.nhdr", "-q"]);
         run(&["pack", "v.nii", "--profile", "slicer-3dtf", "-o", "pk", "-q"]);
-        std::fs::write(dir.path().join("m.vtk"), tet_vtk("CELLS 1 5\n4 0 1 2 3\n")).unwrap();
+        std::fs::write(dir.join("m.vtk"), tet_vtk("CELLS 1 5\n4 0 1 2 3\n")).unwrap();
         dir
     })
-    .path()
 }
 
 fn tet_vtk(cells: &str) -> String {
