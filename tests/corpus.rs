@@ -283,6 +283,17 @@ fn readers() -> Vec<Case> {
             std::fs::write(d.join("h.raw"), [0u8; 10]).unwrap();
             args(&["info", "h.nhdr"])
         }),
+        // MetaImage
+        info_of("empty.mha", Vec::new(), &["empty"]),
+        info_of("nodata.mha", b"ObjectType = Image\nNDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\n".to_vec(), &["no ElementDataFile"]),
+        info_of("type.mha", b"NDims = 3\nDimSize = 2 2 2\nElementType = MET_STRING\nElementDataFile = LOCAL\n".to_vec(), &["MET_STRING"]),
+        info_of("ndims.mha", b"NDims = 5\nDimSize = 2 2 2 2 2\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n".to_vec(), &["NDims = 5"]),
+        info_of("dimsize.mha", b"NDims = 3\nDimSize = 2 x 2\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n".to_vec(), &["DimSize", "'x'"]),
+        info_of("cut.mha", b"NDims = 3\nDimSize = 800 800 800\nElementType = MET_FLOAT\nElementDataFile = LOCAL\n\0\0\0\0".to_vec(), &["truncated"]),
+        info_of("zlib.mha", b"NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\nCompressedData = True\nElementDataFile = LOCAL\nnot zlib".to_vec(), &["gzip"]),
+        info_of("gone.mhd", b"NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\nElementDataFile = gone.raw\n".to_vec(), &["gone.raw"]),
+        info_of("list.mhd", b"NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\nElementDataFile = LIST\na.raw\n".to_vec(), &["1 slice files for 2 slices"]),
+        info_of("spacing.mha", b"NDims = 3\nDimSize = 1 1 1\nElementSpacing = 1 0 1\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n\x07".to_vec(), &["ElementSpacing"]),
         // raw
         case("short raw claiming 800^3", &["a.raw", "truncated"], |d| {
             std::fs::write(d.join("a.raw"), vec![0u8; 4096]).unwrap();

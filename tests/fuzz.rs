@@ -1,5 +1,6 @@
 //! Mutation fuzzing of every reader, in process: NIfTI (plain and gzip),
-//! NRRD (attached, detached, gzip, ascii), raw, legacy VTK, VTU, pack
+//! NRRD (attached, detached, gzip, ascii), MetaImage (attached, zlib,
+//! detached), raw, legacy VTK, VTU, pack
 //! manifests (read as the preview reads them), pipeline TOML and TF JSON.
 //!
 //! Each case mutates a valid seed file (bit flips, interesting integers and
@@ -184,6 +185,9 @@ impl Seeds {
             ("b.nrrd", &u8v, u8o),
             ("g.nrrd", &mf, WriteOptions { gzip: true, ..f32o }),
             ("d.nhdr", &mf, f32o),
+            ("a.mha", &mf, f32o),
+            ("b.mha", &u8v, u8o),
+            ("m.mhd", &mf, f32o),
         ] {
             write(&dir.path().join(name), m, &o, &[]).unwrap();
         }
@@ -277,6 +281,16 @@ fn readers(seeds: &Seeds, dir: &Path) -> Vec<Reader> {
     };
     // a detached header's data file stays valid; the header is mutated
     std::fs::copy(seeds.dir.path().join("d.raw"), dir.join("d.raw")).unwrap();
+    std::fs::copy(seeds.dir.path().join("m.raw"), dir.join("m.raw")).unwrap();
+    let zlib_mha = {
+        let raw = std::fs::read(seeds.dir.path().join("m.raw")).unwrap();
+        let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
+        std::io::Write::write_all(&mut z, &raw).unwrap();
+        let packed = z.finish().unwrap();
+        let head =
+            String::from_utf8(seeds.bytes("m.mhd")).unwrap().replace("CompressedData = False", "CompressedData = True");
+        [head.replace("ElementDataFile = m.raw", "ElementDataFile = LOCAL").into_bytes(), packed].concat()
+    };
     let pack_dir = dir.join("pk");
     std::fs::create_dir(&pack_dir).unwrap();
     for e in std::fs::read_dir(seeds.dir.path().join("pk")).unwrap().flatten() {
@@ -306,6 +320,17 @@ fn readers(seeds: &Seeds, dir: &Path) -> Vec<Reader> {
         file_reader("NRRD gzip", "g.nrrd", vec![seeds.bytes("g.nrrd")], false, true, dir, read_volume),
         file_reader("NRRD ascii", "t.nrrd", vec![ascii.to_vec()], true, false, dir, read_volume),
         file_reader("NRRD detached", "d.nhdr", vec![seeds.bytes("d.nhdr")], true, false, dir, read_volume),
+        file_reader(
+            "MetaImage",
+            "c.mha",
+            vec![seeds.bytes("a.mha"), seeds.bytes("b.mha")],
+            false,
+            false,
+            dir,
+            read_volume,
+        ),
+        file_reader("MetaImage zlib", "z.mha", vec![zlib_mha], false, true, dir, read_volume),
+        file_reader("MetaImage .mhd", "m.mhd", vec![seeds.bytes("m.mhd")], true, false, dir, read_volume),
         file_reader("raw", "r.raw", vec![vec![7u8; 48]], false, false, dir, move |p| {
             let _ = read_raw(p, &raw_spec, &ReadOptions::default());
         }),

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 /// mdtf prepares volume data for direct volume rendering with
 /// multidimensional transfer functions: it reads CT/MRI or simulation volumes
-/// (NIfTI, NRRD, raw), measures derivatives, filters, traces boundaries,
+/// (NIfTI, NRRD, MetaImage, raw), measures derivatives, filters, traces boundaries,
 /// builds histograms and packs textures for renderers.
 #[derive(Debug, Parser)]
 #[command(
@@ -44,7 +44,7 @@ pub enum Command {
     Synth(SynthArgs),
     /// Describe a volume file: dims, stored type, geometry, value range, NaN/Inf count, histogram.
     Info(InfoArgs),
-    /// Convert a volume between formats, chosen by the file extensions (.nii, .nii.gz, .nrrd, .nhdr).
+    /// Convert a volume between formats, chosen by the file extensions (.nii, .nii.gz, .nrrd, .nhdr, .mha, .mhd).
     Convert(ConvertArgs),
     /// Measure derivatives: gradient, g, normal, Hessian, f'', Laplacian, 1/g, shading weight, multi-field ||G||.
     Derive(DeriveArgs),
@@ -102,7 +102,7 @@ pub struct SynthArgs {
     /// Which phantom.
     #[arg(value_enum)]
     pub phantom: Phantom,
-    /// Output volume (.nii, .nii.gz, .nrrd or .nhdr).
+    /// Output volume (.nii, .nii.gz, .nrrd, .nhdr, .mha or .mhd).
     #[arg(short, long, value_name = "OUT")]
     pub output: PathBuf,
     /// Grid size: N for N^3, or NX,NY,NZ.

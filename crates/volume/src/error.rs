@@ -109,7 +109,7 @@ pub enum VolumeError {
     },
     /// The file name does not say which format to use.
     #[error(
-        "{path}: unknown file extension (use .nii, .nii.gz, .nrrd or .nhdr; raw data needs its layout given explicitly)"
+        "{path}: unknown file extension (use .nii, .nii.gz, .nrrd, .nhdr, .mha or .mhd; raw data needs its layout given explicitly)"
     )]
     UnknownFormat {
         /// The file concerned.

@@ -2,6 +2,7 @@
 
 use crate::dtype::SampleType;
 use crate::error::{Result, VolumeError};
+use crate::metaimage::{read_metaimage_with_info, write_metaimage};
 use crate::nifti_io::{read_nifti_with_info, write_nifti};
 use crate::nrrd::{Encoding, read_nrrd_with_info, write_nrrd};
 use crate::output::Inputs;
@@ -20,6 +21,10 @@ pub enum Format {
     Nrrd,
     /// `.nhdr` + `.raw` (detached header)
     Nhdr,
+    /// `.mha` (MetaImage, header and data in one file)
+    Mha,
+    /// `.mhd` + `.raw` (MetaImage, detached header)
+    Mhd,
 }
 
 impl Format {
@@ -34,6 +39,10 @@ impl Format {
             Some(Format::Nrrd)
         } else if name.ends_with(".nhdr") {
             Some(Format::Nhdr)
+        } else if name.ends_with(".mha") {
+            Some(Format::Mha)
+        } else if name.ends_with(".mhd") {
+            Some(Format::Mhd)
         } else {
             None
         }
@@ -46,6 +55,8 @@ impl Format {
             Format::NiftiGz => ".nii.gz",
             Format::Nrrd => ".nrrd",
             Format::Nhdr => ".nhdr",
+            Format::Mha => ".mha",
+            Format::Mhd => ".mhd",
         }
     }
 }
@@ -60,6 +71,7 @@ pub fn read_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiField, Fi
     match Format::from_path(path) {
         Some(Format::Nifti | Format::NiftiGz) => read_nifti_with_info(path, opts),
         Some(Format::Nrrd | Format::Nhdr) => read_nrrd_with_info(path, opts),
+        Some(Format::Mha | Format::Mhd) => read_metaimage_with_info(path, opts),
         None => Err(VolumeError::UnknownFormat { path: path.to_path_buf() }),
     }
 }
@@ -90,13 +102,18 @@ impl Default for WriteOptions {
 pub fn write(path: &Path, mf: &MultiField, opts: &WriteOptions, inputs: &[&Path]) -> Result<()> {
     let inputs = Inputs::of(inputs);
     inputs.refuse_target(path)?;
-    if let Some(data) = crate::nrrd::planned_data_file(path, opts.gzip) {
+    let data_file = match Format::from_path(path) {
+        Some(Format::Mhd) => crate::metaimage::metaimage_planned_data_file(path),
+        _ => crate::nrrd::planned_data_file(path, opts.gzip),
+    };
+    if let Some(data) = data_file {
         inputs.refuse_target(&data)?;
     }
     let encoding = if opts.gzip { Encoding::Gzip } else { Encoding::Raw };
     match Format::from_path(path) {
         Some(Format::Nifti | Format::NiftiGz) => write_nifti(path, mf, opts.ty),
         Some(Format::Nrrd | Format::Nhdr) => write_nrrd(path, mf, opts.ty, encoding),
+        Some(Format::Mha | Format::Mhd) => write_metaimage(path, mf, opts.ty),
         None => Err(VolumeError::UnknownFormat { path: path.to_path_buf() }),
     }
 }

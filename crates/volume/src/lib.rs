@@ -5,9 +5,11 @@
 //!   `world_from_voxel`). [`MultiField`]: named fields on one grid.
 //! * Readers: NIfTI-1 (`.nii`, `.nii.gz`, every common type, scl_slope and
 //!   scl_inter applied, sform/qform kept), NRRD (`.nrrd`, `.nhdr`; raw, gzip,
-//!   ascii; both endiannesses), raw with a caller-given [`RawSpec`].
-//! * Writers: NIfTI and NRRD for f32, u8, u16, atomically (temporary file,
-//!   then rename), never over an input.
+//!   ascii; both endiannesses), MetaImage (`.mha`, `.mhd`; zlib, channels,
+//!   LIST slices), raw with a caller-given [`RawSpec`].
+//! * Writers: NIfTI, NRRD and MetaImage for f32, u8, u16, atomically
+//!   ([`output`]: temporary file, then rename; folders swapped in whole),
+//!   never over an input.
 //!
 //! Every error is a [`VolumeError`] naming the file; no reader panics on a
 //! malformed file.
@@ -17,6 +19,7 @@ mod error;
 mod geometry;
 mod io;
 mod limits;
+pub mod metaimage;
 mod nifti_io;
 pub mod nrrd;
 pub mod output;

@@ -12,8 +12,9 @@ use std::path::{Path, PathBuf};
 
 /// Generates the phantom and, if asked, its truth.
 pub fn run(args: &SynthArgs, progress: &Progress) -> Result<()> {
-    let format = Format::from_path(&args.output)
-        .with_context(|| format!("{}: unknown extension (use .nii, .nii.gz, .nrrd or .nhdr)", args.output.display()))?;
+    let format = Format::from_path(&args.output).with_context(|| {
+        format!("{}: unknown extension (use .nii, .nii.gz, .nrrd, .nhdr, .mha or .mhd)", args.output.display())
+    })?;
     let dims = parse_size(&args.size, "--size")?;
     let spacing = parse_spacing(&args.spacing, "--spacing")?;
     let origin = parse_triple(&args.origin, "--origin")?;

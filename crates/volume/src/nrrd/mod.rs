@@ -16,7 +16,7 @@ use crate::dtype::{Endian, SampleType, encode_samples, first_unrepresentable};
 use crate::error::{Result, VolumeError};
 use crate::geometry::Geometry;
 use crate::limits::check_dims;
-use crate::output::{FileId, OutputLock, StagedFile, publish_pair, sweep, write_file_atomically};
+use crate::output::{OutputLock, StagedFile, old_pair_data, publish_pair, sweep, write_file_atomically};
 use crate::samples::{
     FieldAxis, FileInfo, ReadOptions, SampleLayout, decode_fields, drain_rest, read_decoded, write_fields,
 };
@@ -288,10 +288,10 @@ pub fn write_nrrd(path: &Path, mf: &MultiField, ty: SampleType, encoding: Encodi
         Some(name) => {
             let data_path = path.parent().unwrap_or(Path::new("")).join(name);
             let _lock = OutputLock::acquire(path)?;
-            let old_data = data_file_of_old_header(path, &data_path)?;
+            let old_data = old_pair_data(path, &data_path, &detached_data_files(path))?;
             let data = StagedFile::write(&data_path, write_samples)?;
             let staged_header = StagedFile::write(path, |w| w.write_all(header.as_bytes()))?;
-            publish_pair(staged_header, data, old_data.as_deref())?;
+            publish_pair(staged_header, data, old_data.as_deref(), with_data_file)?;
             sweep(path);
             sweep(&data_path);
             Ok(())
@@ -312,26 +312,6 @@ fn data_file_name(path: &Path, gzip: bool) -> Option<String> {
 /// The data file that writing `path` as NRRD would also write, if any.
 pub fn planned_data_file(path: &Path, gzip: bool) -> Option<PathBuf> {
     data_file_name(path, gzip).map(|n| path.parent().unwrap_or(Path::new("")).join(n))
-}
-
-/// Whether the data file about to be written may be: it must be new, or be
-/// the data file of the header being replaced (or a link to it). Returns the
-/// old data file when the old header names it.
-fn data_file_of_old_header(header: &Path, data: &Path) -> Result<Option<PathBuf>> {
-    let Some(data_id) = FileId::of(data) else { return Ok(None) };
-    let named = detached_data_files(header);
-    // A header left pointing at a partial link by a killed write: `data` is
-    // the new data that write had already put in place.
-    let at_partial_link =
-        |d: &PathBuf| d.file_name().is_some_and(|n| n.to_string_lossy().starts_with(crate::output::PARTIAL_PREFIX));
-    if !named.is_empty() && named.iter().all(at_partial_link) {
-        return Ok(None);
-    }
-    if named.iter().any(|d| FileId::of(d).as_ref() == Some(&data_id)) {
-        Ok(named.into_iter().find(|d| FileId::of(d).as_ref() == Some(&data_id)))
-    } else {
-        Err(VolumeError::DataFileInTheWay { path: data.to_path_buf(), header: header.to_path_buf() })
-    }
 }
 
 /// The data files a detached header names (empty for an attached header, a

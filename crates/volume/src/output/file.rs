@@ -3,6 +3,7 @@
 //! is published so that the header always names complete data that belong
 //! to it, before, during and after the replacement.
 
+use super::identity::FileId;
 use super::lock::OutputLock;
 use super::staging::{self, prefix_for, register};
 use crate::error::{Result, VolumeError};
@@ -72,12 +73,36 @@ pub(crate) fn sweep(path: &Path) {
     }
 }
 
+/// Whether the data file about to be written beside `header` may be: it must
+/// be new, or be one of `named` (the data files the header being replaced
+/// names), by identity. Returns that old data file when there is one.
+pub(crate) fn old_pair_data(header: &Path, data: &Path, named: &[PathBuf]) -> Result<Option<PathBuf>> {
+    let Some(data_id) = FileId::of(data) else { return Ok(None) };
+    // A header left pointing at a partial link by a killed write: `data` is
+    // the new data that write had already put in place.
+    let at_partial_link =
+        |d: &PathBuf| d.file_name().is_some_and(|n| n.to_string_lossy().starts_with(staging::PARTIAL_PREFIX));
+    if !named.is_empty() && named.iter().all(at_partial_link) {
+        return Ok(None);
+    }
+    match named.iter().find(|d| FileId::of(d).as_ref() == Some(&data_id)) {
+        Some(d) => Ok(Some(d.clone())),
+        None => Err(VolumeError::DataFileInTheWay { path: data.to_path_buf(), header: header.to_path_buf() }),
+    }
+}
+
 /// Publishes a detached header and its data file as one unit. When an older
 /// header at `header` names the data file being replaced, it is first pointed
 /// at a hard link of the old data, so that at every moment the header names
 /// complete data of its own; the link is removed at the end (or, after a
 /// kill, by the next write to the same header).
-pub(crate) fn publish_pair(header: StagedFile, data: StagedFile, old_header_data: Option<&Path>) -> Result<()> {
+/// `repoint(text, name)` is the old header's text naming the data file `name`.
+pub(crate) fn publish_pair(
+    header: StagedFile,
+    data: StagedFile,
+    old_header_data: Option<&Path>,
+    repoint: fn(&str, &str) -> String,
+) -> Result<()> {
     let mut old_link = None;
     if let Some(old_data) = old_header_data
         && old_data.exists()
@@ -92,7 +117,7 @@ pub(crate) fn publish_pair(header: StagedFile, data: StagedFile, old_header_data
         register(&link);
         let text = std::fs::read_to_string(&header.target).map_err(|e| VolumeError::io(&header.target, e))?;
         let link_name = link.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        let repointed = crate::nrrd::with_data_file(&text, &link_name);
+        let repointed = repoint(&text, &link_name);
         StagedFile::write(&header.target, |w| w.write_all(repointed.as_bytes()))?.publish()?;
         old_link = Some(link);
     }

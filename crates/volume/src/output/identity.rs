@@ -72,7 +72,13 @@ impl Inputs {
             return;
         }
         self.add_file(path);
-        for data in crate::nrrd::detached_data_files(path) {
+        let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+        let data_files = match ext.as_str() {
+            "nhdr" | "nrrd" => crate::nrrd::detached_data_files(path),
+            "mhd" | "mha" => crate::metaimage::metaimage_data_files(path),
+            _ => Vec::new(),
+        };
+        for data in data_files {
             self.add_file(&data);
         }
     }

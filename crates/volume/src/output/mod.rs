@@ -21,7 +21,7 @@ mod lock;
 mod staging;
 
 pub use file::write_file_atomically;
-pub(crate) use file::{StagedFile, publish_pair, sweep};
+pub(crate) use file::{StagedFile, old_pair_data, publish_pair, sweep};
 pub use folder::{MARKER_NAME, OutputFolder};
 pub use identity::{FileId, Inputs};
 pub use lock::OutputLock;
