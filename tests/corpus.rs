@@ -291,9 +291,18 @@ fn readers() -> Vec<Case> {
         info_of("dimsize.mha", b"NDims = 3\nDimSize = 2 x 2\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n".to_vec(), &["DimSize", "'x'"]),
         info_of("cut.mha", b"NDims = 3\nDimSize = 800 800 800\nElementType = MET_FLOAT\nElementDataFile = LOCAL\n\0\0\0\0".to_vec(), &["truncated"]),
         info_of("zlib.mha", b"NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\nCompressedData = True\nElementDataFile = LOCAL\nnot zlib".to_vec(), &["gzip"]),
+        info_of("overflow.mha", b"NDims = 3\nDimSize = 18446744073709551615 5 18446744073709551615\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n".to_vec(), &["memory"]),
         info_of("gone.mhd", b"NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\nElementDataFile = gone.raw\n".to_vec(), &["gone.raw"]),
         info_of("list.mhd", b"NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\nElementDataFile = LIST\na.raw\n".to_vec(), &["1 slice files for 2 slices"]),
         info_of("spacing.mha", b"NDims = 3\nDimSize = 1 1 1\nElementSpacing = 1 0 1\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n\x07".to_vec(), &["ElementSpacing"]),
+        // TIFF
+        info_of("empty.tif", Vec::new(), &["empty"]),
+        info_of("notiff.tif", b"hello, not a tiff".to_vec(), &["cannot decode the TIFF"]),
+        info_of("cut.tif", b"II*\0\x08\0\0\0\x09\0".to_vec(), &["claims 9 entries", "truncated"]),
+        case("folder without slices", &["empty-folder", "no .tif"], |d| {
+            std::fs::create_dir(d.join("empty-folder")).unwrap();
+            args(&["info", "empty-folder"])
+        }),
         // raw
         case("short raw claiming 800^3", &["a.raw", "truncated"], |d| {
             std::fs::write(d.join("a.raw"), vec![0u8; 4096]).unwrap();

@@ -1,6 +1,6 @@
 //! Mutation fuzzing of every reader, in process: NIfTI (plain and gzip),
 //! NRRD (attached, detached, gzip, ascii), MetaImage (attached, zlib,
-//! detached), raw, legacy VTK, VTU, pack
+//! detached), TIFF, raw, legacy VTK, VTU, pack
 //! manifests (read as the preview reads them), pipeline TOML and TF JSON.
 //!
 //! Each case mutates a valid seed file (bit flips, interesting integers and
@@ -251,6 +251,43 @@ const TET_VTU: &str = r#"<?xml version="1.0"?>
 </VTKFile>
 "#;
 
+/// A small valid 3-page grayscale TIFF (uncompressed, 16-bit, little-endian).
+fn tiff_seed() -> Vec<u8> {
+    let (w, h, pages) = (4u32, 3u32, 3u32);
+    let mut b = b"II*\0".to_vec();
+    b.extend(8u32.to_le_bytes());
+    for p in 0..pages {
+        let data_at = b.len() as u32 + 2 + 9 * 12 + 4;
+        let next = if p + 1 < pages { data_at + w * h * 2 } else { 0 };
+        let entry = |tag: u16, ty: u16, value: u32| {
+            let mut e = tag.to_le_bytes().to_vec();
+            e.extend(ty.to_le_bytes());
+            e.extend(1u32.to_le_bytes());
+            e.extend(value.to_le_bytes());
+            e
+        };
+        b.extend(9u16.to_le_bytes());
+        for e in [
+            entry(256, 4, w),
+            entry(257, 4, h),
+            entry(258, 3, 16),
+            entry(259, 3, 1),
+            entry(262, 3, 1),
+            entry(273, 4, data_at),
+            entry(277, 3, 1),
+            entry(278, 4, h),
+            entry(279, 4, w * h * 2),
+        ] {
+            b.extend(e);
+        }
+        b.extend(next.to_le_bytes());
+        for i in 0..w * h {
+            b.extend(((p * 100 + i) as u16).to_le_bytes());
+        }
+    }
+    b
+}
+
 /// A reader of files: writes each case to `dir/name` and reads it with `f`.
 fn file_reader(
     name: &'static str,
@@ -331,6 +368,7 @@ fn readers(seeds: &Seeds, dir: &Path) -> Vec<Reader> {
         ),
         file_reader("MetaImage zlib", "z.mha", vec![zlib_mha], false, true, dir, read_volume),
         file_reader("MetaImage .mhd", "m.mhd", vec![seeds.bytes("m.mhd")], true, false, dir, read_volume),
+        file_reader("TIFF", "t.tif", vec![tiff_seed()], false, false, dir, read_volume),
         file_reader("raw", "r.raw", vec![vec![7u8; 48]], false, false, dir, move |p| {
             let _ = read_raw(p, &raw_spec, &ReadOptions::default());
         }),
@@ -425,6 +463,9 @@ fn fuzz(reader: &Reader, cases: usize, seed: u64) -> Round {
         if result.is_err() {
             failures.push(format!("panic on {} bytes: {:?}", input.len(), String::from_utf8_lossy(&input)));
         } else if peak > budget {
+            if let Ok(keep) = std::env::var("MDTF_FUZZ_KEEP") {
+                let _ = std::fs::write(format!("{keep}-{}-{}", reader.name.replace(' ', "_"), failures.len()), &input);
+            }
             failures.push(format!("{peak} bytes of heap for {} input bytes", input.len()));
         }
         if failures.len() >= 5 {

@@ -80,7 +80,11 @@ pub fn read_options(args: &InputArgs) -> ReadOptions {
 /// Reads `path` by its extension, or as raw samples when `--raw-dims` is given.
 pub fn read_input(path: &Path, args: &InputArgs, opts: &ReadOptions) -> Result<(MultiField, FileInfo)> {
     let Some(dims) = &args.raw_dims else {
-        return read_with_info(path, opts).context("cannot read the input");
+        let (mf, info) = read_with_info(path, opts).context("cannot read the input")?;
+        for w in &info.warnings {
+            eprintln!("warning: {w}");
+        }
+        return Ok((mf, info));
     };
     let dims = parse_size(dims, "--raw-dims")?;
     let ty = SampleType::parse(&args.raw_type)
@@ -95,7 +99,14 @@ pub fn read_input(path: &Path, args: &InputArgs, opts: &ReadOptions) -> Result<(
         byte_skip: args.raw_skip,
     };
     let v = read_raw(path, &spec, opts).context("cannot read the raw input")?;
-    let info = FileInfo { format: "raw".into(), sample_type: ty, endian, compressed: false, scale: None };
+    let info = FileInfo {
+        format: "raw".into(),
+        sample_type: ty,
+        endian,
+        compressed: false,
+        scale: None,
+        warnings: Vec::new(),
+    };
     Ok((MultiField::from(v), info))
 }
 

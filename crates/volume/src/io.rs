@@ -7,6 +7,7 @@ use crate::nifti_io::{read_nifti_with_info, write_nifti};
 use crate::nrrd::{Encoding, read_nrrd_with_info, write_nrrd};
 use crate::output::Inputs;
 use crate::samples::{FileInfo, ReadOptions};
+use crate::tiff_stack::read_tiff_with_info;
 use crate::volume::{MultiField, Volume};
 use std::path::Path;
 
@@ -25,6 +26,8 @@ pub enum Format {
     Mha,
     /// `.mhd` + `.raw` (MetaImage, detached header)
     Mhd,
+    /// `.tif` / `.tiff` (a stack of pages; read only), or a folder of TIFF slices
+    Tiff,
 }
 
 impl Format {
@@ -43,6 +46,8 @@ impl Format {
             Some(Format::Mha)
         } else if name.ends_with(".mhd") {
             Some(Format::Mhd)
+        } else if name.ends_with(".tif") || name.ends_with(".tiff") || path.is_dir() {
+            Some(Format::Tiff)
         } else {
             None
         }
@@ -57,6 +62,7 @@ impl Format {
             Format::Nhdr => ".nhdr",
             Format::Mha => ".mha",
             Format::Mhd => ".mhd",
+            Format::Tiff => ".tif",
         }
     }
 }
@@ -72,6 +78,7 @@ pub fn read_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiField, Fi
         Some(Format::Nifti | Format::NiftiGz) => read_nifti_with_info(path, opts),
         Some(Format::Nrrd | Format::Nhdr) => read_nrrd_with_info(path, opts),
         Some(Format::Mha | Format::Mhd) => read_metaimage_with_info(path, opts),
+        Some(Format::Tiff) => read_tiff_with_info(path, opts),
         None => Err(VolumeError::UnknownFormat { path: path.to_path_buf() }),
     }
 }
@@ -114,6 +121,10 @@ pub fn write(path: &Path, mf: &MultiField, opts: &WriteOptions, inputs: &[&Path]
         Some(Format::Nifti | Format::NiftiGz) => write_nifti(path, mf, opts.ty),
         Some(Format::Nrrd | Format::Nhdr) => write_nrrd(path, mf, opts.ty, encoding),
         Some(Format::Mha | Format::Mhd) => write_metaimage(path, mf, opts.ty),
+        Some(Format::Tiff) => Err(VolumeError::header(
+            path,
+            "mdtf reads TIFF stacks but does not write them: write .nrrd, .nii.gz or .mha (Fiji opens all three)",
+        )),
         None => Err(VolumeError::UnknownFormat { path: path.to_path_buf() }),
     }
 }

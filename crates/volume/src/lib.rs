@@ -27,6 +27,7 @@ mod png_out;
 mod range;
 mod raw;
 mod samples;
+mod tiff_stack;
 mod volume;
 
 pub use dtype::{Endian, SAMPLE_TYPE_NAMES, SampleType};

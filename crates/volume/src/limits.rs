@@ -40,8 +40,8 @@ pub fn check_dims(path: &Path, dims: &[u64], fields: u64) -> Result<usize> {
             message: "every dimension must be at least 1".into(),
         });
     }
-    let samples: u128 = dims.iter().map(|&d| d as u128).product::<u128>() * fields as u128;
-    let needed = samples * 4;
+    let samples: u128 = dims.iter().try_fold(fields as u128, |n, &d| n.checked_mul(d as u128)).unwrap_or(u128::MAX / 4);
+    let needed = samples.saturating_mul(4);
     let available = available_memory() as u128;
     if needed > available {
         return Err(VolumeError::TooLarge {

@@ -38,6 +38,8 @@ pub struct FileInfo {
     pub compressed: bool,
     /// Linear scaling applied on read (slope, intercept), if any.
     pub scale: Option<(f64, f64)>,
+    /// What the reader had to assume (e.g. a spacing the file does not record).
+    pub warnings: Vec<String>,
 }
 
 impl FileInfo {
@@ -48,6 +50,7 @@ impl FileInfo {
             endian: layout.endian,
             compressed,
             scale: layout.scale,
+            warnings: Vec::new(),
         }
     }
 }
