@@ -121,6 +121,7 @@ pub fn write(path: &Path, mf: &MultiField, opts: &WriteOptions, inputs: &[&Path]
         Some(Format::Nifti | Format::NiftiGz) => write_nifti(path, mf, opts.ty),
         Some(Format::Nrrd | Format::Nhdr) => write_nrrd(path, mf, opts.ty, encoding),
         Some(Format::Mha | Format::Mhd) => write_metaimage(path, mf, opts.ty),
+        Some(Format::Tiff) if path.is_dir() => Err(VolumeError::OutputNotAFolder { path: path.to_path_buf() }),
         Some(Format::Tiff) => Err(VolumeError::header(
             path,
             "mdtf reads TIFF stacks but does not write them: write .nrrd, .nii.gz or .mha (Fiji opens all three)",
