@@ -95,7 +95,7 @@ pub(crate) fn old_pair_data(header: &Path, data: &Path, named: &[PathBuf]) -> Re
 /// header at `header` names the data file being replaced, it is first pointed
 /// at a hard link of the old data, so that at every moment the header names
 /// complete data of its own; the link is removed at the end (or, after a
-/// kill, by the next write to the same header).
+/// kill or a signal, by the next write to the same header).
 /// `repoint(text, name)` is the old header's text naming the data file `name`.
 pub(crate) fn publish_pair(
     header: StagedFile,
@@ -114,7 +114,9 @@ pub(crate) fn publish_pair(
             .into_temp_path()
             .keep()
             .map_err(|e| VolumeError::io(old_data, e.error))?;
-        register(&link);
+        // Not listed for signal clean-up: once the old header names the link,
+        // removing it would leave a header without data. A link left behind
+        // is swept by the next write of this header, after its new header is in.
         let text = std::fs::read_to_string(&header.target).map_err(|e| VolumeError::io(&header.target, e))?;
         let link_name = link.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         let repointed = repoint(&text, &link_name);
@@ -124,9 +126,7 @@ pub(crate) fn publish_pair(
     data.publish()?;
     header.publish()?;
     if let Some(link) = old_link {
-        let mut live = staging::live();
         let _ = std::fs::remove_file(&link);
-        staging::unregister_locked(&mut live, &link);
     }
     Ok(())
 }

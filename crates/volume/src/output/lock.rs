@@ -67,7 +67,9 @@ impl Drop for OutputLock {
     fn drop(&mut self) {
         // Unlink while still holding the lock; a waiting run then re-opens.
         let mut live = super::staging::live();
-        if still_named(&self.file, &self.path) {
+        // lock files are empty: one with content is somebody's file that happens to have this name
+        let empty = self.file.metadata().is_ok_and(|m| m.len() == 0);
+        if empty && still_named(&self.file, &self.path) {
             let _ = std::fs::remove_file(&self.path);
         }
         super::staging::unregister_locked(&mut live, &self.path);
