@@ -452,7 +452,7 @@ fn outputs() -> Vec<Case> {
             let p = mdtf_e2e::shipped_pipeline("distance-tf");
             args(&["run", p.to_str().unwrap(), "--input", "v.nii", "-o", "."])
         }),
-        case("run -o an existing file", &["afile", "wrong kind"], |d| {
+        case("run -o an existing file", &["afile", "not a folder"], |d| {
             std::fs::write(d.join("afile"), "mine").unwrap();
             let p = mdtf_e2e::shipped_pipeline("slicer-3dtf");
             args(&["run", p.to_str().unwrap(), "-o", "afile"])

@@ -353,11 +353,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let provenance = Provenance {
         mdtf_version: env!("CARGO_PKG_VERSION").into(),
         input: Some(input_name.clone()),
-        input_sha256: opts
-            .input
-            .as_ref()
-            .or(p.input.file.as_ref())
-            .and_then(|f| mdtf_pack::sha256_file(&base.join(f)).ok()),
+        input_sha256: input_file(p, opts, &base).and_then(|f| mdtf_pack::sha256_file(&f).ok()),
         stages: serde_json::to_value(p).unwrap_or(serde_json::Value::Null),
     };
     if profile == Profile::ProjectedTetrahedra {
@@ -459,7 +455,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
 /// Every file a run reads: the pipeline file, the input and the TF file.
 fn run_inputs(p: &Pipeline, opts: &RunOptions, base: &Path) -> Inputs {
     let mut inputs = Inputs::of(&[&opts.pipeline_path]);
-    if let Some(f) = opts.input.clone().or_else(|| p.input.file.as_ref().map(|f| base.join(f))) {
+    if let Some(f) = input_file(p, opts, base) {
         inputs.add(&f);
     }
     if let Some(tf) = &p.pack.tf {
@@ -475,9 +471,13 @@ fn derive_normals(value: &MultiField, kernel: Kernel) -> Result<Vec<(String, Vol
     Ok(out.items.into_iter().flat_map(|(_, mf)| mf.into_volumes()).collect())
 }
 
+/// The input file of a run: `--input` as given, else the pipeline's, relative to its folder.
+fn input_file(p: &Pipeline, opts: &RunOptions, base: &Path) -> Option<PathBuf> {
+    opts.input.clone().or_else(|| p.input.file.as_ref().map(|f| base.join(f)))
+}
+
 fn load_input(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(MultiField, String), RunError> {
-    let file = opts.input.clone().or_else(|| p.input.file.as_ref().map(|f| base.join(f)));
-    if let Some(f) = file {
+    if let Some(f) = input_file(p, opts, base) {
         let mf = mdtf_volume::read(&f, &ReadOptions::default()).map_err(|e| fail("input")(e.to_string()))?;
         return Ok((mf, f.display().to_string()));
     }

@@ -34,8 +34,7 @@ impl<'a> Tokens<'a> {
         }
         for i in 0..n {
             let (t, line) = self.next().unwrap_or(("", 0));
-            let keyword = t.len() > 3 && t.chars().all(|c| c.is_ascii_uppercase() || c == '_');
-            if keyword {
+            if is_keyword(t) {
                 return Err(format!(
                     "{what} needs {n} numbers but only {i} come before {t} on line {line} (a count larger than the data?)"
                 ));
@@ -46,6 +45,11 @@ impl<'a> Tokens<'a> {
         }
         Ok(())
     }
+}
+
+/// A section keyword (POINTS, CELL_TYPES, ...) where a number was due.
+fn is_keyword(t: &str) -> bool {
+    t.len() > 3 && t.chars().all(|c| c.is_ascii_uppercase() || c == '_')
 }
 
 fn finite(_: usize, t: &str) -> Option<String> {
@@ -133,7 +137,7 @@ fn walk(t: &mut Tokens) -> Result<(), String> {
                     let mut used = 0usize;
                     for c in 0..n {
                         let (k, l) = t.next().unwrap_or(("", line));
-                        if k.len() > 3 && k.chars().all(|ch| ch.is_ascii_uppercase() || ch == '_') {
+                        if is_keyword(k) {
                             return Err(format!(
                                 "CELLS {n} {size} announces {n} cells but only {c} come before {k} on line {l}"
                             ));

@@ -165,10 +165,8 @@ pub enum VolumeError {
         /// The output folder.
         path: PathBuf,
     },
-    /// The output path names a file or a link where a folder is needed, or a folder where a file is.
-    #[error(
-        "{path}: exists and is of the wrong kind (a file or a link for a folder, or a folder for a file); choose another output name"
-    )]
+    /// The output path names a file or a link where a folder is needed.
+    #[error("{path}: exists and is not a folder (a file or a link); choose another output folder")]
     OutputNotAFolder {
         /// The output path.
         path: PathBuf,

@@ -26,7 +26,7 @@ pub enum Format {
     Mha,
     /// `.mhd` + `.raw` (MetaImage, detached header)
     Mhd,
-    /// `.tif` / `.tiff` (a stack of pages; read only), or a folder of TIFF slices
+    /// `.tif` / `.tiff` (a stack of pages; read only; a folder of TIFF slices is read too)
     Tiff,
 }
 
@@ -46,7 +46,7 @@ impl Format {
             Some(Format::Mha)
         } else if name.ends_with(".mhd") {
             Some(Format::Mhd)
-        } else if name.ends_with(".tif") || name.ends_with(".tiff") || path.is_dir() {
+        } else if name.ends_with(".tif") || name.ends_with(".tiff") {
             Some(Format::Tiff)
         } else {
             None
@@ -74,6 +74,10 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
 
 /// [`read`], also returning how the file stores its samples.
 pub fn read_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiField, FileInfo)> {
+    if path.is_dir() {
+        // the only folder format: TIFF slices
+        return read_tiff_with_info(path, opts);
+    }
     match Format::from_path(path) {
         Some(Format::Nifti | Format::NiftiGz) => read_nifti_with_info(path, opts),
         Some(Format::Nrrd | Format::Nhdr) => read_nrrd_with_info(path, opts),
@@ -121,7 +125,6 @@ pub fn write(path: &Path, mf: &MultiField, opts: &WriteOptions, inputs: &[&Path]
         Some(Format::Nifti | Format::NiftiGz) => write_nifti(path, mf, opts.ty),
         Some(Format::Nrrd | Format::Nhdr) => write_nrrd(path, mf, opts.ty, encoding),
         Some(Format::Mha | Format::Mhd) => write_metaimage(path, mf, opts.ty),
-        Some(Format::Tiff) if path.is_dir() => Err(VolumeError::OutputNotAFolder { path: path.to_path_buf() }),
         Some(Format::Tiff) => Err(VolumeError::header(
             path,
             "mdtf reads TIFF stacks but does not write them: write .nrrd, .nii.gz or .mha (Fiji opens all three)",

@@ -155,55 +155,31 @@ fn tiff_error(path: &Path, e: tiff::TiffError) -> VolumeError {
     VolumeError::header(path, format!("cannot decode the TIFF: {e}"))
 }
 
-/// Appends one decoded page to `out` as f32; returns the stored type.
-fn append_page(path: &Path, page: DecodingResult, out: &mut Vec<f32>) -> Result<SampleType> {
-    out.try_reserve(sample_count(&page)).map_err(|_| VolumeError::header(path, "the page does not fit in memory"))?;
-    Ok(match page {
-        DecodingResult::U8(v) => {
-            out.extend(v.iter().map(|&x| x as f32));
-            SampleType::U8
-        }
-        DecodingResult::I8(v) => {
-            out.extend(v.iter().map(|&x| x as f32));
-            SampleType::I8
-        }
-        DecodingResult::U16(v) => {
-            out.extend(v.iter().map(|&x| x as f32));
-            SampleType::U16
-        }
-        DecodingResult::I16(v) => {
-            out.extend(v.iter().map(|&x| x as f32));
-            SampleType::I16
-        }
-        DecodingResult::U32(v) => {
-            out.extend(v.iter().map(|&x| x as f32));
-            SampleType::U32
-        }
-        DecodingResult::I32(v) => {
-            out.extend(v.iter().map(|&x| x as f32));
-            SampleType::I32
-        }
-        DecodingResult::F32(v) => {
-            out.extend_from_slice(&v);
-            SampleType::F32
-        }
-        DecodingResult::F64(v) => {
-            out.extend(v.iter().map(|&x| x as f32));
-            SampleType::F64
-        }
-        DecodingResult::U64(v) => {
-            out.extend(v.iter().map(|&x| x as f32));
-            SampleType::F64
-        }
-        DecodingResult::I64(v) => {
-            out.extend(v.iter().map(|&x| x as f32));
-            SampleType::F64
-        }
+/// Appends one decoded page to `out` as f32; returns the stored type
+/// (64-bit integers are reported as f64: both exceed f32's precision).
+fn append_page(page: DecodingResult, out: &mut Vec<f32>) -> SampleType {
+    macro_rules! widen {
+        ($v:expr, $ty:expr) => {{
+            out.extend($v.iter().map(|&x| x as f32));
+            $ty
+        }};
+    }
+    match page {
+        DecodingResult::U8(v) => widen!(v, SampleType::U8),
+        DecodingResult::I8(v) => widen!(v, SampleType::I8),
+        DecodingResult::U16(v) => widen!(v, SampleType::U16),
+        DecodingResult::I16(v) => widen!(v, SampleType::I16),
+        DecodingResult::U32(v) => widen!(v, SampleType::U32),
+        DecodingResult::I32(v) => widen!(v, SampleType::I32),
+        DecodingResult::F32(v) => widen!(v, SampleType::F32),
+        DecodingResult::F64(v) => widen!(v, SampleType::F64),
+        DecodingResult::U64(v) => widen!(v, SampleType::F64),
+        DecodingResult::I64(v) => widen!(v, SampleType::F64),
         DecodingResult::F16(v) => {
-            out.extend(v.iter().map(|&x| x.to_f32()));
+            out.extend(v.iter().map(|x| x.to_f32()));
             SampleType::F32
         }
-    })
+    }
 }
 
 /// Reads every page of one TIFF file into `out`; returns (width, height, pages, type, meta of page 1).
@@ -263,13 +239,16 @@ fn read_pages(
         }
         first.get_or_insert((w, h));
         let page = d.read_image().map_err(|e| tiff_error(path, e))?;
-        if sample_count(&page) != w as usize * h as usize {
+        let samples = w as usize * h as usize;
+        out.try_reserve(samples).map_err(|_| VolumeError::header(path, "the stack does not fit in memory"))?;
+        let before = out.len();
+        let page_ty = append_page(page, out);
+        if out.len() - before != samples {
             return Err(VolumeError::header(
                 path,
                 format!("page {} decodes to the wrong number of samples", pages + 1),
             ));
         }
-        let page_ty = append_page(path, page, out)?;
         if ty.is_some_and(|t| t != page_ty) {
             return Err(VolumeError::header(
                 path,
@@ -285,23 +264,6 @@ fn read_pages(
     }
     let (w, h) = first.unwrap_or((0, 0));
     Ok((w, h, pages, ty.unwrap_or(SampleType::U8), meta))
-}
-
-/// Samples in a decoded page.
-fn sample_count(page: &DecodingResult) -> usize {
-    match page {
-        DecodingResult::U8(v) => v.len(),
-        DecodingResult::I8(v) => v.len(),
-        DecodingResult::U16(v) => v.len(),
-        DecodingResult::I16(v) => v.len(),
-        DecodingResult::F16(v) => v.len(),
-        DecodingResult::U32(v) => v.len(),
-        DecodingResult::I32(v) => v.len(),
-        DecodingResult::F32(v) => v.len(),
-        DecodingResult::U64(v) => v.len(),
-        DecodingResult::I64(v) => v.len(),
-        DecodingResult::F64(v) => v.len(),
-    }
 }
 
 /// Reads a multi-page TIFF, or a folder of TIFF slices, as one volume.
