@@ -167,6 +167,16 @@ pub struct InputArgs {
     /// Bytes to skip at the start of a raw file.
     #[arg(long, default_value_t = 0, value_name = "BYTES", help_heading = "Raw input")]
     pub raw_skip: u64,
+    /// The DICOM series to read when the input holds several, by its
+    /// SeriesNumber or SeriesInstanceUID (without it, mdtf lists them).
+    #[arg(long, value_name = "N|UID", help_heading = "DICOM input")]
+    pub series: Option<String>,
+    /// Interpolate a DICOM stack whose slice gaps vary (a missing slice) or
+    /// that is tilted (gantry tilt) onto a regular grid, instead of refusing
+    /// it: linear between slices, tilt undone by shifting each slice in-plane.
+    /// The run prints what it found and did.
+    #[arg(long, help_heading = "DICOM input")]
+    pub resample: bool,
 }
 
 /// `--nan` values.

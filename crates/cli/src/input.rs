@@ -2,6 +2,7 @@
 
 use crate::args::{EndianArg, InputArgs, NanArg, OutType};
 use anyhow::{Context, Result, bail};
+use mdtf_volume::dicom::DicomOptions;
 use mdtf_volume::{
     Endian, FileInfo, MultiField, NanPolicy, RawSpec, ReadOptions, SAMPLE_TYPE_NAMES, SampleType, read_raw,
     read_with_info,
@@ -74,7 +75,10 @@ pub fn sample_type(t: OutType) -> SampleType {
 
 /// Reader options from the command line.
 pub fn read_options(args: &InputArgs) -> ReadOptions {
-    ReadOptions { nan: if args.nan == NanArg::Zero { NanPolicy::Zero } else { NanPolicy::Refuse } }
+    ReadOptions {
+        nan: if args.nan == NanArg::Zero { NanPolicy::Zero } else { NanPolicy::Refuse },
+        dicom: DicomOptions { series: args.series.clone(), resample: args.resample },
+    }
 }
 
 /// Reads `path` by its extension, or as raw samples when `--raw-dims` is given.
@@ -106,6 +110,7 @@ pub fn read_input(path: &Path, args: &InputArgs, opts: &ReadOptions) -> Result<(
         compressed: false,
         scale: None,
         warnings: Vec::new(),
+        details: Vec::new(),
     };
     Ok((MultiField::from(v), info))
 }

@@ -109,7 +109,7 @@ pub enum VolumeError {
     },
     /// The file name does not say which format to use.
     #[error(
-        "{path}: unknown file extension (use .nii, .nii.gz, .nrrd, .nhdr, .mha or .mhd; raw data needs its layout given explicitly)"
+        "{path}: neither the content nor the extension names a format mdtf reads (NIfTI .nii/.nii.gz, NRRD .nrrd/.nhdr, MetaImage .mha/.mhd, TIFF .tif, DICOM .dcm or a folder; raw data needs its layout given explicitly)"
     )]
     UnknownFormat {
         /// The file concerned.

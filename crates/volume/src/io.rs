@@ -1,5 +1,9 @@
-//! Reading and writing by file name: the extension picks the format.
+//! Reading and writing by file name. On read the content picks the format
+//! (DICM preamble, NRRD and NIfTI magic, MetaImage keys, TIFF byte order
+//! mark), the extension where the content does not tell; on write the
+//! extension does.
 
+use crate::dicom::read_dicom_with_info;
 use crate::dtype::SampleType;
 use crate::error::{Result, VolumeError};
 use crate::metaimage::{read_metaimage_with_info, write_metaimage};
@@ -28,6 +32,8 @@ pub enum Format {
     Mhd,
     /// `.tif` / `.tiff` (a stack of pages; read only; a folder of TIFF slices is read too)
     Tiff,
+    /// DICOM (`.dcm`, `.ima`, a DICOMDIR, a folder, or a `.txt` list of files; read only)
+    Dicom,
 }
 
 impl Format {
@@ -48,9 +54,39 @@ impl Format {
             Some(Format::Mhd)
         } else if name.ends_with(".tif") || name.ends_with(".tiff") {
             Some(Format::Tiff)
+        } else if name.ends_with(".dcm") || name.ends_with(".ima") || name == "dicomdir" {
+            Some(Format::Dicom)
         } else {
             None
         }
+    }
+
+    /// The format the first bytes of a file show, if they show one. Gzip
+    /// data shows none (it may be NIfTI or anything else compressed).
+    pub fn from_content(path: &Path) -> Option<Format> {
+        use std::io::Read;
+        let mut head = Vec::with_capacity(512);
+        std::fs::File::open(path).ok()?.take(512).read_to_end(&mut head).ok()?;
+        let at = |range: std::ops::Range<usize>| head.get(range);
+        if at(128..132) == Some(b"DICM") {
+            return Some(Format::Dicom);
+        }
+        if head.starts_with(b"NRRD000") {
+            return Some(Format::Nrrd);
+        }
+        if [b"II*\0", b"MM\0*", b"II+\0", b"MM\0+"].iter().any(|m| head.starts_with(*m)) {
+            return Some(Format::Tiff);
+        }
+        let sizeof_hdr = at(0..4).map(|b| [b[0], b[1], b[2], b[3]]);
+        if sizeof_hdr.is_some_and(|b| i32::from_le_bytes(b) == 348 || i32::from_be_bytes(b) == 348)
+            && matches!(at(344..348), Some(b"n+1\0" | b"ni1\0"))
+        {
+            return Some(Format::Nifti);
+        }
+        if crate::metaimage::looks_like_metaimage(&head) {
+            return Some(Format::Mha);
+        }
+        None
     }
 
     /// The extension including its dot, e.g. ".nii.gz".
@@ -63,11 +99,12 @@ impl Format {
             Format::Mha => ".mha",
             Format::Mhd => ".mhd",
             Format::Tiff => ".tif",
+            Format::Dicom => ".dcm",
         }
     }
 }
 
-/// Reads any supported file (by extension) as a multi-field volume.
+/// Reads any supported file (by content, else extension) as a multi-field volume.
 pub fn read(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
     read_with_info(path, opts).map(|(mf, _)| mf)
 }
@@ -75,11 +112,19 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
 /// [`read`], also returning how the file stores its samples.
 pub fn read_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiField, FileInfo)> {
     if path.is_dir() {
-        // the only folder format: TIFF slices
-        return read_tiff_with_info(path, opts);
+        // the folder formats: a DICOM series (or export) and TIFF slices
+        return if crate::dicom::folder_is_dicom(path) {
+            read_dicom_with_info(path, opts)
+        } else {
+            read_tiff_with_info(path, opts)
+        };
     }
-    match Format::from_path(path) {
+    if crate::dicom::is_list_name(path) {
+        return read_dicom_with_info(path, opts);
+    }
+    match Format::from_content(path).or_else(|| Format::from_path(path)) {
         Some(Format::Nifti | Format::NiftiGz) => read_nifti_with_info(path, opts),
+        Some(Format::Dicom) => read_dicom_with_info(path, opts),
         Some(Format::Nrrd | Format::Nhdr) => read_nrrd_with_info(path, opts),
         Some(Format::Mha | Format::Mhd) => read_metaimage_with_info(path, opts),
         Some(Format::Tiff) => read_tiff_with_info(path, opts),
@@ -128,6 +173,10 @@ pub fn write(path: &Path, mf: &MultiField, opts: &WriteOptions, inputs: &[&Path]
         Some(Format::Tiff) => Err(VolumeError::header(
             path,
             "mdtf reads TIFF stacks but does not write them: write .nrrd, .nii.gz or .mha (Fiji opens all three)",
+        )),
+        Some(Format::Dicom) => Err(VolumeError::header(
+            path,
+            "mdtf reads DICOM but does not write it: write .nii.gz, .nrrd or .mha (3D Slicer and ITK-SNAP open all three)",
         )),
         None => Err(VolumeError::UnknownFormat { path: path.to_path_buf() }),
     }

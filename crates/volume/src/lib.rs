@@ -6,7 +6,9 @@
 //! * Readers: NIfTI-1 (`.nii`, `.nii.gz`, every common type, scl_slope and
 //!   scl_inter applied, sform/qform kept), NRRD (`.nrrd`, `.nhdr`; raw, gzip,
 //!   ascii; both endiannesses), MetaImage (`.mha`, `.mhd`; zlib, channels,
-//!   LIST slices), raw with a caller-given [`RawSpec`].
+//!   LIST slices), TIFF stacks, DICOM series ([`dicom`]: folders, DICOMDIR,
+//!   multi-frame; sorted and checked), raw with a caller-given [`RawSpec`].
+//!   The content picks the reader, the extension where the content is silent.
 //! * Writers: NIfTI, NRRD and MetaImage for f32, u8, u16, atomically
 //!   ([`output`]: temporary file, then rename; folders swapped in whole),
 //!   never over an input.
@@ -14,6 +16,7 @@
 //! Every error is a [`VolumeError`] naming the file; no reader panics on a
 //! malformed file.
 
+pub mod dicom;
 mod dtype;
 mod error;
 mod geometry;

@@ -74,6 +74,27 @@ fn met_name(ty: SampleType) -> &'static str {
     }
 }
 
+/// Whether the first bytes of a file are a MetaImage header: the first
+/// non-empty line is `Key = value` with a key MetaImage defines.
+pub fn looks_like_metaimage(head: &[u8]) -> bool {
+    const KEYS: &[&str] = &[
+        "ObjectType",
+        "NDims",
+        "DimSize",
+        "ElementType",
+        "Comment",
+        "ObjectSubType",
+        "TransformType",
+        "BinaryData",
+        "BinaryDataByteOrderMSB",
+        "ElementByteOrderMSB",
+        "CompressedData",
+    ];
+    let text = String::from_utf8_lossy(head);
+    let Some(line) = text.lines().map(str::trim).find(|l| !l.is_empty()) else { return false };
+    line.split_once('=').is_some_and(|(key, _)| KEYS.contains(&key.trim()))
+}
+
 /// Reads `key = value` lines up to and including `ElementDataFile` (always
 /// the last key) and, for `LIST`, the slice names after it.
 fn read_header(path: &Path, src: &mut dyn BufRead) -> Result<MetaHeader> {

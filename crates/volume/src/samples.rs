@@ -19,10 +19,12 @@ pub enum NanPolicy {
 }
 
 /// Options common to every reader.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct ReadOptions {
     /// Policy for NaN / infinite samples.
     pub nan: NanPolicy,
+    /// Which DICOM series to read and whether to resample it (DICOM input only).
+    pub dicom: crate::dicom::DicomOptions,
 }
 
 /// What a file says about how it stores its samples (for `mdtf info`).
@@ -40,6 +42,9 @@ pub struct FileInfo {
     pub scale: Option<(f64, f64)>,
     /// What the reader had to assume (e.g. a spacing the file does not record).
     pub warnings: Vec<String>,
+    /// Further facts of the format, as (name, value) lines (e.g. a DICOM
+    /// series' modality and transfer syntax; never a patient attribute).
+    pub details: Vec<(String, String)>,
 }
 
 impl FileInfo {
@@ -51,6 +56,7 @@ impl FileInfo {
             compressed,
             scale: layout.scale,
             warnings: Vec::new(),
+            details: Vec::new(),
         }
     }
 }

@@ -323,6 +323,7 @@ pub fn read_tiff_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiFiel
         compressed: false,
         scale: None,
         warnings,
+        details: Vec::new(),
     };
     Ok((MultiField::new(geometry, vec![Field { name: "value".into(), data }])?, info))
 }

@@ -112,7 +112,7 @@ fn nan_and_inf_are_refused_with_a_count_unless_zeroed() {
         let p = dir.path().join(name);
         write_volume(&p, &v, &WriteOptions::default(), &[]).unwrap();
         assert!(matches!(err_of(&p), VolumeError::NonFinite { count: 2, .. }));
-        let z = read(&p, &ReadOptions { nan: NanPolicy::Zero }).unwrap();
+        let z = read(&p, &ReadOptions { nan: NanPolicy::Zero, ..Default::default() }).unwrap();
         assert_eq!(z.fields[0].data[[0, 0, 1]], 0.0);
         assert_eq!(z.fields[0].data[[1, 2, 3]], 0.0);
         assert_eq!(z.fields[0].data[[1, 2, 2]], 22.0);

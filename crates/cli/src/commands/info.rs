@@ -1,10 +1,11 @@
 //! `mdtf info FILE`: what a volume holds, on stdout.
 
 use crate::args::InfoArgs;
-use crate::input::read_input;
+use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::Result;
 use mdtf_volume::{FileInfo, MultiField, NanPolicy, ReadOptions};
+use rayon::prelude::*;
 use std::fmt::Write;
 
 /// Prints the description of one file.
@@ -17,7 +18,7 @@ pub fn run(args: &InfoArgs, progress: &Progress) -> Result<()> {
         return Ok(());
     }
     // Keep NaN/Inf so they can be counted; info never passes them on.
-    let opts = ReadOptions { nan: NanPolicy::Keep };
+    let opts = ReadOptions { nan: NanPolicy::Keep, ..read_options(&args.read) };
     let (mf, info) = progress.step("reading", || read_input(&args.input, &args.read, &opts))?;
     progress.clear();
     print!("{}", describe(&args.input.display().to_string(), &mf, &info, args.bins as usize));
@@ -53,6 +54,10 @@ fn describe(name: &str, mf: &MultiField, info: &FileInfo, bins: usize) -> String
     if let Some((slope, inter)) = info.scale {
         let _ = writeln!(s, "scaling:     value = {slope} * stored + {inter}");
     }
+    for (key, value) in &info.details {
+        let _ = writeln!(s, "{:<12} {value}", format!("{key}:"));
+    }
+
     let _ = writeln!(s, "dims:        {} ({} voxels)", g.dims_string(), g.voxel_count());
     let _ = writeln!(s, "spacing:     {} {} {} (world units)", g.spacing[0], g.spacing[1], g.spacing[2]);
     let _ = writeln!(s, "origin:      {} {} {}", g.origin[0], g.origin[1], g.origin[2]);
@@ -63,32 +68,70 @@ fn describe(name: &str, mf: &MultiField, info: &FileInfo, bins: usize) -> String
     }
     let _ = writeln!(s, "fields:      {}", mf.fields.len());
     for f in &mf.fields {
-        let values = f.data.iter().copied();
-        let non_finite = f.data.iter().filter(|v| !v.is_finite()).count();
-        let finite: Vec<f32> = values.filter(|v| v.is_finite()).collect();
+        let values = f.data.as_slice().unwrap_or(&[]);
+        let stats = FieldStats::of(values);
         let _ = writeln!(s, "\nfield '{}':", f.name);
-        let _ = writeln!(s, "  NaN/Inf:   {non_finite}");
-        if finite.is_empty() {
+        let _ = writeln!(s, "  NaN/Inf:   {}", stats.non_finite);
+        let Some((lo, hi)) = stats.range else {
             let _ = writeln!(s, "  no finite samples");
             continue;
-        }
-        let (lo, hi) = finite.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
-        let mean = finite.iter().map(|&v| v as f64).sum::<f64>() / finite.len() as f64;
+        };
         let _ = writeln!(s, "  range:     {lo} .. {hi}");
-        let _ = writeln!(s, "  mean:      {mean:.6}");
-        s += &text_histogram(&finite, lo, hi, bins);
+        let _ = writeln!(s, "  mean:      {:.6}", stats.sum / stats.finite as f64);
+        s += &text_histogram(values, lo, hi, bins);
     }
     s
 }
 
-/// Counts per bin with a bar of '#' (linear, 40 characters for the fullest bin).
-fn text_histogram(values: &[f32], lo: f32, hi: f32, bins: usize) -> String {
-    let mut counts = vec![0u64; bins];
-    let width = (hi as f64 - lo as f64) / bins as f64;
-    for &v in values {
-        let b = if width > 0.0 { ((v as f64 - lo as f64) / width) as usize } else { 0 };
-        counts[b.min(bins - 1)] += 1;
+/// Range, sum and counts of one field, in one parallel pass.
+struct FieldStats {
+    range: Option<(f32, f32)>,
+    sum: f64,
+    finite: u64,
+    non_finite: u64,
+}
+
+impl FieldStats {
+    fn of(values: &[f32]) -> FieldStats {
+        let one = |chunk: &[f32]| {
+            let (mut lo, mut hi, mut sum, mut n) = (f32::INFINITY, f32::NEG_INFINITY, 0.0f64, 0u64);
+            for &v in chunk.iter().filter(|v| v.is_finite()) {
+                lo = lo.min(v);
+                hi = hi.max(v);
+                sum += f64::from(v);
+                n += 1;
+            }
+            (lo, hi, sum, n)
+        };
+        // fixed chunks, summed in order: the mean does not depend on the thread count
+        let parts: Vec<(f32, f32, f64, u64)> = values.par_chunks(1 << 16).map(one).collect();
+        let (lo, hi, sum, finite) = parts.into_iter().fold((f32::INFINITY, f32::NEG_INFINITY, 0.0, 0), |a, b| {
+            (a.0.min(b.0), a.1.max(b.1), a.2 + b.2, a.3 + b.3)
+        });
+        FieldStats { range: (finite > 0).then_some((lo, hi)), sum, finite, non_finite: values.len() as u64 - finite }
     }
+}
+
+/// Counts per bin of the finite values, with a bar of '#' (linear, 40
+/// characters for the fullest bin).
+fn text_histogram(values: &[f32], lo: f32, hi: f32, bins: usize) -> String {
+    let width = (hi as f64 - lo as f64) / bins as f64;
+    let per_unit = if width > 0.0 { (1.0 / width) as f32 } else { 0.0 };
+    let count = |chunk: &[f32]| {
+        let mut counts = vec![0u64; bins];
+        for &v in chunk.iter().filter(|v| v.is_finite()) {
+            // a float-to-int cast saturates, so a value at `hi` lands in the last bin
+            counts[(((v - lo) * per_unit) as usize).min(bins - 1)] += 1;
+        }
+        counts
+    };
+    let counts = values.par_chunks(1 << 18).map(count).reduce(
+        || vec![0u64; bins],
+        |mut a, b| {
+            a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
+            a
+        },
+    );
     let max = counts.iter().copied().max().unwrap_or(1).max(1);
     let mut s = String::from("  histogram:\n");
     for (b, &c) in counts.iter().enumerate() {

@@ -1,0 +1,279 @@
+//! DICOM series in: series written by pydicom (oblique, shuffled, rescale
+//! varying per slice, two series in a folder, a missing slice, a duplicate,
+//! a copy, a gantry tilt, 12-bit samples with overlay bits, an enhanced
+//! multi-frame CT), checked against the values written and against
+//! SimpleITK's ImageSeriesReader (GDCM); pydicom's own test files; and the
+//! MR image of ../shared/data/dicom-ts in nine transfer syntaxes.
+
+use mdtf_e2e::{mdtf, mdtf_err, mdtf_ok, run_python};
+use mdtf_volume::dicom::DicomOptions;
+use mdtf_volume::{Geometry, MultiField, ReadOptions, read, read_with_info};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+struct Written {
+    dir: tempfile::TempDir,
+    json: Value,
+}
+
+/// The series of tests/dicom_series.py, written once for every test here.
+fn written() -> &'static Written {
+    static W: OnceLock<Written> = OnceLock::new();
+    W.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let script = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("dicom_series.py")).unwrap();
+        let json = serde_json::from_str(&run_python(&script, &[dir.path().to_str().unwrap()])).unwrap();
+        Written { dir, json }
+    })
+}
+
+fn case(name: &str) -> PathBuf {
+    written().dir.path().join(name)
+}
+
+fn numbers(v: &Value) -> Vec<f64> {
+    v.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect()
+}
+
+fn read_opts(series: Option<&str>, resample: bool) -> ReadOptions {
+    ReadOptions { dicom: DicomOptions { series: series.map(String::from), resample }, ..Default::default() }
+}
+
+fn values(mf: &MultiField) -> Vec<f64> {
+    mf.fields[0].data.iter().map(|&v| v as f64).collect()
+}
+
+fn assert_close(got: &[f64], want: &[f64], tol: f64, what: &str) {
+    assert_eq!(got.len(), want.len(), "{what}: sample count");
+    for (i, (a, b)) in got.iter().zip(want).enumerate() {
+        assert!((a - b).abs() <= tol * b.abs().max(1.0), "{what}: sample {i}: {a} vs {b}");
+    }
+}
+
+/// Origin and axis directions in DICOM's LPS.
+fn lps(g: &Geometry) -> ([f64; 3], [[f64; 3]; 3]) {
+    let flip = |v: [f64; 3]| [-v[0], -v[1], v[2]];
+    (flip(g.origin), [flip(g.directions[0]), flip(g.directions[1]), flip(g.directions[2])])
+}
+
+/// Geometry and values equal SimpleITK's reading of the same files.
+fn assert_same_as_sitk(mf: &MultiField, sitk: &Value, what: &str) {
+    let g = &mf.geometry;
+    let size: Vec<usize> = sitk["size"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() as usize).collect();
+    assert_eq!(g.dims.to_vec(), size, "{what}: dims");
+    let (origin, dirs) = lps(g);
+    assert_close(&origin, &numbers(&sitk["origin"]), 1e-6, &format!("{what}: origin"));
+    assert_close(&g.spacing, &numbers(&sitk["spacing"]), 1e-6, &format!("{what}: spacing"));
+    let d = numbers(&sitk["direction"]);
+    for r in 0..3 {
+        for a in 0..3 {
+            assert!(
+                (dirs[a][r] - d[r * 3 + a]).abs() < 1e-6,
+                "{what}: direction[{r}][{a}] {} vs {}",
+                dirs[a][r],
+                d[r * 3 + a]
+            );
+        }
+    }
+    assert_close(&values(mf), &numbers(&sitk["values"]), 1e-6, &format!("{what}: values"));
+}
+
+#[test]
+fn an_oblique_shuffled_series_matches_simpleitk_and_the_values_written() {
+    let w = written();
+    let mf = read(&case("oblique"), &ReadOptions::default()).unwrap();
+    assert_same_as_sitk(&mf, &w.json["oblique"]["sitk"], "oblique");
+    assert_close(&values(&mf), &numbers(&w.json["oblique"]["truth"]), 1e-6, "oblique truth");
+    // the same files named by a list, in another order, give the same volume
+    let listed = read(&case("oblique.txt"), &ReadOptions::default()).unwrap();
+    assert_eq!(listed, mf);
+    // and the geometry is written through to another format
+    let out = tempfile::tempdir().unwrap();
+    let nii = out.path().join("ct.nii.gz");
+    mdtf_ok(&["convert", case("oblique").to_str().unwrap(), nii.to_str().unwrap()]);
+    let back = read(&nii, &ReadOptions::default()).unwrap();
+    assert!(back.geometry.same_grid(&mf.geometry), "{:?} vs {:?}", back.geometry, mf.geometry);
+    assert_eq!(values(&back), values(&mf));
+}
+
+#[test]
+fn info_shows_the_series_but_never_the_patient() {
+    let out = mdtf(&["info", case("oblique").to_str().unwrap()]);
+    assert!(out.status.success());
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    for shown in [
+        "DICOM series of 9 files",
+        "modality:    CT",
+        "\"test\"",
+        "Explicit VR Little Endian",
+        "rescale:     per slice",
+    ] {
+        assert!(text.contains(shown), "missing {shown}:\n{text}");
+    }
+    for secret in ["Doe", "Jane", "PID-93731", "19230417"] {
+        assert!(!text.contains(secret), "{secret} printed:\n{text}");
+    }
+    // the listing of several series prints no patient attribute either
+    let err = mdtf_err(&["info", case("two").to_str().unwrap()]);
+    assert!(!err.contains("Doe") && !err.contains("PID-93731"), "{err}");
+}
+
+#[test]
+fn several_series_are_listed_and_chosen_by_number_or_uid() {
+    let w = written();
+    let err = mdtf_err(&["info", case("two").to_str().unwrap()]);
+    assert!(err.contains("2 DICOM series") && err.contains("--series"), "{err}");
+    assert!(err.contains("series 7: \"first\", CT, 10x12 pixels, 3 images"), "{err}");
+    assert!(err.contains("series 9: \"second\", CT, 10x12 pixels, 4 images"), "{err}");
+    let nine = read(&case("two"), &read_opts(Some("9"), false)).unwrap();
+    assert_close(&values(&nine), &numbers(&w.json["two"]["truth9"]), 1e-6, "series 9");
+    let uid = w.json["two"]["uid9"].as_str().unwrap();
+    assert_eq!(read(&case("two"), &read_opts(Some(uid), false)).unwrap(), nine);
+    let seven = read(&case("two"), &read_opts(Some("7"), false)).unwrap();
+    assert_close(&values(&seven), &numbers(&w.json["two"]["truth7"]), 1e-6, "series 7");
+    let err = read(&case("two"), &read_opts(Some("8"), false)).unwrap_err().to_string();
+    assert!(err.contains("no DICOM series has the number or UID '8'") && err.contains("series 9"), "{err}");
+    // the command line takes the same choice
+    let text = mdtf_ok(&["info", case("two").to_str().unwrap(), "--series", "9"]);
+    assert!(text.contains("10x12x4"), "{text}");
+}
+
+#[test]
+fn a_missing_slice_is_refused_or_interpolated_on_request() {
+    let w = written();
+    let err = mdtf_err(&["info", case("missing").to_str().unwrap()]);
+    assert!(err.contains("slice spacing varies: 2.0 mm x5, 4.0 mm") && err.contains("--resample"), "{err}");
+    let (mf, info) = read_with_info(&case("missing"), &read_opts(None, true)).unwrap();
+    assert_eq!(mf.geometry.dims, [10, 12, 8]);
+    assert_eq!(mf.geometry.spacing[2], 2.0);
+    // values are linear along z, so linear interpolation restores the slice exactly
+    assert_close(&values(&mf), &numbers(&w.json["missing"]["truth_full"]), 1e-6, "resampled");
+    assert!(
+        info.warnings.iter().any(|m| m.contains("resampled onto a regular grid of 8 slices at 2.0 mm")),
+        "{:?}",
+        info.warnings
+    );
+    let full = read(&case("missing-full"), &ReadOptions::default()).unwrap();
+    assert!(full.geometry.same_grid(&mf.geometry));
+}
+
+#[test]
+fn two_images_at_one_place_are_refused_and_a_copied_file_is_read_once() {
+    let w = written();
+    let err = mdtf_err(&["info", case("dup").to_str().unwrap()]);
+    assert!(err.contains("two images lie at the same position") && err.contains("another-at-2.dcm"), "{err}");
+    let out = mdtf(&["info", case("copy").to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && err.contains("copy-of-1.dcm is a copy of"), "{err}");
+    let mf = read(&case("copy"), &ReadOptions::default()).unwrap();
+    assert_close(&values(&mf), &numbers(&w.json["copy"]["truth"]), 1e-6, "copy");
+}
+
+#[test]
+fn a_gantry_tilt_is_refused_or_sheared_back_onto_the_slice_normal() {
+    let w = written();
+    let err = mdtf_err(&["info", case("tilt").to_str().unwrap()]);
+    assert!(err.contains("gantry tilt 14.0 degrees"), "{err}");
+    let mf = read(&case("tilt"), &read_opts(None, true)).unwrap();
+    let g = &mf.geometry;
+    assert_eq!(g.dims, [16, 12, 6]);
+    // the output axes are the image plane and its normal, whatever the tilt
+    let (origin, dirs) = lps(g);
+    let rot: Vec<Vec<f64>> = w.json["tilt"]["rot"].as_array().unwrap().iter().map(numbers).collect();
+    for a in 0..3 {
+        for r in 0..3 {
+            assert!((dirs[a][r] - rot[r][a]).abs() < 1e-9, "axis {a}");
+        }
+    }
+    // the written values are 10x + 4y - 3z + 100 of the LPS position (rounded
+    // to integers), so every interpolated voxel inside the stack shows it
+    let data = &mf.fields[0].data;
+    for k in 0..6 {
+        for j in 0..12 {
+            for i in 5..15 {
+                let p: Vec<f64> = (0..3)
+                    .map(|r| {
+                        origin[r]
+                            + i as f64 * g.spacing[0] * dirs[0][r]
+                            + j as f64 * g.spacing[1] * dirs[1][r]
+                            + k as f64 * g.spacing[2] * dirs[2][r]
+                    })
+                    .collect();
+                let want = 10.0 * p[0] + 4.0 * p[1] - 3.0 * p[2] + 100.0;
+                let got = data[[k, j, i]] as f64;
+                assert!((got - want).abs() <= 0.5 + 1e-3, "voxel ({i},{j},{k}): {got} vs {want}");
+            }
+        }
+    }
+}
+
+#[test]
+fn stored_bits_enhanced_frames_and_pydicoms_files_read_as_pydicom_decodes_them() {
+    let w = written();
+    let mf = read(&case("bits12"), &ReadOptions::default()).unwrap();
+    assert_eq!(values(&mf), numbers(&w.json["bits12"]["truth"]));
+
+    let e = &w.json["enhanced"];
+    let mf = read(&case("enhanced.dcm"), &ReadOptions::default()).unwrap();
+    assert_eq!(mf.geometry.dims, [3, 4, 5]);
+    assert_close(&mf.geometry.spacing, &[0.9, 0.7, 1.25], 1e-9, "enhanced spacing");
+    let (origin, dirs) = lps(&mf.geometry);
+    assert_close(&origin, &numbers(&e["origin_lps"]), 1e-9, "enhanced origin");
+    for (a, want) in e["dirs_lps"].as_array().unwrap().iter().enumerate() {
+        assert_close(&dirs[a], &numbers(want), 1e-9, "enhanced axis");
+    }
+    assert_eq!(values(&mf), numbers(&e["truth"]));
+
+    let data = PathBuf::from(w.json["pydicom_data"].as_str().unwrap());
+    for name in ["CT_small.dcm", "MR_small.dcm", "rtdose.dcm"] {
+        let mf = read(&data.join(name), &ReadOptions::default()).unwrap();
+        assert_close(&values(&mf), &numbers(&w.json[name]["values"]), 1e-6, name);
+    }
+    let mr = read(&data.join("MR_small.dcm"), &ReadOptions::default()).unwrap();
+    for variant in ["MR_small_RLE.dcm", "MR_small_jp2klossless.dcm", "MR_small_bigendian.dcm", "MR_small_implicit.dcm"]
+    {
+        assert_eq!(read(&data.join(variant), &ReadOptions::default()).unwrap(), mr, "{variant}");
+    }
+    let err = mdtf_err(&["info", data.join("MR_small_jpeg_ls_lossless.dcm").to_str().unwrap()]);
+    assert!(err.contains("JPEG-LS Lossless (1.2.840.10008.1.2.4.80)") && err.contains("gdcmconv --raw"), "{err}");
+    let err = mdtf_err(&["info", data.join("MR_truncated.dcm").to_str().unwrap()]);
+    assert!(err.contains("MR_truncated.dcm"), "{err}");
+}
+
+#[test]
+fn a_dicomdir_names_its_series_as_simpleitk_reads_them() {
+    let w = written();
+    let dicomdir = PathBuf::from(w.json["pydicom_data"].as_str().unwrap()).join("dicomdirtests/DICOMDIR");
+    let uid = w.json["dicomdir"]["uid"].as_str().unwrap();
+    let mf = read(&dicomdir, &read_opts(Some(uid), false)).unwrap();
+    assert_same_as_sitk(&mf, &w.json["dicomdir"]["sitk"], "DICOMDIR");
+    // its "Routine Brain" series has a gap of 202.5 mm between slices 1.25 mm apart
+    let brain = "1.3.6.1.4.1.5962.1.1.0.0.0.1196530851.28319.0.2";
+    let err = read(&dicomdir, &read_opts(Some(brain), false)).unwrap_err().to_string();
+    assert!(err.contains("slice spacing varies: 1.25 mm x2, 202.5 mm"), "{err}");
+}
+
+#[test]
+fn the_mr_image_reads_the_same_in_every_decodable_transfer_syntax() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/dicom-ts/In");
+    assert!(dir.is_dir(), "{} is missing: the shared test data must sit beside the project", dir.display());
+    let reference = read(&dir.join("1.dcm"), &ReadOptions::default()).unwrap();
+    assert_eq!(reference.geometry.dims, [384, 384, 1]);
+    let pydicom = run_python(
+        "import sys, json, pydicom; print(json.dumps(pydicom.dcmread(sys.argv[1]).pixel_array.ravel().tolist()))",
+        &[dir.join("1.dcm").to_str().unwrap()],
+    );
+    assert_eq!(values(&reference), numbers(&serde_json::from_str(&pydicom).unwrap()), "1.dcm vs pydicom");
+    for n in [2, 3, 4, 5, 6, 9] {
+        let mf = read(&dir.join(format!("{n}.dcm")), &ReadOptions::default()).unwrap();
+        assert_eq!(mf, reference, "{n}.dcm");
+    }
+    for n in [7, 8] {
+        let err = mdtf_err(&["info", dir.join(format!("{n}.dcm")).to_str().unwrap()]);
+        assert!(
+            err.contains("JPEG-LS") && err.contains("gdcmconv --raw") && err.contains(&format!("{n}.dcm")),
+            "{err}"
+        );
+    }
+}
