@@ -127,6 +127,19 @@ fn args(list: &[&str]) -> Vec<String> {
     list.iter().map(|s| s.to_string()).collect()
 }
 
+/// A folder `name` of DICOM slices, read by `mdtf info`.
+fn dicom_folder(name: &'static str, slices: Vec<(&'static str, Vec<u8>)>, expect: &[&'static str]) -> Case {
+    let mut words = vec![name];
+    words.extend_from_slice(expect);
+    case(name, &words, move |d| {
+        std::fs::create_dir(d.join(name)).unwrap();
+        for (file, bytes) in &slices {
+            std::fs::write(d.join(name).join(file), bytes).unwrap();
+        }
+        args(&["info", name])
+    })
+}
+
 /// A file `name` with `bytes`, read by `mdtf info`.
 fn info_of(name: &'static str, bytes: Vec<u8>, expect: &[&'static str]) -> Case {
     let mut words = vec![name];
@@ -276,7 +289,7 @@ fn readers() -> Vec<Case> {
             std::fs::write(d.join("nan.nrrd"), &nan_nrrd).unwrap();
             args(&["convert", "nan.nrrd", "out.nii"])
         }),
-        info_of("what.xyz", vec![1, 2, 3], &["unknown file extension"]),
+        info_of("what.xyz", vec![1, 2, 3], &["neither the content nor the extension names a format"]),
         case("missing.nii", &["missing.nii", "No such file"], |_| args(&["info", "missing.nii"])),
         case("detached data too short", &["h.raw", "truncated"], |d| {
             std::fs::write(d.join("h.nhdr"), format!("{NRRD_HEAD}encoding: raw\ndata file: h.raw\n")).unwrap();
@@ -303,6 +316,24 @@ fn readers() -> Vec<Case> {
             std::fs::create_dir(d.join("empty-folder")).unwrap();
             args(&["info", "empty-folder"])
         }),
+        // DICOM
+        info_of("cut.dcm", mdtf_e2e::dicom_slice(mdtf_e2e::EXPLICIT_LE, 4, 4, Some(0.0), 32)[..300].to_vec(), &["not a readable DICOM file"]),
+        info_of("short-pixels.dcm", mdtf_e2e::dicom_slice(mdtf_e2e::EXPLICIT_LE, 4, 4, Some(0.0), 30), &["30 bytes", "Columns x Rows"]),
+        info_of("syntax.dcm", mdtf_e2e::dicom_slice("1.2.3.4.5.6.7", 4, 4, Some(0.0), 32), &["1.2.3.4.5.6.7"]),
+        info_of("jpegls.dcm", mdtf_e2e::dicom_slice("1.2.840.10008.1.2.4.80", 4, 4, Some(0.0), 32), &["JPEG-LS", "gdcmconv --raw"]),
+        info_of("onlymagic.dcm", [vec![0u8; 128], b"DICM".to_vec()].concat(), &["not a readable DICOM file"]),
+        dicom_folder(
+            "sizes",
+            vec![("a.dcm", mdtf_e2e::dicom_slice(mdtf_e2e::EXPLICIT_LE, 4, 4, Some(0.0), 32)), ("b.dcm", mdtf_e2e::dicom_slice(mdtf_e2e::EXPLICIT_LE, 4, 3, Some(1.0), 24))],
+            &["one image size"],
+        ),
+        dicom_folder(
+            "noposition",
+            vec![("a.dcm", mdtf_e2e::dicom_slice(mdtf_e2e::EXPLICIT_LE, 4, 4, Some(0.0), 32)), ("b.dcm", mdtf_e2e::dicom_slice(mdtf_e2e::EXPLICIT_LE, 4, 4, None, 32))],
+            &["b.dcm", "ImagePositionPatient is missing"],
+        ),
+        dicom_folder("nodicom", vec![("a.dcm", b"not dicom".to_vec())], &["no DICOM files"]),
+        info_of("list.txt", b"missing-slice.dcm\n".to_vec(), &["line 1", "missing-slice.dcm", "not a file"]),
         // raw
         case("short raw claiming 800^3", &["a.raw", "truncated"], |d| {
             std::fs::write(d.join("a.raw"), vec![0u8; 4096]).unwrap();

@@ -277,3 +277,29 @@ fn the_mr_image_reads_the_same_in_every_decodable_transfer_syntax() {
         );
     }
 }
+
+#[test]
+fn a_pipeline_reads_a_chosen_resampled_series_and_reports_the_resampling() {
+    let out = tempfile::tempdir().unwrap();
+    let run = out.path().join("run");
+    let pipeline = Path::new(env!("CARGO_MANIFEST_DIR")).join("../pipelines/slicer-3dtf.toml");
+    let input = case("missing");
+    let args = |extra: &[&'static str]| -> Vec<String> {
+        let mut a: Vec<String> =
+            ["run", pipeline.to_str().unwrap(), "--input", input.to_str().unwrap(), "-o", run.to_str().unwrap(), "-q"]
+                .iter()
+                .map(|s| s.to_string())
+                .collect();
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    };
+    let refused = args(&[]);
+    let err = mdtf_err(&refused.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(err.contains("slice spacing varies") && err.contains("resample = true"), "{err}");
+    let ok = args(&["--set", "input.resample=true", "--set", "input.series=1"]);
+    mdtf_ok(&ok.iter().map(String::as_str).collect::<Vec<_>>());
+    let report: Value = serde_json::from_str(&std::fs::read_to_string(run.join("run_report.json")).unwrap()).unwrap();
+    assert_eq!(report["dims"], serde_json::json!([10, 12, 8]));
+    let warnings = report["warnings"].as_array().unwrap();
+    assert!(warnings.iter().any(|w| w.as_str().unwrap().contains("resampled onto a regular grid")), "{warnings:?}");
+}

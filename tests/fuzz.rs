@@ -1,6 +1,6 @@
 //! Mutation fuzzing of every reader, in process: NIfTI (plain and gzip),
 //! NRRD (attached, detached, gzip, ascii), MetaImage (attached, zlib,
-//! detached), TIFF, raw, legacy VTK, VTU, pack
+//! detached), TIFF, DICOM, raw, legacy VTK, VTU, pack
 //! manifests (read as the preview reads them), pipeline TOML and TF JSON.
 //!
 //! Each case mutates a valid seed file (bit flips, interesting integers and
@@ -369,6 +369,15 @@ fn readers(seeds: &Seeds, dir: &Path) -> Vec<Reader> {
         file_reader("MetaImage zlib", "z.mha", vec![zlib_mha], false, true, dir, read_volume),
         file_reader("MetaImage .mhd", "m.mhd", vec![seeds.bytes("m.mhd")], true, false, dir, read_volume),
         file_reader("TIFF", "t.tif", vec![tiff_seed()], false, false, dir, read_volume),
+        file_reader(
+            "DICOM",
+            "s.dcm",
+            vec![mdtf_e2e::dicom_slice(mdtf_e2e::EXPLICIT_LE, 4, 3, Some(2.5), 24)],
+            false,
+            false,
+            dir,
+            read_volume,
+        ),
         file_reader("raw", "r.raw", vec![vec![7u8; 48]], false, false, dir, move |p| {
             let _ = read_raw(p, &raw_spec, &ReadOptions::default());
         }),

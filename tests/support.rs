@@ -103,3 +103,59 @@ pub fn nrrd_f32(path: &Path) -> Vec<f32> {
 pub fn nrrd_u32(path: &Path) -> Vec<u32> {
     nrrd_payload(path).chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
 }
+
+/// One explicit-VR little-endian element, its value padded to even length.
+pub fn dicom_element(group: u16, element: u16, vr: &str, value: &[u8]) -> Vec<u8> {
+    let mut v = value.to_vec();
+    if v.len() % 2 == 1 {
+        v.push(if vr == "UI" || vr == "OB" { 0 } else { b' ' });
+    }
+    let mut out = Vec::new();
+    out.extend(group.to_le_bytes());
+    out.extend(element.to_le_bytes());
+    out.extend(vr.as_bytes());
+    if matches!(vr, "OB" | "OW" | "SQ" | "UN" | "UT") {
+        out.extend([0, 0]);
+        out.extend((v.len() as u32).to_le_bytes());
+    } else {
+        out.extend((v.len() as u16).to_le_bytes());
+    }
+    out.extend(v);
+    out
+}
+
+/// A CT slice of `cols` x `rows` 16-bit pixels as a DICOM file (Part 10), with
+/// `pixels` bytes of pixel data, at z = `z` (no position when None).
+pub fn dicom_slice(syntax: &str, cols: u16, rows: u16, z: Option<f64>, pixels: usize) -> Vec<u8> {
+    let us = |v: u16| v.to_le_bytes().to_vec();
+    let mut meta = dicom_element(0x0002, 0x0001, "OB", &[0, 1]);
+    meta.extend(dicom_element(0x0002, 0x0002, "UI", b"1.2.840.10008.5.1.4.1.1.2"));
+    meta.extend(dicom_element(0x0002, 0x0003, "UI", format!("1.2.3.{}", z.unwrap_or(0.0) as i64 + 10).as_bytes()));
+    meta.extend(dicom_element(0x0002, 0x0010, "UI", syntax.as_bytes()));
+    let mut out = vec![0u8; 128];
+    out.extend(b"DICM");
+    out.extend(dicom_element(0x0002, 0x0000, "UL", &(meta.len() as u32).to_le_bytes()));
+    out.extend(meta);
+    out.extend(dicom_element(0x0008, 0x0016, "UI", b"1.2.840.10008.5.1.4.1.1.2"));
+    out.extend(dicom_element(0x0008, 0x0018, "UI", format!("1.2.3.{}", z.unwrap_or(0.0) as i64 + 10).as_bytes()));
+    out.extend(dicom_element(0x0008, 0x0060, "CS", b"CT"));
+    out.extend(dicom_element(0x0020, 0x000E, "UI", b"1.2.3.4"));
+    if let Some(z) = z {
+        out.extend(dicom_element(0x0020, 0x0032, "DS", format!("0\\0\\{z}").as_bytes()));
+    }
+    out.extend(dicom_element(0x0020, 0x0037, "DS", b"1\\0\\0\\0\\1\\0"));
+    out.extend(dicom_element(0x0028, 0x0002, "US", &us(1)));
+    out.extend(dicom_element(0x0028, 0x0004, "CS", b"MONOCHROME2"));
+    out.extend(dicom_element(0x0028, 0x0010, "US", &us(rows)));
+    out.extend(dicom_element(0x0028, 0x0011, "US", &us(cols)));
+    out.extend(dicom_element(0x0028, 0x0030, "DS", b"1\\1"));
+    out.extend(dicom_element(0x0028, 0x0100, "US", &us(16)));
+    out.extend(dicom_element(0x0028, 0x0101, "US", &us(16)));
+    out.extend(dicom_element(0x0028, 0x0102, "US", &us(15)));
+    out.extend(dicom_element(0x0028, 0x0103, "US", &us(1)));
+    out.extend(dicom_element(0x7FE0, 0x0010, "OW", &vec![7u8; pixels]));
+    out
+}
+
+/// Transfer syntax UID of explicit-VR little-endian DICOM.
+pub const EXPLICIT_LE: &str = "1.2.840.10008.1.2.1";

@@ -23,8 +23,16 @@ pub enum PhantomKind {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct InputSection {
-    /// Volume file (NIfTI or NRRD); relative paths are relative to the pipeline file.
+    /// Volume file or folder (NIfTI, NRRD, MetaImage, TIFF, DICOM series or
+    /// DICOMDIR); relative paths are relative to the pipeline file.
     pub file: Option<PathBuf>,
+    /// DICOM: the series to read (SeriesNumber or SeriesInstanceUID) when the
+    /// input holds several; `series = 3` and `series = "1.2.840..."` both work.
+    #[serde(deserialize_with = "number_or_text")]
+    pub series: Option<String>,
+    /// DICOM: interpolate a stack with unequal slice gaps or a gantry tilt
+    /// onto a regular grid instead of refusing it (reported in the run report).
+    pub resample: bool,
     /// Phantom to synthesise when there is no file.
     pub phantom: PhantomKind,
     /// Phantom grid size (cube).
@@ -35,9 +43,31 @@ pub struct InputSection {
     pub noise: f64,
 }
 
+/// An optional value given either as a TOML integer or as a string.
+fn number_or_text<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<String>, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum NumberOrText {
+        Number(i64),
+        Text(String),
+    }
+    Ok(Option::<NumberOrText>::deserialize(d)?.map(|v| match v {
+        NumberOrText::Number(n) => n.to_string(),
+        NumberOrText::Text(t) => t,
+    }))
+}
+
 impl Default for InputSection {
     fn default() -> Self {
-        InputSection { file: None, phantom: PhantomKind::ErfSphere, size: 128, sigma: 3.0, noise: 0.0 }
+        InputSection {
+            file: None,
+            series: None,
+            resample: false,
+            phantom: PhantomKind::ErfSphere,
+            size: 128,
+            sigma: 3.0,
+            noise: 0.0,
+        }
     }
 }
 

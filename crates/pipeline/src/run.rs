@@ -12,6 +12,7 @@ use mdtf_histogram::{
     Axis, AxisSpec, HvolParams, Scale, count, histogram_volume, hit_mask, write_histogram, write_hvol, write_stretched,
 };
 use mdtf_pack::{PackParams, PackWriter, Profile, Provenance, parse_tf};
+use mdtf_volume::dicom::DicomOptions;
 use mdtf_volume::{
     Geometry, Inputs, MultiField, OutputFolder, ReadOptions, Volume, WriteOptions, write_file_atomically,
 };
@@ -60,6 +61,8 @@ pub struct RunReport {
     pub input: String,
     /// Grid size.
     pub dims: [usize; 3],
+    /// What the reader assumed or repaired (e.g. a DICOM series resampled onto a regular grid).
+    pub warnings: Vec<String>,
     /// The stages, in order.
     pub stages: Vec<StageReport>,
     /// Total wall time, seconds.
@@ -109,7 +112,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     // input
     on_stage("input");
     let t = Instant::now();
-    let (input, input_name) = load_input(p, opts, &base)?;
+    let (input, input_name, warnings) = load_input(p, opts, &base)?;
     let geo = input.geometry.clone();
     let n = geo.voxel_count();
     stage("input", t, n, vec![]);
@@ -442,6 +445,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         output: opts.output.display().to_string(),
         input: input_name,
         dims: geo.dims,
+        warnings,
         stages,
         total_seconds: start.elapsed().as_secs_f64(),
     };
@@ -476,10 +480,15 @@ fn input_file(p: &Pipeline, opts: &RunOptions, base: &Path) -> Option<PathBuf> {
     opts.input.clone().or_else(|| p.input.file.as_ref().map(|f| base.join(f)))
 }
 
-fn load_input(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(MultiField, String), RunError> {
+/// The input volume, its name for the report, and what its reader warned of.
+fn load_input(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(MultiField, String, Vec<String>), RunError> {
     if let Some(f) = input_file(p, opts, base) {
-        let mf = mdtf_volume::read(&f, &ReadOptions::default()).map_err(|e| fail("input")(e.to_string()))?;
-        return Ok((mf, f.display().to_string()));
+        let read = ReadOptions {
+            dicom: DicomOptions { series: p.input.series.clone(), resample: p.input.resample },
+            ..ReadOptions::default()
+        };
+        let (mf, info) = mdtf_volume::read_with_info(&f, &read).map_err(|e| fail("input")(e.to_string()))?;
+        return Ok((mf, f.display().to_string(), info.warnings));
     }
     let i = &p.input;
     if i.size < 8 || i.size > 1024 {
@@ -509,5 +518,5 @@ fn load_input(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(MultiFiel
             f.data = v.data;
         }
     }
-    Ok((mf, name))
+    Ok((mf, name, Vec::new()))
 }

@@ -29,6 +29,9 @@ pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
     let report = run_pipeline(&pipeline, &opts, &|stage| finish(Some(stage)));
     finish(None);
     let report = report?;
+    for w in &report.warnings {
+        progress.note(&format!("warning: {w}"));
+    }
     let mut table = format!("{:<22} {:>9} {:>12} {:>10}\n", "stage", "seconds", "Mvoxel/s", "peak MiB");
     for s in &report.stages {
         table += &format!("{:<22} {:>9.3} {:>12.1} {:>10.0}\n", s.stage, s.seconds, s.mvoxel_per_s, s.peak_mib);

@@ -165,6 +165,7 @@ fn array<const N: usize>(v: Option<Vec<f64>>) -> Option<[f64; N]> {
 /// Reads the header of `path`. Returns `Ok(None)` for a DICOM file that holds
 /// no image (a DICOMDIR, a structured report, a presentation state).
 pub fn read_header(path: &Path) -> Result<Option<ImageHeader>> {
+    super::bounds::check_declared_lengths(path)?;
     let obj = open(path, true)?;
     let transfer_syntax = obj.meta().transfer_syntax().trim_end_matches('\0').to_string();
     let Some(rows) = uint(&obj, tags::ROWS) else { return Ok(None) };

@@ -22,6 +22,7 @@
 //!
 //! JPEG-LS has no pure-Rust decoder: it is refused with the conversion to run.
 
+mod bounds;
 mod header;
 mod pixels;
 mod resample;
@@ -50,7 +51,8 @@ pub struct DicomOptions {
     pub resample: bool,
 }
 
-/// Whether a folder holds DICOM (a DICOMDIR, or a file with the DICM signature at its top level).
+/// Whether a folder holds DICOM: a DICOMDIR, a file with the DICM signature
+/// or a `.dcm` / `.ima` name at its top level, or such a folder inside.
 pub fn folder_is_dicom(dir: &Path) -> bool {
     if dir.join("DICOMDIR").is_file() {
         return true;
@@ -59,7 +61,7 @@ pub fn folder_is_dicom(dir: &Path) -> bool {
     let mut subfolders = Vec::new();
     for e in entries.flatten().take(4096) {
         let p = e.path();
-        if p.is_file() && has_dicom_magic(&p) {
+        if p.is_file() && (has_dicom_magic(&p) || crate::io::Format::from_path(&p) == Some(crate::io::Format::Dicom)) {
             return true;
         }
         if p.is_dir() {
@@ -107,6 +109,7 @@ pub fn read_dicom_with_info(input: &Path, opts: &ReadOptions) -> Result<(MultiFi
         }
     }
     let layout = series::layout(input, &files, opts.dicom.resample)?;
+    pixels::check_native_sizes(&files)?;
     let first = &files[0];
     let (cols, rows) = (first.cols as usize, first.rows as usize);
     let stack_dims = [cols as u64, rows as u64, layout.slices.len() as u64];

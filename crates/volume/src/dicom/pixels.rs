@@ -12,6 +12,7 @@ use crate::error::{Result, VolumeError};
 use dicom_core::value::Value;
 use dicom_dictionary_std::tags;
 use dicom_pixeldata::PixelDecoder;
+use dicom_transfer_syntax_registry::TransferSyntaxIndex;
 use rayon::prelude::*;
 use std::borrow::Cow;
 
@@ -35,6 +36,35 @@ pub fn decode_into(files: &[ImageHeader], slices: &[SliceRef], out: &mut [f32]) 
         .enumerate()
         .filter(|(_, t)| !t.is_empty())
         .try_for_each(|(f, targets)| decode_file(&files[f], targets))
+}
+
+/// Refuses an uncompressed file too short for the pixels its header
+/// declares, before the volume is allocated for them.
+pub fn check_native_sizes(files: &[ImageHeader]) -> Result<()> {
+    for h in files {
+        let native = dicom_transfer_syntax_registry::TransferSyntaxRegistry
+            .get(&h.transfer_syntax)
+            .is_some_and(|ts| !ts.is_encapsulated_pixel_data());
+        let needed = h.rows as u64 * h.cols as u64 * h.sample_bytes() as u64 * h.frames.len() as u64;
+        let len = std::fs::metadata(&h.path).map_err(|e| VolumeError::io(&h.path, e))?.len();
+        if native && len < needed {
+            return Err(pixel_shortage(h, len, needed));
+        }
+    }
+    Ok(())
+}
+
+fn pixel_shortage(h: &ImageHeader, held: u64, needed: u64) -> VolumeError {
+    VolumeError::header(
+        &h.path,
+        format!(
+            "the pixel data holds {held} bytes, fewer than Columns x Rows x frames x bytes = {} x {} x {} x {} = {needed}",
+            h.cols,
+            h.rows,
+            h.frames.len(),
+            h.sample_bytes()
+        ),
+    )
 }
 
 fn decode_file(h: &ImageHeader, targets: Vec<Target>) -> Result<()> {
@@ -64,17 +94,7 @@ fn decode_file(h: &ImageHeader, targets: Vec<Target>) -> Result<()> {
     let frame_bytes = plane * h.sample_bytes();
     let needed = frame_bytes as u64 * h.frames.len() as u64;
     if (bytes.len() as u64) < needed {
-        return Err(VolumeError::header(
-            &h.path,
-            format!(
-                "the pixel data holds {} bytes, fewer than Columns x Rows x frames x bytes = {} x {} x {} x {} = {needed}",
-                bytes.len(),
-                h.cols,
-                h.rows,
-                h.frames.len(),
-                h.sample_bytes()
-            ),
-        ));
+        return Err(pixel_shortage(h, bytes.len() as u64, needed));
     }
     for t in targets {
         let src = &bytes[t.frame * frame_bytes..(t.frame + 1) * frame_bytes];
