@@ -303,3 +303,75 @@ fn a_pipeline_reads_a_chosen_resampled_series_and_reports_the_resampling() {
     let warnings = report["warnings"].as_array().unwrap();
     assert!(warnings.iter().any(|w| w.as_str().unwrap().contains("resampled onto a regular grid")), "{warnings:?}");
 }
+
+/// The value of `b` at the world position of each voxel of `a`: the grids
+/// must coincide up to the order and sign of their axes.
+fn assert_same_in_world(a: &MultiField, b: &MultiField, what: &str) {
+    let (ga, gb) = (&a.geometry, &b.geometry);
+    let mb = gb.world_from_voxel();
+    // b's voxel of a world point: solve the 3x3 system by Cramer's rule
+    let m = [[mb[0][0], mb[0][1], mb[0][2]], [mb[1][0], mb[1][1], mb[1][2]], [mb[2][0], mb[2][1], mb[2][2]]];
+    let det = |m: [[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(m);
+    let ma = ga.world_from_voxel();
+    let (mut checked, data_a, data_b) = (0, &a.fields[0].data, &b.fields[0].data);
+    for ((k, j, i), &va) in data_a.indexed_iter() {
+        let p: Vec<f64> = (0..3)
+            .map(|r| ma[r][0] * i as f64 + ma[r][1] * j as f64 + ma[r][2] * k as f64 + ma[r][3] - mb[r][3])
+            .collect();
+        let mut idx = [0usize; 3];
+        for c in 0..3 {
+            let mut mc = m;
+            for r in 0..3 {
+                mc[r][c] = p[r];
+            }
+            let x = det(mc) / d;
+            assert!(
+                (x - x.round()).abs() < 1e-3,
+                "{what}: voxel ({i},{j},{k}) falls between voxels of the reference ({x})"
+            );
+            idx[c] = x.round() as usize;
+        }
+        let vb = data_b[[idx[2], idx[1], idx[0]]];
+        assert!((va - vb).abs() <= 1e-3 * vb.abs().max(1.0), "{what}: voxel ({i},{j},{k}): {va} vs {vb}");
+        checked += 1;
+    }
+    assert_eq!(checked, ga.voxel_count());
+    assert_eq!(ga.voxel_count(), gb.voxel_count(), "{what}");
+}
+
+#[test]
+fn an_oblique_series_matches_dcm2niix_in_world_space() {
+    let w = written();
+    let dcm2niix = std::process::Command::new("dcm2niix").arg("-h").output();
+    assert!(
+        dcm2niix.is_ok(),
+        "dcm2niix is missing: install it (Debian: apt-get install dcm2niix; tests/run.sh does so as root)"
+    );
+    let out = tempfile::tempdir().unwrap();
+    let status = std::process::Command::new("dcm2niix")
+        .args([
+            "-o",
+            out.path().to_str().unwrap(),
+            "-f",
+            "ct",
+            "-z",
+            "n",
+            "-b",
+            "n",
+            case("oblique-uniform").to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(status.status.success(), "dcm2niix: {}", String::from_utf8_lossy(&status.stderr));
+    let theirs = read(&out.path().join("ct.nii"), &ReadOptions::default()).unwrap();
+    let ours = read(&case("oblique-uniform"), &ReadOptions::default()).unwrap();
+    assert_close(&values(&ours), &numbers(&w.json["oblique-uniform"]["truth"]), 1e-6, "truth");
+    assert_same_in_world(&ours, &theirs, "dcm2niix");
+    for a in 0..3 {
+        assert!((ours.geometry.spacing[a] - theirs.geometry.spacing[a]).abs() < 1e-4, "spacing {a}");
+    }
+}

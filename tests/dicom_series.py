@@ -131,6 +131,11 @@ d = os.path.join(out_dir, "oblique")
 truth, paths, _ = stack(d, 9, 1.5)
 result["oblique"] = {"truth": ordered(truth), "sitk": sitk_read(d)}
 
+# one rescale for the whole series, as dcm2niix (one scl_slope per file) can store it
+d = os.path.join(out_dir, "oblique-uniform")
+truth_u, _, _ = stack(d, 7, 2.5, rot=(0.25, 0.4), varying_rescale=False)
+result["oblique-uniform"] = {"truth": ordered(truth_u)}
+
 # the same files named by a list, in another order
 with open(os.path.join(out_dir, "oblique.txt"), "w") as f:
     for p in sorted(paths.values(), reverse=True):

@@ -6,8 +6,9 @@
 # - a virtual environment with the pinned reference packages of
 #   tests/requirements.txt (created once in target/test-venv, or $MDTF_VENV;
 #   rebuilt when the requirements change), exported as MDTF_PYTHON;
-# - Debian's python3-venv when the interpreter cannot make one (as root with
-#   apt-get; otherwise the command to run is printed);
+# - Debian's python3-venv when the interpreter cannot make one, and dcm2niix
+#   (a reference DICOM converter), as root with apt-get; otherwise the
+#   command to run is printed;
 # - cargo test --workspace.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -22,6 +23,15 @@ command -v python3 >/dev/null || {
     apt-get update -qq && apt-get install -y -qq python3 python3-venv >/dev/null
   else
     die "python3 is missing: install it (Debian/Ubuntu: sudo apt-get install python3 python3-venv)"
+  fi
+}
+
+command -v dcm2niix >/dev/null || {
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    say "installing dcm2niix (apt-get)"
+    apt-get update -qq && apt-get install -y -qq dcm2niix >/dev/null
+  else
+    die "dcm2niix is missing (the DICOM tests compare with it): sudo apt-get install dcm2niix"
   fi
 }
 

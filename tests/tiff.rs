@@ -25,6 +25,7 @@ save("ome.ome.tif", (n / 7).astype("float32"), metadata={"axes": "ZYX", "Physica
 save("big.tif", (n * 7).astype("uint16"), bigtiff=True)
 save("deflate.tif", (n * 11).astype("uint16"), compression="zlib")
 save("lzw.tif", (n * 13).astype("uint16"), compression="lzw")
+save("zstd.tif", (n * 17).astype("float32"), compression="zstd")
 os.makedirs(os.path.join(d, "slices"))
 for k in range(z):
     tifffile.imwrite(os.path.join(d, "slices", f"z{k * 5 + 2}.tif"), (n[k] + 1000 * k).astype("uint16"))

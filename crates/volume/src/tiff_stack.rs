@@ -1,7 +1,7 @@
 //! TIFF stacks, as microscopy hands them over: a multi-page TIFF or BigTIFF
 //! (one page per z slice), or a folder of 2D TIFF slices sorted by the number
 //! in their names (`z2.tif` before `z10.tif`). Grayscale samples of 8 to 64
-//! bits, integer or float; uncompressed, LZW, Deflate or PackBits pages (the
+//! bits, integer or float; uncompressed, LZW, Deflate, Zstandard or PackBits pages (the
 //! `tiff` crate's decoders).
 //!
 //! Spacing comes from ImageJ metadata (`spacing=` for z and the X/Y
