@@ -259,12 +259,17 @@ fn the_mr_image_reads_the_same_in_every_decodable_transfer_syntax() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/dicom-ts/In");
     assert!(dir.is_dir(), "{} is missing: the shared test data must sit beside the project", dir.display());
     let reference = read(&dir.join("1.dcm"), &ReadOptions::default()).unwrap();
-    assert_eq!(reference.geometry.dims, [384, 384, 1]);
+    // a Siemens MOSAIC of 35 slices of 64 x 64, untiled
+    assert_eq!(reference.geometry.dims, [64, 64, 35]);
+    // the tiles hold what pydicom decodes, tile by tile
     let pydicom = run_python(
-        "import sys, json, pydicom; print(json.dumps(pydicom.dcmread(sys.argv[1]).pixel_array.ravel().tolist()))",
+        "import sys, json, pydicom; a = pydicom.dcmread(sys.argv[1]).pixel_array.reshape(6, 64, 6, 64).transpose(0, 2, 1, 3).reshape(36, 64, 64)[:35]; print(json.dumps(a.ravel().tolist()))",
         &[dir.join("1.dcm").to_str().unwrap()],
     );
     assert_eq!(values(&reference), numbers(&serde_json::from_str(&pydicom).unwrap()), "1.dcm vs pydicom");
+    // and every voxel lies where dcm2niix puts it, with its value
+    let dcm2niix = read(&dir.join("../Ref/1.nii"), &ReadOptions::default()).unwrap();
+    assert_same_in_world(&reference, &dcm2niix, "1.dcm vs dcm2niix's Ref/1.nii");
     for n in [2, 3, 4, 5, 6, 9] {
         let mf = read(&dir.join(format!("{n}.dcm")), &ReadOptions::default()).unwrap();
         assert_eq!(mf, reference, "{n}.dcm");

@@ -4,6 +4,7 @@
 //! attributes (name, ID, birth date) are never read, so no message or report
 //! can print them.
 
+use super::mosaic::{Mosaic, csa_values};
 use crate::error::{Result, VolumeError};
 use dicom_core::{Tag, VR};
 use dicom_dictionary_std::tags;
@@ -67,13 +68,23 @@ pub struct ImageHeader {
     /// One entry per frame.
     pub frames: Vec<FramePlane>,
     /// Whether ImageType says MOSAIC (Siemens: several slices tiled in one frame).
-    pub mosaic: bool,
+    pub is_mosaic: bool,
+    /// The tiling of a MOSAIC frame, when its CSA header gives the slice count.
+    pub mosaic: Option<Mosaic>,
 }
 
 impl ImageHeader {
     /// Bytes of one stored sample.
     pub fn sample_bytes(&self) -> usize {
         usize::from(self.bits_allocated / 8)
+    }
+
+    /// Columns and rows of one slice: a mosaic's tile, else the image.
+    pub fn slice_dims(&self) -> (usize, usize) {
+        match &self.mosaic {
+            Some(m) => (m.tile_cols, m.tile_rows),
+            None => (self.cols as usize, self.rows as usize),
+        }
     }
 
     /// The transfer syntax's name, as the registry knows it.
@@ -242,6 +253,8 @@ pub fn read_header(path: &Path) -> Result<Option<ImageHeader>> {
     });
     let image_type =
         obj.element_opt(tags::IMAGE_TYPE).ok().flatten().and_then(|e| e.to_multi_str().ok().map(|v| v.to_vec()));
+    let is_mosaic = image_type.is_some_and(|t| t.iter().any(|s| s.trim() == "MOSAIC"));
+    let mosaic = if is_mosaic && frame_count == 1 { siemens_mosaic(&obj, cols, rows) } else { None };
     Ok(Some(ImageHeader {
         path: path.to_path_buf(),
         series_uid: text(&obj, tags::SERIES_INSTANCE_UID).unwrap_or_default(),
@@ -260,8 +273,21 @@ pub fn read_header(path: &Path) -> Result<Option<ImageHeader>> {
         slice_thickness: thickness.filter(|t| *t > 0.0),
         spacing_between_slices: float(&obj, tags::SPACING_BETWEEN_SLICES).filter(|t| *t > 0.0),
         frames,
-        mosaic: image_type.is_some_and(|t| t.iter().any(|s| s.trim() == "MOSAIC")),
+        is_mosaic,
+        mosaic,
     }))
+}
+
+/// The tiling of a Siemens MOSAIC from its CSA image header (0029,1010).
+fn siemens_mosaic(obj: &InMemDicomObject, cols: u32, rows: u32) -> Option<Mosaic> {
+    let csa = obj.element_opt(Tag(0x0029, 0x1010)).ok()??.to_bytes().ok()?;
+    let found = csa_values(&csa, &["NumberOfImagesInMosaic", "SliceNormalVector"]);
+    let count: usize = found[0].as_ref()?.first()?.parse().ok()?;
+    let normal = found[1].as_ref().and_then(|v| {
+        let n: Vec<f64> = v.iter().filter_map(|x| x.parse().ok()).collect();
+        <[f64; 3]>::try_from(n.as_slice()).ok()
+    });
+    Mosaic::new(cols as usize, rows as usize, count, normal)
 }
 
 /// Refuses what the decoders cannot read, naming the transfer syntax and a way out.

@@ -20,10 +20,12 @@
 //!   ImageOrientationPatient the axes, the first slice the origin, all
 //!   converted from DICOM's LPS to mdtf's RAS.
 //!
-//! JPEG-LS has no pure-Rust decoder: it is refused with the conversion to run.
+//! Siemens MOSAIC frames are untiled into their slices ([`mosaic`]). JPEG-LS
+//! has no pure-Rust decoder: it is refused with the conversion to run.
 
 mod bounds;
 mod header;
+pub mod mosaic;
 mod pixels;
 mod resample;
 mod scan;
@@ -111,7 +113,7 @@ pub fn read_dicom_with_info(input: &Path, opts: &ReadOptions) -> Result<(MultiFi
     let layout = series::layout(input, &files, opts.dicom.resample)?;
     pixels::check_native_sizes(&files)?;
     let first = &files[0];
-    let (cols, rows) = (first.cols as usize, first.rows as usize);
+    let (cols, rows) = first.slice_dims();
     let stack_dims = [cols as u64, rows as u64, layout.slices.len() as u64];
     let plane = crate::limits::check_dims(input, &stack_dims, 1)? / layout.slices.len();
     // zeroed pages come from the allocator untouched, so the first writes
@@ -161,6 +163,15 @@ fn file_info(files: &[header::ImageHeader], layout: &series::Layout) -> FileInfo
         ("transfer syntax".to_string(), first.transfer_syntax_name()),
         ("bits stored".to_string(), format!("{} of {}", first.bits_stored, first.bits_allocated)),
     ];
+    if let Some(m) = &first.mosaic {
+        details.push((
+            "mosaic".to_string(),
+            format!(
+                "Siemens MOSAIC of {} slices in {} x {} tiles of {}x{}",
+                m.count, m.tiles_per_side, m.tiles_per_side, m.tile_cols, m.tile_rows
+            ),
+        ));
+    }
     if let Some(t) = first.slice_thickness {
         details.push(("slice thickness".to_string(), format!("{} mm", series::mm(t))));
     }

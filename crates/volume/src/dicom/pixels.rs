@@ -26,7 +26,8 @@ struct Target<'a> {
 /// Decodes every slice of `slices` into `out` (one plane of cols x rows per
 /// slice, in the order of `slices`), reading each file once, files in parallel.
 pub fn decode_into(files: &[ImageHeader], slices: &[SliceRef], out: &mut [f32]) -> Result<()> {
-    let plane = files[0].rows as usize * files[0].cols as usize;
+    let (cols, rows) = files[0].slice_dims();
+    let plane = cols * rows;
     let mut by_file: Vec<Vec<Target>> = (0..files.len()).map(|_| Vec::new()).collect();
     for (s, chunk) in slices.iter().zip(out.chunks_mut(plane)) {
         by_file[s.file].push(Target { frame: s.frame, rescale: s.rescale, plane: chunk });
@@ -97,8 +98,16 @@ fn decode_file(h: &ImageHeader, targets: Vec<Target>) -> Result<()> {
         return Err(pixel_shortage(h, bytes.len() as u64, needed));
     }
     for t in targets {
-        let src = &bytes[t.frame * frame_bytes..(t.frame + 1) * frame_bytes];
-        convert(h, src, t.rescale, t.plane);
+        match &h.mosaic {
+            // a mosaic has one frame; the target's frame names its tile
+            Some(m) => {
+                let rows = m.tile(&bytes[..frame_bytes], t.frame, h.sample_bytes());
+                for (src, dst) in rows.zip(t.plane.chunks_mut(m.tile_cols)) {
+                    convert(h, src, t.rescale, dst);
+                }
+            }
+            None => convert(h, &bytes[t.frame * frame_bytes..(t.frame + 1) * frame_bytes], t.rescale, t.plane),
+        }
     }
     Ok(())
 }
@@ -166,7 +175,8 @@ mod tests {
             slice_thickness: None,
             spacing_between_slices: None,
             frames: vec![FramePlane { position: None, orientation: None, pixel_spacing: None, rescale: (1.0, 0.0) }],
-            mosaic: false,
+            is_mosaic: false,
+            mosaic: None,
         }
     }
 

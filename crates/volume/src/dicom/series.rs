@@ -203,6 +203,48 @@ fn describe_gaps(gaps: &[f64]) -> (String, f64) {
     (text, groups[0].0)
 }
 
+/// The slices of a Siemens MOSAIC: tile k lies k slice gaps along the
+/// normal from the first tile, whose corner is half the mosaic-minus-tile
+/// size in from ImagePositionPatient.
+fn mosaic_layout(
+    h: &ImageHeader,
+    m: &super::mosaic::Mosaic,
+    frame: SliceRef,
+    row: [f64; 3],
+    col: [f64; 3],
+    pixel: [f64; 2],
+    mut warnings: Vec<String>,
+) -> Layout {
+    // a normal layout of the format, not a repair: `mdtf info` shows it, no warning
+    let mut normal = cross(row, col);
+    if m.normal.is_some_and(|n| dot(n, normal) < 0.0) {
+        normal = [-normal[0], -normal[1], -normal[2]];
+    }
+    let gap = match (h.spacing_between_slices, h.slice_thickness) {
+        (Some(s), _) | (None, Some(s)) => s,
+        (None, None) => {
+            warnings.push("a MOSAIC without SpacingBetweenSlices or SliceThickness: 1 mm assumed along z".into());
+            1.0
+        }
+    };
+    let dx = (h.cols as usize - m.tile_cols) as f64 / 2.0 * pixel[1];
+    let dy = (h.rows as usize - m.tile_rows) as f64 / 2.0 * pixel[0];
+    let first: [f64; 3] = std::array::from_fn(|a| frame.position[a] + dx * row[a] + dy * col[a]);
+    let slices = (0..m.count)
+        .map(|k| {
+            let position = std::array::from_fn(|a| first[a] + k as f64 * gap * normal[a]);
+            SliceRef { frame: k, position, along: dot(position, normal), ..frame }
+        })
+        .collect();
+    let geometry = Geometry {
+        dims: [m.tile_cols, m.tile_rows, m.count],
+        spacing: [pixel[1], pixel[0], gap],
+        origin: ras(first),
+        directions: [ras(row), ras(col), ras(normal)],
+    };
+    Layout { slices, geometry, resampling: None, warnings }
+}
+
 /// Orders the frames of `files` along the slice normal and checks that they
 /// form a regular grid (or plans the interpolation onto one when `resample`).
 pub fn layout(input: &Path, files: &[ImageHeader], resample: bool) -> Result<Layout> {
@@ -354,6 +396,18 @@ pub fn layout(input: &Path, files: &[ImageHeader], resample: bool) -> Result<Lay
         kept.push(s);
     }
     let slices = kept;
+    if let Some(m) = &first.mosaic {
+        if files.len() > 1 {
+            return Err(VolumeError::header(
+                input,
+                format!(
+                    "{} MOSAIC files in one series (a time series of volumes?): give one file to read one volume",
+                    files.len()
+                ),
+            ));
+        }
+        return Ok(mosaic_layout(first, m, slices[0], row, col, pixel, warnings));
+    }
     let origin = slices[0].position;
     let mut geometry = Geometry {
         dims: [first.cols as usize, first.rows as usize, slices.len()],
@@ -361,9 +415,9 @@ pub fn layout(input: &Path, files: &[ImageHeader], resample: bool) -> Result<Lay
         origin: ras(origin),
         directions: [ras(row), ras(col), ras(normal)],
     };
-    if first.mosaic {
+    if first.is_mosaic && first.mosaic.is_none() {
         warnings.push(
-            "the image is a Siemens MOSAIC (slices tiled in one frame); it is read as the 2D frame it is stored as"
+            "the image is a Siemens MOSAIC but its CSA header gives no slice count; it is read as the 2D frame it is stored as"
                 .into(),
         );
     }
