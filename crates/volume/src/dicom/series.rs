@@ -248,7 +248,7 @@ fn mosaic_layout(
 /// Orders the frames of `files` along the slice normal and checks that they
 /// form a regular grid (or plans the interpolation onto one when `resample`).
 pub fn layout(input: &Path, files: &[ImageHeader], resample: bool) -> Result<Layout> {
-    let first = &files[0];
+    let Some(first) = files.first() else { return Err(VolumeError::header(input, "the series holds no image")) };
     let mut warnings = Vec::new();
     for h in files {
         if (h.rows, h.cols) != (first.rows, first.cols) {
