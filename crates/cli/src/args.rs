@@ -200,10 +200,12 @@ pub enum EndianArg {
 /// `mdtf info`.
 #[derive(Debug, Args)]
 #[command(
-    after_help = "Example:\n  mdtf info sphere.nii.gz\n  mdtf info scan.raw --raw-dims 256,256,128 --raw-type u16 --raw-spacing 0.5,0.5,1"
+    after_help = "Example:\n  mdtf info sphere.nii.gz\n  mdtf info scan.raw --raw-dims 256,256,128 --raw-type u16 --raw-spacing 0.5,0.5,1\n  mdtf info dicom-export/                 (lists the series if there are several)\n  mdtf info dicom-export/DICOMDIR --series 3"
 )]
 pub struct InfoArgs {
-    /// The volume file.
+    /// The volume: a file (NIfTI, NRRD, MetaImage, TIFF, DICOM; the content
+    /// picks the reader), a folder (a DICOM series or export, or TIFF
+    /// slices), a DICOMDIR, or a .txt list of DICOM files.
     pub input: PathBuf,
     /// Bins of the text histogram.
     #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=200))]
