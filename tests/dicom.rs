@@ -256,8 +256,12 @@ fn a_dicomdir_names_its_series_as_simpleitk_reads_them() {
 
 #[test]
 fn the_mr_image_reads_the_same_in_every_decodable_transfer_syntax() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/dicom-ts/In");
-    assert!(dir.is_dir(), "{} is missing: the shared test data must sit beside the project", dir.display());
+    let dir = mdtf_e2e::shared_data("dicom-ts/In");
+    assert!(
+        dir.is_dir(),
+        "{} is missing: the shared test data sits in ../shared/data beside the checkout (or set MDTF_SHARED_DATA)",
+        dir.display()
+    );
     let reference = read(&dir.join("1.dcm"), &ReadOptions::default()).unwrap();
     // a Siemens MOSAIC of 35 slices of 64 x 64, untiled
     assert_eq!(reference.geometry.dims, [64, 64, 35]);

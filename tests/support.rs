@@ -159,3 +159,12 @@ pub fn dicom_slice(syntax: &str, cols: u16, rows: u16, z: Option<f64>, pixels: u
 
 /// Transfer syntax UID of explicit-VR little-endian DICOM.
 pub const EXPLICIT_LE: &str = "1.2.840.10008.1.2.1";
+
+/// A file or folder of the shared test data: `$MDTF_SHARED_DATA/rel` when
+/// that is set, else `../shared/data/rel` beside the checkout.
+pub fn shared_data(rel: &str) -> PathBuf {
+    let base = std::env::var_os("MDTF_SHARED_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"));
+    base.join(rel)
+}
