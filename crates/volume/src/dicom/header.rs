@@ -226,7 +226,7 @@ pub fn read_header(path: &Path) -> Result<Option<ImageHeader>> {
             if shared.is_none() && per_frame.is_empty() {
                 let mut plane = top.clone();
                 if let (Some(g), Some(p), Some(o)) = (&grid_offsets, top.position, top.orientation) {
-                    let n = [o[1] * o[5] - o[2] * o[4], o[2] * o[3] - o[0] * o[5], o[0] * o[4] - o[1] * o[3]];
+                    let n = super::series::cross([o[0], o[1], o[2]], [o[3], o[4], o[5]]);
                     plane.position = Some([p[0] + g[f] * n[0], p[1] + g[f] * n[1], p[2] + g[f] * n[2]]);
                 }
                 return plane;

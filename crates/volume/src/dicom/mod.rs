@@ -54,27 +54,26 @@ pub struct DicomOptions {
 }
 
 /// Whether a folder holds DICOM: a DICOMDIR, a file with the DICM signature
-/// or a `.dcm` / `.ima` name at its top level, or such a folder inside.
+/// or a `.dcm` / `.ima` name at its top level, or (without TIFF slices
+/// beside them) a folder inside that is DICOM by the same rule.
 pub fn folder_is_dicom(dir: &Path) -> bool {
     if dir.join("DICOMDIR").is_file() {
         return true;
     }
     let Ok(entries) = std::fs::read_dir(dir) else { return false };
-    let mut subfolders = Vec::new();
+    let (mut subfolders, mut has_tiff) = (Vec::new(), false);
     for e in entries.flatten().take(4096) {
         let p = e.path();
-        if p.is_file() && (has_dicom_magic(&p) || crate::io::Format::from_path(&p) == Some(crate::io::Format::Dicom)) {
-            return true;
-        }
         if p.is_dir() {
             subfolders.push(p);
+        } else if has_dicom_magic(&p) || crate::io::Format::from_path(&p) == Some(crate::io::Format::Dicom) {
+            return true;
+        } else {
+            has_tiff |= crate::tiff_stack::is_tiff_name(&p);
         }
     }
     // scanner exports nest series in folders (PATIENT/STUDY/SERIES)
-    let no_tiff = std::fs::read_dir(dir)
-        .map(|r| r.flatten().all(|e| !crate::tiff_stack::is_tiff_name(&e.path())))
-        .unwrap_or(true);
-    no_tiff && subfolders.iter().take(64).any(|d| folder_is_dicom(d))
+    !has_tiff && subfolders.iter().take(64).any(|d| folder_is_dicom(d))
 }
 
 /// The series an input holds, for a listing.
@@ -114,11 +113,10 @@ pub fn read_dicom_with_info(input: &Path, opts: &ReadOptions) -> Result<(MultiFi
     pixels::check_native_sizes(&files)?;
     let first = &files[0];
     let (cols, rows) = first.slice_dims();
-    let stack_dims = [cols as u64, rows as u64, layout.slices.len() as u64];
-    let plane = crate::limits::check_dims(input, &stack_dims, 1)? / layout.slices.len();
+    let samples = crate::limits::check_dims(input, &[cols as u64, rows as u64, layout.slices.len() as u64], 1)?;
     // zeroed pages come from the allocator untouched, so the first writes
     // (by the parallel decoders) are what maps them, not one thread here
-    let mut stack = vec![0.0f32; plane * layout.slices.len()];
+    let mut stack = vec![0.0f32; samples];
     pixels::decode_into(&files, &layout.slices, &mut stack)?;
     let samples = match &layout.resampling {
         Some(plan) => {

@@ -23,11 +23,12 @@ pub fn resample(stack: &[f32], cols: usize, rows: usize, slices: &[SliceRef], pl
         let b = along.partition_point(|&a| a <= t).clamp(1, along.len() - 1);
         let a = b - 1;
         let w = ((t - along[a]) / (along[b] - along[a])).clamp(0.0, 1.0);
-        let slice = |s: usize| &stack[s * plane..(s + 1) * plane];
+        let slice = |s: usize| Shifted::new(&stack[s * plane..(s + 1) * plane], cols, rows, plan.offsets[s], fill);
+        let (below, above) = (slice(a), slice(b));
         for j in 0..rows {
             for i in 0..cols {
-                let va = shifted(slice(a), cols, rows, i, j, plan.offsets[a], fill);
-                let vb = if w > 0.0 { shifted(slice(b), cols, rows, i, j, plan.offsets[b], fill) } else { va };
+                let va = below.at(i, j);
+                let vb = if w > 0.0 { above.at(i, j) } else { va };
                 dst[j * cols + i] = ((1.0 - w) * va as f64 + w * vb as f64) as f32;
             }
         }
@@ -35,26 +36,44 @@ pub fn resample(stack: &[f32], cols: usize, rows: usize, slices: &[SliceRef], pl
     out
 }
 
-/// The value of `src` at output pixel (i, j) when the slice lies `offset`
-/// pixels (x, y) from the first slice: bilinear at (i - ox, j - oy).
-fn shifted(src: &[f32], cols: usize, rows: usize, i: usize, j: usize, offset: [f64; 2], fill: f32) -> f32 {
-    let x = i as f64 - offset[0];
-    let y = j as f64 - offset[1];
-    let (x0, y0) = (x.floor(), y.floor());
-    let (fx, fy) = (x - x0, y - y0);
-    let at = |xi: f64, yi: f64| -> f64 {
-        if xi < 0.0 || yi < 0.0 || xi >= cols as f64 || yi >= rows as f64 {
-            fill as f64
-        } else {
-            src[yi as usize * cols + xi as usize] as f64
-        }
-    };
-    if fx == 0.0 && fy == 0.0 {
-        return at(x0, y0) as f32;
+/// One input slice seen from the output grid: it lies `offset` pixels (x, y)
+/// from the first slice, so output pixel (i, j) reads it bilinearly at
+/// (i - ox, j - oy). The whole-pixel shift and the fraction are the same for
+/// every pixel of the slice, so they are split once here.
+struct Shifted<'a> {
+    src: &'a [f32],
+    cols: usize,
+    rows: usize,
+    shift: [isize; 2],
+    frac: [f64; 2],
+    fill: f32,
+}
+
+impl<'a> Shifted<'a> {
+    fn new(src: &'a [f32], cols: usize, rows: usize, offset: [f64; 2], fill: f32) -> Shifted<'a> {
+        let (x, y) = (-offset[0], -offset[1]);
+        let (x0, y0) = (x.floor(), y.floor());
+        Shifted { src, cols, rows, shift: [x0 as isize, y0 as isize], frac: [x - x0, y - y0], fill }
     }
-    let top = at(x0, y0) * (1.0 - fx) + at(x0 + 1.0, y0) * fx;
-    let bottom = at(x0, y0 + 1.0) * (1.0 - fx) + at(x0 + 1.0, y0 + 1.0) * fx;
-    (top * (1.0 - fy) + bottom * fy) as f32
+
+    fn pixel(&self, x: isize, y: isize) -> f64 {
+        if x < 0 || y < 0 || x >= self.cols as isize || y >= self.rows as isize {
+            f64::from(self.fill)
+        } else {
+            f64::from(self.src[y as usize * self.cols + x as usize])
+        }
+    }
+
+    fn at(&self, i: usize, j: usize) -> f32 {
+        let (x, y) = (i as isize + self.shift[0], j as isize + self.shift[1]);
+        let [fx, fy] = self.frac;
+        if fx == 0.0 && fy == 0.0 {
+            return self.pixel(x, y) as f32;
+        }
+        let top = self.pixel(x, y) * (1.0 - fx) + self.pixel(x + 1, y) * fx;
+        let bottom = self.pixel(x, y + 1) * (1.0 - fx) + self.pixel(x + 1, y + 1) * fx;
+        (top * (1.0 - fy) + bottom * fy) as f32
+    }
 }
 
 #[cfg(test)]
@@ -81,7 +100,7 @@ mod tests {
         }
         // a slice shifted half a pixel along x reads halfway between columns
         let ramp = [0.0f32, 10.0, 20.0, 0.0, 10.0, 20.0];
-        assert_eq!(shifted(&ramp, 3, 2, 1, 0, [0.5, 0.0], -1.0), 5.0);
-        assert_eq!(shifted(&ramp, 3, 2, 0, 1, [0.5, 0.0], -1.0), -0.5);
+        assert_eq!(Shifted::new(&ramp, 3, 2, [0.5, 0.0], -1.0).at(1, 0), 5.0);
+        assert_eq!(Shifted::new(&ramp, 3, 2, [0.5, 0.0], -1.0).at(0, 1), -0.5);
     }
 }
