@@ -62,6 +62,8 @@ pub enum Command {
     Validate(ValidateArgs),
     /// Render a pack from its manifest alone (CPU ray caster), as its renderer would show it.
     Preview(PreviewArgs),
+    /// Export a pack for VTK/ParaView (.vti, the TF as a 2D image, Python scripts) and 3D Slicer (.nrrd, .vp).
+    Export(crate::commands::export::ExportArgs),
     /// Tetrahedral meshes (VTK .vtu/.vtk, or a meshed volume): per-vertex (s, g), cell boxes and the
     /// projected-tetrahedra pack with its bivariate pre-integration tables.
     Tetra(TetraArgs),

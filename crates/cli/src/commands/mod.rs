@@ -4,6 +4,7 @@ mod bilateral;
 mod boundary;
 mod convert;
 mod derive;
+pub mod export;
 mod histogram;
 mod info;
 mod pack;
@@ -31,6 +32,7 @@ pub fn run(command: Command, progress: &Progress) -> Result<()> {
         Command::Run(a) => run::run(&a, progress),
         Command::Validate(a) => validate::run(&a, progress),
         Command::Preview(a) => preview::run(&a, progress),
+        Command::Export(a) => export::run(&a, progress),
         Command::Tetra(a) => tetra::run(&a, progress),
     }
 }

@@ -1,0 +1,95 @@
+"""Open an mdtf export in ParaView with its 2D transfer function.
+
+Written by `mdtf export --to paraview`. Run it with ParaView 5.11 or later:
+
+    pvpython open_in_paraview.py                          # a window
+    pvbatch open_in_paraview.py --screenshot shot.png     # offscreen, one picture
+
+or in the ParaView GUI: View > Python Shell > Run Script. It loads
+volume.vti, shows it as a volume coloured by the TF's X array, selects the
+2D transfer-function mode with the TF's Y array (not the gradient computed
+by ParaView), and installs mdtf's table, calibrated to the arrays' ranges
+as VTK's 2D mode reads it (see mdtf_vtk_tf.py). ParaView's own 2D TF
+editor edits boxes; mdtf's table is installed on the volume's property, so
+editing the TF in the GUI replaces it.
+"""
+
+import argparse
+import os
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+
+import mdtf_vtk_tf as mdtf  # noqa: E402
+from paraview import simple as pv  # noqa: E402
+
+
+def main(argv):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--screenshot", help="write this PNG and exit")
+    ap.add_argument("--view", default="30,20", help="AZIMUTH,ELEVATION in degrees, as mdtf preview (default 30,20)")
+    ap.add_argument("--size", type=int, default=512, help="screenshot width and height, pixels (default 512)")
+    ap.add_argument("--step", type=float, default=0.5, help="sample spacing, in L_min (default 0.5)")
+    args = ap.parse_args(argv)
+    info = mdtf.load_export(HERE)
+    tf = info.get("tf")
+    if not tf:
+        raise SystemExit("this export has no transfer function: " + "; ".join(info["notes"]))
+
+    reader = pv.XMLImageDataReader(registrationName="mdtf volume", FileName=[os.path.join(HERE, info["volume"])])
+    view = pv.GetActiveViewOrCreate("RenderView")
+    view.OrientationAxesVisibility = 0
+    if hasattr(view, "UseColorPaletteForBackground"):
+        view.UseColorPaletteForBackground = 0
+    view.Background = [0.0, 0.0, 0.0]
+    display = pv.Show(reader, view)
+    display.SetRepresentationType("Volume")
+    pv.ColorBy(display, ("POINTS", tf["x"]))
+    display.UseTransfer2D = 1
+    display.UseGradientForTransfer2D = 0
+    display.ColorArray2Name = ["POINTS", tf["y"]]
+    ambient, diffuse, specular, power = info["lighting"]
+    display.Shade = 1 if info["shade"] else 0
+    display.Ambient, display.Diffuse, display.Specular, display.SpecularPower = ambient, diffuse, specular, power
+    pv.Render(view)
+
+    # mdtf's table replaces the one ParaView built from its (empty) box list
+    renderer = view.GetRenderer()
+    volumes = renderer.GetVolumes()
+    volumes.InitTraversal()
+    volume = volumes.GetNextVolume()
+    if volume is None:
+        raise SystemExit("ParaView made no volume of volume.vti (is its volume rendering available?)")
+    image = reader.GetClientSideObject().GetOutput()
+    x_range = mdtf.array_range(image, tf["x"])
+    y_range = mdtf.array_range(image, tf["y"])
+    sample_distance = args.step * tf["opacity_unit"]
+    table = mdtf.read_vti(os.path.join(HERE, tf["file"]))
+    prop = volume.GetProperty()
+    prop.SetTransferFunction2D(mdtf.calibrated_tf(table, tf, x_range, y_range, sample_distance))
+    prop.SetTransferFunctionModeTo2D()
+    mapper = volume.GetMapper()
+    if hasattr(mapper, "SetAutoAdjustSampleDistances"):
+        mapper.SetAutoAdjustSampleDistances(0)
+        mapper.SetSampleDistance(sample_distance)
+
+    azimuth, elevation = (float(t) for t in args.view.split(","))
+    mdtf.mdtf_view(renderer, info, azimuth, elevation)
+    camera = renderer.GetActiveCamera()
+    view.CameraPosition = list(camera.GetPosition())
+    view.CameraFocalPoint = list(camera.GetFocalPoint())
+    view.CameraViewUp = list(camera.GetViewUp())
+    view.CameraParallelProjection = 1
+    view.CameraParallelScale = camera.GetParallelScale()
+    if args.screenshot:
+        view.ViewSize = [args.size, args.size]
+        pv.SaveScreenshot(args.screenshot, view, ImageResolution=[args.size, args.size])
+        print(f"wrote {args.screenshot}")
+    else:
+        pv.Render(view)
+        pv.Interact(view)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
