@@ -6,9 +6,10 @@
 # - a virtual environment with the pinned reference packages of
 #   tests/requirements.txt (created once in target/test-venv, or $MDTF_VENV;
 #   rebuilt when the requirements change), exported as MDTF_PYTHON;
-# - Debian's python3-venv when the interpreter cannot make one, and dcm2niix
-#   (a reference DICOM converter), as root with apt-get; otherwise the
-#   command to run is printed;
+# - Debian's python3-venv when the interpreter cannot make one, dcm2niix (a
+#   reference DICOM converter), ParaView's pvbatch with xvfb-run (the export
+#   test opens its script in ParaView) and Mesa's EGL (VTK renders offscreen
+#   with it), as root with apt-get; otherwise the command to run is printed;
 # - cargo test --workspace.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -34,6 +35,20 @@ command -v dcm2niix >/dev/null || {
     die "dcm2niix is missing (the DICOM tests compare with it): sudo apt-get install dcm2niix"
   fi
 }
+
+# what the export tests run: pvbatch (Debian's ParaView) under xvfb-run, and the vtk wheel offscreen through Mesa's EGL
+missing=()
+command -v pvbatch >/dev/null || missing+=(python3-paraview python3-numpy)
+command -v xvfb-run >/dev/null || missing+=(xvfb xauth)
+ldconfig -p 2>/dev/null | grep -q libEGL_mesa || missing+=(libegl1 libegl-mesa0 libgl1-mesa-dri)
+if [ "${#missing[@]}" -gt 0 ]; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    say "installing ${missing[*]} (apt-get)"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+  else
+    die "${missing[*]} missing (the export tests render with ParaView and VTK): sudo apt-get install ${missing[*]}"
+  fi
+fi
 
 venv="${MDTF_VENV:-$PWD/target/test-venv}"
 stamp="$venv/.requirements"

@@ -88,26 +88,44 @@ def calibrated_tf(tf_image, tf, x_range, y_range, sample_distance):
     return image
 
 
-def frame(info):
-    """Centre, radius, and the index-to-world rotation of the pack's grid."""
+def frame(info, world=True):
+    """Centre, radius, and the grid-to-world rotation of the pack's grid.
+
+    In the grid's own frame (`world=False`: voxel (i, j, k) at (i sx, j sy,
+    k sz)) the rotation is the identity.
+    """
     g = info["geometry"]
     dims, spacing = np.array(g["dims"], float), np.array(g["spacing"], float)
     m = np.array(g["world_from_voxel"], float)
-    rotation = m[:3, :3] / spacing[None, :]
+    rotation = m[:3, :3] / spacing[None, :] if world else np.eye(3)
+    origin = m[:3, 3] if world else np.zeros(3)
     extent = (dims - 1.0) * spacing
-    centre = m[:3, 3] + rotation @ (extent / 2.0)
+    centre = origin + rotation @ (extent / 2.0)
     return centre, float(np.linalg.norm(extent)) / 2.0, rotation
 
 
-def mdtf_view(renderer, info, azimuth, elevation):
+def in_grid_frame(image):
+    """Places `image` in its grid's own frame: origin 0, axes along x, y, z.
+
+    VTK's GPU ray caster (9.7) lights an image whose axes are rotated (by
+    its direction matrix or the volume's matrix) as if its gradients were
+    not, so shading is right only for an axis-aligned image; the picture
+    of a grid seen from a camera turned with it is the same.
+    """
+    image.SetOrigin(0.0, 0.0, 0.0)
+    image.SetDirectionMatrix(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+
+
+def mdtf_view(renderer, info, azimuth, elevation, world=True):
     """Points the renderer's camera as `mdtf preview --view AZ,EL` does.
 
     Orthographic, looking along -(cos el cos az, cos el sin az, sin el) in
-    the grid's index frame, the image framing the grid's diagonal. A grid
-    whose axes form a left-handed frame shows mirrored against the preview,
-    which renders in the index frame.
+    the grid's frame, the image framing the grid's diagonal; for an image
+    placed in the world (`world`), that view turned with the grid. A grid
+    whose axes form a left-handed frame shows mirrored against the preview
+    there, which renders in the grid's frame.
     """
-    centre, radius, rotation = frame(info)
+    centre, radius, rotation = frame(info, world)
     az, el = math.radians(azimuth), math.radians(elevation)
     d = np.array([-math.cos(el) * math.cos(az), -math.cos(el) * math.sin(az), -math.sin(el)])
     right = np.array([-math.sin(az), math.cos(az), 0.0])

@@ -11,7 +11,10 @@ volume.vti, shows it as a volume coloured by the TF's X array, selects the
 by ParaView), and installs mdtf's table, calibrated to the arrays' ranges
 as VTK's 2D mode reads it (see mdtf_vtk_tf.py). ParaView's own 2D TF
 editor edits boxes; mdtf's table is installed on the volume's property, so
-editing the TF in the GUI replaces it.
+editing the TF in the GUI replaces it. The volume is placed in the world
+(origin and axis directions of the pack's grid); VTK's GPU ray caster
+shades an image with rotated axes as if they were not (see
+mdtf_vtk_tf.in_grid_frame), so the shading of an oblique grid is off.
 """
 
 import argparse
@@ -82,6 +85,20 @@ def main(argv):
     view.CameraViewUp = list(camera.GetViewUp())
     view.CameraParallelProjection = 1
     view.CameraParallelScale = camera.GetParallelScale()
+    # the preview's light instead of ParaView's light kit
+    view.UseLight = 0
+    light = pv.AddLight(view=view)
+    light.Coords = "Camera"
+    light.Type = "Directional"
+    light.Position = [0.0, 0.3, 1.0]
+    light.FocalPoint = [0.0, 0.0, 0.0]
+    pv.Render(view)
+    # ParaView's light proxy has no ambient colour (black in VTK by default)
+    lights = renderer.GetLights()
+    lights.InitTraversal()
+    for _ in range(lights.GetNumberOfItems()):
+        lights.GetNextItem().SetAmbientColor(1.0, 1.0, 1.0)
+    renderer.SetTwoSidedLighting(True)
     if args.screenshot:
         view.ViewSize = [args.size, args.size]
         pv.SaveScreenshot(args.screenshot, view, ImageResolution=[args.size, args.size])

@@ -56,6 +56,8 @@ def main():
     if not tf:
         raise SystemExit("this export has no transfer function to render with: " + "; ".join(info["notes"]))
     volume = mdtf.read_vti(os.path.join(args.folder, info["volume"]))
+    # rendered in the grid's own frame, where VTK shades correctly (see in_grid_frame)
+    mdtf.in_grid_frame(volume)
     table = mdtf.read_vti(os.path.join(args.folder, tf["file"]))
     x_range = mdtf.array_range(volume, tf["x"])
     y_range = list(pair(args.y_range, "--y-range")) if args.y_range else mdtf.array_range(volume, tf["y"])
@@ -87,7 +89,7 @@ def main():
     window.SetSize(args.size, args.size)
     window.SetMultiSamples(0)
     azimuth, elevation = pair(args.view, "--view")
-    mdtf.mdtf_view(renderer, info, azimuth, elevation)
+    mdtf.mdtf_view(renderer, info, azimuth, elevation, world=False)
     mdtf.mdtf_light(renderer)
     if args.window:
         interactor = vtkRenderWindowInteractor()
