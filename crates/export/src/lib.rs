@@ -260,7 +260,7 @@ fn write_file(
 
 /// The pack's channels as point arrays, the normal components as one
 /// 3-component "normal"; and their descriptions from the manifest.
-fn point_arrays(pack: &LoadedPack) -> (Vec<PointArray>, Vec<ExportedArray>) {
+fn point_arrays(pack: &LoadedPack) -> (Vec<PointArray<'_>>, Vec<ExportedArray>) {
     let entry = |name: &str| pack.manifest.channels.iter().find(|c| c.name == name);
     let describe = |name: &str, channels: Vec<String>, components: usize| ExportedArray {
         name: name.into(),
@@ -275,14 +275,14 @@ fn point_arrays(pack: &LoadedPack) -> (Vec<PointArray>, Vec<ExportedArray>) {
         if NORMAL.contains(&name.as_str()) && NORMAL.iter().all(|n| pack.channels.contains_key(*n)) {
             continue;
         }
-        arrays.push(PointArray { name: name.clone(), components: 1, values: volume.samples().to_vec() });
+        arrays.push(PointArray { name: name.clone(), components: 1, values: volume.samples().into() });
         listed.push(describe(name, vec![name.clone()], 1));
     }
     let normals: Option<Vec<&Volume>> = NORMAL.iter().map(|n| pack.channels.get(*n)).collect();
     if let Some(n) = normals {
         let (x, y, z) = (n[0].samples(), n[1].samples(), n[2].samples());
-        let values = x.iter().zip(y).zip(z).flat_map(|((a, b), c)| [*a, *b, *c]).collect();
-        arrays.push(PointArray { name: "normal".into(), components: 3, values });
+        let values: Vec<f32> = x.iter().zip(y).zip(z).flat_map(|((a, b), c)| [*a, *b, *c]).collect();
+        arrays.push(PointArray { name: "normal".into(), components: 3, values: values.into() });
         let mut d = describe("normal", NORMAL.iter().map(|s| s.to_string()).collect(), 3);
         d.meaning = "unit normal (nx, ny, nz)".into();
         listed.push(d);
@@ -299,8 +299,12 @@ fn tf_image_geometry(t: &Tf2d) -> Geometry {
     ])
 }
 
-fn tf_array(t: &Tf2d) -> PointArray {
-    PointArray { name: "rgba".into(), components: 4, values: t.rgba.iter().flatten().copied().collect() }
+fn tf_array(t: &Tf2d) -> PointArray<'static> {
+    PointArray {
+        name: "rgba".into(),
+        components: 4,
+        values: t.rgba.iter().flatten().copied().collect::<Vec<f32>>().into(),
+    }
 }
 
 /// Writes v as NRRD and, for a TF over (v, g), the `.vp` of its marginals.

@@ -6,6 +6,7 @@ use flate2::Compression;
 use flate2::write::ZlibEncoder;
 use mdtf_volume::Geometry;
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::io::{Result, Write};
 
 /// Uncompressed bytes per compressed block (VTK's readers accept any size).
@@ -13,31 +14,31 @@ const BLOCK_BYTES: usize = 1 << 20;
 
 /// One point array: `components` interleaved float32 values per point, x fastest.
 #[derive(Debug, Clone, PartialEq)]
-pub struct PointArray {
+pub struct PointArray<'a> {
     /// Array name, as VTK and ParaView list it.
     pub name: String,
     /// Values per point (1: scalar, 3: vector, 4: RGBA).
     pub components: usize,
-    /// `components` x points values.
-    pub values: Vec<f32>,
+    /// `components` x points values (borrowed from a decoded channel, or owned).
+    pub values: Cow<'a, [f32]>,
 }
 
 /// The array's values as the zlib blocks of VTK's compressed binary layout:
 /// a UInt64 header (block count, block size, size of the last partial block
 /// or 0, compressed size of each block) followed by the blocks.
 fn compressed(values: &[f32]) -> Vec<u8> {
-    let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
-    let blocks: Vec<Vec<u8>> = bytes
-        .par_chunks(BLOCK_BYTES)
+    let blocks: Vec<Vec<u8>> = values
+        .par_chunks(BLOCK_BYTES / 4)
         .map(|chunk| {
-            let mut z = ZlibEncoder::new(Vec::with_capacity(chunk.len() / 2), Compression::fast());
+            let bytes: Vec<u8> = chunk.iter().flat_map(|v| v.to_le_bytes()).collect();
+            let mut z = ZlibEncoder::new(Vec::with_capacity(bytes.len() / 2), Compression::fast());
             // writing into a Vec cannot fail
-            let _ = z.write_all(chunk);
+            let _ = z.write_all(&bytes);
             z.finish().unwrap_or_default()
         })
         .collect();
     let mut out = Vec::new();
-    let header = [blocks.len() as u64, BLOCK_BYTES as u64, (bytes.len() % BLOCK_BYTES) as u64];
+    let header = [blocks.len() as u64, BLOCK_BYTES as u64, ((values.len() * 4) % BLOCK_BYTES) as u64];
     for h in header.iter().copied().chain(blocks.iter().map(|b| b.len() as u64)) {
         out.extend_from_slice(&h.to_le_bytes());
     }
@@ -167,7 +168,7 @@ mod tests {
         let mut g = Geometry::new([2, 3, 4], [0.5, 1.0, 2.0]).with_origin([1.0, -2.0, 3.0]);
         // axis x points along world y, axis y along world -x
         g.directions = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
-        let a = PointArray { name: "v<1>".into(), components: 1, values: vec![1.0; 24] };
+        let a = PointArray { name: "v<1>".into(), components: 1, values: vec![1.0; 24].into() };
         let mut out = Vec::new();
         write_vti(&mut out, &g, &[a], Some("v<1>")).unwrap();
         let text = String::from_utf8_lossy(&out);
