@@ -292,6 +292,14 @@ fn the_slicer_files_parse_by_slicers_layout_and_hold_the_tfs_marginals() {
     }
 }
 
+/// Runs the shipped pipeline `name` at 40^3 into `dir/name`.
+fn small_run(name: &str, dir: &Path) -> PathBuf {
+    let out = dir.join(name);
+    let pipeline = shipped_pipeline(name);
+    mdtf_ok(&["run", pipeline.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q", "--set", "input.size=40"]);
+    out
+}
+
 #[test]
 fn what_cannot_be_exported_is_said_and_the_pack_is_never_written_over() {
     let dir = tempfile::tempdir().unwrap();
@@ -303,46 +311,19 @@ fn what_cannot_be_exported_is_said_and_the_pack_is_never_written_over() {
     }
     assert!(pack.join("manifest.json").is_file() && pack.join("data.raw").is_file());
     // a projected-tetrahedra pack already is VTK (mesh.vtu)
-    let tet = dir.path().join("tet");
-    mdtf_ok(&[
-        "run",
-        shipped_pipeline("projected-tetrahedra").to_str().unwrap(),
-        "-o",
-        tet.to_str().unwrap(),
-        "-q",
-        "--set",
-        "input.size=40",
-    ]);
+    let tet = small_run("projected-tetrahedra", dir.path());
     let err = mdtf_err(&["export", tet.join("pack").to_str().unwrap(), "-o", dir.path().join("x").to_str().unwrap()]);
     assert!(err.contains("mesh.vtu"), "{err}");
     assert!(!dir.path().join("x").exists(), "a failed export left its folder");
     // a gaussian-tf pack has no table: the data is exported and the note says so
-    let gtf = dir.path().join("gtf");
-    mdtf_ok(&[
-        "run",
-        shipped_pipeline("gaussian-tf").to_str().unwrap(),
-        "-o",
-        gtf.to_str().unwrap(),
-        "-q",
-        "--set",
-        "input.size=40",
-    ]);
+    let gtf = small_run("gaussian-tf", dir.path());
     let out = mdtf(&["export", gtf.join("pack").to_str().unwrap(), "-o", dir.path().join("g").to_str().unwrap()]);
     assert!(out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("no 2D or 3D transfer-function table"), "{stderr}");
     assert!(dir.path().join("g/volume.vti").is_file() && !dir.path().join("g/render_vtk.py").exists());
     // a TF over (v, inv_g) has no separable form over v and its gradient: no .vp, and the note says why
-    let pf = dir.path().join("pf");
-    mdtf_ok(&[
-        "run",
-        shipped_pipeline("peak-finding").to_str().unwrap(),
-        "-o",
-        pf.to_str().unwrap(),
-        "-q",
-        "--set",
-        "input.size=40",
-    ]);
+    let pf = small_run("peak-finding", dir.path());
     let out = mdtf(&[
         "export",
         pf.join("pack").to_str().unwrap(),
