@@ -222,7 +222,7 @@ fn pvbatch() -> Command {
 
 #[test]
 fn paraview_renders_the_exported_pack_as_mdtf_preview_does() {
-    for case in ["sphere", "shells-tf"] {
+    for case in ["sphere", "shells-tf", "oblique"] {
         let p = packs();
         let out = p.dir.path().join(case).join("paraview.png");
         let size = PIXELS.to_string();

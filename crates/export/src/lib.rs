@@ -386,12 +386,15 @@ fn readme(m: &ExportManifest, targets: &[Target]) -> String {
                   `VTK_DEFAULT_OPENGL_WINDOW=vtkEGLRenderWindow` or `vtkOSOpenGLRenderWindow`):\n\n    \
                   python render_vtk.py -o render.png --view 30,20 --size 512\n    \
                   python render_vtk.py --window\n\nThe view is `mdtf preview`'s: the same azimuth and elevation about the \
-                  volume's z axis, orthographic, framing the whole grid.\n\n";
+                  volume's z axis, orthographic, framing the whole grid, rendered in the grid's own frame (VTK's ray caster \
+                  misshades images with rotated axes).\n\n";
         }
         if targets.contains(&Target::Paraview) {
             s += "Open in ParaView (5.11 or later): `pvpython open_in_paraview.py` (or `pvbatch open_in_paraview.py \
-                  --screenshot shot.png`), or in the GUI run it from View > Python Shell > Run Script. It loads the `.vti`, \
-                  selects the 2D transfer-function mode with the Y axis array set, and installs the table.\n\n";
+                  --screenshot shot.png`), or in the GUI run it from View > Python Shell > Run Script. It loads the `.vti` \
+                  in its grid's own frame (`--world` places it by the grid's origin and axes, which ParaView 5.11 \
+                  misplaces and misshades for rotated axes), selects the 2D transfer-function mode with the Y axis \
+                  array set, and installs the table.\n\n";
         }
         s += "VTK's 2D mode normalises each array by its own data range and does not correct opacity for the sample \
               distance; `mdtf_vtk_tf.py` resamples the table onto the arrays' ranges and corrects its opacity, so that \
