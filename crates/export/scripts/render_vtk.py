@@ -92,8 +92,11 @@ def main():
     mdtf.mdtf_view(renderer, info, azimuth, elevation, world=False)
     mdtf.mdtf_light(renderer)
     if args.window:
+        from vtkmodules.vtkInteractionStyle import vtkInteractorStyleTrackballCamera
+
         interactor = vtkRenderWindowInteractor()
         interactor.SetRenderWindow(window)
+        interactor.SetInteractorStyle(vtkInteractorStyleTrackballCamera())
         window.Render()
         interactor.Start()
         return
