@@ -204,7 +204,7 @@ fn write_export(pack: &LoadedPack, dir: &Path, targets: &[Target]) -> Result<Exp
         notes: Vec::new(),
     };
     if vtk_like {
-        let (arrays, listed) = point_arrays(pack);
+        let (arrays, listed) = point_arrays(pack, shade);
         let active = tf.as_ref().map(|t| t.x.channel.clone()).or_else(|| listed.first().map(|a| a.name.clone()));
         write_file(dir, VOLUME_VTI, |w| write_vti(w, &geometry, &arrays, active.as_deref()))?;
         manifest.volume = Some(VOLUME_VTI.into());
@@ -222,13 +222,12 @@ fn write_export(pack: &LoadedPack, dir: &Path, targets: &[Target]) -> Result<Exp
                 opacity_unit: geometry.min_spacing(),
                 approximation: t.approximation.clone(),
             });
-            for (name, text) in [HELPER_PY].into_iter().chain(
-                [(Target::Vtk, RENDER_VTK_PY), (Target::Paraview, PARAVIEW_PY)]
-                    .into_iter()
-                    .filter(|(target, _)| targets.contains(target))
-                    .map(|(_, script)| script),
-            ) {
-                write_file(dir, name, |w| w.write_all(text.as_bytes()))?;
+            let scripts =
+                [(None, HELPER_PY), (Some(Target::Vtk), RENDER_VTK_PY), (Some(Target::Paraview), PARAVIEW_PY)];
+            for (for_target, (name, text)) in scripts {
+                if for_target.is_none_or(|t| targets.contains(&t)) {
+                    write_file(dir, name, |w| w.write_all(text.as_bytes()))?;
+                }
             }
         }
     }
@@ -259,8 +258,9 @@ fn write_file(
 }
 
 /// The pack's channels as point arrays, the normal components as one
-/// 3-component "normal"; and their descriptions from the manifest.
-fn point_arrays(pack: &LoadedPack) -> (Vec<PointArray<'_>>, Vec<ExportedArray>) {
+/// 3-component "normal" when the pack `has_normals` (all three); and their
+/// descriptions from the manifest.
+fn point_arrays(pack: &LoadedPack, has_normals: bool) -> (Vec<PointArray<'_>>, Vec<ExportedArray>) {
     let entry = |name: &str| pack.manifest.channels.iter().find(|c| c.name == name);
     let describe = |name: &str, channels: Vec<String>, components: usize| ExportedArray {
         name: name.into(),
@@ -272,7 +272,7 @@ fn point_arrays(pack: &LoadedPack) -> (Vec<PointArray<'_>>, Vec<ExportedArray>) 
     let mut arrays = Vec::new();
     let mut listed = Vec::new();
     for (name, volume) in &pack.channels {
-        if NORMAL.contains(&name.as_str()) && NORMAL.iter().all(|n| pack.channels.contains_key(*n)) {
+        if has_normals && NORMAL.contains(&name.as_str()) {
             continue;
         }
         arrays.push(PointArray { name: name.clone(), components: 1, values: volume.samples().into() });
