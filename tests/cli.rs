@@ -569,10 +569,10 @@ fn pack_rasterises_a_tf_file_into_the_slicer_tables() {
     assert_eq!(names, ["tf3d", "tf2d", "tf_f2"]);
     let t3 = read(&pack.join("tf3d_f32.nrrd"), &ReadOptions::default()).unwrap();
     assert_eq!(t3.fields.len(), 4);
-    assert_eq!(t3.geometry.dims, [256, 128, 8]);
-    // cell (i, j, k): v = i + 0.5, g = (j + 0.5) / 2, f2 = -8 + (k + 0.5) * 2
-    for (i, j, k) in [(120usize, 60usize, 3usize), (100, 100, 0), (130, 30, 7)] {
-        let (v, g, f2) = (i as f64 + 0.5, (j as f64 + 0.5) * 0.5, -8.0 + (k as f64 + 0.5) * 2.0);
+    assert_eq!(t3.geometry.dims, [256, 128, 9]);
+    // cell (i, j, k): v = i + 0.5, g = (j + 0.5) / 2, f2 = -8 + (k + 0.5) * 16 / 9 (k = 4: f2 = 0)
+    for (i, j, k) in [(120usize, 60usize, 3usize), (100, 100, 0), (130, 30, 8), (110, 50, 4)] {
+        let (v, g, f2) = (i as f64 + 0.5, (j as f64 + 0.5) * 0.5, -8.0 + (k as f64 + 0.5) * 16.0 / 9.0);
         let tri = if g <= 60.0 { 0.9 * (1.0 - (v - 100.0).abs() / (40.0 * g / 60.0)).max(0.0) } else { 0.0 };
         let emphasis = 1.0 - 0.5 * (f2.abs() / 8.0);
         let got = t3.fields[3].data[[k, j, i]] as f64;
@@ -617,7 +617,7 @@ fn gaussian_and_peak_finding_profiles_pack_fields_and_tables() {
         serde_json::from_str(&std::fs::read_to_string(g.join("gaussians.json")).unwrap()).unwrap();
     assert_eq!(gaussians[0]["alpha_max"], 0.7);
     let luts: Vec<&str> = m["luts"].as_array().unwrap().iter().map(|l| l["name"].as_str().unwrap()).collect();
-    assert_eq!(luts, ["peak_table", "preintegration"]);
+    assert_eq!(luts, ["igauss", "erf_difference", "peak_table", "preintegration"]);
     // the peaks of tf1d are its samples at v = 25 (tau 3) and v = 75 (tau 1)
     let pt = read(&g.join("peak_table_f32.nrrd"), &ReadOptions::default()).unwrap();
     let values = pt.fields[0].data.iter().copied().collect::<Vec<f32>>();
@@ -629,6 +629,114 @@ fn gaussian_and_peak_finding_profiles_pack_fields_and_tables() {
     let m: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(p.join("manifest.json")).unwrap()).unwrap();
     assert_eq!(m["textures"][0]["component_order"], serde_json::json!(["a", "b", "c", "inv_g"]));
+}
+
+/// The NRRD payload of a 16-bit table as codes.
+fn u16_codes(path: &std::path::Path) -> Vec<u16> {
+    mdtf_e2e::nrrd_payload(path).chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect()
+}
+
+/// Simpson's rule of f over [a, b] with n (even) intervals.
+fn simpson(f: impl Fn(f64) -> f64, a: f64, b: f64, n: usize) -> f64 {
+    let h = (b - a) / n as f64;
+    let w = |k: usize| {
+        if k == 0 || k == n {
+            1.0
+        } else if k % 2 == 1 {
+            4.0
+        } else {
+            2.0
+        }
+    };
+    (0..=n).map(|k| w(k) * f(a + k as f64 * h)).sum::<f64>() * h / 3.0
+}
+
+#[test]
+fn gaussian_tf_packs_scalar_data_with_the_papers_tables_and_default_or_fitted_gtfs() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = dir.path().join("s.nii.gz");
+    mdtf_ok(&["synth", "shells", "-o", s.to_str().unwrap(), "--size", "48", "--sigma", "1.5", "-q"]);
+    let g = dir.path().join("g");
+    mdtf_ok(&["pack", "--profile", "gaussian-tf", s.to_str().unwrap(), "-o", g.to_str().unwrap(), "-q"]);
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(g.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(m["textures"][0]["component_order"], serde_json::json!(["v", "g"]));
+    // the paper's default: one triangular GTF, width 1, at the median v of the voxels with a gradient
+    let gaussians: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(g.join("gaussians.json")).unwrap()).unwrap();
+    assert_eq!(gaussians.as_array().unwrap().len(), 1);
+    assert_eq!(gaussians[0]["triangular"], true);
+    assert_eq!(gaussians[0]["k"], serde_json::json!([[1.0]]));
+    let c = gaussians[0]["centre"][0].as_f64().unwrap();
+    assert!(c > 25.0 && c < 225.0, "the median of the boundary voxels lies between the materials: {c}");
+
+    // IGauss (eq. 16) and erf(x) - erf(y), decoded from their 16-bit codes, against quadrature
+    let luts = m["luts"].as_array().unwrap();
+    let table = |name: &str| luts.iter().find(|l| l["name"] == name).unwrap().clone();
+    let erf = |x: f64| simpson(|t| 2.0 / PI.sqrt() * (-t * t).exp(), 0.0, x, 2000);
+    let igauss = |x1: f64, x2: f64| {
+        if (x1 - x2).abs() < 1e-12 { (-x1 * x1).exp() } else { simpson(|t| (-t * t).exp(), x2, x1, 4000) / (x1 - x2) }
+    };
+    let erf_difference = |x: f64, y: f64| erf(x) - erf(y);
+    type Definition<'a> = (&'a str, usize, f64, f64, &'a dyn Fn(f64, f64) -> f64);
+    let definitions: [Definition; 2] =
+        [("igauss", 128, -10.0, 10.0, &igauss), ("erf_difference", 256, -3.6, 3.6, &erf_difference)];
+    for (name, size, lo, hi, f) in definitions {
+        let t = table(name);
+        assert_eq!(t["axes"][0]["size"], size);
+        assert_eq!((t["axes"][0]["min"].as_f64(), t["axes"][0]["max"].as_f64()), (Some(lo), Some(hi)));
+        let (offset, scale) = (t["u16"]["offset"].as_f64().unwrap(), t["u16"]["scale"].as_f64().unwrap());
+        let codes = u16_codes(&g.join(t["u16"]["file"].as_str().unwrap()));
+        assert_eq!(codes.len(), size * size);
+        let centre = |i: usize| lo + (i as f64 + 0.5) * (hi - lo) / size as f64;
+        let mut worst = 0.0f64;
+        for j in (0..size).step_by(7) {
+            for i in (0..size).step_by(5) {
+                let got = offset + scale * codes[j * size + i] as f64;
+                worst = worst.max((got - f(centre(i), centre(j))).abs() / scale);
+            }
+        }
+        assert!(worst <= 0.5 + 1e-3, "{name}: worst {worst} 16-bit steps");
+    }
+
+    // a GTF fitted to a probed region: the mask selects the voxels with v in [130, 150] (dentin)
+    let v = read_scalar(&s, &ReadOptions::default()).unwrap();
+    let mut mask = v.clone();
+    mask.data.mapv_inplace(|x| if (130.0..=150.0).contains(&x) { 1.0 } else { 0.0 });
+    let mpath = dir.path().join("mask.nii.gz");
+    mdtf_volume::write_volume(&mpath, &mask, &Default::default(), &[]).unwrap();
+    let f = dir.path().join("f");
+    mdtf_ok(&[
+        "pack",
+        "--profile",
+        "gaussian-tf",
+        s.to_str().unwrap(),
+        "-o",
+        f.to_str().unwrap(),
+        "--gtf-from-mask",
+        mpath.to_str().unwrap(),
+        "-q",
+    ]);
+    let gaussians: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(f.join("gaussians.json")).unwrap()).unwrap();
+    let picked: Vec<f64> = v.samples().iter().filter(|x| (130.0..=150.0).contains(*x)).map(|&x| x as f64).collect();
+    let mean = picked.iter().sum::<f64>() / picked.len() as f64;
+    let var = picked.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (picked.len() - 1) as f64;
+    assert!((gaussians[0]["centre"][0].as_f64().unwrap() - mean).abs() < 1e-3);
+    // K^T K = 1 / (2 var)
+    let k = gaussians[0]["k"][0][0].as_f64().unwrap();
+    assert!((k * k * 2.0 * var - 1.0).abs() < 1e-6, "{k} {var}");
+    let e = mdtf_err(&[
+        "pack",
+        "--profile",
+        "slicer-3dtf",
+        s.to_str().unwrap(),
+        "-o",
+        dir.path().join("x").to_str().unwrap(),
+        "--gtf-from-mask",
+        mpath.to_str().unwrap(),
+    ]);
+    assert!(e.contains("--gtf-from-mask applies to --profile gaussian-tf"), "{e}");
 }
 
 #[test]
@@ -696,7 +804,10 @@ fn kept_normals_are_derived_before_the_keep_stage() {
 fn validate_passes_on_a_correct_installation() {
     let dir = tempfile::tempdir().unwrap();
     let out = mdtf_ok(&["validate", "--size", "64", "-o", dir.path().to_str().unwrap()]);
-    assert_eq!(out.lines().filter(|l| l.ends_with(" ok")).count(), 14, "{out}");
+    assert_eq!(out.lines().filter(|l| l.ends_with(" ok")).count(), 16, "{out}");
+    for name in ["triangular GTF segment integral", "shells, least share kept per boundary"] {
+        assert!(out.lines().any(|l| l.contains(name) && l.ends_with(" ok")), "{name}: {out}");
+    }
     assert!(dir.path().join("boundary/boundary_report.png").exists());
     assert!(dir.path().join("histogram/normal_vs_stretched.png").exists());
     let e = mdtf_err(&["validate", "--size", "16"]);

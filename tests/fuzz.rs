@@ -204,12 +204,12 @@ impl Seeds {
             &mdtf_pipeline::boundary_chain::BoundaryChainParams::default(),
         )
         .unwrap();
-        let ranges = mdtf_pipeline::pack_inputs::ranges(&chans, &Default::default()).unwrap();
+        let ranges = mdtf_pipeline::pack_inputs::ranges(&chans, &Default::default(), None).unwrap();
         let pack = mdtf_pack::PackParams { ranges, ..pack };
         let luts = mdtf_pipeline::pack_inputs::luts(
             mdtf_pack::Profile::Slicer3dtf,
             None,
-            &mdtf_boundary::AlphaMap::Linear { a: 1.0, dc: 3.0 },
+            &mdtf_boundary::AlphaMap::Linear { a: 1.0, dc: Some(3.0) },
             &chans,
             &pack.ranges,
             None,

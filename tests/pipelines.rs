@@ -187,6 +187,17 @@ fn peak_finding_pack_decodes_to_the_shells_and_their_inverse_gradient() {
     let (inv, step) = decode(&pack, &m, "inv_g");
     let (mean, n) = mean_relative_error(inv.iter().zip(&truth).map(|(&d, t)| (d, 1.0 / t.g, t.g > 0.2 * peak_g)));
     assert!(mean <= 0.02, "1/g: mean relative error {mean} over {n} voxels (step {step})");
+    // the (v, 1/g) histogram: its lowest occupied 1/g bin holds 1/g at the outer boundary's peak
+    let hist = pack.parent().unwrap().join("histogram");
+    let axes: Value = serde_json::from_slice(&std::fs::read(hist.join("hist_v_inv_g.json")).unwrap()).unwrap();
+    let ia = &axes["axes"][1];
+    let (bins, top) = (ia["bins"].as_u64().unwrap() as usize, ia["max"].as_f64().unwrap());
+    let nv = axes["axes"][0]["bins"].as_u64().unwrap() as usize;
+    let counts = mdtf_e2e::nrrd_u32(&hist.join("hist_v_inv_g.nrrd"));
+    let lowest = (0..bins).find(|&j| counts[j * nv..(j + 1) * nv].iter().any(|&c| c > 0)).unwrap();
+    let w = top / bins as f64;
+    assert!(((lowest as f64 + 0.5) * w - 1.0 / peak_g).abs() <= 2.0 * w, "lowest bin {lowest} of {w} vs 1/{peak_g}");
+    assert!(hist.join("hist_v_inv_g.png").exists());
 }
 
 #[test]

@@ -1,17 +1,35 @@
 //! Distance-to-boundary stage of mdtf (Lee et al.'s distance-based
 //! transfer functions, sections 2-4; DESIGN.md "Distance to boundary").
 //!
-//! From every voxel whose g is at least `g_min`, [`run`] steps along +n and
-//! -n (n = grad f / g) with step L_min/5 up to d_max = 15 L_min, sampling g
-//! and f'' by trilinear interpolation, follows the direction in which g
-//! increases (the sign of f'' at the voxel: f'' = n^T H n is the derivative
-//! of g along n), and at the first sign change of f'' refines the zero
-//! crossing (Illinois regula falsi, tolerance 1e-3 voxel by default; along
-//! a ray the trilinear f'' is one cubic per cell, so steps and refinement
-//! evaluate a polynomial and read memory once per cell). g at the hit is
-//! read by tricubic (Catmull-Rom) interpolation, since trilinear
-//! interpolation flattens g's peak by up to 4 % at sigma = 3 voxels; hits
-//! whose g is below `g_hit_min` (noise, phantom edges) are rejected.
+//! The paper traces two rays from each voxel, along +grad f and -grad f,
+//! and keeps the one along which g increases. This stage traces that one
+//! ray only and picks it before stepping: f'' = n^T H n (n = grad f / g) is
+//! the derivative of g along n, so g increases along +n where f'' > 0 and
+//! along -n where f'' < 0. The result is the paper's; half the rays are not
+//! traced. From every voxel whose g is at least `g_min` the ray steps by
+//! L_min/5 up to d_max = 15 L_min (the paper's values), sampling f'' by
+//! trilinear interpolation, and at the first sign change of f'' refines the
+//! zero crossing (Illinois regula falsi where the paper bisects; tolerance
+//! 1e-3 voxel by default; along a ray the trilinear f'' is one cubic per
+//! cell, so steps and refinement evaluate a polynomial and read memory once
+//! per cell). g is read only at the crossing, by tricubic (Catmull-Rom)
+//! interpolation, since trilinear interpolation flattens g's peak by up to
+//! 4 % at sigma = 3 voxels; crossings whose g is below `g_hit_min` are
+//! rejected.
+//!
+//! **Thresholds.** The paper's g = 5 at the voxel and g = 20 at the
+//! boundary (8-bit data) clean the statistics of its Fig. 2 only; its
+//! Fig. 3 has distances everywhere. Applied to the outputs they cut real
+//! boundaries (the `shells` phantom's dentin-pulp boundary peaks at
+//! g = 16 < 20 x 210 / 255). So the defaults come from the data: the noise
+//! floor is `max(2 x median g, 1e-3 x value range / L_min)` (the median g of
+//! a scan is the noise's, since most voxels lie inside materials; the
+//! second term keeps rounding noise of clean phantoms out), `g_min` is the
+//! floor and `g_hit_min` twice it. The Fig. 2 thresholds (scaled by the
+//! value range / 255) filter the report only. Voxels at or above the floor
+//! are traced even when larger thresholds are given, and a boundary whose
+//! crossings all fall below them is reported in
+//! [`BoundaryOutput::warnings`] (see [`LostBoundary`]).
 //!
 //! Outputs (input geometry): `distance` (world units; [`NO_BOUNDARY`] = -1
 //! where no boundary was kept), `g_hit` (0 where no zero crossing was
@@ -22,12 +40,14 @@
 //! output is bit-identical for any thread count.
 
 mod alpha;
+mod lost;
 mod report;
 mod sample;
 mod trace;
 
 pub use alpha::AlphaMap;
-pub use report::{Report, ReportBin};
+pub use lost::{LOST_MIN_SHARE, LostBoundary};
+pub use report::{Report, ReportBin, ReportInput, ReportThresholds};
 pub use trace::HitCode;
 
 use mdtf_volume::{Geometry, MultiField, Volume};
@@ -39,23 +59,29 @@ use trace::{Fields, TraceSettings, trace_plane};
 
 /// The distance written where no boundary was kept.
 pub const NO_BOUNDARY: f32 = -1.0;
-/// Default g_min for 8-bit data (the paper's 5.0), scaled by value range / 255.
-pub const G_MIN_8BIT: f64 = 5.0;
-/// Default g_hit_min for 8-bit data (the paper's 20.0), scaled by value range / 255.
-pub const G_HIT_MIN_8BIT: f64 = 20.0;
+/// The Fig. 2 report's g threshold at the voxel on 8-bit data (the paper's 5.0), scaled by value range / 255.
+pub const FIG2_G_MIN_8BIT: f64 = 5.0;
+/// The Fig. 2 report's g threshold at the boundary on 8-bit data (the paper's 20.0), scaled by value range / 255.
+pub const FIG2_G_HIT_MIN_8BIT: f64 = 20.0;
+/// The noise floor is at least this many times the median g.
+pub const NOISE_FLOOR_MEDIANS: f64 = 2.0;
+/// The noise floor is at least this fraction of the value range per L_min.
+pub const NOISE_FLOOR_RANGE_FRACTION: f64 = 1e-3;
+/// The default g_hit_min is this many noise floors.
+pub const G_HIT_MIN_FLOORS: f64 = 2.0;
 
 /// Parameters of the boundary stage (shared by `mdtf boundary` and pipeline files).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct BoundaryParams {
     /// Trace only voxels with g at least this (value units per world unit).
-    /// Default: 5.0 x value range / 255 (the paper's 5.0 on 8-bit data).
+    /// Default: the noise floor, max(2 x median g, 1e-3 x value range / L_min).
     pub g_min: Option<f64>,
-    /// Keep only hits whose g is at least this. Default: 20.0 x value range / 255.
+    /// Keep only hits whose g is at least this. Default: twice the noise floor.
     pub g_hit_min: Option<f64>,
     /// Step along the ray, world units. Default: L_min / 5.
     pub step: Option<f64>,
-    /// Longest distance traced, world units. Default: 15 L_min.
+    /// Longest distance traced, world units. Default: 15 L_min (the paper's).
     pub d_max: Option<f64>,
     /// Zero-crossing tolerance in voxels (of L_min). Default 1e-3.
     pub tolerance: f64,
@@ -88,7 +114,8 @@ pub struct BoundaryInput<'a> {
     pub f2: &'a Volume,
     /// Unit normal (nx, ny, nz) along the grid axes.
     pub normal: &'a MultiField,
-    /// Value range (max - min) of the data g and f'' came from; scales the default thresholds.
+    /// Value range (max - min) of the data g and f'' came from; scales the
+    /// noise floor's lower bound and the Fig. 2 thresholds.
     pub value_range: f64,
 }
 
@@ -106,7 +133,7 @@ pub enum BoundaryError {
 /// Counts of the hit codes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 pub struct TraceCounts {
-    /// Voxels below g_min.
+    /// Voxels below g_min (or without a gradient direction).
     pub not_traced: u64,
     /// Voxels with a kept boundary.
     pub hits: u64,
@@ -151,15 +178,25 @@ pub struct BoundaryOutput {
     pub counts: TraceCounts,
     /// The thresholds and sampling actually used (defaults resolved).
     pub resolved: ResolvedParams,
+    /// Boundaries the thresholds took out of the outputs.
+    pub lost: Vec<LostBoundary>,
+    /// One sentence per lost boundary, for stderr and run reports.
+    pub warnings: Vec<String>,
 }
 
 /// Parameters after defaults are applied.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct ResolvedParams {
+    /// The noise floor, value units per world unit: voxels with g at or above it are traced.
+    pub noise_floor: f64,
     /// g_min used.
     pub g_min: f64,
     /// g_hit_min used.
     pub g_hit_min: f64,
+    /// The Fig. 2 report's threshold at the voxel (5 x value range / 255).
+    pub fig2_g_min: f64,
+    /// The Fig. 2 report's threshold at the boundary (20 x value range / 255).
+    pub fig2_g_hit_min: f64,
     /// Step, world units.
     pub step: f64,
     /// d_max, world units.
@@ -169,25 +206,53 @@ pub struct ResolvedParams {
 }
 
 impl BoundaryOutput {
-    /// The Fig. 2 report, with mean g taken from `g` (the gradient magnitude at the voxels).
+    /// The Fig. 2 report, with mean g taken from `g` (the gradient magnitude
+    /// at the voxels), over the hits that pass the Fig. 2 thresholds.
     pub fn report(&self, g: &Volume) -> Report {
-        Report::new(self.hit.samples(), self.dot.samples(), self.distance.samples(), g.samples())
+        let input = ReportInput {
+            hit: self.hit.samples(),
+            dot: self.dot.samples(),
+            distance: self.distance.samples(),
+            g: g.samples(),
+            g_hit: self.g_hit.samples(),
+        };
+        let r = &self.resolved;
+        Report::new(input, ReportThresholds { g_min: r.fig2_g_min, g_hit_min: r.fig2_g_hit_min })
     }
 }
 
+/// The noise floor of a g volume: max(2 x median g, 1e-3 x value range /
+/// L_min), value units per world unit. With no finite g, the second term.
+pub fn noise_floor(g: &[f32], value_range: f64, l_min: f64) -> f64 {
+    let finite = g.iter().filter(|v| v.is_finite()).count() as u64;
+    let median = if finite > 0 { mdtf_volume::order_statistic(g, (finite - 1) / 2).unwrap_or(0.0) as f64 } else { 0.0 };
+    (NOISE_FLOOR_MEDIANS * median).max(NOISE_FLOOR_RANGE_FRACTION * value_range / l_min.max(f64::MIN_POSITIVE))
+}
+
+/// The paper's d_max, 15 L_min (world units).
+pub fn default_d_max(geometry: &Geometry) -> f64 {
+    15.0 * geometry.min_spacing()
+}
+
 /// Resolves defaults and checks every parameter against the grid.
+/// `noise_floor` is [`noise_floor`] of the g volume; to check the
+/// parameters before g exists, pass [`noise_floor`] of an empty slice.
 pub fn resolve(
     params: &BoundaryParams,
     geometry: &Geometry,
     value_range: f64,
+    noise_floor: f64,
 ) -> Result<ResolvedParams, BoundaryError> {
     let l_min = geometry.min_spacing();
     let scale = value_range / 255.0;
     let r = ResolvedParams {
-        g_min: params.g_min.unwrap_or(G_MIN_8BIT * scale),
-        g_hit_min: params.g_hit_min.unwrap_or(G_HIT_MIN_8BIT * scale),
+        noise_floor,
+        g_min: params.g_min.unwrap_or(noise_floor),
+        g_hit_min: params.g_hit_min.unwrap_or(G_HIT_MIN_FLOORS * noise_floor),
+        fig2_g_min: FIG2_G_MIN_8BIT * scale,
+        fig2_g_hit_min: FIG2_G_HIT_MIN_8BIT * scale,
         step: params.step.unwrap_or(l_min / 5.0),
-        d_max: params.d_max.unwrap_or(15.0 * l_min),
+        d_max: params.d_max.unwrap_or(default_d_max(geometry)),
         tolerance: params.tolerance * l_min,
     };
     let bad = |m: String| Err(BoundaryError::BadParameter(m));
@@ -217,6 +282,7 @@ pub fn resolve(
     }
     for a in &params.alpha {
         a.validate().map_err(BoundaryError::BadParameter)?;
+        a.check_within(r.d_max).map_err(BoundaryError::BadParameter)?;
     }
     Ok(r)
 }
@@ -241,7 +307,9 @@ pub fn run(input: &BoundaryInput, params: &BoundaryParams) -> Result<BoundaryOut
             input.normal.fields.len()
         )));
     }
-    let r = resolve(params, geo, input.value_range)?;
+    let floor = noise_floor(input.g.samples(), input.value_range, geo.min_spacing());
+    let r = resolve(params, geo, input.value_range, floor)?;
+    let g_max = mdtf_volume::finite_sample_range(input.g.samples()).map_or(0.0, |r| r.1);
     fn grid<'v>(v: &'v Array3<f32>, dims: [usize; 3]) -> Grid<'v> {
         Grid::new(v.as_slice().unwrap_or(&[]), dims)
     }
@@ -258,6 +326,7 @@ pub fn run(input: &BoundaryInput, params: &BoundaryParams) -> Result<BoundaryOut
         tolerance: r.tolerance as f32,
         g_min: r.g_min as f32,
         g_hit_min: r.g_hit_min as f32,
+        g_probe: r.g_min.min(r.noise_floor) as f32,
     };
     let plane = geo.dims[0] * geo.dims[1];
     let mut distance = Volume::zeros(geo.clone());
@@ -265,23 +334,27 @@ pub fn run(input: &BoundaryInput, params: &BoundaryParams) -> Result<BoundaryOut
     let mut hit = Volume::zeros(geo.clone());
     let mut dot = Volume::zeros(geo.clone());
     let mut counts = TraceCounts::default();
+    let mut crossings = lost::CrossingHistogram::new(g_max);
     {
         let d = distance.data.as_slice_mut().unwrap_or(&mut []);
         let gh = g_hit.data.as_slice_mut().unwrap_or(&mut []);
         let h = hit.data.as_slice_mut().unwrap_or(&mut []);
         let dt = dot.data.as_slice_mut().unwrap_or(&mut []);
-        let per_plane: Vec<TraceCounts> = d
+        let per_plane: Vec<(TraceCounts, lost::CrossingHistogram)> = d
             .par_chunks_mut(plane)
             .zip(gh.par_chunks_mut(plane))
             .zip(h.par_chunks_mut(plane))
             .zip(dt.par_chunks_mut(plane))
             .enumerate()
             .map(|(k, (((d, gh), h), dt))| {
-                trace_plane(&fields, &settings, k, trace::PlaneOut { distance: d, g_hit: gh, hit: h, dot: dt })
+                let mut hist = lost::CrossingHistogram::new(g_max);
+                let out = trace::PlaneOut { distance: d, g_hit: gh, hit: h, dot: dt, crossings: &mut hist };
+                (trace_plane(&fields, &settings, k, out), hist)
             })
             .collect();
-        for c in per_plane {
+        for (c, h) in per_plane {
             counts += c;
+            crossings.merge(&h);
         }
     }
     let hit_mask = |f: &dyn Fn(f32) -> f32| {
@@ -291,7 +364,26 @@ pub fn run(input: &BoundaryInput, params: &BoundaryParams) -> Result<BoundaryOut
     };
     let d_max = r.d_max as f32;
     let flipped = params.flipped.then(|| hit_mask(&|d| d_max - d));
-    let alpha =
-        params.alpha.iter().map(|a| (a.file_name().to_string(), hit_mask(&|d| a.eval(d as f64) as f32))).collect();
-    Ok(BoundaryOutput { distance, g_hit, hit, dot, flipped, alpha, counts, resolved: r })
+    let alpha = params
+        .alpha
+        .iter()
+        .map(|a| (a.file_name().to_string(), hit_mask(&|d| a.eval(d as f64, r.d_max) as f32)))
+        .collect();
+    let cut = r.g_min.max(r.g_hit_min);
+    let lost = lost::lost_boundaries(&crossings, G_HIT_MIN_FLOORS * r.noise_floor, cut);
+    let warnings = lost.iter().map(|l| lost_warning(l, &r)).collect();
+    Ok(BoundaryOutput { distance, g_hit, hit, dot, flipped, alpha, counts, resolved: r, lost, warnings })
+}
+
+fn lost_warning(l: &LostBoundary, r: &ResolvedParams) -> String {
+    let which =
+        if r.g_hit_min > l.g_peak { format!("g_hit_min {:.4}", r.g_hit_min) } else { format!("g_min {:.4}", r.g_min) };
+    format!(
+        "a boundary with peak g {:.4} ({} voxels, {:.1} % of the traced ones) is below {which}: it is missing from \
+         distance and g_hit; lower the threshold (the noise floor is {:.4})",
+        l.g_peak,
+        l.voxels,
+        100.0 * l.share,
+        r.noise_floor
+    )
 }

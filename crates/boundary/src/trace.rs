@@ -29,6 +29,8 @@ pub(crate) struct TraceSettings {
     pub tolerance: f32,
     pub g_min: f32,
     pub g_hit_min: f32,
+    /// Voxels at or above this are traced, those below `g_min` for the crossing histogram only.
+    pub g_probe: f32,
 }
 
 /// Result at one voxel.
@@ -60,11 +62,13 @@ pub(crate) struct PlaneOut<'a> {
     pub g_hit: &'a mut [f32],
     pub hit: &'a mut [f32],
     pub dot: &'a mut [f32],
+    /// g at every crossing of a traced voxel.
+    pub crossings: &'a mut crate::lost::CrossingHistogram,
 }
 
-/// Traces every voxel of z-slice `k` with g >= g_min into `out` (the others
-/// get distance [`crate::NO_BOUNDARY`] and 0 elsewhere) and counts the hit
-/// codes. Compiled for AVX-512 and AVX2 as well as the baseline, picked at
+/// Traces every voxel of z-slice `k` with g >= g_probe, writes those with
+/// g >= g_min into `out` (the others get distance [`crate::NO_BOUNDARY`]
+/// and 0 elsewhere), counts the hit codes and the crossings' g. Compiled for AVX-512 and AVX2 as well as the baseline, picked at
 /// run time; no FMA, so every path gives the same bits.
 #[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+avx2", "x86_64+avx2"))]
 pub(crate) fn trace_plane(f: &Fields, s: &TraceSettings, k: usize, out: PlaneOut) -> crate::TraceCounts {
@@ -92,16 +96,21 @@ pub(crate) fn trace_plane(f: &Fields, s: &TraceSettings, k: usize, out: PlaneOut
     for j in 0..ny {
         for i in 0..nx {
             let o = j * nx + i;
-            if plane[o] >= s.g_min {
+            if plane[o] >= s.g_probe {
                 match march(f, s, i, j, k) {
                     Ok(c) => crossings.push((o, c)),
-                    Err(code) => store(o, Trace::miss(code)),
+                    Err(code) if plane[o] >= s.g_min => store(o, Trace::miss(code)),
+                    Err(_) => {}
                 }
             }
         }
     }
     for (o, c) in &crossings {
-        store(*o, at_hit(f, s, c));
+        let t = at_hit(f, s, c);
+        out.crossings.add(t.g_hit);
+        if plane[*o] >= s.g_min {
+            store(*o, t);
+        }
     }
     counts
 }
@@ -122,7 +131,6 @@ struct Crossing {
 fn march(f: &Fields, s: &TraceSettings, i: usize, j: usize, k: usize) -> Result<Crossing, HitCode> {
     let dims = f.g.dims;
     let index = (k * dims[1] + j) * dims[0] + i;
-    // (the caller traces only voxels with g >= g_min)
     let n = [f.n[0].data[index], f.n[1].data[index], f.n[2].data[index]];
     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
     if len.is_nan() || len <= 0.0 {

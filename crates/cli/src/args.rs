@@ -374,13 +374,22 @@ pub struct BilateralArgs {
 /// `mdtf boundary`.
 #[derive(Debug, Args)]
 #[command(
-    after_help = "From every voxel with g >= --g-min, steps along +n and -n (n = grad f / g) by --step up to --d-max,\n\
-sampling g and f'' trilinearly, follows the direction in which g increases, and at the first sign change\n\
-of f'' finds the zero crossing to --tolerance. Hits whose g (tricubic) is below --g-hit-min are rejected.\n\n\
-Outputs in DIR, named after them: distance (world units; -1 where no boundary was kept), g_hit (g at the\n\
-zero crossing; the stretched-histogram axis), hit (0 not traced, 1 hit, 2 no zero crossing within d_max,\n\
-3 rejected: g at the crossing below --g-hit-min), dot (unit gradient at the voxel . at the hit), and with\n\
---flipped the display image d_max - d, with --alpha the alpha maps of distance (0 where no hit):\n  \
+    after_help = "From every voxel with g >= --g-min, one ray along n or -n (n = grad f / g): the direction in\n\
+which g increases, picked by the sign of f'' at the voxel (f'' is the derivative of g along n). The\n\
+paper traces both rays and keeps that one; the result is the same. The ray steps by --step up to\n\
+--d-max, sampling f'' trilinearly; at the first sign change of f'' the zero crossing is refined to\n\
+--tolerance and g is read there (tricubic). Crossings whose g is below --g-hit-min are rejected.\n\n\
+Thresholds: by default from the data. The noise floor is max(2 x median g, 1e-3 x value range /\n\
+L_min); --g-min defaults to it, --g-hit-min to twice it. The paper's 5 and 20 (8-bit data, scaled by\n\
+value range / 255) filter the --report statistics only: as output thresholds they cut real, weaker\n\
+boundaries. Voxels above the noise floor are traced whatever the thresholds, and a boundary whose\n\
+crossings all fall below them is named in a warning.\n\n\
+Outputs in DIR, named after them: distance (world units; -1 where no boundary was kept), g_hit\n\
+(g at the zero crossing; the stretched-histogram axis), hit (0 not traced, 1 hit, 2 no zero\n\
+crossing within d_max, 3 rejected: g at the crossing below --g-hit-min), dot (unit gradient at the\n\
+voxel . at the hit), with --flipped the display image d_max - d, and with --alpha the alpha maps\n\
+of distance (0 where no hit; dc omitted or dc=d_max: the map spans d_max, the paper's domain\n\
+0 < dc <= d_max):\n  \
 linear:a=1,dc=3       max(-a d / dc + a, 0)                      (eq. 9)\n  \
 concave:a=0.4,dc=3,n=9  a / dc^n |d - dc|^n for d < dc, else 0    (eq. 10)\n  \
 convex:a=1,dc=3,n=3   max(-a d^n / dc^n + a, 0)                  (eq. 11)\n\n\
@@ -403,7 +412,8 @@ pub struct BoundaryArgs {
     /// Precomputed unit normal (3 fields).
     #[arg(long, value_name = "FILE", requires_all = ["g", "f2"])]
     pub normal: Option<PathBuf>,
-    /// Value range of the data behind --g/--f2 (scales the default thresholds). Default 255; with a value volume, its range.
+    /// Value range of the data behind --g/--f2 (scales the noise floor's lower bound and the Fig. 2
+    /// thresholds). Default 255; with a value volume, its range.
     #[arg(long, value_name = "R")]
     pub value_range: Option<f64>,
     /// Derivative kernel when deriving from a value volume (gauss:1 or bspline3 for noisy data).
@@ -412,10 +422,10 @@ pub struct BoundaryArgs {
     /// Bilateral pre-filter of g and f'': SIGMA_D (world units),SIGMA_R (fraction of each channel's range).
     #[arg(long, value_name = "SD,SR")]
     pub prefilter: Option<String>,
-    /// Trace voxels with g at least this. Default: 5 x value range / 255 (the paper's 5.0 on 8-bit data).
+    /// Trace voxels with g at least this. Default: the noise floor, max(2 x median g, 1e-3 x value range / L_min).
     #[arg(long, value_name = "G")]
     pub g_min: Option<f64>,
-    /// Keep hits with g at least this. Default: 20 x value range / 255 (the paper's 20.0).
+    /// Keep hits with g at least this. Default: twice the noise floor.
     #[arg(long, value_name = "G")]
     pub g_hit_min: Option<f64>,
     /// Step along the ray, world units. Default: L_min / 5.
@@ -433,7 +443,8 @@ pub struct BoundaryArgs {
     /// Alpha map(s) of distance to write (repeatable), e.g. linear:a=1,dc=3.
     #[arg(long, value_name = "SPEC")]
     pub alpha: Vec<String>,
-    /// Write the Fig. 2 validation report (boundary_report.csv and .png) into this folder.
+    /// Write the Fig. 2 validation report (boundary_report.csv and .png) into this folder: per bin of
+    /// log10(1 - dot) and per the paper's dot x 100, over the hits passing the paper's thresholds.
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
     /// Output format.
@@ -511,16 +522,22 @@ pub struct HistogramArgs {
 #[derive(Debug, Args)]
 #[command(after_help = "Profiles:\n  \
     slicer-3dtf  data.raw RGBA8 (v, g, f2, unused) and normal.raw RGBA8 (nx, ny, nz, g) (Kniss et al.)\n  \
-    distance-tf  normal_v.raw RGBA8 (nx, ny, nz, v) and ghit_d.raw 2 x u8 (g_hit, distance) (distance-based TFs)\n\n\
+    distance-tf  normal_v.raw RGBA8 (nx, ny, nz, v) and ghit_d.raw 2 x u8 (g_hit, distance) (distance-based TFs)\n  \
+    gaussian-tf  fields_k.raw RGBA16: the fields and gnorm, or v and g for scalar data; gaussians.json\n  \
+    peak-finding fields_k.raw RGBA16: the fields and inv_g\n\n\
 Each texture is raw little-endian samples (components fastest, then x, y, z) with a detached NRRD\n\
 header (.nhdr) that Teem, ParaView and 3D Slicer open; manifest.json says for every channel\n\
 value = offset + scale * code, its meaning, units and source. Signed channels (f2, normals) keep 0\n\
 exact. Ranges default to the data with Teem qbert's percentile clipping (g 0.002 %, f2 0.004 %).\n\n\
 Lookup tables (NRRD, uint8 and float, listed under \"luts\" in the manifest): slicer-3dtf writes tf3d\n\
 (256 x 128 x 8 over v, g, f2) and the separable tf2d (256 x 256) + tf_f2 (256) from --tf, or\n\
-tf2d_default from the histogram volume; distance-tf writes alpha_d (256 over d) and, with --tf, alpha_u.\n\
+tf2d_default from the histogram volume; distance-tf writes alpha_d (256 over [0, d_max]) and, with\n\
+--tf, alpha_u; gaussian-tf writes igauss (128^2 over [-10, 10]^2, eq. 16) and erf_difference (256^2\n\
+over [-3.6, 3.6]^2), each also as uint16 with its decode in the manifest.\n\
 TF widgets: triangle (v0, width, g_low, g_high, shear), rectangle (centre, half_size, falloff:\n\
-constant|ellipsoid|ramp|tent|pyramid), gaussian (centre, k, alpha_max); each with alpha/colour.\n\n\
+constant|ellipsoid|ramp|tent|pyramid), gaussian (centre, k, alpha_max, triangular); each with\n\
+alpha/colour. gaussian-tf's primitives (gaussians.json) come from --tf, else --gtf-from-mask, else\n\
+the Gaussian-TF paper's default: a triangular GTF (width sigma' g) at the median of each field.\n\n\
 Examples:\n  mdtf pack --profile slicer-3dtf ct.nii.gz -o pack/\n  mdtf pack --profile slicer-3dtf ct.nii.gz -o pack/ --tf tf.json\n  \
     mdtf pack --profile distance-tf sphere.nii.gz -o pack/ --range v=0:255\n  mdtf pack --schema")]
 pub struct PackArgs {
@@ -549,8 +566,13 @@ pub struct PackArgs {
     /// header says uint16, the manifest f16) or f32.
     #[arg(long, value_name = "T")]
     pub dtype: Option<String>,
-    /// distance-tf: the alpha map of distance written as the 1D table alpha_d(d).
-    #[arg(long, default_value = "linear:a=1,dc=3", value_name = "SPEC")]
+    /// gaussian-tf without --tf: fit the Gaussian to the voxels where this mask volume is positive
+    /// (centre: their mean; width: their covariance).
+    #[arg(long, value_name = "MASK")]
+    pub gtf_from_mask: Option<PathBuf>,
+    /// distance-tf: the alpha map of distance written as the 1D table alpha_d(d) over [0, d_max]
+    /// (dc omitted: d_max, the paper's domain).
+    #[arg(long, default_value = "linear:a=1", value_name = "SPEC")]
     pub alpha: String,
     /// Also write every texture as NIfTI-1 (`<name>.nii`, one volume per component, the codes as
     /// stored) for tools without NRRD.

@@ -20,6 +20,24 @@ pub struct Axis {
 }
 
 impl Axis {
+    /// The display axis of 1/g, [0, 8 / g_b] in `bins` bins, where g_b is
+    /// the median g of the boundary voxels (those with g above twice the
+    /// median g). Automatic ranges run to 1/epsilon in homogeneous regions
+    /// and leave the boundaries in the first bin; a boundary of peak g_p
+    /// lies at 1/g = 1/g_p at its centre and exp(x^2 / 2 sigma^2) / g_p at x,
+    /// so this range shows every boundary with g_p >= g_b out to 2 sigma.
+    /// None when no voxel has a gradient.
+    pub fn inverse_gradient(g: &[f32], bins: usize) -> Option<Axis> {
+        let median = |s: &[f32]| {
+            let finite = s.iter().filter(|x| x.is_finite()).count() as u64;
+            mdtf_volume::order_statistic(s, finite.checked_sub(1)? / 2)
+        };
+        let cut = 2.0 * median(g)?;
+        let boundary: Vec<f32> = g.iter().copied().filter(|&x| x > cut && x.is_finite()).collect();
+        let g_b = median(&boundary)? as f64;
+        (g_b > 0.0).then(|| Axis { name: "inv_g".into(), min: 0.0, max: 8.0 / g_b, bins })
+    }
+
     /// A checked axis.
     pub fn new(name: &str, min: f64, max: f64, bins: usize) -> Result<Axis, HistogramError> {
         if bins == 0 {
@@ -135,6 +153,24 @@ impl AxisSpec {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_inverse_gradient_axis_spans_eight_over_the_boundary_voxels_median() {
+        // 600 homogeneous voxels (g 0..0.6), 400 on boundaries (g 10..50)
+        let mut g: Vec<f32> = (0..600).map(|k| k as f32 * 1e-3).collect();
+        g.extend((0..400).map(|k| 10.0 + k as f32 * 0.1));
+        // brute force: median of all, then of those above twice it
+        let mut sorted = g.clone();
+        sorted.sort_by(f32::total_cmp);
+        let cut = 2.0 * sorted[(sorted.len() - 1) / 2];
+        let mut b: Vec<f32> = g.iter().copied().filter(|&x| x > cut).collect();
+        b.sort_by(f32::total_cmp);
+        let want = 8.0 / b[(b.len() - 1) / 2] as f64;
+        let a = Axis::inverse_gradient(&g, 128).unwrap();
+        assert_eq!((a.name.as_str(), a.min, a.bins), ("inv_g", 0.0, 128));
+        assert!((a.max - want).abs() < 1e-12, "{} vs {want}", a.max);
+        assert!(Axis::inverse_gradient(&[0.0; 10], 128).is_none());
+    }
 
     #[test]
     fn edges_follow_the_documented_rule() {

@@ -18,7 +18,10 @@ mod tet_tables;
 mod tf;
 mod writer;
 
-pub use gaussian::GaussianPrimitive;
+pub use gaussian::{
+    ERF_DOMAIN, ERF_SIZE, FitError, GaussianPrimitive, IGAUSS_DOMAIN, IGAUSS_SIZE, erf_difference,
+    erf_difference_table, igauss, igauss_table,
+};
 pub use lut::{Lut, LutAxis, LutEntry};
 pub use manifest::{
     ChannelEntry, ChannelSource, MANIFEST_SCHEMA, Manifest, ManifestGeometry, MeshArrayEntry, MeshEntry, Provenance,

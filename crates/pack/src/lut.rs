@@ -34,6 +34,21 @@ pub struct Lut {
     pub values: Vec<f32>,
     /// Values lie in [0, 1], so an 8-bit version (code / 255) is written too.
     pub unit_range: bool,
+    /// Also write a 16-bit version with codes spanning [min, max]
+    /// (value = min + code (max - min) / 65535), for renderers that want
+    /// 16-bit tables (the Gaussian-TF paper's IGauss and erf tables).
+    pub u16_range: Option<[f64; 2]>,
+}
+
+/// A table's 16-bit version: the file and its decode.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct U16Table {
+    /// NRRD, uint16, leading rgba axis when components = 4.
+    pub file: String,
+    /// value = offset + scale * code.
+    pub offset: f64,
+    /// See `offset`.
+    pub scale: f64,
 }
 
 /// A written lookup table, as the manifest lists it.
@@ -51,6 +66,9 @@ pub struct LutEntry {
     pub file_u8: Option<String>,
     /// The f32 version, NRRD with an attached header.
     pub file_f32: String,
+    /// The 16-bit version, when the table has one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub u16: Option<U16Table>,
 }
 
 impl Lut {
@@ -77,6 +95,20 @@ impl Lut {
         };
         let f32s: Vec<u8> = self.values.iter().flat_map(|x| x.to_le_bytes()).collect();
         write_table_bytes(&dir.join(&file_f32), &axes, "float", &f32s)?;
+        let u16 = match self.u16_range {
+            Some([lo, hi]) => {
+                let file = format!("{}_u16.nrrd", self.name);
+                let scale = (hi - lo) / 65535.0;
+                let codes: Vec<u8> = self
+                    .values
+                    .iter()
+                    .flat_map(|&x| (((x as f64 - lo) / scale).round().clamp(0.0, 65535.0) as u16).to_le_bytes())
+                    .collect();
+                write_table_bytes(&dir.join(&file), &axes, "uint16", &codes)?;
+                Some(U16Table { file, offset: lo, scale })
+            }
+            None => None,
+        };
         Ok(LutEntry {
             name: self.name.clone(),
             meaning: self.meaning.clone(),
@@ -84,6 +116,7 @@ impl Lut {
             components: self.components,
             file_u8,
             file_f32,
+            u16,
         })
     }
 }

@@ -213,7 +213,10 @@ pub const MANIFEST_SCHEMA: &str = r##"{
               "min": {"type": "number"}, "max": {"type": "number"}}}},
         "components": {"type": "integer", "description": "4: RGBA (colour 0..1, opacity 0..1), 1: one value"},
         "file_u8": {"type": ["string", "null"], "description": "NRRD, uint8, value = code / 255, leading rgba axis when components = 4; null for tables not in [0, 1]"},
-        "file_f32": {"type": "string", "description": "NRRD, float, the same values"}
+        "file_f32": {"type": "string", "description": "NRRD, float, the same values"},
+        "u16": {"type": "object", "required": ["file", "offset", "scale"],
+          "description": "optional 16-bit version: NRRD, uint16, value = offset + scale * code",
+          "properties": {"file": {"type": "string"}, "offset": {"type": "number"}, "scale": {"type": "number"}}}
       }
     }},
     "mesh": {"type": "object", "description": "projected-tetrahedra packs only",

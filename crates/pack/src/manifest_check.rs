@@ -89,6 +89,9 @@ impl Manifest {
             if let Some(f) = &l.file_u8 {
                 inside_pack(&format!("table {} file_u8", l.name), f)?;
             }
+            if let Some(u) = &l.u16 {
+                inside_pack(&format!("table {} u16 file", l.name), &u.file)?;
+            }
             let cells = l.axes.iter().try_fold(1usize, |n, a| n.checked_mul(a.size));
             let bytes = cells.and_then(|c| c.checked_mul(l.components)).and_then(|c| c.checked_mul(4));
             if l.axes.is_empty() || l.axes.iter().any(|a| a.size == 0) || bytes.is_none() {

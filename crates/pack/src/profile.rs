@@ -13,8 +13,8 @@ pub enum Profile {
     Slicer3dtf,
     /// The distance-based TF renderer: RGBA8 `normal_v` (nx, ny, nz, v) and 2-component u8 `ghit_d` (g_hit, d).
     DistanceTf,
-    /// Gaussian TFs on multi-field data: the fields (normalised to [0, 1] by
-    /// their decode) and ||G||, four per u16 texture `fields_k`.
+    /// Gaussian TFs: the fields (normalised to [0, 1] by their decode) and
+    /// ||G|| (`gnorm`), or for scalar data v and g, four per u16 texture `fields_k`.
     GaussianTf,
     /// Peak finding: the fields and 1/g, four per u16 texture `fields_k`.
     PeakFinding,
@@ -67,7 +67,7 @@ impl Profile {
                 tex("normal_v", &[Some("nx"), Some("ny"), Some("nz"), Some("v")], Dtype::U8),
                 tex("ghit_d", &[Some("g_hit"), Some("distance")], Dtype::U8),
             ],
-            Profile::GaussianTf => groups("gnorm"),
+            Profile::GaussianTf => groups(if fields.is_empty() { "g" } else { "gnorm" }),
             Profile::PeakFinding => groups("inv_g"),
             Profile::ProjectedTetrahedra => Vec::new(),
         }

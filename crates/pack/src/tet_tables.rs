@@ -323,6 +323,7 @@ pub fn front_back_tables(size: [usize; 3], tau_max: f64, d_max: f64) -> [Lut; 2]
         components: 1,
         values,
         unit_range: false,
+        u16_range: None,
     };
     [
         lut("pt_front", "F(a_f, a_b, D) = int_0^D (1 - l/D) exp(-q(l)) dl, world units (eq. 3: C = c_f F + c_b B)", f),
@@ -343,6 +344,7 @@ pub fn gaussian_table(size: [usize; 2], p_max: f64, t_max: f64) -> Lut {
         components: 1,
         values,
         unit_range: false,
+        u16_range: None,
     }
 }
 
@@ -356,6 +358,7 @@ pub fn triangle_tables(size: [usize; 2], kappa_max: f64) -> [Lut; 2] {
         components: 1,
         values: table2(&axes[0], &axes[1], |x, k| triangle_flank_integral(k, x, sign)),
         unit_range: false,
+        u16_range: None,
     };
     [
         lut("pt_triangle_rise", "R(kappa, x) = int_0^x exp(-kappa v^2 / 2) dv, rising flank (section 4.3)", -1.0),
@@ -374,6 +377,7 @@ pub fn sinusoid_table(size: [usize; 2], lambda_max: f64) -> Lut {
         components: 1,
         values,
         unit_range: false,
+        u16_range: None,
     }
 }
 
@@ -406,6 +410,7 @@ pub fn preintegration_1d_table(tf: &Tf1d, s_range: [f64; 2], size: [usize; 3], d
         components: 4,
         values,
         unit_range: true,
+        u16_range: None,
     }
 }
 

@@ -14,6 +14,14 @@
 //! (clamped to 1), colours are the opacity-weighted mean. The f'' axis
 //! carries the boundary-emphasis slider e in [0, 1]: the opacity is scaled
 //! by 1 - (1 - e) |f''| / max|f''| (e = 0: zero at the f'' extremes; e = 1: constant).
+//!
+//! Along f'' each widget may also have its own extent (`"f2": [lo, hi]`,
+//! the third side of the chapter's 3D box widget, section 9.4.5: it adds
+//! nothing outside) and its own `boundary_emphasis` (the file's is the
+//! default). The 3D table is then evaluated per widget at every cell centre,
+//! a true 3D table; it is the separable product tf2d x tf_f2 only when no
+//! widget has either, and the manifest says which. Its f'' axis has an odd
+//! number of cells, so that on a symmetric range a cell centre is f'' = 0.
 
 use crate::gaussian::GaussianPrimitive;
 use serde::{Deserialize, Serialize};
@@ -115,6 +123,20 @@ impl Widget {
     }
 }
 
+/// A widget with its extent along f'' and its own boundary emphasis, as placed in a TF file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlacedWidget {
+    /// The widget's shape on the (v, g) plane.
+    pub shape: Widget,
+    /// f'' interval [lo, hi] the widget covers (None: all of it).
+    pub f2: Option<[f64; 2]>,
+    /// The widget's boundary-emphasis slider (None: the file's).
+    pub boundary_emphasis: Option<f64>,
+}
+
+/// Cells of the 3D table along f'' (odd: one centre at f'' = 0 on a symmetric range).
+pub const TF3D_F2_CELLS: usize = 9;
+
 /// A transfer-function file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TfFile {
@@ -127,7 +149,7 @@ pub struct TfFile {
     /// Boundary-emphasis slider e in [0, 1].
     pub boundary_emphasis: f64,
     /// The widgets.
-    pub widgets: Vec<Widget>,
+    pub widgets: Vec<PlacedWidget>,
     /// Optional 1D TF over v_range: (r, g, b, tau) samples, for the peak and pre-integration tables.
     pub tf1d: Option<Vec<[f64; 4]>>,
 }
@@ -163,13 +185,31 @@ pub fn parse_tf(text: &str) -> Result<TfFile, String> {
     let mut widgets = Vec::with_capacity(raw.widgets.len());
     for (i, w) in raw.widgets.into_iter().enumerate() {
         let mut w = w;
+        let at = |key: &str, e: serde_json::Error| format!("at widgets[{i}].{key}: {e}");
+        let take = |w: &mut serde_json::Value, key: &str| w.as_object_mut().and_then(|o| o.remove(key));
+        let f2: Option<[f64; 2]> =
+            take(&mut w, "f2").map(serde_json::from_value).transpose().map_err(|e| at("f2", e))?;
+        let emphasis: Option<f64> = take(&mut w, "boundary_emphasis")
+            .map(serde_json::from_value)
+            .transpose()
+            .map_err(|e| at("boundary_emphasis", e))?;
+        if let Some([lo, hi]) = f2
+            && !(lo.is_finite() && hi.is_finite() && lo < hi)
+        {
+            return Err(format!("at widgets[{i}].f2: [{lo}, {hi}] must be increasing"));
+        }
+        if let Some(e) = emphasis
+            && !(0.0..=1.0).contains(&e)
+        {
+            return Err(format!("at widgets[{i}].boundary_emphasis: {e} is not in [0, 1]"));
+        }
         let kind = match w.as_object_mut().and_then(|o| o.remove("type")) {
             Some(serde_json::Value::String(k)) => k,
             _ => return Err(format!("at widgets[{i}].type: missing (triangle, rectangle or gaussian)")),
         };
         let field =
             |e: serde_path_to_error::Error<serde_json::Error>| format!("at widgets[{i}].{}: {}", e.path(), e.inner());
-        widgets.push(match kind.as_str() {
+        let shape = match kind.as_str() {
             "triangle" => Widget::Triangle(serde_path_to_error::deserialize(w).map_err(field)?),
             "rectangle" => Widget::Rectangle(serde_path_to_error::deserialize(w).map_err(field)?),
             "gaussian" => Widget::Gaussian(serde_path_to_error::deserialize(w).map_err(field)?),
@@ -178,10 +218,9 @@ pub fn parse_tf(text: &str) -> Result<TfFile, String> {
                     "at widgets[{i}].type: unknown widget '{other}' (triangle, rectangle or gaussian)"
                 ));
             }
-        });
-        if let Some(w) = widgets.last() {
-            check_widget(w).map_err(|e| format!("at widgets[{i}].{e}"))?;
-        }
+        };
+        check_widget(&shape).map_err(|e| format!("at widgets[{i}].{e}"))?;
+        widgets.push(PlacedWidget { shape, f2, boundary_emphasis: emphasis });
     }
     let tf = TfFile {
         v_range: raw.v_range,
@@ -244,9 +283,31 @@ fn check_widget(w: &Widget) -> Result<(), String> {
 impl TfFile {
     /// Combined opacity and colour of all widgets at (v, g) (eq. 3 of the Gaussian-TF paper).
     pub fn eval2(&self, v: f64, g: f64) -> [f64; 4] {
+        self.combine(|w| w.shape.eval(v, g))
+    }
+
+    /// Combined opacity and colour at (v, g, f''): each widget's opacity
+    /// times its f'' factor (0 outside its extent, else its boundary emphasis).
+    pub fn eval3(&self, v: f64, g: f64, f2: f64) -> [f64; 4] {
+        self.combine(|w| {
+            let (a, c) = w.shape.eval(v, g);
+            let inside = w.f2.is_none_or(|[lo, hi]| (lo..=hi).contains(&f2));
+            let e = w.boundary_emphasis.unwrap_or(self.boundary_emphasis);
+            (if inside { a * self.emphasis_with(e, f2) } else { 0.0 }, c)
+        })
+    }
+
+    /// Whether the 3D table is the product of the 2D table and the f'' factor
+    /// (no widget has an f'' extent or an emphasis of its own).
+    pub fn separable(&self) -> bool {
+        self.widgets.iter().all(|w| w.f2.is_none() && w.boundary_emphasis.is_none())
+    }
+
+    /// Opacities add (clamped to 1), colours are the opacity-weighted mean (eq. 3).
+    fn combine(&self, each: impl Fn(&PlacedWidget) -> (f64, [f64; 3])) -> [f64; 4] {
         let (mut a, mut c) = (0.0, [0.0; 3]);
         for w in &self.widgets {
-            let (wa, wc) = w.eval(v, g);
+            let (wa, wc) = each(w);
             a += wa;
             for k in 0..3 {
                 c[k] += wa * wc[k];
@@ -260,8 +321,13 @@ impl TfFile {
 
     /// The boundary-emphasis factor at f''.
     pub fn emphasis(&self, f2: f64) -> f64 {
+        self.emphasis_with(self.boundary_emphasis, f2)
+    }
+
+    /// The factor 1 - (1 - e) |f''| / max|f''| of slider value e at f''.
+    fn emphasis_with(&self, e: f64, f2: f64) -> f64 {
         let m = self.f2_range[0].abs().max(self.f2_range[1].abs());
-        (1.0 - (1.0 - self.boundary_emphasis) * (f2.abs() / m).min(1.0)).max(0.0)
+        (1.0 - (1.0 - e) * (f2.abs() / m).min(1.0)).max(0.0)
     }
 
     /// Centre of cell i of n over [lo, hi].
@@ -285,8 +351,23 @@ impl TfFile {
         (0..n).map(|k| self.emphasis(Self::at(self.f2_range, k, n)) as f32).collect()
     }
 
-    /// The 3D (v, g, f'') table (v fastest): the 2D table with its opacity scaled by the emphasis.
+    /// The 3D (v, g, f'') table (v fastest) at the cell centres: the 2D table
+    /// with its opacity scaled by the emphasis when [`TfFile::separable`],
+    /// else [`TfFile::eval3`] per cell.
     pub fn table3(&self, nv: usize, ng: usize, nf: usize) -> Vec<[f32; 4]> {
+        if !self.separable() {
+            let mut out = Vec::with_capacity(nv * ng * nf);
+            for k in 0..nf {
+                let f2 = Self::at(self.f2_range, k, nf);
+                for j in 0..ng {
+                    let g = Self::at(self.g_range, j, ng);
+                    for i in 0..nv {
+                        out.push(self.eval3(Self::at(self.v_range, i, nv), g, f2).map(|x| x as f32));
+                    }
+                }
+            }
+            return out;
+        }
         let t2 = self.table2(nv, ng);
         let e = self.table_f2(nf);
         let mut out = Vec::with_capacity(nv * ng * nf);
@@ -300,36 +381,51 @@ impl TfFile {
 }
 
 impl TfFile {
-    /// The 3D (v, g, f'') table 256 x 128 x 8 and the separable pair (v, g)
+    /// The 3D (v, g, f'') table 256 x 128 x 9 and the separable pair (v, g)
     /// 256 x 256 + f'' 256 of Kniss et al.'s slicer.
     pub fn slicer_luts(&self) -> Vec<crate::lut::Lut> {
+        let (m3, approx) = if self.separable() {
+            ("RGBA over (v, g, f2): the 2D widgets times boundary emphasis (separable: tf2d x tf_f2)", "")
+        } else {
+            (
+                "RGBA over (v, g, f2): each widget times its f2 extent and boundary emphasis, evaluated per cell (not separable)",
+                "; an approximation: the widgets' own f2 extents and emphasis are in tf3d only",
+            )
+        };
         use crate::lut::{Lut, LutAxis};
         let axis = |c: &str, size, r: [f64; 2]| LutAxis { channel: c.into(), size, min: r[0], max: r[1] };
         let flat = |t: Vec<[f32; 4]>| t.into_iter().flatten().collect::<Vec<f32>>();
         vec![
             Lut {
                 name: "tf3d".into(),
-                meaning: "RGBA over (v, g, f2): colour and opacity, the 2D widgets times boundary emphasis".into(),
-                axes: vec![axis("v", 256, self.v_range), axis("g", 128, self.g_range), axis("f2", 8, self.f2_range)],
+                meaning: m3.into(),
+                axes: vec![
+                    axis("v", 256, self.v_range),
+                    axis("g", 128, self.g_range),
+                    axis("f2", TF3D_F2_CELLS, self.f2_range),
+                ],
                 components: 4,
-                values: flat(self.table3(256, 128, 8)),
+                values: flat(self.table3(256, 128, TF3D_F2_CELLS)),
                 unit_range: true,
+                u16_range: None,
             },
             Lut {
                 name: "tf2d".into(),
-                meaning: "RGBA over (v, g), the separable 2D part".into(),
+                meaning: format!("RGBA over (v, g), the separable 2D part{approx}"),
                 axes: vec![axis("v", 256, self.v_range), axis("g", 256, self.g_range)],
                 components: 4,
                 values: flat(self.table2(256, 256)),
                 unit_range: true,
+                u16_range: None,
             },
             Lut {
                 name: "tf_f2".into(),
-                meaning: "opacity factor over f2 (boundary emphasis), the separable 1D part".into(),
+                meaning: format!("opacity factor over f2 (boundary emphasis), the separable 1D part{approx}"),
                 axes: vec![axis("f2", 256, self.f2_range)],
                 components: 1,
                 values: self.table_f2(256),
                 unit_range: true,
+                u16_range: None,
             },
         ]
     }
@@ -363,6 +459,7 @@ impl TfFile {
             components: 4,
             values,
             unit_range: true,
+            u16_range: None,
         })
     }
 
@@ -379,6 +476,7 @@ impl TfFile {
             components: 4,
             values: self.table2(256, 256).into_iter().flatten().collect(),
             unit_range: true,
+            u16_range: None,
         }
     }
 }
@@ -386,7 +484,10 @@ impl TfFile {
 impl TfFile {
     /// The Gaussian widgets, as written to a pack's `gaussians.json`.
     pub fn gaussians(&self) -> Vec<GaussianPrimitive> {
-        self.widgets.iter().filter_map(|w| if let Widget::Gaussian(g) = w { Some(g.clone()) } else { None }).collect()
+        self.widgets
+            .iter()
+            .filter_map(|w| if let Widget::Gaussian(g) = &w.shape { Some(g.clone()) } else { None })
+            .collect()
     }
 
     /// With a `tf1d`: the 256 x 256 peak table (s of the highest TF peak between front and
@@ -415,6 +516,7 @@ impl TfFile {
                 components: 1,
                 values: peak,
                 unit_range: false,
+                u16_range: None,
             },
             Lut {
                 name: "preintegration".into(),
@@ -423,6 +525,7 @@ impl TfFile {
                 components: 4,
                 values: crate::tables::preintegration_table(&tf, 256, step).into_iter().flatten().collect(),
                 unit_range: true,
+                u16_range: None,
             },
         ]
     }
@@ -475,15 +578,58 @@ mod tests {
     #[test]
     fn separable_3d_table_is_the_product_of_its_parts() {
         let tf = parse_tf(EXAMPLE).unwrap();
-        let (t2, e, t3) = (tf.table2(256, 128), tf.table_f2(8), tf.table3(256, 128, 8));
-        assert_eq!(t3.len(), 256 * 128 * 8);
-        for k in 0..8 {
+        let (t2, e, t3) = (tf.table2(256, 128), tf.table_f2(9), tf.table3(256, 128, 9));
+        assert_eq!(t3.len(), 256 * 128 * 9);
+        for k in 0..9 {
             for idx in [0, 1000, 20_000, 32_767] {
                 assert_eq!(t3[k * 256 * 128 + idx][3], t2[idx][3] * e[k]);
             }
         }
         // emphasis: 1 at f'' = 0, 1 - (1 - e) at the extremes
         assert!((tf.emphasis(0.0) - 1.0).abs() < 1e-12 && (tf.emphasis(10.0) - 0.25).abs() < 1e-12);
+    }
+
+    #[test]
+    fn widgets_with_an_f2_extent_make_a_true_3d_table() {
+        let text = EXAMPLE.replace(
+            r#""alpha": 0.8, "colour": [1, 0.5, 0]}"#,
+            r#""alpha": 0.8, "colour": [1, 0.5, 0], "f2": [-10, 0], "boundary_emphasis": 1}"#,
+        );
+        let tf = parse_tf(&text).unwrap();
+        assert!(!tf.separable() && parse_tf(EXAMPLE).unwrap().separable());
+        let (nv, ng, nf) = (64, 32, TF3D_F2_CELLS);
+        let t3 = tf.table3(nv, ng, nf);
+        let centre = |r: [f64; 2], i: usize, n: usize| r[0] + (i as f64 + 0.5) * (r[1] - r[0]) / n as f64;
+        // the middle f'' cell's centre is f'' = 0
+        assert_eq!(centre([-10.0, 10.0], nf / 2, nf), 0.0);
+        for (i, j) in [(32, 16), (33, 20), (15, 8), (50, 20)] {
+            for k in 0..nf {
+                let (v, g, f2) =
+                    (centre([0.0, 255.0], i, nv), centre([0.0, 40.0], j, ng), centre([-10.0, 10.0], k, nf));
+                // brute force: the triangle only for f'' in [-10, 0] with emphasis 1; the others times
+                // the file's emphasis 1 - 0.75 |f''| / 10
+                let tri = if (5.0..=35.0).contains(&g) && f2 <= 0.0 {
+                    let (c, h) = (128.0 + 0.5 * g, 30.0 * g / 35.0);
+                    0.8 * (1.0 - (v - c).abs() / h).max(0.0)
+                } else {
+                    0.0
+                };
+                let e = 1.0 - 0.75 * f2.abs() / 10.0;
+                let (dv, dg) = ((v - 60.0) / 20.0, (g - 10.0) / 8.0);
+                let rect = if dv.abs() <= 1.0 && dg.abs() <= 1.0 { 0.6 * (1.0 - dv.abs().max(dg.abs())) } else { 0.0 };
+                let gau = 0.9 * (-((0.05 * (v - 200.0)).powi(2) + (0.2 * (g - 25.0)).powi(2))).exp();
+                let a = (tri + e * (rect + gau)).min(1.0);
+                assert!((t3[(k * ng + j) * nv + i][3] as f64 - a).abs() < 1e-6, "({i}, {j}, {k})");
+            }
+        }
+        // not separable: the ratio of two f'' slices differs between cells
+        let alpha = |i: usize, j: usize, k: usize| t3[(k * ng + j) * nv + i][3] as f64;
+        let (lo, hi) = (0, nf - 1);
+        let r1 = alpha(32, 16, hi) / alpha(32, 16, lo);
+        let r2 = alpha(12, 8, hi) / alpha(12, 8, lo);
+        assert!(alpha(32, 16, lo) > 0.0 && alpha(12, 8, lo) > 0.0 && (r1 - r2).abs() > 0.1, "{r1} {r2}");
+        let bad = text.replace(r#""f2": [-10, 0]"#, r#""f2": [3, -3]"#);
+        assert_eq!(parse_tf(&bad).unwrap_err(), "at widgets[0].f2: [3, -3] must be increasing");
     }
 
     #[test]

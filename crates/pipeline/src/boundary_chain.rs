@@ -82,7 +82,8 @@ impl From<BoundaryError> for ChainError {
 pub fn run(value: &Volume, params: &BoundaryChainParams) -> Result<BoundaryChainOutput, ChainError> {
     let value_range = value.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
     // Check the tracing parameters before the expensive stages.
-    mdtf_boundary::resolve(&params.boundary, &value.geometry, value_range)?;
+    let floor = mdtf_boundary::noise_floor(&[], value_range, value.geometry.min_spacing());
+    mdtf_boundary::resolve(&params.boundary, &value.geometry, value_range, floor)?;
     let d = DeriveParams {
         items: vec![Item::G, Item::F2, Item::Normal],
         kernel: params.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),

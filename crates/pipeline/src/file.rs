@@ -109,6 +109,10 @@ pub struct PackSection {
     /// distance-tf: the alpha map of distance.
     #[serde(default)]
     pub alpha: Option<AlphaMap>,
+    /// gaussian-tf without a TF file: fit the Gaussian to the voxels where
+    /// this mask volume (relative to the pipeline file) is positive.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gtf_from_mask: Option<PathBuf>,
     /// Also write every texture as NIfTI-1.
     #[serde(default)]
     pub nifti: bool,

@@ -5,6 +5,7 @@
 pub mod boundary_chain;
 pub mod channels;
 pub mod file;
+pub mod gaussians;
 pub mod pack_inputs;
 pub mod run;
 pub mod validate;

@@ -9,7 +9,9 @@ use mdtf_volume::Volume;
 use std::collections::BTreeMap;
 
 /// Code ranges: the explicit ones; for g, f2 and g_hit the data range with
-/// qbert's percentile clipping (0.002 % / 0.004 % each end); for inv_g
+/// qbert's percentile clipping (0.002 % / 0.004 % each end); for distance
+/// [-1, d_max] when the tracing's d_max is known (-1: no boundary), so that
+/// its codes mean the same distances in every pack; for inv_g
 /// [0, 100 / g_max] (1/g down to g = 1 % of its maximum: the boundaries
 /// peak finding looks for keep their precision, homogeneous voxels, where
 /// 1/g runs to 1/epsilon, share the top code); other channels are left to
@@ -17,9 +19,16 @@ use std::collections::BTreeMap;
 pub fn ranges(
     chans: &[(String, Volume)],
     explicit: &BTreeMap<String, [f64; 2]>,
+    d_max: Option<f64>,
 ) -> Result<BTreeMap<String, [f64; 2]>, HistogramError> {
     let mut out = explicit.clone();
     for (name, v) in chans {
+        if !out.contains_key(name)
+            && name == "distance"
+            && let Some(d) = d_max
+        {
+            out.insert(name.clone(), [mdtf_boundary::NO_BOUNDARY as f64, d]);
+        }
         if !out.contains_key(name) && matches!(name.as_str(), "g" | "f2" | "g_hit") {
             let axis = AxisSpec { bins: Some(256), ..AxisSpec::qbert(name) }.resolve(name, v.samples())?;
             out.insert(name.clone(), [axis.min, axis.max]);
@@ -38,7 +47,9 @@ pub fn ranges(
 /// The lookup tables of `profile`: from `tf` when given; otherwise the
 /// histogram volume's default opacity (slicer-3dtf; `hvol` when the caller
 /// already has it, else computed); distance-tf always gets `alpha_d` from
-/// `alpha` (and `alpha_u` from `tf`).
+/// `alpha` over [0, d_max], the paper's domain (the top of the distance's
+/// code range; without one, the largest distance measured), and `alpha_u`
+/// from `tf`; gaussian-tf gets the IGauss and erf-difference tables.
 pub fn luts(
     profile: Profile,
     tf: Option<&TfFile>,
@@ -78,6 +89,7 @@ pub fn luts(
                     components: 4,
                     values: hv.opacity.iter().flat_map(|&a| [1.0, 1.0, 1.0, a]).collect(),
                     unit_range: true,
+                    u16_range: None,
                 });
             }
         },
@@ -92,8 +104,9 @@ pub fn luts(
                 meaning: format!("opacity over the distance to the boundary: {alpha} (distance paper eqs. 9-11)"),
                 axes: vec![LutAxis { channel: "distance".into(), size: 256, min: 0.0, max: d_max }],
                 components: 1,
-                values: (0..256).map(|k| alpha.eval((k as f64 + 0.5) * d_max / 256.0) as f32).collect(),
+                values: (0..256).map(|k| alpha.eval((k as f64 + 0.5) * d_max / 256.0, d_max) as f32).collect(),
                 unit_range: true,
+                u16_range: None,
             });
             if let Some(tf) = tf {
                 out.push(tf.distance_alpha_u());
@@ -102,13 +115,16 @@ pub fn luts(
         // the mesh pack's tables come from mdtf-tetra
         Profile::ProjectedTetrahedra => {}
         Profile::GaussianTf | Profile::PeakFinding => {
+            if profile == Profile::GaussianTf {
+                out.extend(crate::gaussians::analytic_integration_tables());
+            }
             if let Some(tf) = tf {
                 let step = chans.first().map_or(1.0, |(_, v)| v.geometry.min_spacing());
                 out.extend(tf.table_luts(step));
                 // peak-finding: the widgets over (v, 1/g) for multidimensional peak finding
                 if profile == Profile::PeakFinding
                     && let Some(r) = ranges.get("inv_g")
-                    && let Some(lut) = tf.peak_finding_tf2d(*r, [256, 1024])
+                    && let Some(lut) = tf.peak_finding_tf2d(*r, [1024, 1024])
                 {
                     out.push(lut);
                 }

@@ -61,12 +61,28 @@ pub struct RunReport {
     pub input: String,
     /// Grid size.
     pub dims: [usize; 3],
-    /// What the reader assumed or repaired (e.g. a DICOM series resampled onto a regular grid).
+    /// What the reader assumed or repaired (e.g. a DICOM series resampled
+    /// onto a regular grid), and what a stage left out (e.g. a boundary below
+    /// the tracing thresholds).
     pub warnings: Vec<String>,
+    /// The boundary tracing's thresholds and counts, when it ran.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub boundary: Option<BoundarySummary>,
     /// The stages, in order.
     pub stages: Vec<StageReport>,
     /// Total wall time, seconds.
     pub total_seconds: f64,
+}
+
+/// What the boundary tracing used and found.
+#[derive(Debug, Clone, Serialize)]
+pub struct BoundarySummary {
+    /// Thresholds and sampling after defaults.
+    pub resolved: mdtf_boundary::ResolvedParams,
+    /// Voxels per hit code.
+    pub counts: mdtf_boundary::TraceCounts,
+    /// Boundaries the thresholds took out of the outputs.
+    pub lost: Vec<mdtf_boundary::LostBoundary>,
 }
 
 /// Peak resident set size of this process in MiB (VmHWM), 0 where unknown.
@@ -112,7 +128,9 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     // input
     on_stage("input");
     let t = Instant::now();
-    let (input, input_name, warnings) = load_input(p, opts, &base)?;
+    let (input, input_name, mut warnings) = load_input(p, opts, &base)?;
+    let mut boundary = None;
+    let mut d_max = None;
     let geo = input.geometry.clone();
     let n = geo.voxel_count();
     stage("input", t, n, vec![]);
@@ -249,6 +267,9 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         let t = Instant::now();
         let out = mdtf_boundary::run(&BoundaryInput { g, f2, normal: nm, value_range }, &p.boundary)
             .map_err(|e| fail("boundary")(e.to_string()))?;
+        warnings.extend(out.warnings.iter().map(|w| format!("boundary: {w}")));
+        d_max = Some(out.resolved.d_max);
+        boundary = Some(BoundarySummary { resolved: out.resolved, counts: out.counts, lost: out.lost.clone() });
         let report = out.report(g);
         let rdir = dir.join("boundary");
         std::fs::create_dir_all(&rdir).map_err(|e| fail("boundary")(e.to_string()))?;
@@ -309,6 +330,15 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             let hist = count(&[v.samples(), g.samples()], axes.clone(), None).map_err(|e| err(e.to_string()))?;
             write_histogram(&hdir, &hist, Scale::Log).map_err(|e| err(e.to_string()))?;
             outputs.push("histogram/hist_v_g.png".into());
+            // peak finding's TF domain: (v, 1/g)
+            if let Some(inv_g) = get("inv_g")
+                && let Some(ia) = Axis::inverse_gradient(g.samples(), 256)
+            {
+                let hist = count(&[v.samples(), inv_g.samples()], vec![axes[0].clone(), ia], None)
+                    .map_err(|e| err(e.to_string()))?;
+                write_histogram(&hdir, &hist, Scale::Log).map_err(|e| err(e.to_string()))?;
+                outputs.push("histogram/hist_v_inv_g.png".into());
+            }
         }
         if h.stretched
             && let (Some(g_hit), Some(hit)) = (get("g_hit"), get("hit"))
@@ -369,10 +399,27 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         // the pack is the last stage to read the channels: they move into it
         let mut pack_chans: Vec<(String, Volume)> =
             profile.channels(&fields).into_iter().filter_map(|c| chans.remove(&c).map(|v| (c, v))).collect();
-        let ranges = crate::pack_inputs::ranges(&pack_chans, &BTreeMap::new()).map_err(|e| err(e.to_string()))?;
-        let alpha = p.pack.alpha.unwrap_or(AlphaMap::Linear { a: 1.0, dc: 3.0 });
+        let ranges =
+            crate::pack_inputs::ranges(&pack_chans, &BTreeMap::new(), d_max).map_err(|e| err(e.to_string()))?;
+        let alpha = p.pack.alpha.unwrap_or(AlphaMap::Linear { a: 1.0, dc: None });
         let luts = crate::pack_inputs::luts(profile, tf.as_ref(), &alpha, &pack_chans, &ranges, hvol_kept.as_ref())
             .map_err(|e| err(e.to_string()))?;
+        let gaussians = if profile == Profile::GaussianTf {
+            let mask = match &p.pack.gtf_from_mask {
+                Some(m) => {
+                    let path = base.join(m);
+                    let v = mdtf_volume::read_scalar(&path, &mdtf_volume::ReadOptions::default())
+                        .map_err(|e| err(format!("gtf_from_mask {}: {e}", path.display())))?;
+                    Some(v)
+                }
+                None => None,
+            };
+            let (axes, gradient) =
+                if fields.is_empty() { (vec!["v".to_string()], "g") } else { (fields.clone(), "gnorm") };
+            Some(crate::gaussians::gaussians(tf.as_ref(), mask.as_ref(), &pack_chans, &axes, gradient).map_err(err)?)
+        } else {
+            None
+        };
         let params = PackParams { profile, ranges, fields, dtype: None, nifti: p.pack.nifti };
         let sources = BTreeMap::new();
         let layouts = mdtf_pack::texture_layouts(&params);
@@ -400,25 +447,23 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             pack_chans.retain(|(c, _)| layouts[i + 1..].iter().any(|l| uses(l, c)) || (normals_pending && c == "v"));
         }
         writer.finish(&luts, provenance).map_err(|e| err(e.to_string()))?;
+        if let Some(g) = &gaussians {
+            let json = serde_json::to_string_pretty(g).map_err(|e| err(e.to_string()))?;
+            write_file_atomically(&pdir.join("gaussians.json"), |w| w.write_all(json.as_bytes()))
+                .map_err(|e| err(e.to_string()))?;
+        }
     }
     stage(pack_stage, t, n, vec!["pack/manifest.json".into()]);
 
     let previewable = match profile {
         Profile::Slicer3dtf | Profile::DistanceTf => true,
-        Profile::GaussianTf => p.pack.tf.is_some(),
+        Profile::GaussianTf => true,
         Profile::PeakFinding => tf.as_ref().is_some_and(|t| t.tf1d.is_some() || !t.widgets.is_empty()),
         Profile::ProjectedTetrahedra => false,
     };
     if p.preview && previewable {
         on_stage("preview");
         let t = Instant::now();
-        if profile == Profile::GaussianTf
-            && let Some(tf) = &tf
-        {
-            let json = serde_json::to_string_pretty(&tf.gaussians()).map_err(|e| fail("preview")(e.to_string()))?;
-            write_file_atomically(&pdir.join("gaussians.json"), |w| w.write_all(json.as_bytes()))
-                .map_err(|e| fail("preview")(e.to_string()))?;
-        }
         let cam = mdtf_preview::Camera { azimuth: 30.0, elevation: 20.0, size: 512, step: 0.5 };
         mdtf_preview::preview_named(&pdir, &dir.join("preview.png"), &cam, true, &opts.output.join("pack"))
             .map_err(|e| fail("preview")(e.to_string()))?;
@@ -446,6 +491,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         input: input_name,
         dims: geo.dims,
         warnings,
+        boundary,
         stages,
         total_seconds: start.elapsed().as_secs_f64(),
     };
@@ -464,6 +510,9 @@ fn run_inputs(p: &Pipeline, opts: &RunOptions, base: &Path) -> Inputs {
     }
     if let Some(tf) = &p.pack.tf {
         inputs.add(&base.join(tf));
+    }
+    if let Some(mask) = &p.pack.gtf_from_mask {
+        inputs.add(&base.join(mask));
     }
     inputs
 }

@@ -204,6 +204,7 @@ pub fn validate(n: usize, dir: &Path, params: &ValidateParams) -> Result<Vec<Che
         k: vec![vec![5.0, 1.0], vec![-2.0, 7.0]],
         alpha_max: 1.0,
         colour: [1.0; 3],
+        triangular: false,
     };
     let mut worst_g = 0.0f64;
     for (v1, v2) in
@@ -227,9 +228,78 @@ pub fn validate(n: usize, dir: &Path, params: &ValidateParams) -> Result<Vec<Che
         worst_g = worst_g.max((gp.segment_integral(&v1, &v2) - simpson).abs());
     }
     out.push(check("pack: Gaussian segment integral vs quadrature", worst_g, 1e-5, true));
+    out.push(check("pack: triangular GTF segment integral vs quadr.", tgtf_integral_error(), 1e-5, true));
+    out.push(check("boundary: shells, least share kept per boundary", shells_least_kept(96)?, 0.95, false));
     out.push(check("tetra: vertex g mean rel. error", tetra_g_error(n, &params.tetra)?, 0.02, true));
     out.push(check("tetra: F/B, Gaussian tables vs quadr.", tetra_table_error(), 1e-4, true));
     Ok(out)
+}
+
+/// Simpson's rule with `steps` (even) intervals of f over [0, 1].
+fn simpson(f: impl Fn(f64) -> f64, steps: usize) -> f64 {
+    let w = |k: usize| {
+        if k == 0 || k == steps {
+            1.0
+        } else if k % 2 == 1 {
+            4.0
+        } else {
+            2.0
+        }
+    };
+    (0..=steps).map(|k| w(k) * f(k as f64 / steps as f64)).sum::<f64>() / (3.0 * steps as f64)
+}
+
+/// Largest difference between the triangular GTF's analytic segment
+/// integral (g held at the endpoints' mean, Gaussian-TF paper section 5.2.1)
+/// and Simpson quadrature of its density along the segment at that g.
+fn tgtf_integral_error() -> f64 {
+    let gp = GaussianPrimitive {
+        centre: vec![120.0],
+        k: vec![vec![0.8]],
+        alpha_max: 1.0,
+        colour: [1.0; 3],
+        triangular: true,
+    };
+    let mut worst = 0.0f64;
+    for (v1, g1, v2, g2) in
+        [(100.0, 20.0, 140.0, 30.0), (119.0, 2.0, 121.0, 3.0), (60.0, 40.0, 200.0, 10.0), (120.0, 5.0, 120.0, 5.0)]
+    {
+        let g_hat = 0.5 * (g1 + g2);
+        let quad = simpson(|t| gp.density(&[v1 + t * (v2 - v1), g_hat]), 4000);
+        worst = worst.max((gp.segment_integral(&[v1, g1], &[v2, g2]) - quad).abs());
+    }
+    worst
+}
+
+/// On the `shells` phantom (n^3, sigma 2) traced with the default
+/// thresholds: for each of its three boundaries, the share of the voxels
+/// within one voxel of its radius that are kept with g_hit within 5 % of the
+/// boundary's peak |jump| / (sigma sqrt(2 pi)); the least of the three.
+fn shells_least_kept(n: usize) -> Result<f64, String> {
+    let sigma = 2.0;
+    let ph = mdtf_datagen::RadialPhantom::tooth(Geometry::new([n; 3], [1.0; 3]), sigma);
+    let chain = crate::boundary_chain::run(&ph.volume(), &Default::default()).map_err(|e| e.to_string())?;
+    let out = &chain.boundary;
+    let [nx, ny, _] = ph.geometry.dims;
+    let c = ph.centre;
+    let mut outer = ph.outside;
+    let mut least = 1.0f64;
+    for b in &ph.boundaries {
+        let peak = (b.inside - outer).abs() / (sigma * (2.0 * PI).sqrt());
+        outer = b.inside;
+        let (mut near, mut kept) = (0usize, 0usize);
+        for i in 0..out.hit.samples().len() {
+            let (x, y, z) = ((i % nx) as f64, ((i / nx) % ny) as f64, (i / (nx * ny)) as f64);
+            let rho = ((x - c[0]).powi(2) + (y - c[1]).powi(2) + (z - c[2]).powi(2)).sqrt();
+            if (rho - b.radius).abs() <= 1.0 {
+                near += 1;
+                let gh = out.g_hit.samples()[i] as f64;
+                kept += usize::from(out.hit.samples()[i] == 1.0 && ((gh - peak) / peak).abs() <= 0.05);
+            }
+        }
+        least = least.min(kept as f64 / near.max(1) as f64);
+    }
+    Ok(least)
 }
 
 /// Mean relative error of per-vertex g on the mesh (`params.tets` per cell) of an n^3

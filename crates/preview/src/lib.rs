@@ -49,17 +49,30 @@ pub fn classifier(pack: &LoadedPack, analytic: bool) -> Result<Classifier, Previ
         }),
         "gaussian-tf" => {
             let primitives = pack.gaussians.clone().filter(|g| !g.is_empty()).ok_or_else(|| {
-                PreviewError::Pack("gaussian-tf pack without gaussians.json (pack it with --tf)".into())
+                PreviewError::Pack("gaussian-tf pack without gaussians.json (mdtf pack writes it)".into())
             })?;
-            let m = primitives[0].centre.len();
-            // the TF axes are the packed fields in texture order, ||G|| excluded
+            let m = primitives.iter().map(|p| p.fields()).max().unwrap_or(0);
+            // the TF axes are the packed fields in texture order; the gradient
+            // channel (g for scalar data, gnorm otherwise) follows them for triangular GTFs
+            let is_gradient = |c: &str| c == "gnorm" || c == "g";
             let mut fields: Vec<String> = Vec::new();
+            let mut gradient = None;
             for t in &pack.manifest.textures {
                 for c in t.component_order.iter().flatten() {
-                    if c != "gnorm" && !fields.contains(c) {
+                    if is_gradient(c) {
+                        gradient = Some(c.clone());
+                    } else if !fields.contains(c) {
                         fields.push(c.clone());
                     }
                 }
+            }
+            let triangular = primitives.iter().any(|p| p.triangular);
+            // plain primitives over (fields, gradient), such as a 2D GTF over (v, g)
+            if !triangular
+                && fields.len() + 1 == m
+                && let Some(g) = &gradient
+            {
+                fields.push(g.clone());
             }
             if fields.len() < m {
                 return Err(PreviewError::Pack(format!(
@@ -68,7 +81,18 @@ pub fn classifier(pack: &LoadedPack, analytic: bool) -> Result<Classifier, Previ
                 )));
             }
             fields.truncate(m);
-            Ok(Classifier::Gaussian { primitives, channels: fields, analytic })
+            let mut sqrt_last = false;
+            if triangular {
+                if primitives.iter().any(|p| p.fields() != m) {
+                    return Err(PreviewError::Pack("triangular GTFs need every primitive over the same fields".into()));
+                }
+                let g = gradient.ok_or_else(|| {
+                    PreviewError::Pack("a triangular GTF needs the pack's gradient channel (g or gnorm)".into())
+                })?;
+                sqrt_last = g == "gnorm";
+                fields.push(g);
+            }
+            Ok(Classifier::Gaussian { primitives, channels: fields, analytic, sqrt_last })
         }
         // a 2D TF over (v, 1/g): multidimensional peak finding along chords in TF space
         "peak-finding" if pack.tables.contains_key("tf2d") => Ok(Classifier::Chord {

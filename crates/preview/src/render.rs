@@ -65,6 +65,9 @@ pub enum Classifier {
         channels: Vec<String>,
         /// Integrate analytically between samples instead of sampling the density.
         analytic: bool,
+        /// The last channel is ||D^T D|| (`gnorm`), whose square root is the
+        /// triangular GTF's gradient coordinate.
+        sqrt_last: bool,
     },
     /// Peak finding on v (1D): between consecutive samples, when the TF has a peak
     /// between their values (the pack's peak table), classify at the peak; else (or
@@ -546,8 +549,11 @@ fn render_impl(
                         };
                         ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(step_vox))
                     }
-                    Classifier::Gaussian { primitives, channels: _, analytic } => {
-                        let v: Vec<f64> = table_chans.iter().map(|&c| sample(c) as f64).collect();
+                    Classifier::Gaussian { primitives, channels: _, analytic, sqrt_last } => {
+                        let mut v: Vec<f64> = table_chans.iter().map(|&c| sample(c) as f64).collect();
+                        if *sqrt_last && let Some(last) = v.last_mut() {
+                            *last = last.max(0.0).sqrt();
+                        }
                         let from = if *analytic { previous.replace(v.clone()) } else { None };
                         let (mut depth, mut c) = (0.0, [0.0f64; 3]);
                         for gp in primitives {

@@ -13,9 +13,19 @@ fn analytic_integration_beats_the_riemann_sum_at_a_coarse_step() {
     let v = erf_sphere(Geometry::new([48; 3], [1.0; 3]), 14.0, 2.0, 0.0, 255.0, None).volume();
     let channels: BTreeMap<String, Volume> = [("v".to_string(), v)].into_iter().collect();
     // a narrow peak around v = 128 (width ~ 4 of 255): a thin shell at the boundary
-    let gp = GaussianPrimitive { centre: vec![128.0], k: vec![vec![0.25]], alpha_max: 0.8, colour: [1.0, 0.6, 0.3] };
-    let classify =
-        |analytic| Classifier::Gaussian { primitives: vec![gp.clone()], channels: vec!["v".into()], analytic };
+    let gp = GaussianPrimitive {
+        centre: vec![128.0],
+        k: vec![vec![0.25]],
+        alpha_max: 0.8,
+        colour: [1.0, 0.6, 0.3],
+        triangular: false,
+    };
+    let classify = |analytic| Classifier::Gaussian {
+        primitives: vec![gp.clone()],
+        channels: vec!["v".into()],
+        analytic,
+        sqrt_last: false,
+    };
     let cam = |step| Camera { azimuth: 30.0, elevation: 20.0, size: 64, step };
     let reference = render(&channels, &classify(false), &cam(0.02));
     let riemann = render(&channels, &classify(false), &cam(1.5));

@@ -28,6 +28,58 @@ pub fn finite_sample_range(data: &[f32]) -> Option<(f32, f32)> {
     (lo <= hi).then_some((lo, hi))
 }
 
+/// The k-th smallest finite sample of `data` (k from 0), exactly, or None
+/// if there are at most k finite samples. NaN and infinities are skipped.
+///
+/// A two-pass radix select over the samples' order-preserving 32-bit keys:
+/// a histogram of the upper 16 bits finds the bucket holding the k-th key,
+/// a histogram of the lower 16 bits within that bucket finds the key. It
+/// reads `data` twice and allocates two 2^16-bin histograms per worker,
+/// never a copy of the data, and the counts do not depend on the order.
+pub fn order_statistic(data: &[f32], k: u64) -> Option<f32> {
+    const BUCKETS: usize = 1 << 16;
+    fn key(v: f32) -> u32 {
+        let b = v.to_bits();
+        if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
+    }
+    let count = |select: &(dyn Fn(u32) -> Option<usize> + Sync)| -> Vec<u64> {
+        data.par_chunks(1 << 18)
+            .map(|c| {
+                let mut h = vec![0u64; BUCKETS];
+                for &v in c.iter().filter(|v| v.is_finite()) {
+                    if let Some(b) = select(key(v)) {
+                        h[b] += 1;
+                    }
+                }
+                h
+            })
+            .reduce(
+                || vec![0u64; BUCKETS],
+                |mut a, b| {
+                    a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
+                    a
+                },
+            )
+    };
+    // the bucket holding the k-th key, and how many keys lie in lower buckets
+    let find = |h: &[u64], k: u64| -> Option<(usize, u64)> {
+        let mut below = 0u64;
+        for (b, &n) in h.iter().enumerate() {
+            if below + n > k {
+                return Some((b, below));
+            }
+            below += n;
+        }
+        None
+    };
+    let (hi, below) = find(&count(&|key| Some((key >> 16) as usize)), k)?;
+    let low = count(&|key| ((key >> 16) as usize == hi).then_some((key & 0xffff) as usize));
+    let (lo, _) = find(&low, k - below)?;
+    let key = ((hi as u32) << 16) | lo as u32;
+    let bits = if key >> 31 == 1 { key & 0x7fff_ffff } else { !key };
+    Some(f32::from_bits(bits))
+}
+
 /// Lanes of the block loop: two AVX-512 registers, so that the min, max and
 /// NaN chains of one register do not wait on the previous iteration's.
 const LANES: usize = 32;
@@ -60,6 +112,28 @@ fn block_range(data: &[f32]) -> Option<(f32, f32)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn order_statistics_equal_those_of_a_sorted_copy() {
+        let mut state = 11u64;
+        let mut data: Vec<f32> = (0..300_001)
+            .map(|_| {
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                ((state >> 40) as f32 / (1u64 << 24) as f32 - 0.3) * 1e3
+            })
+            .collect();
+        data[5] = f32::NAN;
+        data[9] = f32::INFINITY;
+        data[17] = -0.0;
+        data[18] = 0.0;
+        let mut sorted: Vec<f32> = data.iter().copied().filter(|v| v.is_finite()).collect();
+        sorted.sort_by(f32::total_cmp);
+        for k in [0u64, 1, 1000, 150_000, 299_998] {
+            assert_eq!(order_statistic(&data, k), Some(sorted[k as usize]), "k = {k}");
+        }
+        assert_eq!(order_statistic(&data, sorted.len() as u64), None);
+        assert_eq!(order_statistic(&[], 0), None);
+    }
 
     #[test]
     fn agrees_with_a_plain_fold_and_catches_every_non_finite_position() {

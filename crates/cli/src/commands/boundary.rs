@@ -90,10 +90,13 @@ pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
     if let Some(r) = report_folder {
         r.publish(&inputs)?;
     }
+    for w in &out.warnings {
+        progress.note(&format!("warning: {w}"));
+    }
     let c = out.counts;
     progress.note(&format!(
         "traced {} voxels in {seconds:.2} s: {} boundaries kept, {} rejected (g at the hit < {:.3}), {} without a zero crossing within {:.3}; \
-         {} below g_min {:.3} not traced",
+         {} below g_min {:.3} not traced (noise floor {:.3})",
         c.traced(),
         c.hits,
         c.rejected,
@@ -101,7 +104,8 @@ pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
         c.no_crossing,
         out.resolved.d_max,
         c.not_traced,
-        out.resolved.g_min
+        out.resolved.g_min,
+        out.resolved.noise_floor
     ));
     Ok(())
 }

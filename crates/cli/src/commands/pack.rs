@@ -7,7 +7,7 @@ use anyhow::{Context, Result, bail};
 use mdtf_boundary::AlphaMap;
 use mdtf_pack::{Dtype, MANIFEST_SCHEMA, PackParams, Profile, Provenance, pack, parse_tf, sha256_file};
 use mdtf_pipeline::boundary_chain::BoundaryChainParams;
-use mdtf_pipeline::{channels, pack_inputs};
+use mdtf_pipeline::{channels, gaussians, pack_inputs};
 use mdtf_volume::{Inputs, OutputFolder, Volume};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -29,7 +29,11 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
             input.display()
         );
     }
-    let given: Vec<&Path> = [Some(input), args.tf.as_ref()].into_iter().flatten().map(PathBuf::as_path).collect();
+    let given: Vec<&Path> = [Some(input), args.tf.as_ref(), args.gtf_from_mask.as_ref()]
+        .into_iter()
+        .flatten()
+        .map(PathBuf::as_path)
+        .collect();
     let inputs = Inputs::of(&given);
     let folder = OutputFolder::begin(output, &inputs)?;
     let (chans, fields) = progress.step("reading channels", || -> Result<ChannelsAndFields> {
@@ -46,7 +50,10 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         let (a, b) = span.split_once(':').with_context(|| format!("--range: expected NAME=MIN:MAX, got '{r}'"))?;
         ranges.insert(name.to_string(), [a.trim().parse::<f64>()?, b.trim().parse::<f64>()?]);
     }
-    let ranges = pack_inputs::ranges(&chans, &ranges)?;
+    // a value volume is traced with the default d_max; stage outputs leave the measured one
+    let d_max =
+        (!input.is_dir()).then(|| chans.first().map(|(_, v)| mdtf_boundary::default_d_max(&v.geometry))).flatten();
+    let ranges = pack_inputs::ranges(&chans, &ranges, d_max)?;
     let provenance = Provenance {
         mdtf_version: env!("CARGO_PKG_VERSION").into(),
         input: Some(input.display().to_string()),
@@ -72,14 +79,28 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         Some("f32") => Some(Dtype::F32),
         Some(other) => bail!("--dtype: unknown type '{other}' (u8, u16, f16, f32)"),
     };
+    let gaussians = if profile == Profile::GaussianTf {
+        let mask = match &args.gtf_from_mask {
+            Some(m) => Some(
+                read_input(m, &args.read, &read_options(&args.read))?
+                    .0
+                    .into_scalar()
+                    .with_context(|| format!("--gtf-from-mask {} must hold one field", m.display()))?,
+            ),
+            None => None,
+        };
+        let (axes, gradient) = if fields.is_empty() { (vec!["v".to_string()], "g") } else { (fields.clone(), "gnorm") };
+        Some(gaussians::gaussians(tf.as_ref(), mask.as_ref(), &chans, &axes, gradient).map_err(anyhow::Error::msg)?)
+    } else {
+        if args.gtf_from_mask.is_some() {
+            bail!("--gtf-from-mask applies to --profile gaussian-tf");
+        }
+        None
+    };
     let params = PackParams { profile, ranges, fields, dtype, nifti: args.nifti };
     let m = progress.step("packing", || pack(&chans, &params, &luts, folder.path(), provenance, &BTreeMap::new()))?;
-    if let Some(tf) = &args.tf
-        && profile == Profile::GaussianTf
-    {
-        let text = std::fs::read_to_string(tf)?;
-        let gaussians = parse_tf(&text).map_err(anyhow::Error::msg)?.gaussians();
-        let json = serde_json::to_string_pretty(&gaussians)?;
+    if let Some(g) = &gaussians {
+        let json = serde_json::to_string_pretty(g)?;
         mdtf_volume::write_file_atomically(&folder.path().join("gaussians.json"), |w| w.write_all(json.as_bytes()))?;
     }
     folder.publish(&inputs)?;

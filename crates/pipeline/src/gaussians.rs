@@ -1,0 +1,113 @@
+//! The Gaussian primitives of a gaussian-tf pack (`gaussians.json`) and the
+//! lookup tables a GPU renderer of the Gaussian-TF paper reads.
+//!
+//! The primitives come from, in order: the TF file's `gaussian` widgets; a
+//! GTF fitted to the voxels of a mask (the paper's section 6: the mean and
+//! covariance of a probed region); the paper's default TF (section 3.2,
+//! Fig. 5): one triangular GTF centred at each field's median, of width one
+//! (K = 1 on scalar data, where v and g share value units, so it selects the
+//! voxels within about one world unit of the median's isosurface;
+//! K = diag(1 / range) on multi-field data, whose gradient measure is of the
+//! fields normalised to [0, 1]), extinction 1 per voxel, white.
+//!
+//! The medians are taken over the voxels whose gradient (g, or gnorm) is
+//! above twice its median, where there are at least 1 % of them. The
+//! paper's weather simulation has structure everywhere, so there this is
+//! nearly every voxel; in a scan or a phantom most voxels are homogeneous
+//! background, and the plain median is the background's value: its
+//! isosurface lies in the boundaries' far tails, where (v - c) / g stays
+//! near 1 and the TGTF fills the volume with fog.
+
+use mdtf_pack::{
+    ERF_DOMAIN, ERF_SIZE, GaussianPrimitive, IGAUSS_DOMAIN, IGAUSS_SIZE, Lut, LutAxis, TfFile, erf_difference_table,
+    igauss_table,
+};
+use mdtf_volume::Volume;
+
+/// The primitives of the pack: see the module docs. `fields` names the TF
+/// axes (the input's fields, or "v" for scalar data), each a channel in `chans`.
+/// `gradient` names the gradient channel (g or gnorm), used to pick the voxels the medians are over.
+pub fn gaussians(
+    tf: Option<&TfFile>,
+    mask: Option<&Volume>,
+    chans: &[(String, Volume)],
+    fields: &[String],
+    gradient: &str,
+) -> Result<Vec<GaussianPrimitive>, String> {
+    if let Some(tf) = tf {
+        return Ok(tf.gaussians());
+    }
+    let get = |n: &str| chans.iter().find(|(c, _)| c == n).map(|(_, v)| v).ok_or(format!("no channel '{n}'"));
+    let data: Vec<&Volume> = fields.iter().map(|f| get(f)).collect::<Result<_, _>>()?;
+    let samples: Vec<&[f32]> = data.iter().map(|v| v.samples()).collect();
+    if let Some(mask) = mask {
+        if !data.first().is_some_and(|v| v.geometry.same_grid(&mask.geometry)) {
+            return Err(format!(
+                "the mask ({}) is not on the input's grid ({})",
+                mask.geometry.dims_string(),
+                data.first().map_or_else(String::new, |v| v.geometry.dims_string())
+            ));
+        }
+        let m = mask.samples();
+        let p = GaussianPrimitive::fit(&samples, |i| m[i] > 0.0, 1.0, [1.0, 1.0, 1.0])
+            .map_err(|e| format!("fitting a Gaussian to the mask: {e}"))?;
+        return Ok(vec![p]);
+    }
+    let multi = fields.len() > 1;
+    let g = get(gradient)?.samples();
+    let median = |s: &[f32]| {
+        let finite = s.iter().filter(|x| x.is_finite()).count() as u64;
+        mdtf_volume::order_statistic(s, finite.saturating_sub(1) / 2)
+    };
+    let g_cut = 2.0 * median(g).unwrap_or(0.0);
+    let structured = g.iter().filter(|&&x| x > g_cut).count();
+    let use_all = structured * 100 < g.len();
+    let mut centre = Vec::new();
+    let mut k = vec![vec![0.0; fields.len()]; fields.len()];
+    for (a, s) in samples.iter().enumerate() {
+        let picked: Vec<f32>;
+        let over = if use_all {
+            *s
+        } else {
+            picked = s.iter().zip(g).filter(|(_, gv)| **gv > g_cut).map(|(v, _)| *v).collect();
+            &picked[..]
+        };
+        let m = median(over).ok_or(format!("channel '{}' has no finite sample", fields[a]))?;
+        centre.push(m as f64);
+        let range = mdtf_volume::finite_sample_range(s).map_or(1.0, |(lo, hi)| (hi - lo) as f64);
+        k[a][a] = if multi && range > 0.0 { 1.0 / range } else { 1.0 };
+    }
+    Ok(vec![GaussianPrimitive { centre, k, alpha_max: 1.0, colour: [1.0, 1.0, 1.0], triangular: true }])
+}
+
+/// The IGauss table (eq. 16, 128^2 over [-10, 10]^2) and the erf-difference
+/// table (section 5.2.2, 256^2 over [-3.6, 3.6]^2), each also as 16-bit codes.
+pub fn analytic_integration_tables() -> Vec<Lut> {
+    let axes = |size: usize, [min, max]: [f64; 2], a: &str, b: &str| {
+        vec![LutAxis { channel: a.into(), size, min, max }, LutAxis { channel: b.into(), size, min, max }]
+    };
+    vec![
+        Lut {
+            name: "igauss".into(),
+            meaning: "IGauss(x1, x2) = sqrt(pi)/2 (erf(x1) - erf(x2)) / (x1 - x2), exp(-x1^2) where x1 = x2: the mean \
+                      of exp(-x^2) over [x2, x1] (Gaussian-TF paper eq. 16), at the cell centres"
+                .into(),
+            axes: axes(IGAUSS_SIZE, IGAUSS_DOMAIN, "x1", "x2"),
+            components: 1,
+            values: igauss_table(),
+            unit_range: true,
+            u16_range: Some([0.0, 1.0]),
+        },
+        Lut {
+            name: "erf_difference".into(),
+            meaning: "erf(x) - erf(y) at the cell centres (Gaussian-TF paper section 5.2.2); clamp x and y to the \
+                      domain, erf is +-1 beyond it to 2e-7"
+                .into(),
+            axes: axes(ERF_SIZE, ERF_DOMAIN, "x", "y"),
+            components: 1,
+            values: erf_difference_table(),
+            unit_range: false,
+            u16_range: Some([-2.0, 2.0]),
+        },
+    ]
+}
