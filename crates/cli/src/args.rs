@@ -685,8 +685,9 @@ g = |grad s| (least-squares fit over the edge neighbours by default), per-cell (
 conservative culling, longest edges and smallest vertex value differences, and the pre-integration\n\
 tables of Song et al.: front-back (F, B of the approximated mode, eq. 3), gaussian (T(P, t), section\n\
 4.2), triangle (rising/falling flank integrals, 4.3), sinusoid (4.4) and preintegration-1d (the\n\
-classic (s_f, s_b, D) table). The pack folder gets mesh.vtu (with g and gradient added), the arrays as\n\
-NRRD, the tables as NRRD and manifest.json; it is written to a temporary folder and renamed at the end.\n\n\
+classic (s_f, s_b, D) table of --tf's tf1d; left out, with a note, without one). The pack folder\n\
+gets mesh.vtu (with g and gradient added), the arrays as NRRD, the tables as NRRD and manifest.json;\n\
+it is written to a temporary folder and renamed at the end.\n\n\
 Examples:\n  mdtf tetra blunt_fin.vtu -o blunt-pack --scalar density\n  \
     mdtf tetra --from-volume ct.nii.gz --tets 6 -o ct-mesh-pack\n  \
     mdtf tetra mesh.vtk -o pack --tables front-back,gaussian --fb-size 64,64,128"
@@ -726,7 +727,7 @@ pub struct TetraArgs {
     #[arg(long, value_name = "D")]
     pub d_max: Option<f64>,
     /// Transfer-function file; its tf1d (over v_range) feeds the classic 1D table
-    /// (without one: an example two-peak TF over the scalar's range).
+    /// (without one that table is left out, with a note).
     #[arg(long, value_name = "TF.json")]
     pub tf: Option<PathBuf>,
     #[command(flatten)]

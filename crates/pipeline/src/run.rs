@@ -393,6 +393,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         let value = get("v").ok_or_else(|| err("no value volume".into()))?;
         let mesh = mdtf_tetra::tetrahedralise(value, p.tetra.tets, "v").map_err(|e| err(e.to_string()))?;
         let out = mdtf_tetra::run(&mesh, &p.tetra, tf.as_ref()).map_err(|e| err(e.to_string()))?;
+        warnings.extend(out.notes.iter().map(|n| format!("tetra: {n}")));
         let report = mdtf_tetra::MeshReport::default();
         mdtf_tetra::write_pack(&pdir, &mesh, &report, &out, Some(&geo), provenance).map_err(|e| err(e.to_string()))?;
     } else {

@@ -84,7 +84,11 @@ pub enum Classifier {
     /// Multidimensional peak finding by chordal ray marching (peak-finding paper
     /// section 4.3): between consecutive samples f0, f1 the chord from f0 to f1 in
     /// the TF's domain is sampled every `cells_per_sample` TF cells (Delta s) and
-    /// the sample is classified at the chord point of highest opacity; with
+    /// the sample is classified at the chord point of highest opacity. A peak
+    /// strictly between the samples is an isosurface crossing: it keeps the
+    /// TF's opacity whatever the step (the paper's constant-opacity rule) and
+    /// is shaded at R(t_peak), the ray point at the peak's chord parameter
+    /// (section 4.6); elsewhere the opacity is corrected for the step. With
     /// `find_peaks` off, plain post-classification at the samples.
     Chord {
         /// RGBA LUT over any channels of the pack (e.g. v and inv_g).
@@ -97,8 +101,9 @@ pub enum Classifier {
 }
 
 /// The highest-opacity RGBA on the chord from `f0` to `f1` in `t`'s domain,
-/// sampled every `cells_per_sample` cells (both ends included).
-fn chord_peak(t: &Table, f0: &[f32], f1: &[f32], cells_per_sample: f64) -> [f32; 4] {
+/// sampled every `cells_per_sample` cells (both ends included), and the chord
+/// parameter s in [0, 1) of that peak when it is not at `f1` (the sample itself).
+fn chord_peak(t: &Table, f0: &[f32], f1: &[f32], cells_per_sample: f64) -> ([f32; 4], Option<f32>) {
     let cells: f64 = t
         .axes
         .iter()
@@ -108,6 +113,7 @@ fn chord_peak(t: &Table, f0: &[f32], f1: &[f32], cells_per_sample: f64) -> [f32;
         .sqrt();
     let samples = ((cells / cells_per_sample).ceil() as usize).clamp(1, 4096);
     let mut best = lookup(t, f1);
+    let mut at = None;
     let mut point = vec![0f32; f0.len()];
     for k in 0..samples {
         let s = k as f32 / samples as f32;
@@ -117,9 +123,10 @@ fn chord_peak(t: &Table, f0: &[f32], f1: &[f32], cells_per_sample: f64) -> [f32;
         let rgba = lookup(t, &point);
         if rgba[3] > best[3] {
             best = rgba;
+            at = Some(s);
         }
     }
-    best
+    (best, at)
 }
 
 fn lookup(t: &Table, coords: &[f32]) -> [f32; 4] {
@@ -466,7 +473,7 @@ fn render_impl(
             let mut previous: Option<Vec<f64>> = None;
             // the previous sample's cell and block (chord and peak classifiers),
             // and its TF coordinates once the chord classifier computed them
-            let mut prev: Option<(Cell, usize)> = None;
+            let mut prev: Option<(Cell, usize, [f64; 3])> = None;
             let mut prev_coords: Option<[f32; 4]> = None;
             let mut entered = false;
             for s in first_step(origin, dir, &ext, step_world)..steps {
@@ -494,15 +501,17 @@ fn render_impl(
                     continue;
                 }
                 let cell = Cell::at(dims, p);
-                let prev_here = prev.replace((cell, block));
+                let prev_here = prev.replace((cell, block, p));
                 let prev_coords_here = prev_coords.take();
                 if let Some((visible, _)) = &skip
                     && !visible[block]
-                    && prev_here.is_none_or(|(_, pb)| pb == block)
+                    && prev_here.is_none_or(|(_, pb, _)| pb == block)
                 {
                     continue;
                 }
                 let sample = |d: Option<&[f32]>| d.map_or(0.0, |d| cell.sample(d));
+                // where the sample is shaded: at the sample, or at a peak found between samples
+                let mut shade = cell;
                 let ([r, gr, b], a) = match classifier {
                     Classifier::Lut(t) => {
                         let [r, gr, b, a] = lookup(t, &coords(&cell, &table_chans));
@@ -520,7 +529,7 @@ fn render_impl(
                     Classifier::Peak { peak_table, preintegration, find_peaks } => {
                         let v1 = sample(v_data);
                         let v0 = if *find_peaks {
-                            prev_here.map(|(c, _)| v_data.map_or(0.0, |d| c.sample(d)))
+                            prev_here.map(|(c, _, _)| v_data.map_or(0.0, |d| c.sample(d)))
                         } else {
                             None
                         };
@@ -539,15 +548,28 @@ fn render_impl(
                         prev_coords = Some(f1_all);
                         let f1 = &f1_all[..tf.axes.len()];
                         let f0 = if *find_peaks {
-                            prev_here.map(|(c, _)| prev_coords_here.unwrap_or_else(|| coords(&c, &table_chans)))
+                            prev_here
+                                .map(|(c, _, p0)| (prev_coords_here.unwrap_or_else(|| coords(&c, &table_chans)), p0))
                         } else {
                             None
                         };
-                        let [r, gr, b, a] = match f0 {
-                            Some(f0) => chord_peak(tf, &f0[..tf.axes.len()], f1, *cells_per_sample),
-                            None => lookup(tf, f1),
+                        let ([r, gr, b, a], peak) = match f0 {
+                            Some((f0, p0)) => {
+                                let (rgba, s) = chord_peak(tf, &f0[..tf.axes.len()], f1, *cells_per_sample);
+                                (rgba, s.map(|s| (s as f64, p0)))
+                            }
+                            None => (lookup(tf, f1), None),
                         };
-                        ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(step_vox))
+                        match peak {
+                            // a peak between the samples: an isosurface at R(t_peak), shaded
+                            // there, with the TF's opacity whatever the step (the paper's
+                            // section 3: constant opacity at peaks)
+                            Some((s, p0)) => {
+                                shade = Cell::at(dims, [0, 1, 2].map(|k| p0[k] + s * (p[k] - p0[k])));
+                                ([r, gr, b], (a as f64).min(0.999))
+                            }
+                            None => ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(step_vox)),
+                        }
                     }
                     Classifier::Gaussian { primitives, channels: _, analytic, sqrt_last } => {
                         let mut v: Vec<f64> = table_chans.iter().map(|&c| sample(c) as f64).collect();
@@ -576,14 +598,14 @@ fn render_impl(
                 }
                 let mut colour = [r as f64, gr as f64, b as f64];
                 if let (Some(nxv), Some(nyv), Some(nzv)) = (nx, ny, nz) {
-                    let n = [cell.sample(nxv) as f64, cell.sample(nyv) as f64, cell.sample(nzv) as f64];
+                    let n = [shade.sample(nxv) as f64, shade.sample(nyv) as f64, shade.sample(nzv) as f64];
                     let nl = (n.iter().map(|x| x * x).sum::<f64>()).sqrt();
                     if nl > 1e-6 {
                         let n = n.map(|x| x / nl);
                         let diffuse = (n[0] * light[0] + n[1] * light[1] + n[2] * light[2]).abs();
                         let spec = (n[0] * half[0] + n[1] * half[1] + n[2] * half[2]).abs().powi(32);
                         let w = gch.map_or(1.0, |gv| {
-                            let t = 1.0 - (cell.sample(gv) as f64 / g_max).clamp(0.0, 1.0);
+                            let t = 1.0 - (shade.sample(gv) as f64 / g_max).clamp(0.0, 1.0);
                             1.0 - t * t
                         });
                         let shaded = colour.map(|c| c * (0.25 + 0.75 * diffuse) + 0.3 * spec);

@@ -141,11 +141,14 @@ pub struct TetraOutput {
     pub tau_max: f64,
     /// The gradient method used.
     pub gradient: GradientMethod,
+    /// What was asked for and left out, one sentence each (for stderr and run reports).
+    pub notes: Vec<String>,
 }
 
 /// Runs the stage on a mesh: gradients, g, cells and tables. The classic 1D
-/// table uses `tf`'s `tf1d` over its `v_range`, or without one the example
-/// two-peak TF of [`Tf1d::two_peaks`] over the mesh's scalar range.
+/// table needs `tf`'s `tf1d` (over its `v_range`); without one it is left
+/// out, with a note: a 1D TF the user did not give would be a picture of
+/// nothing in the data.
 pub fn run(mesh: &TetMesh, params: &TetraParams, tf: Option<&TfFile>) -> Result<TetraOutput, TetraError> {
     run_with_progress(mesh, params, tf, &|_| {})
 }
@@ -192,6 +195,7 @@ pub fn run_with_progress(
         }
     }
     let mut luts = Vec::new();
+    let mut notes = Vec::new();
     for table in &t.tables {
         on_step(&format!(
             "{} table",
@@ -202,18 +206,17 @@ pub fn run_with_progress(
             TetTable::Gaussian => luts.push(mdtf_pack::gaussian_table(t.gaussian_size, t.p_max, t.t_max)),
             TetTable::Triangle => luts.extend(mdtf_pack::triangle_tables(t.triangle_size, t.kappa_max)),
             TetTable::Sinusoid => luts.push(mdtf_pack::sinusoid_table(t.sinusoid_size, t.lambda_max)),
-            TetTable::Preintegration1d => {
-                let (tf1d, range) = match tf.and_then(|f| f.tf1d.clone().map(|s| (s, f.v_range))) {
-                    Some((samples, range)) => (Tf1d { samples }, range),
-                    None => {
-                        let lo = mesh.scalar.iter().copied().fold(f32::INFINITY, f32::min) as f64;
-                        let hi = mesh.scalar.iter().copied().fold(f32::NEG_INFINITY, f32::max) as f64;
-                        (Tf1d::two_peaks(256), [lo, if hi > lo { hi } else { lo + 1.0 }])
-                    }
-                };
-                luts.push(mdtf_pack::preintegration_1d_table(&tf1d, range, t.preint_size, d_max));
-            }
+            TetTable::Preintegration1d => match tf.and_then(|f| f.tf1d.clone().map(|s| (s, f.v_range))) {
+                Some((samples, range)) => {
+                    luts.push(mdtf_pack::preintegration_1d_table(&Tf1d { samples }, range, t.preint_size, d_max));
+                }
+                None => notes.push(
+                    "the classic 1D pre-integration table (preintegration-1d) is left out: it needs a TF file \
+                     with tf1d (--tf, or [pack] tf)"
+                        .into(),
+                ),
+            },
         }
     }
-    Ok(TetraOutput { gradients, g, cells, max_edge_length, luts, d_max, tau_max, gradient: params.gradient })
+    Ok(TetraOutput { gradients, g, cells, max_edge_length, luts, d_max, tau_max, gradient: params.gradient, notes })
 }

@@ -300,3 +300,26 @@ fn mesh_summary_counts_cells_by_type_and_ranges_arrays() {
     assert_eq!(m.arrays, vec![("density".to_string(), 1, -5.0, 4.0)]);
     assert_eq!(m.bounds, ([0.0, 0.0, 0.0], [2.0, 2.0, 3.0]));
 }
+
+#[test]
+fn the_classic_1d_table_comes_from_the_users_tf_or_is_left_out_with_a_note() {
+    let phantom = erf_sphere(Geometry::new([12, 12, 12], [1.0; 3]), 4.0, 1.5, 0.0, 100.0, None);
+    let mesh = tetrahedralise(&phantom.volume(), TetScheme::Six, "v").unwrap();
+    let mut params = mdtf_tetra::TetraParams::default();
+    params.tables.tables = vec![mdtf_pack::TetTable::Preintegration1d];
+    params.tables.preint_size = [8, 8, 4];
+    let without = mdtf_tetra::run(&mesh, &params, None).unwrap();
+    assert!(
+        without.luts.is_empty(),
+        "no TF given, no table: {:?}",
+        without.luts.iter().map(|l| &l.name).collect::<Vec<_>>()
+    );
+    assert!(without.notes[0].contains("needs a TF file with tf1d"), "{:?}", without.notes);
+    let tf = mdtf_pack::parse_tf(r#"{"v_range": [0, 100], "g_range": [0, 1], "tf1d": [[1, 1, 1, 0], [1, 0, 0, 2]]}"#)
+        .unwrap();
+    let with = mdtf_tetra::run(&mesh, &params, Some(&tf)).unwrap();
+    assert_eq!(with.luts.len(), 1);
+    assert_eq!(with.luts[0].name, "pt_preintegration_1d");
+    assert_eq!((with.luts[0].axes[0].min, with.luts[0].axes[0].max), (0.0, 100.0), "over the TF's v_range");
+    assert!(with.notes.is_empty());
+}

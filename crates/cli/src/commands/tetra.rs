@@ -71,6 +71,9 @@ pub fn run(args: &TetraArgs, progress: &Progress) -> Result<()> {
     };
     progress.step("writing the pack", || write_pack(folder.path(), &mesh, &report, &out, grid.as_ref(), provenance))?;
     folder.publish(&inputs)?;
+    for n in &out.notes {
+        progress.note(&format!("note: {n}"));
+    }
     let g_max = out.g.iter().copied().fold(0.0f32, f32::max);
     progress.note(&format!(
         "{} points, {} tetrahedra (longest edge {:.4}), g up to {g_max:.4}; tables: {}; pack in {}",
