@@ -39,7 +39,7 @@ fn trace_sphere(bencher: divan::Bencher, n: usize) {
 /// The workload of the prototype in ../shared/research/ANCHORS.md (5.3: 32 M
 /// traced voxels/s): step 0.5 voxel, at most 16 steps, a noisy sphere on
 /// which nearly every voxel is traced, so the per-volume cost is spread
-/// over 16 M traces instead of 0.87 M. Compares the tracer, not the issue's
+/// over 16 M traces instead of the 1.4 M of the default run. Compares the tracer, not the issue's
 /// defaults.
 #[divan::bench(sample_count = 5, sample_size = 1)]
 fn trace_like_the_anchor_prototype_256(bencher: divan::Bencher) {

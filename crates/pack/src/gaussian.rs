@@ -251,13 +251,18 @@ mod tests {
         s * h / 3.0
     }
 
-    #[test]
-    fn analytic_segment_integral_matches_quadrature_for_random_primitives() {
-        let mut state = 7u64;
-        let mut rnd = || {
+    /// Uniform numbers in [0, 1) from a fixed LCG seeded with `seed`.
+    fn uniform(seed: u64) -> impl FnMut() -> f64 {
+        let mut state = seed;
+        move || {
             state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        }
+    }
+
+    #[test]
+    fn analytic_segment_integral_matches_quadrature_for_random_primitives() {
+        let mut rnd = uniform(7);
         let mut worst = 0.0f64;
         for case in 0..500 {
             let m = 1 + case % 3;
@@ -293,11 +298,7 @@ mod tests {
     /// exp(-||K (v(t) - c)||^2 / g-hat^2), written out here.
     #[test]
     fn triangular_segment_integral_matches_quadrature_with_the_mean_gradient() {
-        let mut state = 3u64;
-        let mut rnd = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = uniform(3);
         let mut worst = 0.0f64;
         for case in 0..500 {
             let m = 1 + case % 3;
