@@ -224,8 +224,7 @@ impl BoundaryOutput {
 /// The noise floor of a g volume: max(2 x median g, 1e-3 x value range /
 /// L_min), value units per world unit. With no finite g, the second term.
 pub fn noise_floor(g: &[f32], value_range: f64, l_min: f64) -> f64 {
-    let finite = g.iter().filter(|v| v.is_finite()).count() as u64;
-    let median = if finite > 0 { mdtf_volume::order_statistic(g, (finite - 1) / 2).unwrap_or(0.0) as f64 } else { 0.0 };
+    let median = mdtf_volume::median(g).unwrap_or(0.0) as f64;
     (NOISE_FLOOR_MEDIANS * median).max(NOISE_FLOOR_RANGE_FRACTION * value_range / l_min.max(f64::MIN_POSITIVE))
 }
 

@@ -28,10 +28,7 @@ impl Axis {
     /// so this range shows every boundary with g_p >= g_b out to 2 sigma.
     /// None when no voxel has a gradient.
     pub fn inverse_gradient(g: &[f32], bins: usize) -> Option<Axis> {
-        let median = |s: &[f32]| {
-            let finite = s.iter().filter(|x| x.is_finite()).count() as u64;
-            mdtf_volume::order_statistic(s, finite.checked_sub(1)? / 2)
-        };
+        let median = mdtf_volume::median;
         let cut = 2.0 * median(g)?;
         let boundary: Vec<f32> = g.iter().copied().filter(|&x| x > cut && x.is_finite()).collect();
         let g_b = median(&boundary)? as f64;

@@ -55,10 +55,7 @@ pub fn gaussians(
     }
     let multi = fields.len() > 1;
     let g = get(gradient)?.samples();
-    let median = |s: &[f32]| {
-        let finite = s.iter().filter(|x| x.is_finite()).count() as u64;
-        mdtf_volume::order_statistic(s, finite.saturating_sub(1) / 2)
-    };
+    let median = mdtf_volume::median;
     let g_cut = 2.0 * median(g).unwrap_or(0.0);
     let structured = g.iter().filter(|&&x| x > g_cut).count();
     let use_all = structured * 100 < g.len();

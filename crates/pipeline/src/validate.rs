@@ -210,22 +210,8 @@ pub fn validate(n: usize, dir: &Path, params: &ValidateParams) -> Result<Vec<Che
     for (v1, v2) in
         [([0.1, 0.2], [0.9, 0.8]), ([0.4, 0.6], [0.4, 0.6]), ([0.0, 1.0], [1.0, 0.0]), ([0.35, 0.5], [0.45, 0.7])]
     {
-        let steps = 4000;
-        let simpson: f64 = (0..=steps)
-            .map(|k| {
-                let t = k as f64 / steps as f64;
-                let w = if k == 0 || k == steps {
-                    1.0
-                } else if k % 2 == 1 {
-                    4.0
-                } else {
-                    2.0
-                };
-                w * gp.density(&[v1[0] + t * (v2[0] - v1[0]), v1[1] + t * (v2[1] - v1[1])])
-            })
-            .sum::<f64>()
-            / (3.0 * steps as f64);
-        worst_g = worst_g.max((gp.segment_integral(&v1, &v2) - simpson).abs());
+        let quad = simpson(|t| gp.density(&[v1[0] + t * (v2[0] - v1[0]), v1[1] + t * (v2[1] - v1[1])]), 4000);
+        worst_g = worst_g.max((gp.segment_integral(&v1, &v2) - quad).abs());
     }
     out.push(check("pack: Gaussian segment integral vs quadrature", worst_g, 1e-5, true));
     out.push(check("pack: triangular GTF segment integral vs quadr.", tgtf_integral_error(), 1e-5, true));

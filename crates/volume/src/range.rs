@@ -80,6 +80,13 @@ pub fn order_statistic(data: &[f32], k: u64) -> Option<f32> {
     Some(f32::from_bits(bits))
 }
 
+/// The median of the finite samples of `data` (the lower one of an even
+/// count: the ((n - 1) / 2)-th smallest), or None without finite samples.
+pub fn median(data: &[f32]) -> Option<f32> {
+    let finite = data.iter().filter(|v| v.is_finite()).count() as u64;
+    order_statistic(data, finite.checked_sub(1)? / 2)
+}
+
 /// Lanes of the block loop: two AVX-512 registers, so that the min, max and
 /// NaN chains of one register do not wait on the previous iteration's.
 const LANES: usize = 32;
