@@ -361,7 +361,9 @@ pub fn layout(input: &Path, files: &[ImageHeader], resample: bool) -> Result<Lay
             slices.push(SliceRef { file, frame, position, along: dot(position, normal), rescale: p.rescale });
         }
     }
-    slices.sort_by(|a, b| a.along.total_cmp(&b.along));
+    // ties broken by path so which file of a copied pair is kept does not depend
+    // on the order the directory listing returned them in
+    slices.sort_by(|a, b| a.along.total_cmp(&b.along).then_with(|| files[a.file].path.cmp(&files[b.file].path)));
     // the same image twice (a copied file) is read once; two images at one place are refused
     let mut kept: Vec<SliceRef> = Vec::with_capacity(slices.len());
     for s in slices {
@@ -371,7 +373,7 @@ pub fn layout(input: &Path, files: &[ImageHeader], resample: bool) -> Result<Lay
             let (a, b) = (&files[prev.file], &files[s.file]);
             if a.instance_uid == b.instance_uid && !a.instance_uid.is_empty() && a.frames.len() == 1 {
                 warnings.push(format!(
-                    "{} is a copy of {} (same SOPInstanceUID); read once",
+                    "{} holds the same image as {} (same SOPInstanceUID); read once",
                     b.path.display(),
                     a.path.display()
                 ));
