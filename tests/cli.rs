@@ -3,6 +3,7 @@
 use mdtf_e2e::{mdtf, mdtf_err, mdtf_ok, shipped_pipeline};
 use mdtf_volume::{ReadOptions, read, read_scalar};
 use std::f64::consts::{PI, SQRT_2};
+use std::path::Path;
 
 #[test]
 fn synth_truth_files_match_the_closed_forms_of_design_md() {
@@ -936,4 +937,117 @@ fn preview_refuses_bad_views_steps_and_sizes_before_reading_the_pack() {
         assert!(e.contains(want), "{extra:?}: {e}");
     }
     assert!(!png.exists());
+}
+
+#[test]
+fn tetra_marks_the_cells_a_tf_can_show_as_a_brute_force_box_test_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let vol = dir.path().join("s.nii.gz");
+    let (size, radius, sigma) = ("20", "6", "1.5");
+    mdtf_ok(&[
+        "synth",
+        "erf-sphere",
+        "-o",
+        vol.to_str().unwrap(),
+        "--size",
+        size,
+        "--radius",
+        radius,
+        "--sigma",
+        sigma,
+        "-q",
+    ]);
+    let bare = dir.path().join("bare");
+    let args = |out: &Path| {
+        [
+            "tetra",
+            "--from-volume",
+            vol.to_str().unwrap(),
+            "--tets",
+            "5",
+            "-o",
+            out.to_str().unwrap(),
+            "--tables",
+            "gaussian",
+            "-q",
+        ]
+        .map(String::from)
+        .to_vec()
+    };
+    let run = |a: Vec<String>| mdtf_ok(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    run(args(&bare));
+    // without a TF there is nothing to cull against, so no mask
+    assert!(!bare.join("cell_visible.nrrd").exists());
+    let s_g = mdtf_e2e::nrrd_f32(&bare.join("s_g.nrrd"));
+    let tets = mdtf_e2e::nrrd_u32(&bare.join("tets.nrrd"));
+    let (mut s_lo, mut s_hi, mut g_hi) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
+    for sg in s_g.chunks_exact(2) {
+        s_lo = s_lo.min(sg[0] as f64);
+        s_hi = s_hi.max(sg[0] as f64);
+        g_hi = g_hi.max(sg[1] as f64);
+    }
+    let span = s_hi - s_lo;
+    // a 2D Gaussian, a rectangle and a triangular GTF (width sigma' g), placed on the data's ranges
+    let (gc, gs) = ([s_lo + 0.5 * span, 0.6 * g_hi], [0.04 * span, 0.08 * g_hi]);
+    let (rc, rh) = ([s_lo + 0.1 * span, 0.05 * g_hi], [0.03 * span, 0.04 * g_hi]);
+    let (tc, t_sigma) = (s_lo + 0.85 * span, 0.2);
+    let k = |s: f64| 1.0 / (SQRT_2 * s);
+    let tf = serde_json::json!({
+        "v_range": [s_lo, s_hi], "g_range": [0.0, g_hi],
+        "widgets": [
+            {"type": "gaussian", "centre": gc, "k": [[k(gs[0]), 0.0], [0.0, k(gs[1])]], "alpha_max": 0.8, "colour": [1, 0, 0]},
+            {"type": "rectangle", "centre": rc, "half_size": rh, "falloff": "constant", "alpha": 0.5, "colour": [0, 1, 0]},
+            {"type": "gaussian", "centre": [tc], "k": [[k(t_sigma)]], "triangular": true, "alpha_max": 0.5, "colour": [0, 0, 1]},
+            {"type": "rectangle", "centre": [s_lo, 0.0], "half_size": [span, g_hi], "falloff": "constant", "alpha": 0.0, "colour": [0, 0, 0]}
+        ]
+    });
+    let tf_path = dir.path().join("tf.json");
+    std::fs::write(&tf_path, tf.to_string()).unwrap();
+    let pack = dir.path().join("pack");
+    let mut a = args(&pack);
+    a.extend(["--tf".into(), tf_path.to_str().unwrap().into()]);
+    run(a);
+    let mask = mdtf_e2e::nrrd_payload(&pack.join("cell_visible.nrrd"));
+    assert_eq!(mask.len(), tets.len() / 4);
+    let m: serde_json::Value = serde_json::from_slice(&std::fs::read(pack.join("manifest.json")).unwrap()).unwrap();
+    let entry = m["mesh"]["arrays"].as_array().unwrap().iter().find(|e| e["name"] == "cell_visible").unwrap();
+    assert_eq!((entry["dtype"].as_str(), entry["association"].as_str()), (Some("u8"), Some("cell")));
+
+    let meets = |a: [f64; 2], b: [f64; 2]| a[0] <= b[1] && a[1] >= b[0];
+    let density = |s: f64, g: f64| {
+        let gauss = (-((s - gc[0]) / gs[0]).powi(2) / 2.0 - ((g - gc[1]) / gs[1]).powi(2) / 2.0).exp();
+        let rect = ((s - rc[0]).abs() <= rh[0] && (g - rc[1]).abs() <= rh[1]) as u8 as f64;
+        let tri = if g > 0.0 { (-((s - tc) / (t_sigma * g)).powi(2) / 2.0).exp() } else { 0.0 };
+        gauss.max(rect).max(tri)
+    };
+    let (mut shown, mut checked) = (0, 0);
+    for (cell, t) in tets.chunks_exact(4).enumerate() {
+        let v: Vec<[f64; 2]> =
+            t.iter().map(|&i| [s_g[2 * i as usize] as f64, s_g[2 * i as usize + 1] as f64]).collect();
+        let lo_hi = |c: usize| {
+            [
+                v.iter().map(|p| p[c]).fold(f64::INFINITY, f64::min),
+                v.iter().map(|p| p[c]).fold(f64::NEG_INFINITY, f64::max),
+            ]
+        };
+        let (bs, bg) = (lo_hi(0), lo_hi(1));
+        let gap = (bs[0] - tc).max(tc - bs[1]).max(0.0);
+        let expected = (meets(bs, [gc[0] - 3.0 * gs[0], gc[0] + 3.0 * gs[0]])
+            && meets(bg, [gc[1] - 3.0 * gs[1], gc[1] + 3.0 * gs[1]]))
+            || (meets(bs, [rc[0] - rh[0], rc[0] + rh[0]]) && meets(bg, [rc[1] - rh[1], rc[1] + rh[1]]))
+            || (bg[1] > 0.0 && gap <= 3.0 * t_sigma * bg[1]);
+        assert_eq!(mask[cell] == 1, expected, "cell {cell}: s {bs:?}, g {bg:?}");
+        shown += usize::from(expected);
+        if !expected {
+            // no point of a skipped cell (s and g are linear inside it) shows more than exp(-4.5) of a widget
+            for w in [[1.0, 0.0, 0.0, 0.0], [0.25; 4], [0.5, 0.5, 0.0, 0.0], [0.0, 0.2, 0.3, 0.5], [0.1, 0.1, 0.1, 0.7]]
+            {
+                let at = |c: usize| (0..4).map(|j| w[j] * v[j][c]).sum::<f64>();
+                assert!(density(at(0), at(1)) < (-4.5f64).exp(), "cell {cell} skipped but visible at {w:?}");
+                checked += 1;
+            }
+        }
+    }
+    // the widgets pick some cells and leave others
+    assert!(shown > 0 && checked > 0, "{shown} shown, {checked} samples of skipped cells");
 }

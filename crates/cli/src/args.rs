@@ -685,7 +685,9 @@ g = |grad s| (least-squares fit over the edge neighbours by default), per-cell (
 conservative culling, longest edges and smallest vertex value differences, and the pre-integration\n\
 tables of Song et al.: front-back (F, B of the approximated mode, eq. 3), gaussian (T(P, t), section\n\
 4.2), triangle (rising/falling flank integrals, 4.3), sinusoid (4.4) and preintegration-1d (the\n\
-classic (s_f, s_b, D) table of --tf's tf1d; left out, with a note, without one). The pack folder\n\
+classic (s_f, s_b, D) table of --tf's tf1d; left out, with a note, without one). Given --tf with\n\
+widgets, cell_visible.nrrd marks (1 per cell, uint8) the cells whose (s, g) box meets a widget\n\
+(Gaussians reach +-3 sigma), so a renderer may skip the rest (section 3.1). The pack folder\n\
 gets mesh.vtu (with g and gradient added), the arrays as NRRD, the tables as NRRD and manifest.json;\n\
 it is written to a temporary folder and renamed at the end.\n\n\
 Examples:\n  mdtf tetra blunt_fin.vtu -o blunt-pack --scalar density\n  \
@@ -727,7 +729,8 @@ pub struct TetraArgs {
     #[arg(long, value_name = "D")]
     pub d_max: Option<f64>,
     /// Transfer-function file; its tf1d (over v_range) feeds the classic 1D table
-    /// (without one that table is left out, with a note).
+    /// (without one that table is left out, with a note), and its widgets (over (s, g))
+    /// the visible-cell mask cell_visible.nrrd.
     #[arg(long, value_name = "TF.json")]
     pub tf: Option<PathBuf>,
     #[command(flatten)]

@@ -16,6 +16,7 @@ mod quantise;
 mod tables;
 mod tet_tables;
 mod tf;
+mod widget_support;
 mod writer;
 
 pub use gaussian::{
@@ -37,6 +38,7 @@ pub use tet_tables::{
     triangle_flank_integral, triangle_tables,
 };
 pub use tf::{Falloff, TfFile, Widget, parse_tf, to_rgba8};
+pub use widget_support::GAUSSIAN_SUPPORT_SIGMAS;
 pub use writer::{PackWriter, texture_layouts};
 
 use mdtf_volume::{Geometry, Volume, VolumeError};

@@ -142,7 +142,7 @@ pub struct MeshArrayEntry {
     pub association: String,
     /// Components per point or cell.
     pub components: usize,
-    /// "f32" or "u32", little-endian.
+    /// "f32", "u32" or "u8", little-endian.
     pub dtype: String,
     /// The NRRD file, relative to the manifest.
     pub file: String,
@@ -233,7 +233,7 @@ pub const MANIFEST_SCHEMA: &str = r##"{
           "required": ["name", "meaning", "units", "association", "components", "dtype", "file"],
           "properties": {"name": {"type": "string"}, "meaning": {"type": "string"}, "units": {"type": "string"},
             "association": {"enum": ["point", "cell"]}, "components": {"type": "integer", "minimum": 1},
-            "dtype": {"enum": ["f32", "u32"]}, "file": {"type": "string"}}}}
+            "dtype": {"enum": ["f32", "u32", "u8"]}, "file": {"type": "string"}}}}
       }
     },
     "provenance": {"type": "object", "required": ["mdtf_version", "stages"],

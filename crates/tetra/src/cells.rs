@@ -3,6 +3,7 @@
 //! value difference between vertices (the banded-TF frequency bound).
 
 use crate::mesh::{TetMesh, max_edge};
+use mdtf_pack::TfFile;
 use rayon::prelude::*;
 
 /// What the renderer needs to know about one tetrahedron.
@@ -59,5 +60,19 @@ pub fn cull(cells: &[CellInfo], s_range: [f32; 2], g_range: [f32; 2]) -> Vec<u32
                 && c.g_range[1] >= g_range[0]
         })
         .map(|(i, _)| i as u32)
+        .collect()
+}
+
+/// The visible-cell mask of section 3.1 for a transfer function: 1 for a
+/// cell whose (s, g) box may meet one of `tf`'s widgets
+/// ([`TfFile::may_meet`]; Gaussian widgets reach +-3 sigma), 0 for a cell
+/// the renderer can skip.
+pub fn visible_cells(cells: &[CellInfo], tf: &TfFile) -> Vec<u8> {
+    cells
+        .par_iter()
+        .map(|c| {
+            let range = |r: [f32; 2]| [f64::from(r[0]), f64::from(r[1])];
+            u8::from(tf.may_meet(range(c.s_range), range(c.g_range)))
+        })
         .collect()
 }

@@ -21,7 +21,7 @@ mod pack_mesh;
 mod vtk_io;
 pub mod vtu_writer;
 
-pub use cells::{CellInfo, cell_infos, cull};
+pub use cells::{CellInfo, cell_infos, cull, visible_cells};
 pub use from_volume::{TetScheme, tetrahedralise};
 pub use gradient::{GradientMethod, VertexStars, magnitudes, tet_gradient, vertex_gradients};
 pub use mesh::{DEGENERATE_RATIO, MeshReport, PointArray, TetMesh, max_edge, six_volume};
@@ -139,13 +139,17 @@ pub struct TetraOutput {
     pub d_max: f64,
     /// Largest extinction on the F/B tables (per world unit).
     pub tau_max: f64,
+    /// Per cell, 1 when it may be visible under the TF's widgets and 0 when
+    /// the renderer can skip it ([`visible_cells`]); None without a TF with widgets.
+    pub visible: Option<Vec<u8>>,
     /// The gradient method used.
     pub gradient: GradientMethod,
     /// What was asked for and left out, one sentence each (for stderr and run reports).
     pub notes: Vec<String>,
 }
 
-/// Runs the stage on a mesh: gradients, g, cells and tables. The classic 1D
+/// Runs the stage on a mesh: gradients, g, cells, tables and, given a TF
+/// with widgets, the visible-cell mask. The classic 1D
 /// table needs `tf`'s `tf1d` (over its `v_range`); without one it is left
 /// out, with a note: a 1D TF the user did not give would be a picture of
 /// nothing in the data.
@@ -218,5 +222,28 @@ pub fn run_with_progress(
             },
         }
     }
-    Ok(TetraOutput { gradients, g, cells, max_edge_length, luts, d_max, tau_max, gradient: params.gradient, notes })
+    let visible = tf.filter(|f| !f.widgets.is_empty()).map(|f| {
+        on_step("visible cells");
+        let mask = visible_cells(&cells, f);
+        let shown = mask.iter().filter(|&&m| m == 1).count();
+        if shown == 0 {
+            notes.push(format!(
+                "no cell is visible under the TF's widgets: none of the {} cells' (s, g) ranges meets one",
+                cells.len()
+            ));
+        }
+        mask
+    });
+    Ok(TetraOutput {
+        gradients,
+        g,
+        cells,
+        max_edge_length,
+        luts,
+        d_max,
+        tau_max,
+        visible,
+        gradient: params.gradient,
+        notes,
+    })
 }

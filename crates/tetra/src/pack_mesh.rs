@@ -1,5 +1,6 @@
 //! The `projected-tetrahedra` pack: the mesh (as `.vtu` and as raw arrays),
-//! per-vertex (s, g), per-cell boxes, and the pre-integration tables, with a
+//! per-vertex (s, g), per-cell boxes, the visible-cell mask of a TF, and the
+//! pre-integration tables, with a
 //! manifest of the pack schema.
 
 use crate::mesh::{MeshReport, TetMesh};
@@ -98,16 +99,31 @@ pub fn write_pack(
             bytes: Box::new(|| f32_bytes(out.cells.iter().flat_map(|c| [c.max_edge, c.s_min_diff]))),
         },
     ];
+    let visible = out.visible.as_ref().map(|mask| ArrayOut {
+        name: "cell_visible",
+        meaning: "1 where the cell's (s, g) box meets a widget of the TF (Gaussians: +-3 sigma), 0 where the \
+                  renderer may skip it (conservative culling, section 3.1)",
+        units: "flag",
+        association: "cell",
+        components: 1,
+        dtype: "u8",
+        bytes: Box::new(move || mask.clone()),
+    });
     let mut entries = Vec::new();
-    for a in arrays {
+    for a in arrays.into_iter().chain(visible) {
         let bytes = (a.bytes)();
-        let count = bytes.len() / (4 * a.components);
+        let width = if a.dtype == "u8" { 1 } else { 4 };
+        let count = bytes.len() / (width * a.components);
         let file = format!("{}.nrrd", a.name);
         let axes = [
             TableAxis { label: "component".into(), size: a.components, min: 0.0, max: a.components as f64 },
             TableAxis { label: a.association.into(), size: count, min: 0.0, max: count as f64 },
         ];
-        let type_name = if a.dtype == "u32" { "uint32" } else { "float" };
+        let type_name = match a.dtype {
+            "u32" => "uint32",
+            "u8" => "uint8",
+            _ => "float",
+        };
         write_table_bytes(&dir.join(&file), &axes, type_name, &bytes)?;
         drop(bytes);
         entries.push(MeshArrayEntry {

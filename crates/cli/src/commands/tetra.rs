@@ -75,8 +75,12 @@ pub fn run(args: &TetraArgs, progress: &Progress) -> Result<()> {
         progress.note(&format!("note: {n}"));
     }
     let g_max = out.g.iter().copied().fold(0.0f32, f32::max);
+    let visible = out.visible.as_ref().map_or(String::new(), |mask| {
+        let shown = mask.iter().filter(|&&m| m == 1).count();
+        format!("; {shown} cells ({:.1} %) visible under the TF", 100.0 * shown as f64 / mask.len().max(1) as f64)
+    });
     progress.note(&format!(
-        "{} points, {} tetrahedra (longest edge {:.4}), g up to {g_max:.4}; tables: {}; pack in {}",
+        "{} points, {} tetrahedra (longest edge {:.4}), g up to {g_max:.4}; tables: {}{visible}; pack in {}",
         mesh.points.len(),
         mesh.tets.len(),
         out.max_edge_length,
