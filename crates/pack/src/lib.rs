@@ -38,7 +38,7 @@ pub use tet_tables::{
     triangle_flank_integral, triangle_tables,
 };
 pub use tf::{Falloff, TfFile, Widget, parse_tf, to_rgba8};
-pub use widget_support::GAUSSIAN_SUPPORT_SIGMAS;
+pub use widget_support::{GAUSSIAN_SUPPORT_SIGMAS, Support};
 pub use writer::{PackWriter, texture_layouts};
 
 use mdtf_volume::{Geometry, Volume, VolumeError};

@@ -22,26 +22,68 @@ use crate::tf::{Rectangle, TfFile, Triangle, Widget};
 /// Multiples of sigma a Gaussian widget's culling box spans on each side of its centre.
 pub const GAUSSIAN_SUPPORT_SIGMAS: f64 = 3.0;
 
+/// The region of the (v, g) plane where one widget can be non-zero, worked
+/// out once per widget so that testing a cell costs a few comparisons.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Support {
+    /// Zero everywhere (opacity 0).
+    Nowhere,
+    /// No bound is known (a singular K, or a Gaussian over other axes).
+    Everywhere,
+    /// The closed box v x g ([lo, hi] each).
+    Box {
+        /// v interval.
+        v: [f64; 2],
+        /// g interval.
+        g: [f64; 2],
+    },
+    /// Levoy's triangle (its v0, width, g thresholds and shear).
+    Triangle(Triangle),
+    /// |v - centre| <= reach g, for g > 0 (a triangular GTF).
+    Wedge {
+        /// Centre in v.
+        centre: f64,
+        /// Half-width in v per unit g.
+        reach: f64,
+    },
+}
+
+impl Support {
+    /// Whether the region meets the box `v` x `g` ([lo, hi] each, in the TF's units).
+    pub fn meets(&self, v: [f64; 2], g: [f64; 2]) -> bool {
+        match self {
+            Support::Nowhere => false,
+            Support::Everywhere => true,
+            Support::Box { v: bv, g: bg } => overlaps(v, *bv) && overlaps(g, *bg),
+            Support::Triangle(t) => triangle_meets(t, v, g),
+            // widest at the box's largest g
+            Support::Wedge { centre, reach } => {
+                let gap = (v[0] - centre).max(centre - v[1]).max(0.0);
+                g[1] > 0.0 && gap <= reach * g[1]
+            }
+        }
+    }
+}
+
 impl TfFile {
-    /// Whether any widget can be non-zero in the box `v` x `g` (see [`Widget::may_meet`]).
-    pub fn may_meet(&self, v: [f64; 2], g: [f64; 2]) -> bool {
-        self.widgets.iter().any(|w| w.shape.may_meet(v, g))
+    /// The support of every widget, in the file's order.
+    pub fn supports(&self) -> Vec<Support> {
+        self.widgets.iter().map(|w| w.shape.support()).collect()
     }
 }
 
 impl Widget {
-    /// Whether the widget can be non-zero somewhere in the box `v` x `g`
-    /// ([lo, hi] each, in the TF's units): false only when it is zero (or,
-    /// for a Gaussian, below exp(-4.5) of its peak) everywhere in the box.
-    pub fn may_meet(&self, v: [f64; 2], g: [f64; 2]) -> bool {
+    /// Where the widget can be non-zero: it is zero (or, for a Gaussian,
+    /// below exp(-4.5) of its peak) everywhere outside.
+    pub fn support(&self) -> Support {
         match self {
-            Widget::Triangle(t) => triangle_meets(t, v, g),
-            Widget::Rectangle(Rectangle { centre, half_size, alpha, .. }) => {
-                *alpha > 0.0
-                    && overlaps(v, [centre[0] - half_size[0], centre[0] + half_size[0]])
-                    && overlaps(g, [centre[1] - half_size[1], centre[1] + half_size[1]])
-            }
-            Widget::Gaussian(p) => p.alpha_max > 0.0 && gaussian_meets(p, v, g),
+            Widget::Triangle(t) if t.alpha > 0.0 => Support::Triangle(t.clone()),
+            Widget::Rectangle(Rectangle { centre, half_size, alpha, .. }) if *alpha > 0.0 => Support::Box {
+                v: [centre[0] - half_size[0], centre[0] + half_size[0]],
+                g: [centre[1] - half_size[1], centre[1] + half_size[1]],
+            },
+            Widget::Gaussian(p) if p.alpha_max > 0.0 => gaussian_support(p),
+            _ => Support::Nowhere,
         }
     }
 }
@@ -54,7 +96,7 @@ fn overlaps(a: [f64; 2], b: [f64; 2]) -> bool {
 /// lines at its two ends, widened by the largest half-width there.
 fn triangle_meets(t: &Triangle, v: [f64; 2], g: [f64; 2]) -> bool {
     let (lo, hi) = (g[0].max(t.g_low), g[1].min(t.g_high));
-    if t.alpha <= 0.0 || lo > hi {
+    if lo > hi {
         return false;
     }
     let (c_lo, c_hi) = (t.v0 + t.shear * lo, t.v0 + t.shear * hi);
@@ -62,22 +104,18 @@ fn triangle_meets(t: &Triangle, v: [f64; 2], g: [f64; 2]) -> bool {
     overlaps(v, [c_lo.min(c_hi) - h, c_lo.max(c_hi) + h])
 }
 
-fn gaussian_meets(p: &GaussianPrimitive, v: [f64; 2], g: [f64; 2]) -> bool {
-    let Some(sigma) = marginal_sigmas(&p.k) else { return true };
-    let reach = |i: usize| GAUSSIAN_SUPPORT_SIGMAS * sigma[i];
+fn gaussian_support(p: &GaussianPrimitive) -> Support {
+    let Some(sigma) = marginal_sigmas(&p.k) else { return Support::Everywhere };
+    let span = |i: usize| {
+        let r = GAUSSIAN_SUPPORT_SIGMAS * sigma[i];
+        [p.centre[i] - r, p.centre[i] + r]
+    };
     match (p.centre.len(), p.triangular) {
-        // a triangular GTF over v: |v - c| <= 3 sigma' g, widest at the box's largest g
-        (1, true) => {
-            let gap = (v[0] - p.centre[0]).max(p.centre[0] - v[1]).max(0.0);
-            g[1] > 0.0 && gap <= reach(0) * g[1]
-        }
-        (1, false) => overlaps(v, [p.centre[0] - reach(0), p.centre[0] + reach(0)]),
-        (2, false) => {
-            overlaps(v, [p.centre[0] - reach(0), p.centre[0] + reach(0)])
-                && overlaps(g, [p.centre[1] - reach(1), p.centre[1] + reach(1)])
-        }
+        (1, true) => Support::Wedge { centre: p.centre[0], reach: GAUSSIAN_SUPPORT_SIGMAS * sigma[0] },
+        (1, false) => Support::Box { v: span(0), g: [f64::NEG_INFINITY, f64::INFINITY] },
+        (2, false) => Support::Box { v: span(0), g: span(1) },
         // a Gaussian over other axes than (v, g) is not culled
-        _ => true,
+        _ => Support::Everywhere,
     }
 }
 

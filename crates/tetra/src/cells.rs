@@ -65,14 +65,10 @@ pub fn cull(cells: &[CellInfo], s_range: [f32; 2], g_range: [f32; 2]) -> Vec<u32
 
 /// The visible-cell mask of section 3.1 for a transfer function: 1 for a
 /// cell whose (s, g) box may meet one of `tf`'s widgets
-/// ([`TfFile::may_meet`]; Gaussian widgets reach +-3 sigma), 0 for a cell
+/// ([`TfFile::supports`]; Gaussian widgets reach +-3 sigma), 0 for a cell
 /// the renderer can skip.
 pub fn visible_cells(cells: &[CellInfo], tf: &TfFile) -> Vec<u8> {
-    cells
-        .par_iter()
-        .map(|c| {
-            let range = |r: [f32; 2]| [f64::from(r[0]), f64::from(r[1])];
-            u8::from(tf.may_meet(range(c.s_range), range(c.g_range)))
-        })
-        .collect()
+    let supports = tf.supports();
+    let range = |r: [f32; 2]| [f64::from(r[0]), f64::from(r[1])];
+    cells.par_iter().map(|c| u8::from(supports.iter().any(|s| s.meets(range(c.s_range), range(c.g_range))))).collect()
 }
