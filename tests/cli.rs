@@ -630,6 +630,35 @@ fn gaussian_and_peak_finding_profiles_pack_fields_and_tables() {
     let m: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(p.join("manifest.json")).unwrap()).unwrap();
     assert_eq!(m["textures"][0]["component_order"], serde_json::json!(["a", "b", "c", "inv_g"]));
+    // several fields: 1/g comes from ||G|| of all three (not from field a), and the manifest says so
+    let inv_g = m["channels"].as_array().unwrap().iter().find(|c| c["name"] == "inv_g").unwrap().clone();
+    assert!(inv_g["meaning"].as_str().unwrap().contains("sqrt(||Df^T Df||)"), "{}", inv_g["meaning"]);
+    let gm: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(g.join("manifest.json")).unwrap()).unwrap();
+    let gnorm = gm["channels"].as_array().unwrap().iter().find(|c| c["name"] == "gnorm").unwrap().clone();
+    let decode =
+        |c: &serde_json::Value| (c["decode"]["offset"].as_f64().unwrap(), c["decode"]["scale"].as_f64().unwrap());
+    let ((io, is), (go, gs)) = (decode(&inv_g), decode(&gnorm));
+    let codes = |pack: &std::path::Path| -> Vec<u16> {
+        let nhdr = std::fs::read_to_string(pack.join("fields_0.nhdr")).unwrap();
+        let raw = nhdr.lines().find_map(|l| l.strip_prefix("data file: ")).unwrap().trim().to_string();
+        std::fs::read(pack.join(raw)).unwrap().chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect()
+    };
+    let (pc, gc) = (codes(&p), codes(&g));
+    let mut compared = 0;
+    for (pv, gv) in pc.chunks_exact(4).zip(gc.chunks_exact(4)) {
+        let (ci, cg) = (pv[3] as f64, gv[3] as f64);
+        if ci >= 65535.0 || cg < 100.0 {
+            continue; // 1/g clipped at the top of its range, or ||G|| too coarse in its codes
+        }
+        let (got, gn) = (io + is * ci, go + gs * cg);
+        let want = 1.0 / gn.sqrt();
+        // one code of each: d(1/sqrt(x)) = x^-1.5 / 2 dx
+        let tol = is + 0.5 * gn.powf(-1.5) * gs;
+        assert!((got - want).abs() <= tol, "inv_g {got} vs 1/sqrt(gnorm) {want} (tolerance {tol})");
+        compared += 1;
+    }
+    assert!(compared > 1000, "{compared} voxels compared");
 }
 
 /// The NRRD payload of a 16-bit table as codes.

@@ -273,7 +273,7 @@ impl OutFormat {
     hessian    hxx, hxy, hxz, hyy, hyz, hzz (per world unit squared)\n  \
     f2         second derivative along the gradient, (grad f)^T H (grad f) / g^2 (0 where g < epsilon)\n  \
     laplacian  hxx + hyy + hzz\n  \
-    inv_g      1 / max(g, epsilon)\n  \
+    inv_g      1 / max(g, epsilon); several fields: 1 / max(sqrt(gnorm), epsilon)\n  \
     shade      surface-shading weight 1 - (1 - g/g_max)^2\n  \
     gnorm      multi-field: ||Df^T Df|| (Frobenius) of the fields normalised to [0,1]\n  \
     jacobian   multi-field: Df of the normalised fields, 3 components per field\n\n\
@@ -524,7 +524,7 @@ pub struct HistogramArgs {
     slicer-3dtf  data.raw RGBA8 (v, g, f2, unused) and normal.raw RGBA8 (nx, ny, nz, g) (Kniss et al.)\n  \
     distance-tf  normal_v.raw RGBA8 (nx, ny, nz, v) and ghit_d.raw 2 x u8 (g_hit, distance) (distance-based TFs)\n  \
     gaussian-tf  fields_k.raw RGBA16: the fields and gnorm, or v and g for scalar data; gaussians.json\n  \
-    peak-finding fields_k.raw RGBA16: the fields and inv_g\n\n\
+    peak-finding fields_k.raw RGBA16: the fields and inv_g (several fields: 1 / sqrt(gnorm))\n\n\
 Each texture is raw little-endian samples (components fastest, then x, y, z) with a detached NRRD\n\
 header (.nhdr) that Teem, ParaView and 3D Slicer open; manifest.json says for every channel\n\
 value = offset + scale * code, its meaning, units and source. Signed channels (f2, normals) keep 0\n\

@@ -22,7 +22,11 @@ pub enum Item {
     F2,
     /// Laplacian, trace of the Hessian.
     Laplacian,
-    /// Inverse gradient magnitude 1 / max(g, epsilon) (the peak-finding paper's second axis), world units per value unit.
+    /// Inverse gradient magnitude (the peak-finding paper's second axis): one
+    /// field, 1 / max(g, epsilon), world units per value unit; several fields,
+    /// 1 / max(sqrt(||G||), epsilon) with ||G|| the Frobenius norm of Df^T Df
+    /// of the normalised fields (see [`Item::Gnorm`]), world units. For one
+    /// field sqrt(||G||) = g, so the two agree.
     InvG,
     /// Surface-shading weight 1 - (1 - g / g_max)^2 in [0, 1] (Kniss et al. 9.5.4), g_max the largest g in the volume.
     Shade,
@@ -71,6 +75,11 @@ impl Item {
     /// Whether the item is a multi-field measure (needs several fields).
     pub fn is_multi_field(self) -> bool {
         matches!(self, Item::Gnorm | Item::Jacobian)
+    }
+
+    /// Whether the item is defined for one field and for several alike (1/g).
+    pub fn is_any_field_count(self) -> bool {
+        self == Item::InvG
     }
 
     /// Names of the output components of a single-field item.

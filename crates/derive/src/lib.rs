@@ -219,7 +219,7 @@ fn prepare<'a>(input: &'a MultiField, params: &DeriveParams) -> Result<Prepared<
     let g = &input.geometry;
     let m = input.fields.len();
     let multi: Vec<Item> = items.iter().copied().filter(|i| i.is_multi_field()).collect();
-    let single: Vec<Item> = items.iter().copied().filter(|i| !i.is_multi_field()).collect();
+    let single: Vec<Item> = items.iter().copied().filter(|i| !i.is_multi_field() && !i.is_any_field_count()).collect();
     if !multi.is_empty() && !single.is_empty() {
         return Err(DeriveError::FieldCount(format!(
             "multi-field items ({}) and single-field items ({}) cannot be requested together",
@@ -268,7 +268,7 @@ fn prepare<'a>(input: &'a MultiField, params: &DeriveParams) -> Result<Prepared<
         }
     }
 
-    let normalise = !multi.is_empty();
+    let normalise = !multi.is_empty() || m > 1;
     let fields: Vec<FieldInput> = input
         .fields
         .iter()

@@ -117,28 +117,20 @@ impl Layout {
                         *o = a + b + c;
                     }
                 }
+                Item::InvG if self.fields > 1 => {
+                    for (i, o) in outs[first][span.clone()].iter_mut().enumerate() {
+                        let g = gnorm_at(rows, self.fields, i).sqrt();
+                        *o = 1.0 / if g > eps { g } else { eps };
+                    }
+                }
                 Item::InvG => {
                     for (o, &g) in outs[first][span.clone()].iter_mut().zip(r.g) {
                         *o = 1.0 / if g > eps { g } else { eps };
                     }
                 }
                 Item::Gnorm => {
-                    let out = &mut outs[first][span.clone()];
-                    for (i, o) in out.iter_mut().enumerate() {
-                        let mut m = [0.0f32; 6]; // xx xy xz yy yz zz
-                        for f in 0..self.fields {
-                            let rf = rows.field(f);
-                            let (x, y, z) = (rf.gx[i], rf.gy[i], rf.gz[i]);
-                            m[0] += x * x;
-                            m[1] += x * y;
-                            m[2] += x * z;
-                            m[3] += y * y;
-                            m[4] += y * z;
-                            m[5] += z * z;
-                        }
-                        *o =
-                            (m[0] * m[0] + m[3] * m[3] + m[5] * m[5] + 2.0 * (m[1] * m[1] + m[2] * m[2] + m[4] * m[4]))
-                                .sqrt();
+                    for (i, o) in outs[first][span.clone()].iter_mut().enumerate() {
+                        *o = gnorm_at(rows, self.fields, i);
                     }
                 }
                 Item::Jacobian => {
@@ -152,6 +144,23 @@ impl Layout {
             }
         }
     }
+}
+
+/// ||G||, the Frobenius norm of G = Df^T Df, at sample `i` of the row (Kniss et al. 9.3.2).
+#[inline(always)]
+fn gnorm_at(rows: &RowSet, fields: usize, i: usize) -> f32 {
+    let mut m = [0.0f32; 6]; // xx xy xz yy yz zz
+    for f in 0..fields {
+        let rf = rows.field(f);
+        let (x, y, z) = (rf.gx[i], rf.gy[i], rf.gz[i]);
+        m[0] += x * x;
+        m[1] += x * y;
+        m[2] += x * z;
+        m[3] += y * y;
+        m[4] += y * z;
+        m[5] += z * z;
+    }
+    (m[0] * m[0] + m[3] * m[3] + m[5] * m[5] + 2.0 * (m[1] * m[1] + m[2] * m[2] + m[4] * m[4])).sqrt()
 }
 
 /// Row `j` of the fused items: the requested ones into `outs`, the others

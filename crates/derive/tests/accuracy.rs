@@ -325,6 +325,49 @@ fn multi_field_gnorm_is_within_a_thousandth_of_the_analytic_value() {
     assert!(mean <= 1e-3, "{mean:e}");
 }
 
+/// G = D^T D of a 2 x 3 Jacobian `d` (rows: fields), and its Frobenius norm.
+fn frobenius_of_dtd(d: &[[f64; 3]]) -> f64 {
+    let mut sum = 0.0;
+    for a in 0..3 {
+        for b in 0..3 {
+            let gab: f64 = d.iter().map(|row| row[a] * row[b]).sum();
+            sum += gab * gab;
+        }
+    }
+    sum.sqrt()
+}
+
+#[test]
+fn multi_field_inv_g_is_one_over_the_root_of_gnorm_and_one_field_inv_g_is_one_over_g() {
+    // two linear ramps, f0 = 3x + y and f1 = -2z, on an anisotropic grid:
+    // normalised to [0, 1] over their ranges, D is constant and known
+    let g = Geometry::new([20, 16, 12], [0.5, 1.0, 2.0]);
+    let [nx, ny, nz] = [20.0, 16.0, 12.0];
+    let f0 = Array3::from_shape_fn(g.shape(), |(_, j, i)| (3.0 * i as f64 * 0.5 + j as f64) as f32);
+    let f1 = Array3::from_shape_fn(g.shape(), |(k, _, _)| (-2.0 * k as f64 * 2.0) as f32);
+    let (r0, r1) = (3.0 * (nx - 1.0) * 0.5 + (ny - 1.0), 2.0 * (nz - 1.0) * 2.0);
+    let fields = MultiField {
+        geometry: g.clone(),
+        fields: vec![
+            mdtf_volume::Field { name: "a".into(), data: f0.clone() },
+            mdtf_volume::Field { name: "b".into(), data: f1 },
+        ],
+    };
+    let out = run(&fields, &DeriveParams { items: vec![Item::InvG, Item::Gnorm], ..Default::default() }).unwrap();
+    let want_gnorm = frobenius_of_dtd(&[[3.0 / r0, 1.0 / r0, 0.0], [0.0, 0.0, -2.0 / r1]]);
+    let (inv_g, gnorm) = (&out.get(Item::InvG).unwrap().fields[0].data, &out.get(Item::Gnorm).unwrap().fields[0].data);
+    let at = [6, 8, 10];
+    let (got_inv, got_gnorm) = (inv_g[at] as f64, gnorm[at] as f64);
+    assert!((got_gnorm - want_gnorm).abs() < 1e-5 * want_gnorm, "{got_gnorm} vs {want_gnorm}");
+    let want_inv = 1.0 / want_gnorm.sqrt();
+    assert!((got_inv - want_inv).abs() < 1e-5 * want_inv, "{got_inv} vs {want_inv}");
+    // one field: inv_g = 1 / g = 1 / |(3, 1, 0)|, in the field's own units
+    let one = MultiField::from(Volume::new(g, f0).unwrap());
+    let out = run(&one, &DeriveParams { items: vec![Item::InvG], ..Default::default() }).unwrap();
+    let got = out.get(Item::InvG).unwrap().fields[0].data[at] as f64;
+    assert!((got - 1.0 / 10f64.sqrt()).abs() < 1e-5, "{got}");
+}
+
 #[test]
 fn results_are_bit_identical_with_one_and_two_threads() {
     let input = MultiField::from(RadialPhantom::tooth(Geometry::new([40, 36, 30], [1.0, 1.0, 1.5]), 2.0).volume());

@@ -122,7 +122,7 @@ pub fn check_channels(channels: &[(String, Volume)], params: &PackParams) -> Res
         .channels(&params.fields)
         .into_iter()
         .filter(|c| get(c).is_none())
-        .map(|c| format!("{c} (made by the {} stage)", describe(&c).2))
+        .map(|c| format!("{c} (made by the {} stage)", describe(&c, !params.fields.is_empty()).2))
         .collect();
     if !missing.is_empty() {
         return Err(PackError::MissingChannels { profile: params.profile.to_string(), missing: missing.join(", ") });

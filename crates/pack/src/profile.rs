@@ -16,7 +16,7 @@ pub enum Profile {
     /// Gaussian TFs: the fields (normalised to [0, 1] by their decode) and
     /// ||G|| (`gnorm`), or for scalar data v and g, four per u16 texture `fields_k`.
     GaussianTf,
-    /// Peak finding: the fields and 1/g, four per u16 texture `fields_k`.
+    /// Peak finding: the fields and 1/g (for several fields 1 / sqrt(||G||)), four per u16 texture `fields_k`.
     PeakFinding,
     /// Projected tetrahedra with bivariate (s, g) TFs: no volume textures;
     /// the mesh's per-vertex and per-cell arrays and the pre-integration
@@ -87,9 +87,18 @@ impl Profile {
     }
 }
 
-/// What a channel is, its units, the stage that makes it, and whether it is signed (0 kept exact).
-pub fn describe(channel: &str) -> (&'static str, &'static str, &'static str, bool) {
+/// What a channel is, its units, the stage that makes it, and whether it is
+/// signed (0 kept exact); `multi_field`: the pack's input has several fields
+/// (its 1/g then comes from ||G|| of all of them).
+pub fn describe(channel: &str, multi_field: bool) -> (&'static str, &'static str, &'static str, bool) {
     match channel {
+        "inv_g" if multi_field => (
+            "inverse multi-field gradient 1 / max(sqrt(||Df^T Df||), epsilon) of the fields normalised to [0, 1] \
+             (for one field, 1 / g)",
+            "world units",
+            "derive",
+            false,
+        ),
         "v" => ("value", "input units", "input", false),
         "g" => ("gradient magnitude |grad f|", "value units per world unit", "derive", false),
         "f2" => ("second derivative along the gradient", "value units per world unit^2", "derive", true),

@@ -60,7 +60,7 @@ impl<'a> TextureEncoder<'a> {
             };
             let v = get(c).ok_or_else(|| PackError::MissingChannels {
                 profile: self.params.profile.to_string(),
-                missing: format!("{c} (made by the {} stage)", describe(c).2),
+                missing: format!("{c} (made by the {} stage)", describe(c, !self.params.fields.is_empty()).2),
             })?;
             if !v.geometry.same_grid(geometry) {
                 return Err(PackError::Geometry(format!("channel {c} is not on the grid of the pack")));
@@ -74,7 +74,7 @@ impl<'a> TextureEncoder<'a> {
                     .entry(c.clone())
                     .or_insert_with(|| v.finite_range().map_or([0.0, 0.0], |(lo, hi)| [lo as f64, hi as f64])),
             };
-            let (meaning, units, stage, signed) = describe(c);
+            let (meaning, units, stage, signed) = describe(c, !self.params.fields.is_empty());
             let d = decode_for(c, min, max, layout.dtype, signed)?;
             let top = layout.dtype.max_code().unwrap_or(0.0);
             self.entries.push(ChannelEntry {

@@ -24,6 +24,7 @@ pub fn compute(
     let geometry = &input.geometry;
     let needs = |n: &str| names.iter().any(|x| x == n);
     let tracing = needs("g_hit") || needs("hit") || needs("distance");
+    let multi = input.fields.len() > 1;
     // one derive pass serves both the derivative channels and the tracing,
     // computing only the items asked for (each is a full volume)
     let mut items = Vec::new();
@@ -31,7 +32,7 @@ pub fn compute(
         (Item::G, tracing || needs("g")),
         (Item::F2, tracing || needs("f2")),
         (Item::Normal, tracing || ["nx", "ny", "nz"].iter().any(|n| needs(n))),
-        (Item::InvG, needs("inv_g")),
+        (Item::InvG, needs("inv_g") && !multi),
     ] {
         if wanted {
             items.push(item);
@@ -51,16 +52,17 @@ pub fn compute(
         // every output field is named after its component: g, f2, nx, ny, nz, inv_g
         derived.extend(mdtf_derive::run(value_input, &d)?.items.into_iter().flat_map(|(_, mf)| mf.into_volumes()));
     }
-    let gnorm = if needs("gnorm") && input.fields.len() > 1 {
+    // several fields: ||G|| and 1/g (from ||G||) in one pass over all of them
+    let multi_items: Vec<Item> =
+        [(Item::Gnorm, "gnorm"), (Item::InvG, "inv_g")].into_iter().filter(|(_, c)| needs(c)).map(|(i, _)| i).collect();
+    if multi && !multi_items.is_empty() {
         let d = DeriveParams {
-            items: vec![Item::Gnorm],
+            items: multi_items,
             kernel: kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
             ..Default::default()
         };
-        mdtf_derive::run(input, &d)?.items.into_iter().next().and_then(|(_, m)| m.field_volume(0))
-    } else {
-        None
-    };
+        derived.extend(mdtf_derive::run(input, &d)?.items.into_iter().flat_map(|(_, mf)| mf.into_volumes()));
+    }
     let traced = if tracing {
         // the tracing consumes g, f'' and the normal: copied only if they are asked for too
         let mut take = |c: &str| {
@@ -89,7 +91,6 @@ pub fn compute(
         } else {
             match (name.as_str(), &traced) {
                 ("v", _) => input.field_volume(0),
-                ("gnorm", _) => gnorm.clone(),
                 ("g_hit", Some(t)) => Some(t.g_hit.clone()),
                 ("hit", Some(t)) => Some(t.hit.clone()),
                 ("distance", Some(t)) => Some(t.distance.clone()),

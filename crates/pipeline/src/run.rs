@@ -191,7 +191,8 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     if tracing || (wants_normals && !defer_normals) {
         items.push(Item::Normal);
     }
-    if needs("inv_g") {
+    // several fields: 1/g comes from ||G|| of all of them, in the multi-field pass
+    if needs("inv_g") && !multi {
         items.push(Item::InvG);
     }
     let mut normal: Option<MultiField> = None;
@@ -213,15 +214,17 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         }
         stage("derive", t, n, vec![]);
     }
-    if needs("gnorm")
-        && let Some(mf) = &input
+    let multi_items: Vec<Item> =
+        [(Item::Gnorm, "gnorm"), (Item::InvG, "inv_g")].into_iter().filter(|(_, c)| needs(c)).map(|(i, _)| i).collect();
+    if let Some(mf) = &input
+        && !multi_items.is_empty()
     {
         on_stage("derive (multi-field)");
         let t = Instant::now();
-        let d = DeriveParams { items: vec![Item::Gnorm], kernel, ..Default::default() };
+        let d = DeriveParams { items: multi_items, kernel, ..Default::default() };
         let out = mdtf_derive::run(mf, &d).map_err(|e| fail("derive")(e.to_string()))?;
-        if let Some((_, m)) = out.items.into_iter().next() {
-            chans.insert("gnorm".into(), m.into_scalar().map_err(|e| fail("derive")(e.to_string()))?);
+        for (item, m) in out.items {
+            chans.insert(item.name().into(), m.into_scalar().map_err(|e| fail("derive")(e.to_string()))?);
         }
         stage("derive (multi-field)", t, n, vec![]);
     }
