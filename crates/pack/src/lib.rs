@@ -31,7 +31,7 @@ pub use manifest::{
 pub use manifest_check::ManifestError;
 pub use profile::{PROFILE_NAMES, Profile, TextureLayout, describe};
 pub use quantise::{Decode, Dtype, QuantiseError, decode_for};
-pub use tables::{Tf1d, peak_table, peaks, preintegration_table, segment, segment_by_midpoint};
+pub use tables::{PEAKS_PER_ENTRY, Tf1d, peak_table, peaks, preintegration_table, segment, segment_by_midpoint};
 pub use tet_tables::{
     TetTable, TetTableParams, front_back_tables, front_back_weights, gaussian_segment, gaussian_table,
     gaussian_widget_integral, lookup_gaussian, preintegration_1d_table, sinusoid_integral, sinusoid_table,

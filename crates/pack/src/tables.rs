@@ -179,29 +179,33 @@ pub fn peaks(tf: &Tf1d) -> Vec<usize> {
         .collect()
 }
 
-/// The n x n peak table: entry (i, j) is the s of the highest TF peak
-/// whose s lies between s_i = i/(n-1) and s_j (inclusive; ties go to the
-/// peak nearer the front s_i), or -1 where there is none.
-pub fn peak_table(tf: &Tf1d, n: usize) -> Vec<f32> {
+/// Peaks one entry of the peak table holds (one per RGBA component).
+pub const PEAKS_PER_ENTRY: usize = 4;
+
+/// The n x n peak table of 1D peak finding (Knoll et al. 2009, the
+/// peak-finding paper's ref. [12]; its section 3: "storing the peak isovalue
+/// (or isovalues) between [f0, f1]"). Entry (i, j), front i fastest, holds the
+/// s of the TF's peaks (see [`peaks`]) between the front value s_i = i/(n-1)
+/// and the back value s_j, both included, in the order a ray going from s_i
+/// to s_j crosses them (the one nearest s_i first), up to
+/// [`PEAKS_PER_ENTRY`]; -1 fills the rest. The first component is the first
+/// isosurface the segment meets, which is what a renderer that finds one
+/// peak per segment needs.
+pub fn peak_table(tf: &Tf1d, n: usize) -> Vec<[f32; PEAKS_PER_ENTRY]> {
     let m = tf.samples.len().max(2);
-    let pk: Vec<(f64, f64)> = peaks(tf).into_iter().map(|k| (k as f64 / (m - 1) as f64, tf.samples[k][3])).collect();
+    let pk: Vec<f64> = peaks(tf).into_iter().map(|k| k as f64 / (m - 1) as f64).collect();
     let step = 1.0 / (n.max(2) - 1) as f64;
-    let mut table = vec![-1f32; n * n];
+    let mut table = vec![[-1f32; PEAKS_PER_ENTRY]; n * n];
     table.par_chunks_mut(n).enumerate().for_each(|(j, row)| {
         for (i, e) in row.iter_mut().enumerate() {
             let (sf, sb) = (i as f64 * step, j as f64 * step);
             let (lo, hi) = (sf.min(sb) - 1e-12, sf.max(sb) + 1e-12);
-            let mut best: Option<(f64, f64)> = None;
-            for &(s, tau) in pk.iter().filter(|(s, _)| *s >= lo && *s <= hi) {
-                let better = match best {
-                    None => true,
-                    Some((bs, bt)) => tau > bt || (tau == bt && (s - sf).abs() < (bs - sf).abs()),
-                };
-                if better {
-                    best = Some((s, tau));
-                }
+            let inside = pk.iter().copied().filter(|s| *s >= lo && *s <= hi);
+            // pk ascends: a rising segment meets them in that order, a falling one in reverse
+            let ordered: Vec<f64> = if sb >= sf { inside.collect() } else { inside.rev().collect() };
+            for (slot, s) in e.iter_mut().zip(ordered) {
+                *slot = s as f32;
             }
-            *e = best.map_or(-1.0, |(s, _)| s as f32);
         }
     });
     table
@@ -230,26 +234,41 @@ mod tests {
     }
 
     #[test]
-    fn peak_table_equals_a_brute_force_scan() {
-        let tf = Tf1d::two_peaks(101);
+    fn peak_table_lists_the_peaks_a_segment_crosses_in_ray_order_as_a_brute_force_scan_does() {
+        // five peaks (s = 0.1, 0.3, 0.5, 0.7, 0.9), so some entries have more than four
         let n = 101;
+        let tf = Tf1d {
+            samples: (0..n)
+                .map(|k| {
+                    let tau = if k % 20 == 10 { 1.0 + (k / 20) as f64 } else { 0.0 };
+                    [1.0, 1.0, 1.0, tau]
+                })
+                .collect(),
+        };
         let table = peak_table(&tf, n);
         let tau: Vec<f64> = tf.samples.iter().map(|s| s[3]).collect();
+        let mut seen_full = false;
         for j in 0..n {
             for i in 0..n {
-                // brute force: scan the samples between i and j for local maxima, keep the highest
-                let (lo, hi) = (i.min(j), i.max(j));
-                let mut best: Option<usize> = None;
-                for k in lo..=hi {
-                    let is_peak = (k == 0 || tau[k] > tau[k - 1]) && (k == 100 || tau[k] >= tau[k + 1]) && tau[k] > 0.0;
-                    if is_peak && best.is_none_or(|b| tau[k] > tau[b]) {
-                        best = Some(k);
+                // brute force: walk the samples from i towards j, collecting local maxima
+                let path: Vec<usize> = if j >= i { (i..=j).collect() } else { (j..=i).rev().collect() };
+                let mut want = [-1f32; PEAKS_PER_ENTRY];
+                let mut slot = 0;
+                for k in path {
+                    let is_peak =
+                        (k == 0 || tau[k] > tau[k - 1]) && (k == n - 1 || tau[k] >= tau[k + 1]) && tau[k] > 0.0;
+                    if is_peak && slot < PEAKS_PER_ENTRY {
+                        want[slot] = k as f32 / (n - 1) as f32;
+                        slot += 1;
                     }
                 }
-                let want = best.map_or(-1.0, |k| k as f32 / 100.0);
+                seen_full |= slot == PEAKS_PER_ENTRY;
                 assert_eq!(table[j * n + i], want, "({i}, {j})");
             }
         }
-        assert_eq!(peaks(&tf), vec![30, 70]);
+        assert!(seen_full);
+        assert_eq!(peaks(&tf), vec![10, 30, 50, 70, 90]);
+        // falling segment from s = 1 to 0: the first peak met is the one at 0.9
+        assert_eq!(table[n - 1], [0.9, 0.7, 0.5, 0.3]);
     }
 }

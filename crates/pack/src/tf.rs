@@ -490,8 +490,9 @@ impl TfFile {
             .collect()
     }
 
-    /// With a `tf1d`: the 256 x 256 peak table (s of the highest TF peak between front and
-    /// back values, -1 for none) and the pre-integration table for a segment of `step` world units.
+    /// With a `tf1d`: the 256 x 256 peak table (the v of up to four TF peaks between
+    /// front and back values, in the order a ray meets them, -1 for none; see
+    /// [`crate::tables::peak_table`]) and the pre-integration table for a segment of `step` world units.
     pub fn table_luts(&self, step: f64) -> Vec<crate::lut::Lut> {
         use crate::lut::{Lut, LutAxis};
         let Some(samples) = &self.tf1d else { return Vec::new() };
@@ -505,15 +506,19 @@ impl TfFile {
         };
         let peak = crate::tables::peak_table(&tf, 256)
             .into_iter()
+            .flatten()
             .map(|s| if s < 0.0 { -1.0 } else { (self.v_range[0] + s as f64 * span) as f32 })
             .collect();
         vec![
             Lut {
                 name: "peak_table".into(),
-                meaning: "v of the highest peak of tf1d between the front (first axis) and back values; -1: none"
-                    .into(),
+                meaning: format!(
+                    "v of up to {} peaks of tf1d between the front (first axis) and back values, in the order \
+                     a ray from the front value meets them (component 0 first); -1: none",
+                    crate::tables::PEAKS_PER_ENTRY
+                ),
                 axes: axes("v_front", "v_back"),
-                components: 1,
+                components: crate::tables::PEAKS_PER_ENTRY,
                 values: peak,
                 unit_range: false,
                 u16_range: None,

@@ -69,12 +69,17 @@ pub enum Classifier {
         /// triangular GTF's gradient coordinate.
         sqrt_last: bool,
     },
-    /// Peak finding on v (1D): between consecutive samples, when the TF has a peak
-    /// between their values (the pack's peak table), classify at the peak; else (or
-    /// with `find_peaks` off: plain post-classification) at the sample. Colour and
-    /// opacity come from the pre-integration table's diagonal (a segment at one value).
+    /// Peak finding on v (1D, the peak-finding paper's section 3): between
+    /// consecutive samples, when the TF has peaks between their values (the
+    /// pack's peak table), each peak is an isosurface the segment crosses: the
+    /// peaks are composited in the order the ray meets them, each with the
+    /// TF's opacity whatever the step (constant opacity at peaks), and shaded
+    /// at the first one's crossing, found by the secant between the two
+    /// samples. Else (or with `find_peaks` off: plain post-classification) the
+    /// sample is classified with the step's opacity. Colour and opacity come
+    /// from the pre-integration table's diagonal (a segment at one value).
     Peak {
-        /// v of the highest TF peak between (v_front, v_back); -1 for none.
+        /// v of up to four TF peaks between (v_front, v_back) in ray order; -1 for none.
         peak_table: Table,
         /// RGBA of a segment of one L_min between (v_front, v_back).
         preintegration: Table,
@@ -127,6 +132,28 @@ fn chord_peak(t: &Table, f0: &[f32], f1: &[f32], cells_per_sample: f64) -> ([f32
         }
     }
     (best, at)
+}
+
+/// The peaks `pk` (v values in ray order, -1 for none) composited front to
+/// back, each with the TF's colour and opacity (`preintegration`'s diagonal)
+/// at its value: one colour and opacity for the segment.
+fn composite_peaks(preintegration: &Table, pk: &[f32; 4]) -> ([f32; 3], f64) {
+    let (mut rgb, mut alpha) = ([0f64; 3], 0f64);
+    for &v in pk.iter().filter(|v| **v >= 0.0) {
+        let (colour, a) = unpremultiplied(lookup(preintegration, &[v, v]));
+        let a = a.min(0.999);
+        for (acc, c) in rgb.iter_mut().zip(colour) {
+            *acc += (1.0 - alpha) * a * c as f64;
+        }
+        alpha += (1.0 - alpha) * a;
+    }
+    let colour = if alpha > 0.0 { rgb.map(|c| (c / alpha) as f32) } else { [0.0; 3] };
+    (colour, alpha)
+}
+
+/// A pre-integration entry (colour premultiplied by its opacity) as colour and opacity.
+fn unpremultiplied([r, g, b, a]: [f32; 4]) -> ([f32; 3], f64) {
+    if a > 0.0 { ([r / a, g / a, b / a], a as f64) } else { ([0.0; 3], 0.0) }
 }
 
 fn lookup(t: &Table, coords: &[f32]) -> [f32; 4] {
@@ -529,19 +556,23 @@ fn render_impl(
                     Classifier::Peak { peak_table, preintegration, find_peaks } => {
                         let v1 = sample(v_data);
                         let v0 = if *find_peaks {
-                            prev_here.map(|(c, _, _)| v_data.map_or(0.0, |d| c.sample(d)))
+                            prev_here.map(|(c, _, p0)| (v_data.map_or(0.0, |d| c.sample(d)), p0))
                         } else {
                             None
                         };
-                        let at = match v0 {
-                            Some(v0) => {
-                                let peak = lookup(peak_table, &[v0, v1])[3];
-                                if peak >= 0.0 { peak } else { v1 }
+                        let peaks = v0.map(|(v0, p0)| (v0, p0, lookup(peak_table, &[v0, v1])));
+                        match peaks.filter(|(_, _, pk)| pk[0] >= 0.0) {
+                            Some((v0, p0, pk)) => {
+                                // the secant's root of v(t) = first peak on the segment
+                                let t = if v1 != v0 { ((pk[0] - v0) / (v1 - v0)).clamp(0.0, 1.0) as f64 } else { 1.0 };
+                                shade = Cell::at(dims, [0, 1, 2].map(|k| p0[k] + t * (p[k] - p0[k])));
+                                composite_peaks(preintegration, &pk)
                             }
-                            None => v1,
-                        };
-                        let [r, gr, b, a] = lookup(preintegration, &[at, at]);
-                        ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(step_vox))
+                            None => {
+                                let (colour, a) = unpremultiplied(lookup(preintegration, &[v1, v1]));
+                                (colour, 1.0 - (1.0 - a.min(0.999)).powf(step_vox))
+                            }
+                        }
                     }
                     Classifier::Chord { tf, cells_per_sample, find_peaks } => {
                         let f1_all = coords(&cell, &table_chans);

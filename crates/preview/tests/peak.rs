@@ -54,6 +54,48 @@ fn peak_finding_finds_the_feature_that_coarse_sampling_misses() {
     assert!(lp * 5 < lk, "post-classification should miss most of the shell: {lp} vs {lk}");
 }
 
+#[test]
+fn peak_finding_composites_every_peak_a_segment_crosses_in_ray_order() {
+    // two narrow peaks 16 values apart (a third of a voxel on this sphere's
+    // boundary, so one step of 2 crosses both): red, weak, at v = 120, met
+    // first by a ray entering the sphere; blue, dense, at v = 136
+    let v = erf_sphere(Geometry::new([48; 3], [1.0; 3]), 14.0, 2.0, 0.0, 255.0, None).volume();
+    let channels: BTreeMap<String, Volume> = [("v".to_string(), v)].into_iter().collect();
+    let (tau_red, tau_blue) = (-(1.0f64 - 0.3).ln(), -(1.0f64 - 0.9).ln()); // opacities 0.3 and 0.9 at d = 1
+    let samples: Vec<String> = (0..256)
+        .map(|k| match k {
+            120 => format!("[1, 0, 0, {tau_red}]"),
+            136 => format!("[0, 0, 1, {tau_blue}]"),
+            _ => "[0, 0, 0, 0]".to_string(),
+        })
+        .collect();
+    let tf =
+        parse_tf(&format!(r#"{{"v_range": [0, 255], "g_range": [0, 1], "tf1d": [{}]}}"#, samples.join(","))).unwrap();
+    let mut luts = tf.table_luts(1.0);
+    let to_table = |l: mdtf_pack::Lut| Table {
+        axes: l.axes.iter().map(|a| (a.channel.clone(), a.size, a.min, a.max)).collect(),
+        components: l.components,
+        values: l.values,
+    };
+    let preintegration = to_table(luts.remove(1));
+    let peak_table = to_table(luts.remove(0));
+    let img = render(
+        &channels,
+        &Classifier::Peak { peak_table, preintegration, find_peaks: true },
+        &Camera { azimuth: 30.0, elevation: 20.0, size: 64, step: 2.0 },
+    );
+    // a ray through the shell: red 0.3 first, then blue (1 - 0.3) 0.9 = 0.63;
+    // the exit meets blue first, then red: (1 - 0.93) (0.9 blue + 0.1 x 0.3 red);
+    // no normals, so no shading. Highest peak only: no red; the wrong order: red 0.03
+    let (want_red, want_blue) = (0.3 + 0.07 * 0.03, 0.63 + 0.07 * 0.9);
+    let lit: Vec<&[u8]> = img.chunks_exact(3).filter(|px| px[2] > 30).collect();
+    let near = |got: u8, want: f64| (got as f64 / 255.0 - want).abs() < 0.03;
+    let right = lit.iter().filter(|px| near(px[0], want_red) && near(px[2], want_blue)).count();
+    eprintln!("{right} of {} lit pixels show red {want_red:.3} and blue {want_blue:.3}", lit.len());
+    assert!(lit.len() > 300, "{}", lit.len());
+    assert!(right as f64 >= 0.9 * lit.len() as f64, "{right} of {}", lit.len());
+}
+
 /// Pixels whose red channel shows the feature.
 fn lit_pixels(img: &[u8]) -> Vec<bool> {
     img.chunks_exact(3).map(|px| px[0] > 30).collect()
