@@ -29,6 +29,12 @@ pub struct Grey {
     pub pixels: Vec<u8>,
 }
 
+/// Height in pixels of a 1D histogram's picture.
+pub const BAR_HEIGHT: usize = 128;
+
+/// Grey level of the log-scale bars in a 1D histogram's picture (the linear ones are white).
+pub const LOG_BAR_GREY: u8 = 96;
+
 /// Grey level of count c for the largest count `max`.
 pub fn grey_level(c: u64, max: u64, scale: Scale) -> u8 {
     if max == 0 {
@@ -42,17 +48,23 @@ pub fn grey_level(c: u64, max: u64, scale: Scale) -> u8 {
 }
 
 impl Histogram {
-    /// The picture of a 2D histogram (one pixel per bin; axis 0 to the right,
-    /// axis 1 upward) or of a 1D histogram (bars 128 pixels tall).
+    /// The picture of a 2D histogram (one pixel per bin, grey by `scale`;
+    /// axis 0 to the right, axis 1 upward) or of a 1D histogram: bars
+    /// [`BAR_HEIGHT`] pixels tall on both scales at once, as Kniss et al.'s
+    /// Fig. 9.1 overlays them: the log bar in grey [`LOG_BAR_GREY`] behind
+    /// the linear bar in white (the log scale shows the small peaks of
+    /// boundaries, the linear scale the materials' relative sizes).
     pub fn image(&self, scale: Scale) -> Grey {
         let max = self.max();
         if self.axes.len() == 1 {
-            let (w, h) = (self.axes[0].bins, 128usize);
+            let (w, h) = (self.axes[0].bins, BAR_HEIGHT);
             let mut pixels = vec![0u8; w * h];
+            let bar = |c: u32, scale: Scale| (grey_level(c as u64, max, scale) as usize * h).div_ceil(255);
             for (x, &c) in self.counts.iter().enumerate() {
-                let height = (grey_level(c as u64, max, scale) as usize * h).div_ceil(255);
-                for y in 0..height {
-                    pixels[(h - 1 - y) * w + x] = 255;
+                for (height, grey) in [(bar(c, Scale::Log), LOG_BAR_GREY), (bar(c, Scale::Linear), 255)] {
+                    for y in 0..height {
+                        pixels[(h - 1 - y) * w + x] = grey;
+                    }
                 }
             }
             return Grey { width: w, height: h, pixels };
@@ -78,7 +90,12 @@ impl Histogram {
                 format!("{} {dir}: [{}, {}] in {} bins", a.name, a.min, a.max, a.bins)
             })
             .collect();
-        format!("{}; {:?} scale; max count {}", axes.join("; "), scale, self.max())
+        let scale = if self.axes.len() == 1 {
+            "bars on log (grey) and linear (white) scales overlaid".to_string()
+        } else {
+            format!("{scale:?} scale")
+        };
+        format!("{}; {scale}; max count {}", axes.join("; "), self.max())
     }
 }
 
@@ -135,4 +152,30 @@ pub fn write_exr(path: &Path, h: &Histogram) -> Result<(), VolumeError> {
     Image::from_layer(layer).write().to_buffered(&mut buffer).map_err(io)?;
     let bytes = buffer.into_inner();
     write_file_atomically(path, |out| out.write_all(&bytes))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::axis::Axis;
+
+    #[test]
+    fn a_1d_picture_overlays_linear_bars_on_log_bars() {
+        let h = Histogram {
+            axes: vec![Axis { name: "v".into(), min: 0.0, max: 5.0, bins: 5 }],
+            counts: vec![1000, 100, 10, 1, 0],
+        };
+        let img = h.image(Scale::Log);
+        assert_eq!((img.width, img.height), (5, 128));
+        let column = |x: usize, grey: u8| (0..128).filter(|y| img.pixels[y * 5 + x] == grey).count();
+        // linear: 128 c / 1000 rounded up, via the 8-bit level (100: level 26, 14 pixels; 10: level 3, 2)
+        let white: Vec<usize> = (0..5).map(|x| column(x, 255)).collect();
+        assert_eq!(white, [128, 14, 2, 0, 0]);
+        // log: 128 ln(1 + c) / ln(1001) (100: level 170, 86 pixels; 10: level 89, 45; 1: level 26, 14)
+        let lit: Vec<usize> = (0..5).map(|x| column(x, 255) + column(x, LOG_BAR_GREY)).collect();
+        assert_eq!(lit, [128, 86, 45, 14, 0]);
+        // bars stand on the bottom row
+        assert_eq!(img.pixels[127 * 5 + 3], LOG_BAR_GREY);
+        assert!(h.describe(Scale::Log).contains("log (grey) and linear (white)"));
+    }
 }
