@@ -661,6 +661,78 @@ fn gaussian_and_peak_finding_profiles_pack_fields_and_tables() {
     assert!(compared > 1000, "{compared} voxels compared");
 }
 
+#[test]
+fn a_product_tf_packs_one_table_per_factor_and_previews() {
+    // Kniss et al.'s meteorological TF on a three-field volume: a 2D TF over (a, b) times a ramp over ||G||
+    let dir = tempfile::tempdir().unwrap();
+    let mf = dir.path().join("m.nrrd");
+    mdtf_ok(&["synth", "multifield", "-o", mf.to_str().unwrap(), "--size", "32", "-q"]);
+    let tf = dir.path().join("tf.json");
+    std::fs::write(
+        &tf,
+        r#"{"product": [
+          {"channels": ["a", "b"], "ranges": [[0, 100], [0, 100]],
+           "widgets": [{"type": "rectangle", "centre": [50, 50], "half_size": [50, 50], "falloff": "constant", "alpha": 0.7, "colour": [1, 0.4, 0.1]}]},
+          {"channels": ["gnorm"], "ranges": [[0, 0.02]], "ramp": [0.001, 0.004]}]}"#,
+    )
+    .unwrap();
+    let g = dir.path().join("g");
+    mdtf_ok(&[
+        "pack",
+        "--profile",
+        "gaussian-tf",
+        mf.to_str().unwrap(),
+        "-o",
+        g.to_str().unwrap(),
+        "--tf",
+        tf.to_str().unwrap(),
+        "-q",
+    ]);
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(g.join("manifest.json")).unwrap()).unwrap();
+    let luts = m["luts"].as_array().unwrap();
+    let lut = |name: &str| luts.iter().find(|l| l["name"] == name).unwrap_or_else(|| panic!("no {name}")).clone();
+    let (p0, p1) = (lut("product_0"), lut("product_1"));
+    assert_eq!((p0["axes"][0]["channel"].as_str(), p0["axes"][1]["channel"].as_str()), (Some("a"), Some("b")));
+    assert_eq!((p0["components"].as_u64(), p0["axes"][0]["size"].as_u64()), (Some(4), Some(256)));
+    assert_eq!((p1["axes"][0]["channel"].as_str(), p1["components"].as_u64()), (Some("gnorm"), Some(1)));
+    assert!(p1["meaning"].as_str().unwrap().contains("product of every product_* table's opacity"));
+    // the ramp: 0 up to 0.001, 1 from 0.004, linear between, at the cell centres of [0, 0.02] in 256 cells
+    let ramp = read(&g.join("product_1_f32.nrrd"), &ReadOptions::default()).unwrap();
+    let values: Vec<f32> = ramp.fields[0].data.iter().copied().collect();
+    assert_eq!(values.len(), 256);
+    for (k, &got) in values.iter().enumerate() {
+        let x = (k as f64 + 0.5) * 0.02 / 256.0;
+        let want = ((x - 0.001) / 0.003).clamp(0.0, 1.0);
+        assert!((got as f64 - want).abs() < 1e-6, "cell {k}: {got} vs {want}");
+    }
+    let png = dir.path().join("g.png");
+    mdtf_ok(&["preview", g.to_str().unwrap(), "-o", png.to_str().unwrap(), "--size", "64", "-q"]);
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    reader.next_frame(&mut buf).unwrap();
+    let orange = buf.chunks_exact(3).filter(|px| px[0] > 40 && px[0] > 2 * px[2]).count();
+    assert!(orange > 100, "the product shows in the preview: {orange} pixels");
+    // a factor over a channel the pack does not hold is refused by name
+    std::fs::write(&tf, r#"{"product": [{"channels": ["g"], "ranges": [[0, 1]], "ramp": [0, 1]}]}"#).unwrap();
+    let e = mdtf_err(&[
+        "pack",
+        "--profile",
+        "gaussian-tf",
+        mf.to_str().unwrap(),
+        "-o",
+        dir.path().join("h").to_str().unwrap(),
+        "--tf",
+        tf.to_str().unwrap(),
+        "-q",
+    ]);
+    assert!(
+        e.contains("product[0] reads channel 'g', which this pack does not hold (it holds: a, b, c, gnorm)"),
+        "{e}"
+    );
+}
+
 /// The NRRD payload of a 16-bit table as codes.
 fn u16_codes(path: &std::path::Path) -> Vec<u16> {
     mdtf_e2e::nrrd_payload(path).chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect()

@@ -530,14 +530,19 @@ header (.nhdr) that Teem, ParaView and 3D Slicer open; manifest.json says for ev
 value = offset + scale * code, its meaning, units and source. Signed channels (f2, normals) keep 0\n\
 exact. Ranges default to the data with Teem qbert's percentile clipping (g 0.002 %, f2 0.004 %).\n\n\
 Lookup tables (NRRD, uint8 and float, listed under \"luts\" in the manifest): slicer-3dtf writes tf3d\n\
-(256 x 128 x 8 over v, g, f2) and the separable tf2d (256 x 256) + tf_f2 (256) from --tf, or\n\
+(256 x 128 x 9 over v, g, f2) and the separable tf2d (256 x 256) + tf_f2 (256) from --tf, or\n\
 tf2d_default from the histogram volume; distance-tf writes alpha_d (256 over [0, d_max]) and, with\n\
 --tf, alpha_u; gaussian-tf writes igauss (128^2 over [-10, 10]^2, eq. 16) and erf_difference (256^2\n\
 over [-3.6, 3.6]^2), each also as uint16 with its decode in the manifest.\n\
 TF widgets: triangle (v0, width, g_low, g_high, shear), rectangle (centre, half_size, falloff:\n\
 constant|ellipsoid|ramp|tent|pyramid), gaussian (centre, k, alpha_max, triangular); each with\n\
 alpha/colour. gaussian-tf's primitives (gaussians.json) come from --tf, else --gtf-from-mask, else\n\
-the Gaussian-TF paper's default: a triangular GTF (width sigma' g) at the median of each field.\n\n\
+the Gaussian-TF paper's default: a triangular GTF (width sigma' g) at the median of each field.\n\
+A TF's \"product\" (any profile) is a separable TF over the pack's channels, opacity the product of\n\
+its factors, colour the first's: 2D widget factors ({\"channels\": [a, b], \"ranges\": [[..], [..]],\n\
+\"widgets\": [..]}) and 1D ramps ({\"channels\": [gnorm], \"ranges\": [[..]], \"ramp\": [begin, end]});\n\
+Kniss et al.'s meteorological TF (fields x a ramp over ||G||) or the peak-finding paper's 4D TF\n\
+v(a, b) mu(c, d). Each factor is a table product_k (256 per axis; peak-finding 1024).\n\n\
 Examples:\n  mdtf pack --profile slicer-3dtf ct.nii.gz -o pack/\n  mdtf pack --profile slicer-3dtf ct.nii.gz -o pack/ --tf tf.json\n  \
     mdtf pack --profile distance-tf sphere.nii.gz -o pack/ --range v=0:255\n  mdtf pack --schema")]
 pub struct PackArgs {
@@ -557,8 +562,8 @@ pub struct PackArgs {
     /// Derivative kernel when computing channels from a value volume.
     #[arg(long, value_name = "K")]
     pub kernel: Option<String>,
-    /// Transfer-function file (JSON: v_range, g_range, f2_range, boundary_emphasis, widgets) rasterised
-    /// into the profile's lookup tables. Without it, slicer-3dtf gets the default opacity of the
+    /// Transfer-function file (JSON: v_range, g_range, f2_range, boundary_emphasis, widgets, tf1d,
+    /// product) rasterised into the profile's lookup tables. Without it, slicer-3dtf gets the default opacity of the
     /// histogram stage (tent of the position function p(v, g)).
     #[arg(long, value_name = "TF.json")]
     pub tf: Option<PathBuf>,

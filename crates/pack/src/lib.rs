@@ -11,6 +11,7 @@ mod gaussian;
 mod lut;
 mod manifest;
 mod manifest_check;
+mod product_tf;
 mod profile;
 mod quantise;
 mod tables;
@@ -29,6 +30,7 @@ pub use manifest::{
     SCHEMA_ID, TextureEntry,
 };
 pub use manifest_check::ManifestError;
+pub use product_tf::{FactorShape, PRODUCT_MAX_CHANNELS, ProductFactor, ProductTf};
 pub use profile::{PROFILE_NAMES, Profile, TextureLayout, describe};
 pub use quantise::{Decode, Dtype, QuantiseError, decode_for};
 pub use tables::{PEAKS_PER_ENTRY, Tf1d, peak_table, peaks, preintegration_table, segment, segment_by_midpoint};

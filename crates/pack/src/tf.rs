@@ -24,6 +24,7 @@
 //! number of cells, so that on a symmetric range a cell centre is f'' = 0.
 
 use crate::gaussian::GaussianPrimitive;
+use crate::product_tf::{FactorShape, PRODUCT_MAX_CHANNELS, ProductFactor, ProductTf, check_factor};
 use serde::{Deserialize, Serialize};
 
 /// Rectangle falloff.
@@ -152,14 +153,18 @@ pub struct TfFile {
     pub widgets: Vec<PlacedWidget>,
     /// Optional 1D TF over v_range: (r, g, b, tau) samples, for the peak and pre-integration tables.
     pub tf1d: Option<Vec<[f64; 4]>>,
+    /// Optional separable product TF over named channels ([`crate::product_tf`]).
+    pub product: Option<ProductTf>,
 }
 
 /// The file's top level, widgets still raw so each can be checked against its own type.
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawTf {
-    v_range: [f64; 2],
-    g_range: [f64; 2],
+    #[serde(default)]
+    v_range: Option<[f64; 2]>,
+    #[serde(default)]
+    g_range: Option<[f64; 2]>,
     #[serde(default = "default_f2_range")]
     f2_range: [f64; 2],
     #[serde(default = "one")]
@@ -168,6 +173,20 @@ struct RawTf {
     widgets: Vec<serde_json::Value>,
     #[serde(default)]
     tf1d: Option<Vec<[f64; 4]>>,
+    #[serde(default)]
+    product: Option<Vec<RawFactor>>,
+}
+
+/// A product factor as written, its widgets still raw.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFactor {
+    channels: Vec<String>,
+    ranges: Vec<[f64; 2]>,
+    #[serde(default)]
+    widgets: Option<Vec<serde_json::Value>>,
+    #[serde(default)]
+    ramp: Option<[f64; 2]>,
 }
 
 fn default_f2_range() -> [f64; 2] {
@@ -179,6 +198,7 @@ fn one() -> f64 {
 }
 
 /// Parses a TF file; errors name the JSON path of the bad field.
+/// `v_range` and `g_range` may be left out only when the file has a `product`.
 pub fn parse_tf(text: &str) -> Result<TfFile, String> {
     let de = &mut serde_json::Deserializer::from_str(text);
     let raw: RawTf = serde_path_to_error::deserialize(de).map_err(|e| format!("at {}: {}", e.path(), e.inner()))?;
@@ -203,32 +223,24 @@ pub fn parse_tf(text: &str) -> Result<TfFile, String> {
         {
             return Err(format!("at widgets[{i}].boundary_emphasis: {e} is not in [0, 1]"));
         }
-        let kind = match w.as_object_mut().and_then(|o| o.remove("type")) {
-            Some(serde_json::Value::String(k)) => k,
-            _ => return Err(format!("at widgets[{i}].type: missing (triangle, rectangle or gaussian)")),
-        };
-        let field =
-            |e: serde_path_to_error::Error<serde_json::Error>| format!("at widgets[{i}].{}: {}", e.path(), e.inner());
-        let shape = match kind.as_str() {
-            "triangle" => Widget::Triangle(serde_path_to_error::deserialize(w).map_err(field)?),
-            "rectangle" => Widget::Rectangle(serde_path_to_error::deserialize(w).map_err(field)?),
-            "gaussian" => Widget::Gaussian(serde_path_to_error::deserialize(w).map_err(field)?),
-            other => {
-                return Err(format!(
-                    "at widgets[{i}].type: unknown widget '{other}' (triangle, rectangle or gaussian)"
-                ));
-            }
-        };
-        check_widget(&shape).map_err(|e| format!("at widgets[{i}].{e}"))?;
+        let shape = parse_widget(w, &format!("widgets[{i}]"))?;
         widgets.push(PlacedWidget { shape, f2, boundary_emphasis: emphasis });
     }
+    let product = raw.product.map(parse_product).transpose()?;
+    let range = |name: &str, r: Option<[f64; 2]>| match r {
+        Some(r) => Ok(r),
+        // a product-only file: the (v, g) tables are not written, any range does
+        None if product.is_some() => Ok([0.0, 1.0]),
+        None => Err(format!("at {name}: missing (give v_range and g_range, or a product)")),
+    };
     let tf = TfFile {
-        v_range: raw.v_range,
-        g_range: raw.g_range,
+        v_range: range("v_range", raw.v_range)?,
+        g_range: range("g_range", raw.g_range)?,
         f2_range: raw.f2_range,
         boundary_emphasis: raw.boundary_emphasis,
         widgets,
         tf1d: raw.tf1d,
+        product,
     };
     if tf.tf1d.as_ref().is_some_and(|t| t.len() < 2) {
         return Err("at tf1d: give at least 2 samples".into());
@@ -242,6 +254,52 @@ pub fn parse_tf(text: &str) -> Result<TfFile, String> {
         }
     }
     Ok(tf)
+}
+
+/// One widget object (`"type"` and that type's fields), checked; `at` is its JSON path for messages.
+fn parse_widget(mut w: serde_json::Value, at: &str) -> Result<Widget, String> {
+    let kind = match w.as_object_mut().and_then(|o| o.remove("type")) {
+        Some(serde_json::Value::String(k)) => k,
+        _ => return Err(format!("at {at}.type: missing (triangle, rectangle or gaussian)")),
+    };
+    let field = |e: serde_path_to_error::Error<serde_json::Error>| format!("at {at}.{}: {}", e.path(), e.inner());
+    let shape = match kind.as_str() {
+        "triangle" => Widget::Triangle(serde_path_to_error::deserialize(w).map_err(field)?),
+        "rectangle" => Widget::Rectangle(serde_path_to_error::deserialize(w).map_err(field)?),
+        "gaussian" => Widget::Gaussian(serde_path_to_error::deserialize(w).map_err(field)?),
+        other => return Err(format!("at {at}.type: unknown widget '{other}' (triangle, rectangle or gaussian)")),
+    };
+    check_widget(&shape).map_err(|e| format!("at {at}.{e}"))?;
+    Ok(shape)
+}
+
+/// The `product` list: each factor's widgets or ramp, checked, and at most
+/// [`PRODUCT_MAX_CHANNELS`] channels over all of them.
+fn parse_product(raw: Vec<RawFactor>) -> Result<ProductTf, String> {
+    let mut factors = Vec::with_capacity(raw.len());
+    for (k, f) in raw.into_iter().enumerate() {
+        let shape = match (f.widgets, f.ramp) {
+            (Some(ws), None) => FactorShape::Widgets(
+                ws.into_iter()
+                    .enumerate()
+                    .map(|(i, w)| parse_widget(w, &format!("product[{k}].widgets[{i}]")))
+                    .collect::<Result<_, _>>()?,
+            ),
+            (None, Some(r)) => FactorShape::Ramp(r),
+            _ => return Err(format!("at product[{k}]: give either widgets or ramp")),
+        };
+        let factor = ProductFactor { channels: f.channels, ranges: f.ranges, shape };
+        check_factor(&factor).map_err(|e| format!("at product[{k}].{e}"))?;
+        factors.push(factor);
+    }
+    if factors.is_empty() {
+        return Err("at product: give at least one factor".into());
+    }
+    let n: usize = factors.iter().map(|f| f.channels.len()).sum();
+    if n > PRODUCT_MAX_CHANNELS {
+        return Err(format!("at product: {n} channels in all; at most {PRODUCT_MAX_CHANNELS}"));
+    }
+    Ok(ProductTf { factors })
 }
 
 /// A widget's values that would draw nothing, or something else than meant

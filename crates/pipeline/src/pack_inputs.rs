@@ -49,7 +49,9 @@ pub fn ranges(
 /// already has it, else computed); distance-tf always gets `alpha_d` from
 /// `alpha` over [0, d_max], the paper's domain (the top of the distance's
 /// code range; without one, the largest distance measured), and `alpha_u`
-/// from `tf`; gaussian-tf gets the IGauss and erf-difference tables.
+/// from `tf`; gaussian-tf gets the IGauss and erf-difference tables; a
+/// product TF in `tf` gets one table per factor, `product_k`, whichever the
+/// profile (its channels must be among `chans`).
 pub fn luts(
     profile: Profile,
     tf: Option<&TfFile>,
@@ -113,7 +115,7 @@ pub fn luts(
             }
         }
         // the mesh pack's tables come from mdtf-tetra
-        Profile::ProjectedTetrahedra => {}
+        Profile::ProjectedTetrahedra => return Ok(out),
         Profile::GaussianTf | Profile::PeakFinding => {
             if profile == Profile::GaussianTf {
                 out.extend(crate::gaussians::analytic_integration_tables());
@@ -130,6 +132,13 @@ pub fn luts(
                 }
             }
         }
+    }
+    // a product TF over any of the pack's channels, each factor a table
+    // (peak finding's 2D factors at the 1024^2 its paper recommends)
+    if let Some(product) = tf.and_then(|t| t.product.as_ref()) {
+        let packed: Vec<String> = chans.iter().map(|(c, _)| c.clone()).collect();
+        let cells = if profile == Profile::PeakFinding { 1024 } else { 256 };
+        out.extend(product.luts(&packed, cells).map_err(HistogramError::BadAxis)?);
     }
     Ok(out)
 }

@@ -462,7 +462,9 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let previewable = match profile {
         Profile::Slicer3dtf | Profile::DistanceTf => true,
         Profile::GaussianTf => true,
-        Profile::PeakFinding => tf.as_ref().is_some_and(|t| t.tf1d.is_some() || !t.widgets.is_empty()),
+        Profile::PeakFinding => {
+            tf.as_ref().is_some_and(|t| t.tf1d.is_some() || !t.widgets.is_empty() || t.product.is_some())
+        }
         Profile::ProjectedTetrahedra => false,
     };
     if p.preview && previewable {

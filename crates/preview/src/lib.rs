@@ -1,7 +1,8 @@
 //! Preview of an mdtf pack: decode it from its manifest alone and ray-cast
 //! it the way its renderer family would (3D or 2D TF LUT for slicer-3dtf,
 //! alpha_u(v, g_hit) x alpha_d(d) for distance-tf, Gaussian primitives with
-//! a Riemann sum or the analytic segment integral for gaussian-tf), with Blinn-Phong shading
+//! a Riemann sum or the analytic segment integral for gaussian-tf; a product
+//! TF's factor tables, whatever the profile), with Blinn-Phong shading
 //! where the profile has normals. A check that the pack is complete, and a
 //! picture to look at before loading it into the real renderer.
 
@@ -37,6 +38,15 @@ pub enum PreviewError {
 /// peak-finding; otherwise both classify at the samples.
 pub fn classifier(pack: &LoadedPack, analytic: bool) -> Result<Classifier, PreviewError> {
     let table = |n: &str| pack.tables.get(n).cloned();
+    // a product TF (product_0, product_1, ...) classifies whatever the profile
+    let factors: Vec<Table> = (0..).map_while(|k| table(&format!("product_{k}"))).collect();
+    if !factors.is_empty() {
+        return Ok(Classifier::Product {
+            factors,
+            cells_per_sample: 2.0,
+            find_peaks: analytic && pack.manifest.profile == "peak-finding",
+        });
+    }
     match pack.manifest.profile.as_str() {
         "slicer-3dtf" => table("tf3d")
             .or_else(|| table("tf2d_default"))

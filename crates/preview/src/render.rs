@@ -103,21 +103,40 @@ pub enum Classifier {
         /// Search the chord between samples.
         find_peaks: bool,
     },
+    /// A separable product TF (Kniss et al. 9.5.2; the peak-finding paper's
+    /// section 5.3 4D TF v(f0, f1) mu(f2, f3)): the opacity is the product of
+    /// the factor tables' opacities, the colour the first factor's. With
+    /// `find_peaks`, chordal peak finding as [`Classifier::Chord`] does, on
+    /// the chord through all the factors' axes; else post-classification.
+    Product {
+        /// The factor tables (`product_0`, `product_1`, ...), each over its own channels.
+        factors: Vec<Table>,
+        /// Delta s, as for [`Classifier::Chord`].
+        cells_per_sample: f64,
+        /// Search the chord between samples.
+        find_peaks: bool,
+    },
 }
 
-/// The highest-opacity RGBA on the chord from `f0` to `f1` in `t`'s domain,
+/// The highest-opacity RGBA of `eval` on the chord from `f0` to `f1` in the
+/// domain of `axes` (a table's, or a product's axes one after another),
 /// sampled every `cells_per_sample` cells (both ends included), and the chord
 /// parameter s in [0, 1) of that peak when it is not at `f1` (the sample itself).
-fn chord_peak(t: &Table, f0: &[f32], f1: &[f32], cells_per_sample: f64) -> ([f32; 4], Option<f32>) {
-    let cells: f64 = t
-        .axes
+fn chord_peak(
+    axes: &[(String, usize, f64, f64)],
+    eval: &dyn Fn(&[f32]) -> [f32; 4],
+    f0: &[f32],
+    f1: &[f32],
+    cells_per_sample: f64,
+) -> ([f32; 4], Option<f32>) {
+    let cells: f64 = axes
         .iter()
         .enumerate()
         .map(|(k, (_, n, min, max))| ((f1[k] - f0[k]) as f64 / (max - min) * *n as f64).powi(2))
         .sum::<f64>()
         .sqrt();
     let samples = ((cells / cells_per_sample).ceil() as usize).clamp(1, 4096);
-    let mut best = lookup(t, f1);
+    let mut best = eval(f1);
     let mut at = None;
     let mut point = vec![0f32; f0.len()];
     for k in 0..samples {
@@ -125,7 +144,7 @@ fn chord_peak(t: &Table, f0: &[f32], f1: &[f32], cells_per_sample: f64) -> ([f32
         for (p, (a, b)) in point.iter_mut().zip(f0.iter().zip(f1)) {
             *p = a + s * (b - a);
         }
-        let rgba = lookup(t, &point);
+        let rgba = eval(&point);
         if rgba[3] > best[3] {
             best = rgba;
             at = Some(s);
@@ -149,6 +168,22 @@ fn composite_peaks(preintegration: &Table, pk: &[f32; 4]) -> ([f32; 3], f64) {
     }
     let colour = if alpha > 0.0 { rgb.map(|c| (c / alpha) as f32) } else { [0.0; 3] };
     (colour, alpha)
+}
+
+/// RGBA of a product TF at `coords` (each factor's coordinates one after
+/// another): the opacities multiply, the colour is the first factor's.
+fn product_lookup(factors: &[Table], coords: &[f32]) -> [f32; 4] {
+    let (mut at, mut out) = (0, [0.0, 0.0, 0.0, 1.0]);
+    for (k, t) in factors.iter().enumerate() {
+        let n = t.axes.len();
+        let rgba = lookup(t, &coords[at..at + n]);
+        at += n;
+        if k == 0 {
+            out[..3].copy_from_slice(&rgba[..3]);
+        }
+        out[3] *= rgba[3];
+    }
+    out
 }
 
 /// A pre-integration entry (colour premultiplied by its opacity) as colour and opacity.
@@ -421,6 +456,9 @@ pub fn channels_read(classifier: &Classifier) -> Vec<String> {
     let mut names: Vec<String> = SHADING_AND_PROFILE_CHANNELS.iter().map(|c| c.to_string()).collect();
     match classifier {
         Classifier::Lut(t) | Classifier::Chord { tf: t, .. } => names.extend(t.axes.iter().map(|(c, ..)| c.clone())),
+        Classifier::Product { factors, .. } => {
+            names.extend(factors.iter().flat_map(|t| t.axes.iter().map(|(c, ..)| c.clone())))
+        }
         Classifier::Gaussian { channels, .. } => names.extend(channels.iter().cloned()),
         Classifier::Distance { .. } | Classifier::Peak { .. } => {}
     }
@@ -466,6 +504,7 @@ fn render_impl(
     let dims = g.dims;
     let table_chans = match classifier {
         Classifier::Lut(t) | Classifier::Chord { tf: t, .. } => table_channels(t, channels),
+        Classifier::Product { factors, .. } => factors.iter().flat_map(|t| table_channels(t, channels)).collect(),
         Classifier::Gaussian { channels: names, .. } => names.iter().map(|c| data(c)).collect(),
         _ => Vec::new(),
     };
@@ -484,10 +523,37 @@ fn render_impl(
         Classifier::Distance { alpha_d, .. } if skip_empty => {
             distance.map(|d| visible_distance_blocks(alpha_d, d, dims))
         }
+        // a product is 0 wherever one factor is: a block shows only if every factor can there
+        Classifier::Product { factors, .. } if skip_empty && !factors.is_empty() => {
+            let mut at = 0;
+            let mut all: Option<(Vec<bool>, [usize; 3])> = None;
+            for t in factors {
+                let n = t.axes.len();
+                let (visible, nb) = visible_blocks(t, &table_chans[at..at + n], dims);
+                at += n;
+                all = Some(match all {
+                    None => (visible, nb),
+                    Some((acc, nb)) => (acc.iter().zip(&visible).map(|(a, b)| *a && *b).collect(), nb),
+                });
+            }
+            all
+        }
         _ => None,
     };
     // the chord from the previous sample leaves a block's value box unless both samples are in it
-    let chord_search = matches!(classifier, Classifier::Chord { find_peaks: true, .. });
+    let chord_search =
+        matches!(classifier, Classifier::Chord { find_peaks: true, .. } | Classifier::Product { find_peaks: true, .. });
+    // the chord classifiers' domain and TF: one table, or a product of tables
+    let chord_axes: Vec<(String, usize, f64, f64)> = match classifier {
+        Classifier::Chord { tf, .. } => tf.axes.clone(),
+        Classifier::Product { factors, .. } => factors.iter().flat_map(|t| t.axes.iter().cloned()).collect(),
+        _ => Vec::new(),
+    };
+    let chord_eval = |x: &[f32]| match classifier {
+        Classifier::Chord { tf, .. } => lookup(tf, x),
+        Classifier::Product { factors, .. } => product_lookup(factors, x),
+        _ => [0.0; 4],
+    };
     img.par_chunks_mut(cam.size * 3).enumerate().for_each(|(row, out)| {
         for col in 0..cam.size {
             let (u, v) = (
@@ -574,10 +640,12 @@ fn render_impl(
                             }
                         }
                     }
-                    Classifier::Chord { tf, cells_per_sample, find_peaks } => {
+                    Classifier::Chord { cells_per_sample, find_peaks, .. }
+                    | Classifier::Product { cells_per_sample, find_peaks, .. } => {
                         let f1_all = coords(&cell, &table_chans);
                         prev_coords = Some(f1_all);
-                        let f1 = &f1_all[..tf.axes.len()];
+                        let n_axes = chord_axes.len();
+                        let f1 = &f1_all[..n_axes];
                         let f0 = if *find_peaks {
                             prev_here
                                 .map(|(c, _, p0)| (prev_coords_here.unwrap_or_else(|| coords(&c, &table_chans)), p0))
@@ -586,10 +654,11 @@ fn render_impl(
                         };
                         let ([r, gr, b, a], peak) = match f0 {
                             Some((f0, p0)) => {
-                                let (rgba, s) = chord_peak(tf, &f0[..tf.axes.len()], f1, *cells_per_sample);
+                                let (rgba, s) =
+                                    chord_peak(&chord_axes, &chord_eval, &f0[..n_axes], f1, *cells_per_sample);
                                 (rgba, s.map(|s| (s as f64, p0)))
                             }
-                            None => (lookup(tf, f1), None),
+                            None => (chord_eval(f1), None),
                         };
                         match peak {
                             // a peak between the samples: an isosurface at R(t_peak), shaded
