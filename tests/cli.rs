@@ -490,8 +490,7 @@ fn pack_writes_a_manifest_that_decodes_v_and_names_missing_channels() {
         "v=0:255",
         "-q",
     ]);
-    let m: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(pack.join("manifest.json")).unwrap()).unwrap();
+    let m = mdtf_e2e::manifest(&pack);
     assert_eq!(m["schema"], "mdtf-pack/1");
     let v = m["channels"].as_array().unwrap().iter().find(|c| c["name"] == "v").unwrap();
     let (off, scale) = (v["decode"]["offset"].as_f64().unwrap(), v["decode"]["scale"].as_f64().unwrap());
@@ -564,8 +563,7 @@ fn pack_rasterises_a_tf_file_into_the_slicer_tables() {
         tf.to_str().unwrap(),
         "-q",
     ]);
-    let m: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(pack.join("manifest.json")).unwrap()).unwrap();
+    let m = mdtf_e2e::manifest(&pack);
     let names: Vec<&str> = m["luts"].as_array().unwrap().iter().map(|l| l["name"].as_str().unwrap()).collect();
     assert_eq!(names, ["tf3d", "tf2d", "tf_f2"]);
     let t3 = read(&pack.join("tf3d_f32.nrrd"), &ReadOptions::default()).unwrap();
@@ -610,8 +608,7 @@ fn gaussian_and_peak_finding_profiles_pack_fields_and_tables() {
         tf.to_str().unwrap(),
         "-q",
     ]);
-    let m: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(g.join("manifest.json")).unwrap()).unwrap();
+    let m = mdtf_e2e::manifest(&g);
     assert_eq!(m["textures"][0]["component_order"], serde_json::json!(["a", "b", "c", "gnorm"]));
     assert_eq!(m["textures"][0]["dtype"], "u16");
     let gaussians: serde_json::Value =
@@ -627,14 +624,12 @@ fn gaussian_and_peak_finding_profiles_pack_fields_and_tables() {
     assert!(values.contains(&75.0) && values.contains(&-1.0));
     let p = dir.path().join("p");
     mdtf_ok(&["pack", "--profile", "peak-finding", mf.to_str().unwrap(), "-o", p.to_str().unwrap(), "-q"]);
-    let m: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(p.join("manifest.json")).unwrap()).unwrap();
+    let m = mdtf_e2e::manifest(&p);
     assert_eq!(m["textures"][0]["component_order"], serde_json::json!(["a", "b", "c", "inv_g"]));
     // several fields: 1/g comes from ||G|| of all three (not from field a), and the manifest says so
     let inv_g = m["channels"].as_array().unwrap().iter().find(|c| c["name"] == "inv_g").unwrap().clone();
     assert!(inv_g["meaning"].as_str().unwrap().contains("sqrt(||Df^T Df||)"), "{}", inv_g["meaning"]);
-    let gm: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(g.join("manifest.json")).unwrap()).unwrap();
+    let gm = mdtf_e2e::manifest(&g);
     let gnorm = gm["channels"].as_array().unwrap().iter().find(|c| c["name"] == "gnorm").unwrap().clone();
     let decode =
         |c: &serde_json::Value| (c["decode"]["offset"].as_f64().unwrap(), c["decode"]["scale"].as_f64().unwrap());
@@ -688,8 +683,7 @@ fn a_product_tf_packs_one_table_per_factor_and_previews() {
         tf.to_str().unwrap(),
         "-q",
     ]);
-    let m: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(g.join("manifest.json")).unwrap()).unwrap();
+    let m = mdtf_e2e::manifest(&g);
     let luts = m["luts"].as_array().unwrap();
     let lut = |name: &str| luts.iter().find(|l| l["name"] == name).unwrap_or_else(|| panic!("no {name}")).clone();
     let (p0, p1) = (lut("product_0"), lut("product_1"));
@@ -760,8 +754,7 @@ fn gaussian_tf_packs_scalar_data_with_the_papers_tables_and_default_or_fitted_gt
     mdtf_ok(&["synth", "shells", "-o", s.to_str().unwrap(), "--size", "48", "--sigma", "1.5", "-q"]);
     let g = dir.path().join("g");
     mdtf_ok(&["pack", "--profile", "gaussian-tf", s.to_str().unwrap(), "-o", g.to_str().unwrap(), "-q"]);
-    let m: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(g.join("manifest.json")).unwrap()).unwrap();
+    let m = mdtf_e2e::manifest(&g);
     assert_eq!(m["textures"][0]["component_order"], serde_json::json!(["v", "g"]));
     // the paper's default: one triangular GTF, width 1, at the median v of the voxels with a gradient
     let gaussians: serde_json::Value =

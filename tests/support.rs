@@ -86,6 +86,13 @@ pub fn run_python(script: &str, args: &[&str]) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
+/// A pack's `manifest.json`, parsed.
+pub fn manifest(pack: &Path) -> serde_json::Value {
+    let text =
+        std::fs::read_to_string(pack.join("manifest.json")).unwrap_or_else(|e| panic!("{}: {e}", pack.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", pack.display()))
+}
+
 /// The samples of an NRRD file with an attached header written by mdtf (raw
 /// encoding: the header ends at the first blank line).
 pub fn nrrd_payload(path: &Path) -> Vec<u8> {

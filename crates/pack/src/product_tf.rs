@@ -21,7 +21,7 @@
 //! `product_k`, so a renderer multiplies at most four lookups per sample.
 
 use crate::lut::{Lut, LutAxis};
-use crate::tf::Widget;
+use crate::tf::{Widget, combine};
 
 /// At most this many channels over all factors (one RGBA texel of coordinates).
 pub const PRODUCT_MAX_CHANNELS: usize = 4;
@@ -59,20 +59,7 @@ impl ProductFactor {
     /// RGBA of this factor at `x` (one coordinate per channel); a ramp is white.
     pub fn eval(&self, x: &[f64]) -> [f64; 4] {
         match &self.shape {
-            FactorShape::Widgets(widgets) => {
-                let (mut a, mut c) = (0.0, [0.0; 3]);
-                for w in widgets {
-                    let (wa, wc) = w.eval(x[0], x[1]);
-                    a += wa;
-                    for k in 0..3 {
-                        c[k] += wa * wc[k];
-                    }
-                }
-                if a > 0.0 {
-                    c = c.map(|v| v / a);
-                }
-                [c[0], c[1], c[2], a.min(1.0)]
-            }
+            FactorShape::Widgets(widgets) => combine(widgets.iter().map(|w| w.eval(x[0], x[1]))),
             FactorShape::Ramp([begin, end]) => {
                 let t = if end != begin { ((x[0] - begin) / (end - begin)).clamp(0.0, 1.0) } else { 1.0 };
                 [1.0, 1.0, 1.0, t]

@@ -124,6 +124,22 @@ impl Widget {
     }
 }
 
+/// Widgets' (opacity, colour) at one point combined as the Gaussian-TF
+/// paper's eq. 3 does: opacities add (clamped to 1), colours are the opacity-weighted mean.
+pub(crate) fn combine(parts: impl Iterator<Item = (f64, [f64; 3])>) -> [f64; 4] {
+    let (mut a, mut c) = (0.0, [0.0; 3]);
+    for (wa, wc) in parts {
+        a += wa;
+        for k in 0..3 {
+            c[k] += wa * wc[k];
+        }
+    }
+    if a > 0.0 {
+        c = c.map(|x| x / a);
+    }
+    [c[0], c[1], c[2], a.min(1.0)]
+}
+
 /// A widget with its extent along f'' and its own boundary emphasis, as placed in a TF file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlacedWidget {
@@ -363,18 +379,7 @@ impl TfFile {
 
     /// Opacities add (clamped to 1), colours are the opacity-weighted mean (eq. 3).
     fn combine(&self, each: impl Fn(&PlacedWidget) -> (f64, [f64; 3])) -> [f64; 4] {
-        let (mut a, mut c) = (0.0, [0.0; 3]);
-        for w in &self.widgets {
-            let (wa, wc) = each(w);
-            a += wa;
-            for k in 0..3 {
-                c[k] += wa * wc[k];
-            }
-        }
-        if a > 0.0 {
-            c = c.map(|x| x / a);
-        }
-        [c[0], c[1], c[2], a.min(1.0)]
+        combine(self.widgets.iter().map(each))
     }
 
     /// The boundary-emphasis factor at f''.

@@ -9,6 +9,21 @@ use mdtf_preview::{Camera, Classifier, Table, render};
 use mdtf_volume::{Geometry, Volume};
 use std::collections::BTreeMap;
 
+/// The peak table and pre-integration table (segment of 1 voxel) of a tf1d
+/// over v in [0, 255] given as its JSON samples "[r, g, b, tau]".
+fn peak_tables(samples: &[String]) -> (Table, Table) {
+    let tf =
+        parse_tf(&format!(r#"{{"v_range": [0, 255], "g_range": [0, 1], "tf1d": [{}]}}"#, samples.join(","))).unwrap();
+    let mut luts = tf.table_luts(1.0);
+    let to_table = |l: mdtf_pack::Lut| Table {
+        axes: l.axes.iter().map(|a| (a.channel.clone(), a.size, a.min, a.max)).collect(),
+        components: l.components,
+        values: l.values,
+    };
+    let preintegration = to_table(luts.remove(1));
+    (to_table(luts.remove(0)), preintegration)
+}
+
 #[test]
 fn peak_finding_finds_the_feature_that_coarse_sampling_misses() {
     let v = erf_sphere(Geometry::new([48; 3], [1.0; 3]), 14.0, 2.0, 0.0, 255.0, None).volume();
@@ -28,16 +43,7 @@ fn peak_finding_finds_the_feature_that_coarse_sampling_misses() {
             )
         })
         .collect();
-    let tf =
-        parse_tf(&format!(r#"{{"v_range": [0, 255], "g_range": [0, 1], "tf1d": [{}]}}"#, samples.join(","))).unwrap();
-    let mut luts = tf.table_luts(1.0);
-    let to_table = |l: mdtf_pack::Lut| Table {
-        axes: l.axes.iter().map(|a| (a.channel.clone(), a.size, a.min, a.max)).collect(),
-        components: l.components,
-        values: l.values,
-    };
-    let preintegration = to_table(luts.remove(1));
-    let peak_table = to_table(luts.remove(0));
+    let (peak_table, preintegration) = peak_tables(&samples);
     let classify = |find_peaks| Classifier::Peak {
         peak_table: peak_table.clone(),
         preintegration: preintegration.clone(),
@@ -69,16 +75,7 @@ fn peak_finding_composites_every_peak_a_segment_crosses_in_ray_order() {
             _ => "[0, 0, 0, 0]".to_string(),
         })
         .collect();
-    let tf =
-        parse_tf(&format!(r#"{{"v_range": [0, 255], "g_range": [0, 1], "tf1d": [{}]}}"#, samples.join(","))).unwrap();
-    let mut luts = tf.table_luts(1.0);
-    let to_table = |l: mdtf_pack::Lut| Table {
-        axes: l.axes.iter().map(|a| (a.channel.clone(), a.size, a.min, a.max)).collect(),
-        components: l.components,
-        values: l.values,
-    };
-    let preintegration = to_table(luts.remove(1));
-    let peak_table = to_table(luts.remove(0));
+    let (peak_table, preintegration) = peak_tables(&samples);
     let img = render(
         &channels,
         &Classifier::Peak { peak_table, preintegration, find_peaks: true },
