@@ -702,10 +702,7 @@ fn a_product_tf_packs_one_table_per_factor_and_previews() {
     }
     let png = dir.path().join("g.png");
     mdtf_ok(&["preview", g.to_str().unwrap(), "-o", png.to_str().unwrap(), "--size", "64", "-q"]);
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
-    let mut reader = decoder.read_info().unwrap();
-    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
-    reader.next_frame(&mut buf).unwrap();
+    let (_, _, buf) = mdtf_e2e::read_rgb_png(&png);
     let orange = buf.chunks_exact(3).filter(|px| px[0] > 40 && px[0] > 2 * px[2]).count();
     assert!(orange > 100, "the product shows in the preview: {orange} pixels");
     // a factor over a channel the pack does not hold is refused by name
@@ -725,6 +722,63 @@ fn a_product_tf_packs_one_table_per_factor_and_previews() {
         e.contains("product[0] reads channel 'g', which this pack does not hold (it holds: a, b, c, gnorm)"),
         "{e}"
     );
+}
+
+#[test]
+fn the_default_slicer_tf_shows_every_boundary_the_histogram_volume_finds() {
+    // shells (outside 20 | enamel 230 | dentin 140 | pulp 60), clean and with noise and a smoothing kernel
+    let dir = tempfile::tempdir().unwrap();
+    for (name, noise, kernel) in [("clean", "0", "central4"), ("noisy", "3", "gauss:1.5")] {
+        let s = dir.path().join(format!("{name}.nii.gz"));
+        mdtf_ok(&["synth", "shells", "-o", s.to_str().unwrap(), "--size", "96", "--noise", noise, "-q"]);
+        let pipeline = dir.path().join(format!("{name}.toml"));
+        std::fs::write(
+            &pipeline,
+            format!(
+                "[derive]\nkernel = \"{kernel}\"\n[histogram]\njoint = true\nhvol = true\n[pack]\nprofile = \"slicer-3dtf\"\n"
+            ),
+        )
+        .unwrap();
+        let out = dir.path().join(name);
+        mdtf_ok(&[
+            "run",
+            pipeline.to_str().unwrap(),
+            "--input",
+            s.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "-q",
+        ]);
+        let report: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("run_report.json")).unwrap()).unwrap();
+        let found = report["boundaries"].as_array().unwrap().len();
+        assert_eq!(found, 3, "{name}: {}", report["boundaries"]);
+        let m = mdtf_e2e::manifest(&out.join("pack"));
+        let lut = m["luts"].as_array().unwrap().iter().find(|l| l["name"] == "tf2d_default").unwrap().clone();
+        assert!(lut["meaning"].as_str().unwrap().contains("surface opacity"), "{}", lut["meaning"]);
+        // every foreground pixel goes to the boundary colour nearest its hue
+        let (_, _, px) = mdtf_e2e::read_rgb_png(&out.join("preview.png"));
+        let palette = &mdtf_pack::BOUNDARY_PALETTE[..3];
+        let mut per = [0usize; 3];
+        let mut foreground = 0;
+        for p in px.chunks_exact(3) {
+            let c = [p[0] as f64, p[1] as f64, p[2] as f64];
+            let norm = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+            if norm < 30.0 {
+                continue;
+            }
+            foreground += 1;
+            let cosine = |q: &[f64; 3]| {
+                (c[0] * q[0] + c[1] * q[1] + c[2] * q[2]) / (norm * (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt())
+            };
+            let k = (0..3).max_by(|&a, &b| cosine(&palette[a]).total_cmp(&cosine(&palette[b]))).unwrap();
+            per[k] += 1;
+        }
+        eprintln!("{name}: {foreground} foreground pixels, per boundary colour {per:?}");
+        for (k, n) in per.iter().enumerate() {
+            assert!(*n as f64 >= 0.02 * foreground as f64, "{name}: boundary {k} shows in {n} of {foreground} pixels");
+        }
+    }
 }
 
 /// The NRRD payload of a 16-bit table as codes.

@@ -531,7 +531,7 @@ value = offset + scale * code, its meaning, units and source. Signed channels (f
 exact. Ranges default to the data with Teem qbert's percentile clipping (g 0.002 %, f2 0.004 %).\n\n\
 Lookup tables (NRRD, uint8 and float, listed under \"luts\" in the manifest): slicer-3dtf writes tf3d\n\
 (256 x 128 x 9 over v, g, f2) and the separable tf2d (256 x 256) + tf_f2 (256) from --tf, or\n\
-tf2d_default from the histogram volume; distance-tf writes alpha_d (256 over [0, d_max]) and, with\n\
+tf2d_default (the boundaries found in the histogram volume, coloured); distance-tf writes alpha_d (256 over [0, d_max]) and, with\n\
 --tf, alpha_u; gaussian-tf writes igauss (128^2 over [-10, 10]^2, eq. 16) and erf_difference (256^2\n\
 over [-3.6, 3.6]^2), each also as uint16 with its decode in the manifest.\n\
 TF widgets: triangle (v0, width, g_low, g_high, shear), rectangle (centre, half_size, falloff:\n\
@@ -563,8 +563,9 @@ pub struct PackArgs {
     #[arg(long, value_name = "K")]
     pub kernel: Option<String>,
     /// Transfer-function file (JSON: v_range, g_range, f2_range, boundary_emphasis, widgets, tf1d,
-    /// product) rasterised into the profile's lookup tables. Without it, slicer-3dtf gets the default opacity of the
-    /// histogram stage (tent of the position function p(v, g)).
+    /// product) rasterised into the profile's lookup tables. Without it, slicer-3dtf gets a default TF
+    /// from the boundaries found in the histogram volume: each its own colour on its arch in (v, g),
+    /// opacity the tent of p(v, g), larger surfaces more transparent so the ones behind show.
     #[arg(long, value_name = "TF.json")]
     pub tf: Option<PathBuf>,
     /// Storage type of every texture instead of the profile's: u8, u16, f16 (IEEE half bits; NRRD

@@ -56,7 +56,8 @@ pub fn write_stretched(dir: &Path, normal: &Histogram, stretched: &Histogram, sc
     write_png(&dir.join("normal_vs_stretched.png"), &both, &text)
 }
 
-/// Writes `hvol.nrrd`, `position.nrrd`, `opacity.{nrrd,png}`, `hvol_per_v.csv` and `hvol.json`.
+/// Writes `hvol.nrrd`, `position.nrrd`, `opacity.{nrrd,png}`, `hvol_per_v.csv` and `hvol.json`
+/// (with the boundaries [`crate::detect_boundaries`] finds).
 pub fn write_hvol(dir: &Path, hv: &HistogramVolume) -> Result<(), VolumeError> {
     write_counts_nrrd(&dir.join("hvol.nrrd"), &table_axes(&hv.hist.axes), &hv.hist.counts)?;
     let vg = table_axes(&hv.vg_axes);
@@ -81,6 +82,7 @@ pub fn write_hvol(dir: &Path, hv: &HistogramVolume) -> Result<(), VolumeError> {
         &serde_json::json!({
             "sigma": hv.sigma, "g_thresh": hv.g_thresh, "tent_width": hv.tent_width,
             "axes": hv.hist.axes, "sigma_formula": "2 max g(v) / (sqrt(e) (max h(v) - min h(v)))",
+            "boundaries": crate::boundaries::detect_boundaries(hv),
         }),
     )
 }

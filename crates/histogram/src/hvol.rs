@@ -4,7 +4,8 @@
 //!
 //! * sigma = 2 max_v g(v) / (sqrt(e) (max_v h(v) - min_v h(v))) with g(v),
 //!   h(v) the mean g and f'' of the voxels in v bin (Teem's corrected form;
-//!   exact for an ideal erf boundary).
+//!   exact for an ideal erf boundary), over the v bins holding at least
+//!   [`SIGMA_MIN_SHARE`] of the voxels.
 //! * p(v, g) = -sigma^2 h(v, g) / max(g - g_thresh, 0), with h(v, g) and g
 //!   the mean f'' and mean g of the voxels in the (v, g) bin (using the mean
 //!   g rather than the bin centre removes the bin-width bias); 0 in empty
@@ -59,6 +60,8 @@ pub struct HistogramVolume {
     pub g_thresh: f64,
     /// Tent half-width used by the opacity.
     pub tent_width: f64,
+    /// The opacity at p = 0 (the tent's peak).
+    pub max_opacity: f64,
     /// The (v, g) axes of the 2D tables below (first axis fastest).
     pub vg_axes: [Axis; 2],
     /// Voxels per (v, g) bin.
@@ -68,6 +71,10 @@ pub struct HistogramVolume {
     /// Default opacity alpha(v, g) in [0, 1].
     pub opacity: Vec<f32>,
 }
+
+/// Least share of the voxels a v bin must hold for its mean g and f'' to
+/// enter sigma's estimate.
+pub const SIGMA_MIN_SHARE: f64 = 1e-4;
 
 /// Number of fixed parts for floating-point sums: fixed so that the sums do
 /// not depend on the thread count.
@@ -231,7 +238,12 @@ fn derive_tables(
     let mean = |sum: f64, c: u64| if c > 0 { sum / c as f64 } else { 0.0 };
     let mean_g_v: Vec<f64> = (0..nv).map(|b| mean(g_v[b], c_v[b])).collect();
     let mean_h_v: Vec<f64> = (0..nv).map(|b| mean(h_v[b], c_v[b])).collect();
-    let filled = || (0..nv).filter(|&b| c_v[b] > 0);
+    // sigma reads the extremes of the per-v means: v bins with a handful of
+    // voxels (the tails of noise, whose few voxels are its peaks and pits,
+    // with large |f''|) would set them, so bins below SIGMA_MIN_SHARE of the voxels do not count
+    let counted: u64 = c_v.iter().sum();
+    let least = ((SIGMA_MIN_SHARE * counted as f64).ceil() as u64).max(1);
+    let filled = || (0..nv).filter(|&b| c_v[b] >= least);
     let max_g = filled().map(|b| mean_g_v[b]).fold(0.0, f64::max);
     let max_h = filled().map(|b| mean_h_v[b]).fold(f64::NEG_INFINITY, f64::max);
     let min_h = filled().map(|b| mean_h_v[b]).fold(f64::INFINITY, f64::min);
@@ -273,6 +285,7 @@ fn derive_tables(
         sigma,
         g_thresh,
         tent_width,
+        max_opacity: params.max_opacity,
         vg_axes: [av, ag],
         count_vg: sums.c_vg,
         position,

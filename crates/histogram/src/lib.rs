@@ -7,6 +7,7 @@
 //! not depend on the thread count. Bin rule: [`Axis::bin`].
 
 mod axis;
+mod boundaries;
 mod count;
 mod files;
 mod hvol;
@@ -16,6 +17,7 @@ mod percentile;
 mod rgb;
 
 pub use axis::{Axis, AxisSpec, DEFAULT_BINS, MAX_INTEGER_BINS};
+pub use boundaries::{CORE_HALF_WIDTH, DetectedBoundary, MIN_CORE_SHARE, MIN_RISE_CORRELATION, detect_boundaries};
 pub use count::{Histogram, count};
 pub use files::{write_histogram, write_hvol, write_stretched};
 pub use hvol::{HVOL_PARTS, HistogramVolume, HvolAccumulator, HvolAxes, HvolParams, histogram_volume};

@@ -7,6 +7,7 @@
 //! value = offset + scale * code; signed channels (f'', normals) keep 0
 //! exactly representable.
 
+mod boundary_tf;
 mod gaussian;
 mod lut;
 mod manifest;
@@ -20,6 +21,10 @@ mod tf;
 mod widget_support;
 mod writer;
 
+pub use boundary_tf::{
+    ARCH_RATIO, BOUNDARY_PALETTE, BoundaryArch, MAX_BOUNDARY_OPACITY, MIN_BOUNDARY_OPACITY, Tent, boundary_opacities,
+    boundary_tf,
+};
 pub use gaussian::{
     ERF_DOMAIN, ERF_SIZE, FitError, GaussianPrimitive, IGAUSS_DOMAIN, IGAUSS_SIZE, erf_difference,
     erf_difference_table, igauss, igauss_table,

@@ -3,8 +3,8 @@
 //! file or the defaults (the histogram volume's opacity, a distance alpha map).
 
 use mdtf_boundary::AlphaMap;
-use mdtf_histogram::{AxisSpec, HistogramError, HistogramVolume, HvolParams, histogram_volume};
-use mdtf_pack::{Lut, LutAxis, Profile, TfFile};
+use mdtf_histogram::{AxisSpec, HistogramError, HistogramVolume, HvolParams, detect_boundaries, histogram_volume};
+use mdtf_pack::{BoundaryArch, Lut, LutAxis, Profile, Tent, TfFile, boundary_tf};
 use mdtf_volume::Volume;
 use std::collections::BTreeMap;
 
@@ -44,9 +44,10 @@ pub fn ranges(
     Ok(out)
 }
 
-/// The lookup tables of `profile`: from `tf` when given; otherwise the
-/// histogram volume's default opacity (slicer-3dtf; `hvol` when the caller
-/// already has it, else computed); distance-tf always gets `alpha_d` from
+/// The lookup tables of `profile`: from `tf` when given; otherwise for
+/// slicer-3dtf the default TF of the boundaries found in the histogram
+/// volume (`hvol` when the caller already has it, else computed; see
+/// [`mdtf_pack::boundary_tf`]), or its plain tent opacity where none is found; distance-tf always gets `alpha_d` from
 /// `alpha` over [0, d_max], the paper's domain (the top of the distance's
 /// code range; without one, the largest distance measured), and `alpha_u`
 /// from `tf`; gaussian-tf gets the IGauss and erf-difference tables; a
@@ -78,21 +79,41 @@ pub fn luts(
                     }
                 };
                 let [av, ag] = &hv.vg_axes;
-                out.push(Lut {
-                    name: "tf2d_default".into(),
-                    meaning: format!(
-                        "opacity over (v, g): tent of half-width {:.4} around p(v, g) = 0 (Kindlmann-Durkin, sigma {:.4}); colour white",
-                        hv.tent_width, hv.sigma
-                    ),
-                    axes: vec![
-                        LutAxis { channel: "v".into(), size: av.bins, min: av.min, max: av.max },
-                        LutAxis { channel: "g".into(), size: ag.bins, min: ag.min, max: ag.max },
-                    ],
-                    components: 4,
-                    values: hv.opacity.iter().flat_map(|&a| [1.0, 1.0, 1.0, a]).collect(),
-                    unit_range: true,
-                    u16_range: None,
-                });
+                let axis = |c: &str, a: &mdtf_histogram::Axis| LutAxis {
+                    channel: c.into(),
+                    size: a.bins,
+                    min: a.min,
+                    max: a.max,
+                };
+                let (v_axis, g_axis) = (axis("v", av), axis("g", ag));
+                let arches: Vec<BoundaryArch> = detect_boundaries(hv)
+                    .into_iter()
+                    .map(|b| BoundaryArch {
+                        v_low: b.v_low,
+                        v_high: b.v_high,
+                        g_peak: b.g_peak,
+                        core_voxels: b.core_voxels,
+                    })
+                    .collect();
+                if arches.is_empty() {
+                    out.push(Lut {
+                        name: "tf2d_default".into(),
+                        meaning: format!(
+                            "opacity over (v, g): tent of half-width {:.4} around p(v, g) = 0 (Kindlmann-Durkin, sigma {:.4}); colour white (no boundary found to colour)",
+                            hv.tent_width, hv.sigma
+                        ),
+                        axes: vec![v_axis, g_axis],
+                        components: 4,
+                        values: hv.opacity.iter().flat_map(|&a| [1.0, 1.0, 1.0, a]).collect(),
+                        unit_range: true,
+                        u16_range: None,
+                    });
+                } else {
+                    let spacing = chans.first().map_or(1.0, |(_, v)| v.geometry.min_spacing());
+                    let tent =
+                        Tent { opacity: &hv.opacity, peak: hv.max_opacity, half_width_voxels: hv.tent_width / spacing };
+                    out.push(boundary_tf(&v_axis, &g_axis, tent, &arches));
+                }
             }
         },
         Profile::DistanceTf => {

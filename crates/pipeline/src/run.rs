@@ -68,6 +68,10 @@ pub struct RunReport {
     /// The boundary tracing's thresholds and counts, when it ran.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub boundary: Option<BoundarySummary>,
+    /// The boundaries found in the histogram volume, when it was built
+    /// (`[histogram] hvol`): the materials they separate and their peak g.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub boundaries: Vec<mdtf_histogram::DetectedBoundary>,
     /// The stages, in order.
     pub stages: Vec<StageReport>,
     /// Total wall time, seconds.
@@ -317,6 +321,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
 
     // histograms (the histogram volume is kept for the pack's default opacity)
     let mut hvol_kept = None;
+    let mut boundaries = Vec::new();
     if let Some(h) = &p.histogram {
         on_stage("histogram");
         let t = Instant::now();
@@ -363,6 +368,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
                 .map_err(|e| err(e.to_string()))?;
             write_hvol(&hdir, &hv).map_err(|e| err(e.to_string()))?;
             outputs.push("histogram/opacity.png".into());
+            boundaries = mdtf_histogram::detect_boundaries(&hv);
             // the pack needs only the 2D opacity: free the 3D counts (64 MiB at 256^3) now
             let mut hv = hv;
             hv.hist.counts = Vec::new();
@@ -498,6 +504,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         dims: geo.dims,
         warnings,
         boundary,
+        boundaries,
         stages,
         total_seconds: start.elapsed().as_secs_f64(),
     };

@@ -1,0 +1,80 @@
+//! Boundary detection in the histogram volume against phantoms whose
+//! boundaries are known: the three of the shells (tooth) phantom, the one of
+//! the erf sphere, none in pure noise.
+
+use mdtf_datagen::{RadialPhantom, add_gaussian_noise, erf_sphere};
+use mdtf_derive::DeriveParams;
+use mdtf_histogram::{DetectedBoundary, HvolParams, detect_boundaries, histogram_volume_derived};
+use mdtf_volume::{Geometry, MultiField, Volume};
+use std::f64::consts::PI;
+
+fn detect(v: Volume) -> Vec<DetectedBoundary> {
+    detect_with(v, &DeriveParams::default())
+}
+
+fn detect_with(v: Volume, derive: &DeriveParams) -> Vec<DetectedBoundary> {
+    let hv = histogram_volume_derived(&MultiField::from(v), derive, &HvolParams::default()).unwrap();
+    detect_boundaries(&hv)
+}
+
+/// The boundary of `found` nearest in centre to the one between `a` and `b`.
+fn nearest(found: &[DetectedBoundary], a: f64, b: f64) -> &DetectedBoundary {
+    let centre = (a + b) / 2.0;
+    found.iter().min_by(|x, y| (x.v_centre - centre).abs().total_cmp(&(y.v_centre - centre).abs())).unwrap()
+}
+
+#[test]
+fn the_shells_three_boundaries_are_found_with_their_materials_and_peak_g() {
+    let sigma = 2.0;
+    let phantom = RadialPhantom::tooth(Geometry::new([96; 3], [1.0; 3]), sigma);
+    let found = detect(phantom.volume());
+    eprintln!("{found:#?}");
+    assert_eq!(found.len(), 3, "{found:?}");
+    // outside 20 | enamel 230 | dentin 140 | pulp 60
+    for (a, b) in [(20.0, 230.0), (140.0, 230.0), (60.0, 140.0)] {
+        let f = nearest(&found, a, b);
+        let g_true = (b - a) / ((2.0 * PI).sqrt() * sigma);
+        // the materials within the value span of one sigma of the boundary (its g_peak x sigma)
+        let tol = g_true * sigma;
+        assert!((f.v_low - a).abs() <= tol && (f.v_high - b).abs() <= tol, "{a}..{b}: {f:?} (tolerance {tol})");
+        assert!((f.g_peak - g_true).abs() <= 0.05 * g_true, "{a}..{b}: g {} vs {g_true}", f.g_peak);
+    }
+}
+
+#[test]
+fn the_shells_keep_three_boundaries_under_noise_measured_with_a_smoothing_kernel() {
+    // noise of sd 4 swamps f'' from central differences (and with it sigma's
+    // estimate); a Gaussian derivative kernel, as one uses on noisy scans, does not
+    let mut v = RadialPhantom::tooth(Geometry::new([96; 3], [1.0; 3]), 2.0).volume();
+    add_gaussian_noise(&mut v, 4.0, 5);
+    let found = detect_with(v, &DeriveParams { kernel: "gauss:1.5".parse().unwrap(), ..Default::default() });
+    assert_eq!(found.len(), 3, "{found:?}");
+    for (a, b) in [(20.0, 230.0), (140.0, 230.0), (60.0, 140.0)] {
+        let f = nearest(&found, a, b);
+        assert!((f.v_centre - (a + b) / 2.0).abs() < 0.15 * (b - a), "{a}..{b}: {f:?}");
+    }
+}
+
+#[test]
+fn the_erf_sphere_has_exactly_one_boundary() {
+    let sigma = 3.0;
+    let v = erf_sphere(Geometry::new([80; 3], [1.0; 3]), 24.0, sigma, 0.0, 255.0, None).volume();
+    let found = detect(v);
+    assert_eq!(found.len(), 1, "{found:?}");
+    let g_true = 255.0 / ((2.0 * PI).sqrt() * sigma);
+    assert!((found[0].g_peak - g_true).abs() <= 0.05 * g_true, "{:?} vs {g_true}", found[0]);
+    assert!((found[0].v_centre - 127.5).abs() <= 0.05 * 255.0, "{:?}", found[0]);
+}
+
+#[test]
+fn pure_noise_has_no_boundary_and_a_noisy_sphere_keeps_its_one() {
+    let g = Geometry::new([64; 3], [1.0; 3]);
+    let mut noise = Volume::new(g.clone(), ndarray::Array3::from_elem(g.shape(), 100.0)).unwrap();
+    add_gaussian_noise(&mut noise, 10.0, 7);
+    let found = detect(noise);
+    assert!(found.is_empty(), "{found:?}");
+    let mut sphere = erf_sphere(g, 20.0, 2.0, 0.0, 255.0, None).volume();
+    add_gaussian_noise(&mut sphere, 5.0, 11);
+    let found = detect(sphere);
+    assert_eq!(found.len(), 1, "{found:?}");
+}

@@ -1,0 +1,206 @@
+//! The default 2D transfer function from the boundaries found in the data:
+//! each boundary its own colour, and opacities that let the surfaces
+//! behind a large one show through.
+//!
+//! Kindlmann and Durkin's semi-automatic opacity (a tent of the position
+//! function p(v, g) around p = 0) marks every boundary at once, all alike:
+//! on a head CT the skin, met first by every ray, hides the bone. Here each
+//! (v, g) cell is given to the boundary whose arch it lies on, the arch of
+//! a boundary between v_low and v_high with peak gradient G being
+//! g(v) = G exp(-x^2 / 2 sigma^2) at v = v_low + (v_high - v_low) Phi(x / sigma):
+//! * a cell belongs to the boundary whose v span holds its v and whose arch
+//!   g(v) is nearest its g by ratio, if that ratio is within a factor of
+//!   [`ARCH_RATIO`]; other cells stay transparent;
+//! * boundary k's surface opacity, what a ray crossing it accumulates, is
+//!   A_k = [`MAX_BOUNDARY_OPACITY`] n_min / n_k, at least
+//!   [`MIN_BOUNDARY_OPACITY`], with n_k the voxels in its core: a larger
+//!   surface (most often an outer one, such as the skin) is more
+//!   transparent, the smallest is the most opaque;
+//! * a cell's opacity, per voxel of path as the renderers take it, is
+//!   a_k = 1 - (1 - A_k)^(1 / w) times the tent of p (the histogram
+//!   volume's default opacity divided by its peak), w being the tent's
+//!   half-width in voxels: a ray crossing the boundary head-on spends about
+//!   w voxels' worth of full tent in it, so it accumulates about A_k;
+//! * its colour is [`BOUNDARY_PALETTE`]'s k-th, boundaries in the order given (strongest first).
+
+use crate::lut::{Lut, LutAxis};
+
+/// A boundary's arch in the (v, g) plane, as detected in the histogram volume.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BoundaryArch {
+    /// Value of the material on the low side.
+    pub v_low: f64,
+    /// Value of the material on the high side.
+    pub v_high: f64,
+    /// Peak gradient magnitude G, value units per world unit.
+    pub g_peak: f64,
+    /// Voxels in its core (what sets its opacity).
+    pub core_voxels: u64,
+}
+
+/// Colours of the detected boundaries, in order (then repeated).
+pub const BOUNDARY_PALETTE: [[f64; 3]; 6] =
+    [[1.0, 0.55, 0.1], [0.2, 0.55, 1.0], [0.3, 0.9, 0.3], [0.9, 0.3, 0.8], [1.0, 0.9, 0.2], [0.2, 0.9, 0.9]];
+/// Surface opacity of the boundary with the fewest core voxels (nearly opaque).
+pub const MAX_BOUNDARY_OPACITY: f64 = 0.95;
+/// Least opacity of any boundary.
+pub const MIN_BOUNDARY_OPACITY: f64 = 0.1;
+/// How far (as a ratio) a cell's g may be from a boundary's arch to belong to it.
+pub const ARCH_RATIO: f64 = 2.0;
+
+impl BoundaryArch {
+    /// The arch's g at value `v` (None outside the open span (v_low, v_high)).
+    pub fn g_at(&self, v: f64) -> Option<f64> {
+        let t = (v - self.v_low) / (self.v_high - self.v_low);
+        if !(t > 0.0 && t < 1.0) {
+            return None;
+        }
+        // g / G = exp(-z^2 / 2) with Phi(z) = t
+        let z = normal_quantile(t);
+        Some(self.g_peak * (-z * z / 2.0).exp())
+    }
+}
+
+/// The surface opacity A_k of each boundary (see the module docs).
+pub fn boundary_opacities(arches: &[BoundaryArch]) -> Vec<f64> {
+    let least = arches.iter().map(|a| a.core_voxels.max(1)).min().unwrap_or(1) as f64;
+    arches
+        .iter()
+        .map(|a| (MAX_BOUNDARY_OPACITY * least / a.core_voxels.max(1) as f64).max(MIN_BOUNDARY_OPACITY))
+        .collect()
+}
+
+/// The tent and its size, as the histogram volume gives them.
+#[derive(Debug, Clone, Copy)]
+pub struct Tent<'a> {
+    /// The histogram volume's opacity over (v, g), first axis fastest.
+    pub opacity: &'a [f32],
+    /// Its value at p = 0.
+    pub peak: f64,
+    /// Its half-width in voxels (the tent width over the smallest spacing).
+    pub half_width_voxels: f64,
+}
+
+/// `tf2d_default` over (`v`, `g`): see the module docs.
+pub fn boundary_tf(v: &LutAxis, g: &LutAxis, tent: Tent, arches: &[BoundaryArch]) -> Lut {
+    let opacity = boundary_opacities(arches);
+    let w = tent.half_width_voxels.max(1e-3);
+    let per_voxel: Vec<f64> = opacity.iter().map(|a| 1.0 - (1.0 - a).powf(1.0 / w)).collect();
+    let centre = |a: &LutAxis, i: usize| a.min + (i as f64 + 0.5) * (a.max - a.min) / a.size as f64;
+    // each arch's g at every v cell centre, once
+    let arch_g: Vec<Vec<Option<f64>>> =
+        (0..v.size).map(|i| arches.iter().map(|a| a.g_at(centre(v, i))).collect()).collect();
+    let mut values = Vec::with_capacity(4 * v.size * g.size);
+    for j in 0..g.size {
+        let gc = centre(g, j);
+        for (i, column) in arch_g.iter().enumerate() {
+            let owner = column
+                .iter()
+                .enumerate()
+                .filter_map(|(k, ga)| ga.map(|ga| (k, (gc / ga).ln().abs())))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .filter(|(_, miss)| *miss <= ARCH_RATIO.ln());
+            match owner {
+                Some((k, _)) if tent.peak > 0.0 => {
+                    let c = BOUNDARY_PALETTE[k % BOUNDARY_PALETTE.len()];
+                    let a = per_voxel[k] * (tent.opacity[j * v.size + i] as f64 / tent.peak).clamp(0.0, 1.0);
+                    values.extend([c[0] as f32, c[1] as f32, c[2] as f32, a as f32]);
+                }
+                _ => values.extend([0.0; 4]),
+            }
+        }
+    }
+    let listed: Vec<String> = arches
+        .iter()
+        .zip(&opacity)
+        .enumerate()
+        .map(|(k, (a, o))| {
+            let c = BOUNDARY_PALETTE[k % BOUNDARY_PALETTE.len()];
+            format!(
+                "{:.4}..{:.4} (peak g {:.4}) colour [{}, {}, {}] surface opacity {o:.3}",
+                a.v_low, a.v_high, a.g_peak, c[0], c[1], c[2]
+            )
+        })
+        .collect();
+    Lut {
+        name: "tf2d_default".into(),
+        meaning: format!(
+            "RGBA over (v, g) from the boundaries found in the histogram volume: each cell on a boundary's arch \
+             has its colour and opacity times the tent of p(v, g) (Kindlmann-Durkin); boundaries: {}",
+            listed.join("; ")
+        ),
+        axes: vec![v.clone(), g.clone()],
+        components: 4,
+        values,
+        unit_range: true,
+        u16_range: None,
+    }
+}
+
+/// z with Phi(z) = t for t in (0, 1), Phi the standard normal CDF, by
+/// bisection (Phi is monotone; 64 halvings of [-40, 40] reach f64's resolution).
+fn normal_quantile(t: f64) -> f64 {
+    let (mut lo, mut hi) = (-40.0f64, 40.0f64);
+    for _ in 0..64 {
+        let mid = 0.5 * (lo + hi);
+        if 0.5 * libm::erfc(-mid / std::f64::consts::SQRT_2) < t {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_arch_is_the_erf_boundarys_g_as_a_function_of_v() {
+        // an erf boundary from 20 to 230, sigma 2: at distance x, v = 20 + 210 Phi(x / 2), g = G exp(-x^2 / 8)
+        let arch = BoundaryArch {
+            v_low: 20.0,
+            v_high: 230.0,
+            g_peak: 210.0 / (2.0 * (2.0 * std::f64::consts::PI).sqrt()),
+            core_voxels: 1,
+        };
+        for x in [-3.0f64, -1.0, -0.2, 0.0, 0.7, 2.5] {
+            let phi = 0.5 * (1.0 + libm::erf(x / 2.0 / std::f64::consts::SQRT_2));
+            let v = 20.0 + 210.0 * phi;
+            let want = arch.g_peak * (-x * x / 8.0).exp();
+            let got = arch.g_at(v).unwrap();
+            assert!((got - want).abs() < 1e-9 * arch.g_peak, "x {x}: {got} vs {want}");
+        }
+        assert_eq!((arch.g_at(20.0), arch.g_at(231.0)), (None, None));
+    }
+
+    #[test]
+    fn cells_go_to_the_nearest_arch_with_its_colour_and_the_larger_surface_is_more_transparent() {
+        let arches = [
+            BoundaryArch { v_low: 0.0, v_high: 200.0, g_peak: 40.0, core_voxels: 40_000 },
+            BoundaryArch { v_low: 50.0, v_high: 150.0, g_peak: 10.0, core_voxels: 10_000 },
+        ];
+        assert_eq!(boundary_opacities(&arches), vec![0.95 / 4.0, 0.95]);
+        let (v, g) = (
+            LutAxis { channel: "v".into(), size: 100, min: 0.0, max: 200.0 },
+            LutAxis { channel: "g".into(), size: 50, min: 0.0, max: 50.0 },
+        );
+        // a tent at its peak everywhere, 2 voxels wide: per voxel 1 - (1 - A)^(1/2)
+        let tent = vec![0.5f32; 100 * 50];
+        let lut = boundary_tf(&v, &g, Tent { opacity: &tent, peak: 0.5, half_width_voxels: 2.0 }, &arches);
+        let (a0, a1) = ((1.0 - (1.0 - 0.95 / 4.0f64).sqrt()) as f32, (1.0 - 0.05f64.sqrt()) as f32);
+        let at = |i: usize, j: usize| &lut.values[4 * (j * 100 + i)..4 * (j * 100 + i) + 4];
+        // v = 101 (cell 50), g = 39.5 (cell 39): on the first arch (g 40 there)
+        assert_eq!(at(50, 39), &[1.0, 0.55, 0.1, a0]);
+        // g = 9.5: the second arch's apex (10), a ratio of 1.05; the first's is 4.2
+        assert_eq!(at(50, 9), &[0.2, 0.55, 1.0, a1]);
+        // g = 2.5: four times below the second arch, sixteen below the first: nobody's
+        assert_eq!(at(50, 2), &[0.0; 4]);
+        assert!(
+            lut.meaning.contains("0.0000..200.0000 (peak g 40.0000) colour [1, 0.55, 0.1] surface opacity 0.237"),
+            "{}",
+            lut.meaning
+        );
+    }
+}
