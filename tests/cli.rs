@@ -756,29 +756,52 @@ fn the_default_slicer_tf_shows_every_boundary_the_histogram_volume_finds() {
         let m = mdtf_e2e::manifest(&out.join("pack"));
         let lut = m["luts"].as_array().unwrap().iter().find(|l| l["name"] == "tf2d_default").unwrap().clone();
         assert!(lut["meaning"].as_str().unwrap().contains("surface opacity"), "{}", lut["meaning"]);
-        // every foreground pixel goes to the boundary colour nearest its hue
-        let (_, _, px) = mdtf_e2e::read_rgb_png(&out.join("preview.png"));
-        let palette = &mdtf_pack::BOUNDARY_PALETTE[..3];
-        let mut per = [0usize; 3];
-        let mut foreground = 0;
-        for p in px.chunks_exact(3) {
-            let c = [p[0] as f64, p[1] as f64, p[2] as f64];
-            let norm = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
-            if norm < 30.0 {
-                continue;
-            }
-            foreground += 1;
-            let cosine = |q: &[f64; 3]| {
-                (c[0] * q[0] + c[1] * q[1] + c[2] * q[2]) / (norm * (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt())
-            };
-            let k = (0..3).max_by(|&a, &b| cosine(&palette[a]).total_cmp(&cosine(&palette[b]))).unwrap();
-            per[k] += 1;
-        }
-        eprintln!("{name}: {foreground} foreground pixels, per boundary colour {per:?}");
-        for (k, n) in per.iter().enumerate() {
-            assert!(*n as f64 >= 0.02 * foreground as f64, "{name}: boundary {k} shows in {n} of {foreground} pixels");
-        }
+        assert_every_boundary_colour_shows(&out.join("preview.png"), 3, name);
     }
+}
+
+/// Asserts that of the foreground pixels of the RGB picture `png` (|rgb| >= 30),
+/// each of the first `boundaries` colours of the default TFs' palette is the
+/// nearest in hue (cosine) to at least 2 %.
+fn assert_every_boundary_colour_shows(png: &Path, boundaries: usize, name: &str) {
+    let (_, _, px) = mdtf_e2e::read_rgb_png(png);
+    let palette = &mdtf_pack::BOUNDARY_PALETTE[..boundaries];
+    let mut per = vec![0usize; boundaries];
+    let mut foreground = 0;
+    for p in px.chunks_exact(3) {
+        let c = [p[0] as f64, p[1] as f64, p[2] as f64];
+        let norm = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+        if norm < 30.0 {
+            continue;
+        }
+        foreground += 1;
+        let cosine = |q: &[f64; 3]| {
+            (c[0] * q[0] + c[1] * q[1] + c[2] * q[2]) / (norm * (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt())
+        };
+        let k = (0..boundaries).max_by(|&a, &b| cosine(&palette[a]).total_cmp(&cosine(&palette[b]))).unwrap();
+        per[k] += 1;
+    }
+    eprintln!("{name}: {foreground} foreground pixels, per boundary colour {per:?}");
+    assert!(foreground as f64 >= 0.02 * (px.len() / 3) as f64, "{name}: {foreground} foreground pixels");
+    for (k, n) in per.iter().enumerate() {
+        assert!(*n as f64 >= 0.02 * foreground as f64, "{name}: boundary {k} shows in {n} of {foreground} pixels");
+    }
+}
+
+#[test]
+fn peak_finding_without_a_tf_renders_a_thin_widget_at_every_boundary_found() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = dir.path().join("shells.nii.gz");
+    mdtf_ok(&["synth", "shells", "-o", s.to_str().unwrap(), "--size", "96", "-q"]);
+    let pack = dir.path().join("pf");
+    mdtf_ok(&["pack", "--profile", "peak-finding", s.to_str().unwrap(), "-o", pack.to_str().unwrap(), "-q"]);
+    let m = mdtf_e2e::manifest(&pack);
+    let lut = m["luts"].as_array().unwrap().iter().find(|l| l["name"] == "tf2d").unwrap().clone();
+    assert!(lut["meaning"].as_str().unwrap().contains("(3 found)"), "{}", lut["meaning"]);
+    assert_eq!((lut["axes"][0]["size"].as_u64(), lut["axes"][1]["channel"].as_str()), (Some(1024), Some("inv_g")));
+    let png = dir.path().join("pf.png");
+    mdtf_ok(&["preview", pack.to_str().unwrap(), "-o", png.to_str().unwrap(), "--size", "160", "-q"]);
+    assert_every_boundary_colour_shows(&png, 3, "peak finding");
 }
 
 /// The NRRD payload of a 16-bit table as codes.

@@ -24,6 +24,7 @@
 //! * its colour is [`BOUNDARY_PALETTE`]'s k-th, boundaries in the order given (strongest first).
 
 use crate::lut::{Lut, LutAxis};
+use crate::tf::{Falloff, PlacedWidget, Rectangle, TfFile, Widget};
 
 /// A boundary's arch in the (v, g) plane, as detected in the histogram volume.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -136,6 +137,48 @@ pub fn boundary_tf(v: &LutAxis, g: &LutAxis, tent: Tent, arches: &[BoundaryArch]
         u16_range: None,
     }
 }
+
+/// A TF of thin widgets, one per boundary, at its centre value: the
+/// isosurfaces multidimensional peak finding renders (through
+/// [`TfFile::peak_finding_tf2d`]). Each is a constant rectangle
+/// [`ISOSURFACE_HALF_WIDTH`] of the boundary's value span wide on each side
+/// of its centre (at least one of the 1024 cells of `v_range`), over g from
+/// 0.3 to 1.3 times its peak g, with the boundary's colour and its surface
+/// opacity as the widget's opacity (peak finding keeps a peak's opacity
+/// whatever the step, so that is what a ray crossing it accumulates).
+pub fn boundary_isosurface_tf(arches: &[BoundaryArch], v_range: [f64; 2]) -> TfFile {
+    let opacity = boundary_opacities(arches);
+    let cell = (v_range[1] - v_range[0]) / 1024.0;
+    let widgets = arches
+        .iter()
+        .zip(&opacity)
+        .enumerate()
+        .map(|(k, (a, &alpha))| PlacedWidget {
+            shape: Widget::Rectangle(Rectangle {
+                centre: [(a.v_low + a.v_high) / 2.0, 0.8 * a.g_peak],
+                half_size: [(ISOSURFACE_HALF_WIDTH * (a.v_high - a.v_low)).max(cell), 0.5 * a.g_peak],
+                falloff: Falloff::Constant,
+                alpha,
+                colour: BOUNDARY_PALETTE[k % BOUNDARY_PALETTE.len()],
+            }),
+            f2: None,
+            boundary_emphasis: None,
+        })
+        .collect();
+    let g_top = arches.iter().map(|a| 1.3 * a.g_peak).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
+    TfFile {
+        v_range,
+        g_range: [0.0, g_top],
+        f2_range: [-1.0, 1.0],
+        boundary_emphasis: 1.0,
+        widgets,
+        tf1d: None,
+        product: None,
+    }
+}
+
+/// Half-width of a boundary's isosurface widget, as a share of its value span.
+pub const ISOSURFACE_HALF_WIDTH: f64 = 0.01;
 
 /// z with Phi(z) = t for t in (0, 1), Phi the standard normal CDF, by
 /// bisection (Phi is monotone; 64 halvings of [-40, 40] reach f64's resolution).

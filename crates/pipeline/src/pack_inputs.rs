@@ -3,10 +3,21 @@
 //! file or the defaults (the histogram volume's opacity, a distance alpha map).
 
 use mdtf_boundary::AlphaMap;
-use mdtf_histogram::{AxisSpec, HistogramError, HistogramVolume, HvolParams, detect_boundaries, histogram_volume};
-use mdtf_pack::{BoundaryArch, Lut, LutAxis, Profile, Tent, TfFile, boundary_tf};
+use mdtf_histogram::{
+    AxisSpec, HistogramError, HistogramVolume, HvolParams, detect_boundaries, histogram_volume,
+    histogram_volume_derived,
+};
+use mdtf_pack::{BoundaryArch, Lut, LutAxis, Profile, Tent, TfFile, boundary_isosurface_tf, boundary_tf};
 use mdtf_volume::Volume;
 use std::collections::BTreeMap;
+
+/// The arches of the boundaries found in `hv`, strongest first.
+fn arches_of(hv: &HistogramVolume) -> Vec<BoundaryArch> {
+    detect_boundaries(hv)
+        .into_iter()
+        .map(|b| BoundaryArch { v_low: b.v_low, v_high: b.v_high, g_peak: b.g_peak, core_voxels: b.core_voxels })
+        .collect()
+}
 
 /// Code ranges: the explicit ones; for g, f2 and g_hit the data range with
 /// qbert's percentile clipping (0.002 % / 0.004 % each end); for distance
@@ -52,7 +63,9 @@ pub fn ranges(
 /// code range; without one, the largest distance measured), and `alpha_u`
 /// from `tf`; gaussian-tf gets the IGauss and erf-difference tables; a
 /// product TF in `tf` gets one table per factor, `product_k`, whichever the
-/// profile (its channels must be among `chans`).
+/// profile (its channels must be among `chans`). Scalar peak-finding packs
+/// without a TF get a tf2d over (v, 1/g) of thin widgets at the boundaries
+/// found ([`mdtf_pack::boundary_isosurface_tf`]).
 pub fn luts(
     profile: Profile,
     tf: Option<&TfFile>,
@@ -86,15 +99,7 @@ pub fn luts(
                     max: a.max,
                 };
                 let (v_axis, g_axis) = (axis("v", av), axis("g", ag));
-                let arches: Vec<BoundaryArch> = detect_boundaries(hv)
-                    .into_iter()
-                    .map(|b| BoundaryArch {
-                        v_low: b.v_low,
-                        v_high: b.v_high,
-                        g_peak: b.g_peak,
-                        core_voxels: b.core_voxels,
-                    })
-                    .collect();
+                let arches = arches_of(hv);
                 if arches.is_empty() {
                     out.push(Lut {
                         name: "tf2d_default".into(),
@@ -149,6 +154,34 @@ pub fn luts(
                     && let Some(r) = ranges.get("inv_g")
                     && let Some(lut) = tf.peak_finding_tf2d(*r, [1024, 1024])
                 {
+                    out.push(lut);
+                }
+            } else if profile == Profile::PeakFinding
+                && let (Some(v), Some(r)) = (get("v"), ranges.get("inv_g"))
+            {
+                // scalar data without a TF: a thin widget at each boundary the histogram volume shows
+                let computed;
+                let hv = match hvol {
+                    Some(h) => h,
+                    None => {
+                        let input = mdtf_volume::MultiField::from(v.clone());
+                        computed = histogram_volume_derived(
+                            &input,
+                            &mdtf_derive::DeriveParams::default(),
+                            &HvolParams::default(),
+                        )?;
+                        &computed
+                    }
+                };
+                let arches = arches_of(hv);
+                let default = boundary_isosurface_tf(&arches, [hv.vg_axes[0].min, hv.vg_axes[0].max]);
+                if let Some(mut lut) = default.peak_finding_tf2d(*r, [1024, 1024]) {
+                    lut.meaning = format!(
+                        "{}; the default TF: a thin constant rectangle at the centre value of each boundary found in the \
+                         histogram volume ({} found), its colour and surface opacity as slicer-3dtf's default gives them",
+                        lut.meaning,
+                        arches.len()
+                    );
                     out.push(lut);
                 }
             }

@@ -398,6 +398,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         input_sha256: input_file(p, opts, &base).and_then(|f| mdtf_pack::sha256_file(&f).ok()),
         stages: serde_json::to_value(p).unwrap_or(serde_json::Value::Null),
     };
+    let mut table_names: Vec<String> = Vec::new();
     if profile == Profile::ProjectedTetrahedra {
         let value = get("v").ok_or_else(|| err("no value volume".into()))?;
         let mesh = mdtf_tetra::tetrahedralise(value, p.tetra.tets, "v").map_err(|e| err(e.to_string()))?;
@@ -414,6 +415,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         let alpha = p.pack.alpha.unwrap_or(AlphaMap::Linear { a: 1.0, dc: None });
         let luts = crate::pack_inputs::luts(profile, tf.as_ref(), &alpha, &pack_chans, &ranges, hvol_kept.as_ref())
             .map_err(|e| err(e.to_string()))?;
+        table_names = luts.iter().map(|l| l.name.clone()).collect();
         let gaussians = if profile == Profile::GaussianTf {
             let mask = match &p.pack.gtf_from_mask {
                 Some(m) => {
@@ -468,9 +470,8 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let previewable = match profile {
         Profile::Slicer3dtf | Profile::DistanceTf => true,
         Profile::GaussianTf => true,
-        Profile::PeakFinding => {
-            tf.as_ref().is_some_and(|t| t.tf1d.is_some() || !t.widgets.is_empty() || t.product.is_some())
-        }
+        // with a TF, or the default one from the boundaries found
+        Profile::PeakFinding => table_names.iter().any(|l| ["tf2d", "peak_table", "product_0"].contains(&l.as_str())),
         Profile::ProjectedTetrahedra => false,
     };
     if p.preview && previewable {
