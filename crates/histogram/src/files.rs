@@ -3,6 +3,7 @@
 
 use crate::axis::Axis;
 use crate::count::Histogram;
+use crate::figure::Labels;
 use crate::hvol::HistogramVolume;
 use crate::image::{Grey, Scale, side_by_side, write_exr, write_png};
 use mdtf_volume::nrrd::{TableAxis, write_counts_nrrd, write_table_nrrd};
@@ -18,9 +19,11 @@ fn write_json(path: &Path, value: &serde_json::Value) -> Result<(), VolumeError>
     write_file_atomically(path, |w| w.write_all(text.as_bytes()))
 }
 
-/// Writes `hist_<axes>.{nrrd,json}` and, for 1D/2D, `.png` (and `.exr` for 2D), for 3D the
-/// colour-volume picture `_rgb.png` of the three primary-plane projections, into `dir`.
-pub fn write_histogram(dir: &Path, h: &Histogram, scale: Scale) -> Result<(), VolumeError> {
+/// Writes `hist_<axes>.{nrrd,json}` and, for 1D/2D, the figure `.png` (axes
+/// in data units, a colour bar; titled `title`, e.g. the input's name) and
+/// for 2D the exact counts as `.exr`; for 3D the colour-volume picture
+/// `_rgb.png` of the three primary-plane projections, into `dir`.
+pub fn write_histogram(dir: &Path, h: &Histogram, scale: Scale, title: &str) -> Result<(), VolumeError> {
     let stem: Vec<&str> = h.axes.iter().map(|a| a.name.as_str()).collect();
     let stem = format!("hist_{}", stem.join("_"));
     write_counts_nrrd(&dir.join(format!("{stem}.nrrd")), &table_axes(&h.axes), &h.counts)?;
@@ -30,7 +33,12 @@ pub fn write_histogram(dir: &Path, h: &Histogram, scale: Scale) -> Result<(), Vo
             "png": "first axis to the right, second axis upward" }),
     )?;
     if h.axes.len() <= 2 {
-        write_png(&dir.join(format!("{stem}.png")), &h.image(scale), &h.describe(scale))?;
+        let labels = Labels::of(h, &format!("{stem} of {title}"));
+        let figure = h.figure(scale, &labels).map_err(VolumeError::Fields)?;
+        if let Some(f) = figure {
+            let text = format!("{}; axes: {}; {}", labels.title, labels.axes.join(" | "), h.describe(scale));
+            crate::rgb::write_rgb_png(&dir.join(format!("{stem}.png")), &f, &text)?;
+        }
     }
     if h.axes.len() == 2 {
         write_exr(&dir.join(format!("{stem}.exr")), h)?;
@@ -49,8 +57,14 @@ pub fn write_histogram(dir: &Path, h: &Histogram, scale: Scale) -> Result<(), Vo
 }
 
 /// Writes the stretched histogram's files and `normal_vs_stretched.png` (the distance paper's Fig. 5).
-pub fn write_stretched(dir: &Path, normal: &Histogram, stretched: &Histogram, scale: Scale) -> Result<(), VolumeError> {
-    write_histogram(dir, stretched, scale)?;
+pub fn write_stretched(
+    dir: &Path,
+    normal: &Histogram,
+    stretched: &Histogram,
+    scale: Scale,
+    title: &str,
+) -> Result<(), VolumeError> {
+    write_histogram(dir, stretched, scale, title)?;
     let both = side_by_side(&normal.image(scale), &stretched.image(scale));
     let text = format!("left: normal (v, g) of traced voxels; right: stretched (v, g_hit); {}", normal.describe(scale));
     write_png(&dir.join("normal_vs_stretched.png"), &both, &text)

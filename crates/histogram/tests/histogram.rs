@@ -311,3 +311,55 @@ fn histogram_volume_derived_on_the_fly_equals_the_stored_one() {
     let e = mdtf_histogram::histogram_volume_derived(&two, &DeriveParams::default(), &HvolParams::default());
     assert!(e.unwrap_err().to_string().contains("one field"));
 }
+
+#[test]
+fn figures_have_axes_labels_and_a_colour_bar_and_show_each_bin_in_place() {
+    // 2D: counts only in bin (2, 5) of 8 x 6 (1000) and bin (6, 1) (10)
+    let mut v = vec![2.5f32; 1000];
+    let mut g = vec![5.5f32; 1000];
+    v.extend([6.5f32; 10]);
+    g.extend([1.5f32; 10]);
+    let axes = vec![Axis::new("v", 0.0, 8.0, 8).unwrap(), Axis::new("g", 0.0, 6.0, 6).unwrap()];
+    let h = count(&[&v, &g], axes, None).unwrap();
+    let labels = mdtf_histogram::Labels::of(&h, "test input");
+    assert_eq!(labels.axes, ["v (input units)", "g = |grad v| (input units per world unit)"]);
+    let fig = h.figure(Scale::Log, &labels).unwrap().unwrap();
+    assert!(fig.width <= 1200 && fig.height <= 1200, "{} x {}", fig.width, fig.height);
+    let at = |x: usize, y: usize| [0, 1, 2].map(|c| fig.pixels[3 * (y * fig.width + x) + c]);
+    // the two filled bins by their colours (the top of the ramp, and its log level for 10), in
+    // the heat map, left of the colour bar (the right 130 pixels)
+    let top = mdtf_histogram::count_colour(1000, 1000, Scale::Log);
+    let low = mdtf_histogram::count_colour(10, 1000, Scale::Log);
+    let plot_width = mdtf_histogram::FIGURE_SIZE.0 as usize - 130;
+    let where_is = |c: [u8; 3]| {
+        let hits: Vec<(usize, usize)> = (0..fig.height)
+            .flat_map(|y| (0..plot_width).map(move |x| (x, y)))
+            .filter(|&(x, y)| at(x, y) == c)
+            .collect();
+        assert!(!hits.is_empty(), "colour {c:?} not drawn");
+        let n = hits.len() as f64;
+        (hits.iter().map(|p| p.0 as f64).sum::<f64>() / n, hits.iter().map(|p| p.1 as f64).sum::<f64>() / n, hits.len())
+    };
+    let (x_top, y_top, n_top) = where_is(top);
+    let (x_low, y_low, n_low) = where_is(low);
+    // bin (6, 1) lies right of and below bin (2, 5), 4 bin widths and heights away; the cells are alike
+    assert!(x_low > x_top && y_low > y_top, "({x_low}, {y_low}) vs ({x_top}, {y_top})");
+    let (bw, bh) = ((x_low - x_top) / 4.0, (y_low - y_top) / 4.0);
+    assert!((n_top as f64 - bw * bh).abs() <= 0.1 * bw * bh + bw + bh, "{n_top} pixels for a {bw} x {bh} cell");
+    assert!((n_low as f64 - n_top as f64).abs() <= bw + bh, "{n_low} vs {n_top}");
+    // a figure without labels differs from the labelled one: the labels are drawn
+    let bare = h.figure(Scale::Log, &mdtf_histogram::Labels { title: String::new(), axes: vec![String::new(); 2] });
+    assert_ne!(bare.unwrap().unwrap().pixels, fig.pixels);
+    // written with the labels in the PNG's text too
+    let dir = tempfile::tempdir().unwrap();
+    mdtf_histogram::write_histogram(dir.path(), &h, Scale::Log, "test input").unwrap();
+    let png = std::fs::read(dir.path().join("hist_v_g.png")).unwrap();
+    let text = String::from_utf8_lossy(&png);
+    assert!(text.contains("hist_v_g of test input") && text.contains("g = |grad v| (input units per world unit)"));
+    // 1D: bars on both scales, labelled
+    let h1 = count(&[&v], vec![Axis::new("v", 0.0, 8.0, 8).unwrap()], None).unwrap();
+    let f1 = h1.figure(Scale::Log, &mdtf_histogram::Labels::of(&h1, "test input")).unwrap().unwrap();
+    assert!(
+        f1.pixels.chunks_exact(3).any(|p| p == [0, 0, 0]) && f1.pixels.chunks_exact(3).any(|p| p == [170, 170, 170])
+    );
+}

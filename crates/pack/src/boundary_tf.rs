@@ -21,7 +21,9 @@
 //!   volume's default opacity divided by its peak), w being the tent's
 //!   half-width in voxels: a ray crossing the boundary head-on spends about
 //!   w voxels' worth of full tent in it, so it accumulates about A_k;
-//! * its colour is [`BOUNDARY_PALETTE`]'s k-th, boundaries in the order given (strongest first).
+//! * its colour is [`BOUNDARY_PALETTE`]'s k-th, boundaries in the order
+//!   given (strongest first); a lone boundary, with nothing to tell it
+//!   from, is white (the classic look of the plain tent).
 
 use crate::lut::{Lut, LutAxis};
 use crate::tf::{Falloff, PlacedWidget, Rectangle, TfFile, Widget};
@@ -42,8 +44,9 @@ pub struct BoundaryArch {
 /// Colours of the detected boundaries, in order (then repeated).
 pub const BOUNDARY_PALETTE: [[f64; 3]; 6] =
     [[1.0, 0.55, 0.1], [0.2, 0.55, 1.0], [0.3, 0.9, 0.3], [0.9, 0.3, 0.8], [1.0, 0.9, 0.2], [0.2, 0.9, 0.9]];
-/// Surface opacity of the boundary with the fewest core voxels (nearly opaque).
-pub const MAX_BOUNDARY_OPACITY: f64 = 0.95;
+/// Surface opacity of the boundary with the fewest core voxels: opaque at its
+/// centre, as Kindlmann and Durkin's plain tent makes every boundary.
+pub const MAX_BOUNDARY_OPACITY: f64 = 1.0;
 /// Least opacity of any boundary.
 pub const MIN_BOUNDARY_OPACITY: f64 = 0.1;
 /// How far (as a ratio) a cell's g may be from a boundary's arch to belong to it.
@@ -60,6 +63,11 @@ impl BoundaryArch {
         let z = normal_quantile(t);
         Some(self.g_peak * (-z * z / 2.0).exp())
     }
+}
+
+/// The colour of boundary `k` of `count` (see the module docs).
+pub fn boundary_colour(k: usize, count: usize) -> [f64; 3] {
+    if count == 1 { [1.0; 3] } else { BOUNDARY_PALETTE[k % BOUNDARY_PALETTE.len()] }
 }
 
 /// The surface opacity A_k of each boundary (see the module docs).
@@ -103,7 +111,7 @@ pub fn boundary_tf(v: &LutAxis, g: &LutAxis, tent: Tent, arches: &[BoundaryArch]
                 .filter(|(_, miss)| *miss <= ARCH_RATIO.ln());
             match owner {
                 Some((k, _)) if tent.peak > 0.0 => {
-                    let c = BOUNDARY_PALETTE[k % BOUNDARY_PALETTE.len()];
+                    let c = boundary_colour(k, arches.len());
                     let a = per_voxel[k] * (tent.opacity[j * v.size + i] as f64 / tent.peak).clamp(0.0, 1.0);
                     values.extend([c[0] as f32, c[1] as f32, c[2] as f32, a as f32]);
                 }
@@ -116,7 +124,7 @@ pub fn boundary_tf(v: &LutAxis, g: &LutAxis, tent: Tent, arches: &[BoundaryArch]
         .zip(&opacity)
         .enumerate()
         .map(|(k, (a, o))| {
-            let c = BOUNDARY_PALETTE[k % BOUNDARY_PALETTE.len()];
+            let c = boundary_colour(k, arches.len());
             format!(
                 "{:.4}..{:.4} (peak g {:.4}) colour [{}, {}, {}] surface opacity {o:.3}",
                 a.v_low, a.v_high, a.g_peak, c[0], c[1], c[2]
@@ -159,7 +167,7 @@ pub fn boundary_isosurface_tf(arches: &[BoundaryArch], v_range: [f64; 2]) -> TfF
                 half_size: [(ISOSURFACE_HALF_WIDTH * (a.v_high - a.v_low)).max(cell), 0.5 * a.g_peak],
                 falloff: Falloff::Constant,
                 alpha,
-                colour: BOUNDARY_PALETTE[k % BOUNDARY_PALETTE.len()],
+                colour: boundary_colour(k, arches.len()),
             }),
             f2: None,
             boundary_emphasis: None,
@@ -224,7 +232,7 @@ mod tests {
             BoundaryArch { v_low: 0.0, v_high: 200.0, g_peak: 40.0, core_voxels: 40_000 },
             BoundaryArch { v_low: 50.0, v_high: 150.0, g_peak: 10.0, core_voxels: 10_000 },
         ];
-        assert_eq!(boundary_opacities(&arches), vec![0.95 / 4.0, 0.95]);
+        assert_eq!(boundary_opacities(&arches), vec![0.25, 1.0]);
         let (v, g) = (
             LutAxis { channel: "v".into(), size: 100, min: 0.0, max: 200.0 },
             LutAxis { channel: "g".into(), size: 50, min: 0.0, max: 50.0 },
@@ -232,7 +240,7 @@ mod tests {
         // a tent at its peak everywhere, 2 voxels wide: per voxel 1 - (1 - A)^(1/2)
         let tent = vec![0.5f32; 100 * 50];
         let lut = boundary_tf(&v, &g, Tent { opacity: &tent, peak: 0.5, half_width_voxels: 2.0 }, &arches);
-        let (a0, a1) = ((1.0 - (1.0 - 0.95 / 4.0f64).sqrt()) as f32, (1.0 - 0.05f64.sqrt()) as f32);
+        let (a0, a1) = ((1.0 - 0.75f64.sqrt()) as f32, 1.0);
         let at = |i: usize, j: usize| &lut.values[4 * (j * 100 + i)..4 * (j * 100 + i) + 4];
         // v = 101 (cell 50), g = 39.5 (cell 39): on the first arch (g 40 there)
         assert_eq!(at(50, 39), &[1.0, 0.55, 0.1, a0]);
@@ -241,7 +249,7 @@ mod tests {
         // g = 2.5: four times below the second arch, sixteen below the first: nobody's
         assert_eq!(at(50, 2), &[0.0; 4]);
         assert!(
-            lut.meaning.contains("0.0000..200.0000 (peak g 40.0000) colour [1, 0.55, 0.1] surface opacity 0.237"),
+            lut.meaning.contains("0.0000..200.0000 (peak g 40.0000) colour [1, 0.55, 0.1] surface opacity 0.250"),
             "{}",
             lut.meaning
         );

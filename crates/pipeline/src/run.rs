@@ -336,7 +336,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         let mut outputs = Vec::new();
         if h.joint {
             let hist = count(&[v.samples(), g.samples()], axes.clone(), None).map_err(|e| err(e.to_string()))?;
-            write_histogram(&hdir, &hist, Scale::Log).map_err(|e| err(e.to_string()))?;
+            write_histogram(&hdir, &hist, Scale::Log, &input_name).map_err(|e| err(e.to_string()))?;
             outputs.push("histogram/hist_v_g.png".into());
             // peak finding's TF domain: (v, 1/g)
             if let Some(inv_g) = get("inv_g")
@@ -344,7 +344,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             {
                 let hist = count(&[v.samples(), inv_g.samples()], vec![axes[0].clone(), ia], None)
                     .map_err(|e| err(e.to_string()))?;
-                write_histogram(&hdir, &hist, Scale::Log).map_err(|e| err(e.to_string()))?;
+                write_histogram(&hdir, &hist, Scale::Log, &input_name).map_err(|e| err(e.to_string()))?;
                 outputs.push("histogram/hist_v_inv_g.png".into());
             }
         }
@@ -358,7 +358,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             sa[1].name = "g_hit".into();
             let stretched =
                 count(&[v.samples(), g_hit.samples()], sa, Some(&traced)).map_err(|e| err(e.to_string()))?;
-            write_stretched(&hdir, &normal, &stretched, Scale::Log).map_err(|e| err(e.to_string()))?;
+            write_stretched(&hdir, &normal, &stretched, Scale::Log, &input_name).map_err(|e| err(e.to_string()))?;
             outputs.push("histogram/normal_vs_stretched.png".into());
         }
         if h.hvol

@@ -88,12 +88,14 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
             .collect()
     };
     let axes = axes_of(&args.axes)?;
+    let title =
+        args.input.file_name().map_or_else(|| args.input.display().to_string(), |n| n.to_string_lossy().into_owned());
     let data: Vec<&[f32]> = args.axes.iter().filter_map(|n| get(n).map(Volume::samples)).collect();
     let h = progress.step("counting", || count(&data, axes, mask.as_deref()))?;
-    write_histogram(out, &h, scale)?;
+    write_histogram(out, &h, scale, &title)?;
     if h.axes.len() == 3 {
         for (a, b) in [(0, 1), (0, 2), (1, 2)] {
-            write_histogram(out, &h.project(a, b), scale)?;
+            write_histogram(out, &h.project(a, b), scale, &title)?;
         }
     }
     progress.note(&format!("{}: {} voxels counted", h.describe(scale), h.total()));
@@ -113,7 +115,7 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
         let mut stretched_axes = shared;
         stretched_axes[1].name = "g_hit".into();
         let stretched = count(&[v.samples(), g_hit.samples()], stretched_axes, Some(&traced))?;
-        write_stretched(out, &normal, &stretched, scale)?;
+        write_stretched(out, &normal, &stretched, scale, &title)?;
     }
     if args.hvol {
         let p = HvolParams { g_thresh: args.g_thresh, tent_width: args.tent_width, ..HvolParams::default() };

@@ -1,0 +1,223 @@
+//! Figures of histograms a person can read without the CSV: axes in data
+//! units with ticks and labels, a title naming the input, and for 2D
+//! histograms a colour bar of the counts.
+//!
+//! Drawn with `plotters` and the DejaVu Sans font bundled in the binary, so
+//! no system font is needed. A 2D histogram is shown as a heat map (empty
+//! bins white, others on a viridis-like ramp of [`grey_level`]'s scaled
+//! count), sampled at the plot's pixels (at most [`PLOT_PIXELS`] per axis:
+//! finer histograms are shown by their nearest bin; the NRRD and EXR files
+//! keep every bin). A 1D histogram is drawn as the two overlaid bar scales
+//! of [`Histogram::image`] (log grey behind linear black), each against its
+//! own labelled axis.
+
+use crate::count::Histogram;
+use crate::image::{Scale, grey_level};
+use crate::rgb::Rgb;
+use plotters::prelude::*;
+use plotters::style::{FontStyle, register_font};
+use std::sync::Once;
+
+/// Largest side of the plotting area, pixels.
+pub const PLOT_PIXELS: u32 = 512;
+/// Figure size, pixels (the plot, its axes, title and colour bar).
+pub const FIGURE_SIZE: (u32, u32) = (780, 620);
+
+/// What the figure says: its title (e.g. the input's name) and a label
+/// with units per axis.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Labels {
+    /// Title above the plot.
+    pub title: String,
+    /// One label per histogram axis, with units.
+    pub axes: Vec<String>,
+}
+
+/// The label of channel `name` with its units, for the axes of histogram figures.
+pub fn axis_label(name: &str) -> String {
+    match name {
+        "v" => "v (input units)".into(),
+        "g" => "g = |grad v| (input units per world unit)".into(),
+        "f2" => "f'' along the gradient (input units per world unit^2)".into(),
+        "inv_g" => "1/g (world units per input unit)".into(),
+        "g_hit" => "g at the boundary hit (input units per world unit)".into(),
+        "distance" => "distance to the boundary (world units)".into(),
+        "gnorm" => "||G|| (per world unit^2)".into(),
+        other => format!("{other} (field units)"),
+    }
+}
+
+impl Labels {
+    /// Labels for `h` titled `title`, each axis labelled by [`axis_label`].
+    pub fn of(h: &Histogram, title: &str) -> Labels {
+        Labels { title: title.into(), axes: h.axes.iter().map(|a| axis_label(&a.name)).collect() }
+    }
+}
+
+fn font_once() {
+    static FONT: Once = Once::new();
+    FONT.call_once(|| {
+        // the bundled font parses; a failure would only cost the text, not the figure
+        let _ = register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular());
+    });
+}
+
+/// A viridis-like ramp at t in [0, 1] (five anchors, linear between).
+fn ramp(t: f64) -> [u8; 3] {
+    const ANCHORS: [[f64; 3]; 5] =
+        [[68.0, 1.0, 84.0], [59.0, 82.0, 139.0], [33.0, 145.0, 140.0], [94.0, 201.0, 98.0], [253.0, 231.0, 37.0]];
+    let x = t.clamp(0.0, 1.0) * 4.0;
+    let k = (x.floor() as usize).min(3);
+    let f = x - k as f64;
+    [0, 1, 2].map(|c| (ANCHORS[k][c] + f * (ANCHORS[k + 1][c] - ANCHORS[k][c])).round() as u8)
+}
+
+/// The colour of count `c` with the largest count `max`: white for 0, else the ramp.
+pub fn count_colour(c: u64, max: u64, scale: Scale) -> [u8; 3] {
+    if c == 0 { [255, 255, 255] } else { ramp(grey_level(c, max, scale) as f64 / 255.0) }
+}
+
+/// Errors of plotting, as text (plotters' own error type is generic over the backend).
+fn plot_err<E: std::fmt::Debug>(e: E) -> String {
+    format!("drawing the figure: {e:?}")
+}
+
+impl Histogram {
+    /// The figure of a 1D or 2D histogram (None for 3D: see
+    /// [`Histogram::rgb_projections`]), [`FIGURE_SIZE`] pixels.
+    pub fn figure(&self, scale: Scale, labels: &Labels) -> Result<Option<Rgb>, String> {
+        font_once();
+        let (w, h) = FIGURE_SIZE;
+        let mut pixels = vec![255u8; (w * h * 3) as usize];
+        let drawn = match self.axes.len() {
+            2 => self.draw_2d(&mut pixels, scale, labels)?,
+            1 => self.draw_1d(&mut pixels, labels)?,
+            _ => return Ok(None),
+        };
+        Ok(drawn.then_some(Rgb { width: w as usize, height: h as usize, pixels }))
+    }
+
+    fn draw_2d(&self, pixels: &mut [u8], scale: Scale, labels: &Labels) -> Result<bool, String> {
+        let (w, h) = FIGURE_SIZE;
+        let (ax, ay) = (&self.axes[0], &self.axes[1]);
+        let max = self.max();
+        let (plot, bar_px);
+        {
+            let root = BitMapBackend::with_buffer(pixels, (w, h)).into_drawing_area();
+            let (main, bar) = root.split_horizontally(w - 130);
+            let mut chart = ChartBuilder::on(&main)
+                .caption(&labels.title, ("sans-serif", 18))
+                .margin(12)
+                .x_label_area_size(48)
+                .y_label_area_size(70)
+                .build_cartesian_2d(ax.min..ax.max, ay.min..ay.max)
+                .map_err(plot_err)?;
+            chart
+                .configure_mesh()
+                .disable_mesh()
+                .x_desc(labels.axes.first().map_or("", String::as_str))
+                .y_desc(labels.axes.get(1).map_or("", String::as_str))
+                .axis_desc_style(("sans-serif", 14))
+                .label_style(("sans-serif", 12))
+                .draw()
+                .map_err(plot_err)?;
+            plot = chart.plotting_area().get_pixel_range();
+            let top = max.max(1) as f64;
+            let mut bar_chart = ChartBuilder::on(&bar)
+                .margin_top(12 + 30)
+                .margin_bottom(12 + 48)
+                .margin_right(12)
+                .y_label_area_size(70)
+                .build_cartesian_2d(0.0..1.0, (1.0..top.max(1.5)).log_scale())
+                .map_err(plot_err)?;
+            bar_chart
+                .configure_mesh()
+                .disable_mesh()
+                .disable_x_axis()
+                .y_desc(format!("voxels per bin ({scale:?} colours)"))
+                .y_label_formatter(&|c| format!("{}", c.round() as u64))
+                .axis_desc_style(("sans-serif", 12))
+                .label_style(("sans-serif", 11))
+                .draw()
+                .map_err(plot_err)?;
+            bar_px = bar_chart.plotting_area().get_pixel_range();
+            root.present().map_err(plot_err)?;
+        }
+        // the heat map: each plot pixel shows the bin under its centre (first axis right, second up)
+        let (px, py) = plot;
+        let (pw, ph) = ((px.end - px.start).max(1) as f64, (py.end - py.start).max(1) as f64);
+        for y in py.clone() {
+            let j = (((py.end - 1 - y) as f64 + 0.5) / ph * ay.bins as f64) as usize;
+            for x in px.clone() {
+                let i = (((x - px.start) as f64 + 0.5) / pw * ax.bins as f64) as usize;
+                let c = self.counts[j.min(ay.bins - 1) * ax.bins + i.min(ax.bins - 1)] as u64;
+                let o = 3 * (y as usize * w as usize + x as usize);
+                pixels[o..o + 3].copy_from_slice(&count_colour(c, max, scale));
+            }
+        }
+        // the colour bar: the ramp against the log count axis beside it
+        let (bx, by) = bar_px;
+        let bh = (by.end - by.start).max(1) as f64;
+        for y in by.clone() {
+            // the count at this height of the log axis, and its colour
+            let t = ((by.end - 1 - y) as f64 + 0.5) / bh;
+            let count = (max.max(1) as f64).powf(t).round() as u64;
+            let colour = count_colour(count.max(1), max.max(1), scale);
+            for x in bx.clone() {
+                let o = 3 * (y as usize * w as usize + x as usize);
+                pixels[o..o + 3].copy_from_slice(&colour);
+            }
+        }
+        Ok(true)
+    }
+
+    fn draw_1d(&self, pixels: &mut [u8], labels: &Labels) -> Result<bool, String> {
+        let (w, h) = FIGURE_SIZE;
+        let a = &self.axes[0];
+        let max = self.max().max(1) as f64;
+        let root = BitMapBackend::with_buffer(pixels, (w, h)).into_drawing_area();
+        let mut chart = ChartBuilder::on(&root)
+            .caption(&labels.title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(48)
+            .y_label_area_size(70)
+            .right_y_label_area_size(70)
+            .build_cartesian_2d(a.min..a.max, 0.0..max * 1.05)
+            .map_err(plot_err)?
+            .set_secondary_coord(a.min..a.max, (1.0..max * 1.5).log_scale());
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_desc(labels.axes.first().map_or("", String::as_str))
+            .y_desc("voxels per bin (linear, black)")
+            .y_label_formatter(&|c| format!("{}", c.round() as u64))
+            .axis_desc_style(("sans-serif", 14))
+            .label_style(("sans-serif", 12))
+            .draw()
+            .map_err(plot_err)?;
+        chart
+            .configure_secondary_axes()
+            .y_desc("voxels per bin (log, grey)")
+            .y_label_formatter(&|c| format!("{}", c.round() as u64))
+            .axis_desc_style(("sans-serif", 14))
+            .label_style(("sans-serif", 12))
+            .draw()
+            .map_err(plot_err)?;
+        let bar = |i: usize| (a.min + i as f64 * a.width(), a.min + (i + 1) as f64 * a.width());
+        let grey = RGBColor(170, 170, 170);
+        chart
+            .draw_secondary_series(self.counts.iter().enumerate().filter(|(_, c)| **c > 0).map(|(i, &c)| {
+                let (x0, x1) = bar(i);
+                Rectangle::new([(x0, 1.0), (x1, c as f64)], grey.filled())
+            }))
+            .map_err(plot_err)?;
+        chart
+            .draw_series(self.counts.iter().enumerate().filter(|(_, c)| **c > 0).map(|(i, &c)| {
+                let (x0, x1) = bar(i);
+                Rectangle::new([(x0, 0.0), (x1, c as f64)], BLACK.filled())
+            }))
+            .map_err(plot_err)?;
+        root.present().map_err(plot_err)?;
+        Ok(true)
+    }
+}
