@@ -757,6 +757,13 @@ fn the_default_slicer_tf_shows_every_boundary_the_histogram_volume_finds() {
         let lut = m["luts"].as_array().unwrap().iter().find(|l| l["name"] == "tf2d_default").unwrap().clone();
         assert!(lut["meaning"].as_str().unwrap().contains("surface opacity"), "{}", lut["meaning"]);
         assert_every_boundary_colour_shows(&out.join("preview.png"), 3, name);
+        // the contact sheet is captioned, and its description names files in the output, not the staging folder
+        let sheet = std::fs::read(out.join("contact_sheet.png")).unwrap();
+        let text = String::from_utf8_lossy(&sheet);
+        let at = text.find("mdtf contact sheet: ").expect("described");
+        let line: String = text[at..].chars().take_while(|c| *c != '\0').collect();
+        assert!(line.contains("preview.png: the pack, rendered") && line.contains("histogram/hist_v_g.png"), "{line}");
+        assert!(!line.contains(dir.path().to_str().unwrap()), "{line}");
     }
 }
 

@@ -481,18 +481,19 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         mdtf_preview::preview_named(&pdir, &dir.join("preview.png"), &cam, true, &opts.output.join("pack"))
             .map_err(|e| fail("preview")(e.to_string()))?;
         // the contact sheet: every picture of the run side by side
-        let mut pictures: Vec<PathBuf> = vec![dir.join("preview.png")];
-        for f in [
-            "histogram/hist_v_g.png",
-            "histogram/normal_vs_stretched.png",
-            "histogram/opacity.png",
-            "boundary/boundary_report.png",
+        let mut pictures: Vec<(PathBuf, &str)> = Vec::new();
+        for (f, caption) in [
+            ("preview.png", "preview.png: the pack, rendered"),
+            ("histogram/hist_v_g.png", "histogram/hist_v_g.png: (v, g)"),
+            ("histogram/normal_vs_stretched.png", "normal | stretched (v, g_hit)"),
+            ("histogram/opacity.png", "histogram/opacity.png: tent of p(v, g)"),
+            ("boundary/boundary_report.png", "boundary/boundary_report.png"),
         ] {
             if dir.join(f).exists() {
-                pictures.push(dir.join(f));
+                pictures.push((dir.join(f), caption));
             }
         }
-        let refs: Vec<&Path> = pictures.iter().map(PathBuf::as_path).collect();
+        let refs: Vec<(&Path, &str)> = pictures.iter().map(|(p, c)| (p.as_path(), *c)).collect();
         mdtf_preview::contact_sheet(&refs, 3, 384, &dir.join("contact_sheet.png"))
             .map_err(|e| fail("preview")(e.to_string()))?;
         stage("preview", t, 512 * 512, vec!["preview.png".into(), "contact_sheet.png".into()]);

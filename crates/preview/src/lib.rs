@@ -183,18 +183,24 @@ fn decode_png(path: &Path) -> Result<(usize, usize, Vec<u8>), PreviewError> {
     Ok((w, h, rgb))
 }
 
+/// Height of the caption strip under each picture of a contact sheet, pixels.
+pub const CAPTION_HEIGHT: usize = 26;
+
 /// Tiles PNG images left to right in rows of `columns`, each scaled to fit a
-/// `cell` x `cell` square (nearest neighbour), on a dark grey background.
-pub fn contact_sheet(images: &[&Path], columns: usize, cell: usize, out: &Path) -> Result<(), PreviewError> {
+/// `cell` x (`cell` - [`CAPTION_HEIGHT`]) box (nearest neighbour) above its
+/// caption, on a dark grey background. The captions (e.g. what the picture
+/// is and its file in the output folder) also make up the PNG's description.
+pub fn contact_sheet(images: &[(&Path, &str)], columns: usize, cell: usize, out: &Path) -> Result<(), PreviewError> {
     let columns = columns.max(1);
     let rows = images.len().div_ceil(columns).max(1);
     let (w, h) = (columns * cell, rows * cell);
+    let picture = cell.saturating_sub(CAPTION_HEIGHT).max(1);
     let mut sheet = vec![40u8; w * h * 3];
-    for (n, path) in images.iter().enumerate() {
+    for (n, (path, _)) in images.iter().enumerate() {
         let (iw, ih, rgb) = decode_png(path)?;
-        let scale = (cell as f64 / iw.max(ih) as f64).min(4.0);
+        let scale = (picture as f64 / iw.max(ih) as f64).min(4.0);
         let (ox, oy) = ((n % columns) * cell, (n / columns) * cell);
-        for y in 0..cell {
+        for y in 0..picture {
             for x in 0..cell {
                 let (sx, sy) = ((x as f64 / scale) as usize, (y as f64 / scale) as usize);
                 if sx < iw && sy < ih {
@@ -205,8 +211,35 @@ pub fn contact_sheet(images: &[&Path], columns: usize, cell: usize, out: &Path) 
             }
         }
     }
-    let names: Vec<String> = images.iter().map(|p| p.display().to_string()).collect();
-    let text = format!("mdtf contact sheet: {}", names.join(", "));
+    draw_captions(&mut sheet, (w, h), images, columns, cell)?;
+    let captions: Vec<&str> = images.iter().map(|(_, c)| *c).collect();
+    let text = format!("mdtf contact sheet: {}", captions.join("; "));
     mdtf_volume::write_png(out, w, h, mdtf_volume::PngColour::Rgb, &sheet, &text)?;
     Ok(())
+}
+
+/// Writes each image's caption in the strip under it (DejaVu Sans, bundled).
+fn draw_captions(
+    sheet: &mut [u8],
+    (w, h): (usize, usize),
+    images: &[(&Path, &str)],
+    columns: usize,
+    cell: usize,
+) -> Result<(), PreviewError> {
+    use plotters::prelude::*;
+    static FONT: std::sync::Once = std::sync::Once::new();
+    FONT.call_once(|| {
+        // a font that does not register costs the captions, not the sheet
+        let _ =
+            plotters::style::register_font("sans-serif", plotters::style::FontStyle::Normal, dejavu::sans::regular());
+    });
+    let fail = |e: &dyn std::fmt::Debug| PreviewError::Pack(format!("drawing the contact sheet's captions: {e:?}"));
+    let root = BitMapBackend::with_buffer(sheet, (w as u32, h as u32)).into_drawing_area();
+    let style = ("sans-serif", 14).into_font().color(&RGBColor(230, 230, 230));
+    for (n, (_, caption)) in images.iter().enumerate() {
+        let (ox, oy) = ((n % columns) * cell, (n / columns) * cell);
+        let at = ((ox + 6) as i32, (oy + cell - CAPTION_HEIGHT + 5) as i32);
+        root.draw(&Text::new(caption.to_string(), at, style.clone())).map_err(|e| fail(&e))?;
+    }
+    root.present().map_err(|e| fail(&e))
 }
