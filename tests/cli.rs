@@ -796,6 +796,21 @@ fn assert_every_boundary_colour_shows(png: &Path, boundaries: usize, name: &str)
 }
 
 #[test]
+fn distance_tf_without_a_tf_colours_every_boundary_found() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = dir.path().join("shells.nii.gz");
+    mdtf_ok(&["synth", "shells", "-o", s.to_str().unwrap(), "--size", "96", "-q"]);
+    let pack = dir.path().join("d");
+    mdtf_ok(&["pack", "--profile", "distance-tf", s.to_str().unwrap(), "-o", pack.to_str().unwrap(), "-q"]);
+    let m = mdtf_e2e::manifest(&pack);
+    let lut = m["luts"].as_array().unwrap().iter().find(|l| l["name"] == "alpha_u").unwrap().clone();
+    assert!(lut["meaning"].as_str().unwrap().contains("from the 3 boundaries found"), "{}", lut["meaning"]);
+    let png = dir.path().join("d.png");
+    mdtf_ok(&["preview", pack.to_str().unwrap(), "-o", png.to_str().unwrap(), "--size", "160", "-q"]);
+    assert_every_boundary_colour_shows(&png, 3, "distance-tf");
+}
+
+#[test]
 fn peak_finding_without_a_tf_renders_a_thin_widget_at_every_boundary_found() {
     let dir = tempfile::tempdir().unwrap();
     let s = dir.path().join("shells.nii.gz");

@@ -185,6 +185,56 @@ pub fn boundary_isosurface_tf(arches: &[BoundaryArch], v_range: [f64; 2]) -> TfF
     }
 }
 
+/// alpha_u over (v, g_hit) for the distance-TF renderer, from the
+/// boundaries: every voxel traced to boundary k reads g_hit near its peak g
+/// (the stretched histogram's rows), so a cell whose v lies in boundary k's
+/// span and whose g_hit is within a factor [`ARCH_RATIO`] of its G (the
+/// nearest by ratio, if several) has k's colour and a per-voxel opacity
+/// 1 - (1 - A_k)^(1 / w), w being the voxels' worth of full alpha_d a ray
+/// crosses (the integral of alpha_d over both sides of the boundary, in
+/// voxels), so that the surface accumulates about A_k. `v` and `g_hit` are
+/// the table's axes (256 cells each is the renderer's size).
+pub fn boundary_alpha_u(v: &LutAxis, g_hit: &LutAxis, alpha_d_voxels: f64, arches: &[BoundaryArch]) -> Lut {
+    let opacity = boundary_opacities(arches);
+    let w = alpha_d_voxels.max(1e-3);
+    let centre = |a: &LutAxis, i: usize| a.min + (i as f64 + 0.5) * (a.max - a.min) / a.size as f64;
+    let mut values = Vec::with_capacity(4 * v.size * g_hit.size);
+    for j in 0..g_hit.size {
+        let g = centre(g_hit, j);
+        for i in 0..v.size {
+            let x = centre(v, i);
+            let owner = arches
+                .iter()
+                .enumerate()
+                .filter(|(_, a)| x > a.v_low && x < a.v_high && a.g_peak > 0.0)
+                .map(|(k, a)| (k, (g / a.g_peak).ln().abs()))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .filter(|(_, miss)| *miss <= ARCH_RATIO.ln());
+            match owner {
+                Some((k, _)) => {
+                    let c = boundary_colour(k, arches.len());
+                    let a = 1.0 - (1.0 - opacity[k]).powf(1.0 / w);
+                    values.extend([c[0] as f32, c[1] as f32, c[2] as f32, a as f32]);
+                }
+                None => values.extend([0.0; 4]),
+            }
+        }
+    }
+    Lut {
+        name: "alpha_u".into(),
+        meaning: format!(
+            "RGBA over (v, g_hit): the default user TF alpha_u from the {} boundaries found in the histogram volume \
+             (each its colour where v is in its span and g_hit within a factor {ARCH_RATIO} of its peak g)",
+            arches.len()
+        ),
+        axes: vec![v.clone(), g_hit.clone()],
+        components: 4,
+        values,
+        unit_range: true,
+        u16_range: None,
+    }
+}
+
 /// Half-width of a boundary's isosurface widget, as a share of its value span.
 pub const ISOSURFACE_HALF_WIDTH: f64 = 0.01;
 

@@ -7,9 +7,27 @@ use mdtf_histogram::{
     AxisSpec, HistogramError, HistogramVolume, HvolParams, detect_boundaries, histogram_volume,
     histogram_volume_derived,
 };
-use mdtf_pack::{BoundaryArch, Lut, LutAxis, Profile, Tent, TfFile, boundary_isosurface_tf, boundary_tf};
+use mdtf_pack::{
+    BoundaryArch, Lut, LutAxis, Profile, Tent, TfFile, boundary_alpha_u, boundary_isosurface_tf, boundary_tf,
+};
 use mdtf_volume::Volume;
 use std::collections::BTreeMap;
+
+/// `hvol` when the caller has it, else the histogram volume of `v` (derived with `kernel`).
+fn hvol_or_computed<'a>(
+    hvol: Option<&'a HistogramVolume>,
+    v: &Volume,
+    kernel: mdtf_derive::Kernel,
+) -> Result<std::borrow::Cow<'a, HistogramVolume>, HistogramError> {
+    Ok(match hvol {
+        Some(h) => std::borrow::Cow::Borrowed(h),
+        None => {
+            let input = mdtf_volume::MultiField::from(v.clone());
+            let derive = mdtf_derive::DeriveParams { kernel, ..Default::default() };
+            std::borrow::Cow::Owned(histogram_volume_derived(&input, &derive, &HvolParams::default())?)
+        }
+    })
+}
 
 /// The arches of the boundaries found in `hv`, strongest first.
 fn arches_of(hv: &HistogramVolume) -> Vec<BoundaryArch> {
@@ -57,15 +75,17 @@ pub fn ranges(
 
 /// The lookup tables of `profile`: from `tf` when given; otherwise for
 /// slicer-3dtf the default TF of the boundaries found in the histogram
-/// volume (`hvol` when the caller already has it, else computed; see
-/// [`mdtf_pack::boundary_tf`]), or its plain tent opacity where none is found; distance-tf always gets `alpha_d` from
+/// volume (`hvol` when the caller already has it, else computed, with
+/// derivatives by `kernel`; see [`mdtf_pack::boundary_tf`]), or its plain
+/// tent opacity where none is found. distance-tf always gets `alpha_d` from
 /// `alpha` over [0, d_max], the paper's domain (the top of the distance's
 /// code range; without one, the largest distance measured), and `alpha_u`
-/// from `tf`; gaussian-tf gets the IGauss and erf-difference tables; a
-/// product TF in `tf` gets one table per factor, `product_k`, whichever the
-/// profile (its channels must be among `chans`). Scalar peak-finding packs
-/// without a TF get a tf2d over (v, 1/g) of thin widgets at the boundaries
-/// found ([`mdtf_pack::boundary_isosurface_tf`]).
+/// from `tf`, or without one from the boundaries found
+/// ([`mdtf_pack::boundary_alpha_u`]). gaussian-tf gets the IGauss and
+/// erf-difference tables. A product TF in `tf` gets one table per factor,
+/// `product_k`, whichever the profile (its channels must be among `chans`).
+/// Scalar peak-finding packs without a TF get a tf2d over (v, 1/g) of thin
+/// widgets at the boundaries found ([`mdtf_pack::boundary_isosurface_tf`]).
 pub fn luts(
     profile: Profile,
     tf: Option<&TfFile>,
@@ -73,6 +93,7 @@ pub fn luts(
     chans: &[(String, Volume)],
     ranges: &BTreeMap<String, [f64; 2]>,
     hvol: Option<&HistogramVolume>,
+    kernel: mdtf_derive::Kernel,
 ) -> Result<Vec<Lut>, HistogramError> {
     let get = |n: &str| chans.iter().find(|(c, _)| c == n).map(|(_, v)| v);
     let mut out = Vec::new();
@@ -138,6 +159,23 @@ pub fn luts(
             });
             if let Some(tf) = tf {
                 out.push(tf.distance_alpha_u());
+            } else if let Some(v) = get("v") {
+                // without a TF: alpha_u from the boundaries the histogram volume shows
+                let hv = hvol_or_computed(hvol, v, kernel)?;
+                let arches = arches_of(&hv);
+                if !arches.is_empty() {
+                    let spacing = v.geometry.min_spacing();
+                    let cells = 256;
+                    let step = d_max / cells as f64;
+                    let alpha_d_voxels = 2.0
+                        * (0..cells).map(|k| alpha.eval((k as f64 + 0.5) * step, d_max) * step).sum::<f64>()
+                        / spacing;
+                    let [av, _] = &hv.vg_axes;
+                    let g_top = arches.iter().map(|a| 1.3 * a.g_peak).fold(0.0, f64::max);
+                    let v_axis = LutAxis { channel: "v".into(), size: 256, min: av.min, max: av.max };
+                    let g_axis = LutAxis { channel: "g_hit".into(), size: 256, min: 0.0, max: g_top };
+                    out.push(boundary_alpha_u(&v_axis, &g_axis, alpha_d_voxels, &arches));
+                }
             }
         }
         // the mesh pack's tables come from mdtf-tetra
@@ -160,20 +198,8 @@ pub fn luts(
                 && let (Some(v), Some(r)) = (get("v"), ranges.get("inv_g"))
             {
                 // scalar data without a TF: a thin widget at each boundary the histogram volume shows
-                let computed;
-                let hv = match hvol {
-                    Some(h) => h,
-                    None => {
-                        let input = mdtf_volume::MultiField::from(v.clone());
-                        computed = histogram_volume_derived(
-                            &input,
-                            &mdtf_derive::DeriveParams::default(),
-                            &HvolParams::default(),
-                        )?;
-                        &computed
-                    }
-                };
-                let arches = arches_of(hv);
+                let hv = hvol_or_computed(hvol, v, kernel)?;
+                let arches = arches_of(&hv);
                 let default = boundary_isosurface_tf(&arches, [hv.vg_axes[0].min, hv.vg_axes[0].max]);
                 if let Some(mut lut) = default.peak_finding_tf2d(*r, [1024, 1024]) {
                     lut.meaning = format!(

@@ -413,8 +413,9 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         let ranges =
             crate::pack_inputs::ranges(&pack_chans, &BTreeMap::new(), d_max).map_err(|e| err(e.to_string()))?;
         let alpha = p.pack.alpha.unwrap_or(AlphaMap::Linear { a: 1.0, dc: None });
-        let luts = crate::pack_inputs::luts(profile, tf.as_ref(), &alpha, &pack_chans, &ranges, hvol_kept.as_ref())
-            .map_err(|e| err(e.to_string()))?;
+        let luts =
+            crate::pack_inputs::luts(profile, tf.as_ref(), &alpha, &pack_chans, &ranges, hvol_kept.as_ref(), kernel)
+                .map_err(|e| err(e.to_string()))?;
         table_names = luts.iter().map(|l| l.name.clone()).collect();
         let gaussians = if profile == Profile::GaussianTf {
             let mask = match &p.pack.gtf_from_mask {

@@ -69,8 +69,10 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         None => None,
     };
     let alpha: AlphaMap = args.alpha.parse().map_err(anyhow::Error::msg)?;
-    let luts =
-        progress.step("lookup tables", || pack_inputs::luts(profile, tf.as_ref(), &alpha, &chans, &ranges, None))?;
+    let kernel: mdtf_derive::Kernel =
+        args.kernel.as_deref().map(str::parse).transpose()?.unwrap_or(mdtf_derive::DEFAULT_KERNEL);
+    let luts = progress
+        .step("lookup tables", || pack_inputs::luts(profile, tf.as_ref(), &alpha, &chans, &ranges, None, kernel))?;
     let dtype = match args.dtype.as_deref() {
         None => None,
         Some("u8") => Some(Dtype::U8),
