@@ -795,35 +795,33 @@ fn assert_every_boundary_colour_shows(png: &Path, boundaries: usize, name: &str)
     }
 }
 
-#[test]
-fn distance_tf_without_a_tf_colours_every_boundary_found() {
+/// Packs the shells phantom (96^3) as `profile` without a TF, checks that
+/// its default table `lut` says `says`, and previews it (160^2): every
+/// boundary's colour must show. Returns the table's manifest entry.
+fn default_tf_of_the_shells(profile: &str, lut: &str, says: &str) -> serde_json::Value {
     let dir = tempfile::tempdir().unwrap();
     let s = dir.path().join("shells.nii.gz");
     mdtf_ok(&["synth", "shells", "-o", s.to_str().unwrap(), "--size", "96", "-q"]);
-    let pack = dir.path().join("d");
-    mdtf_ok(&["pack", "--profile", "distance-tf", s.to_str().unwrap(), "-o", pack.to_str().unwrap(), "-q"]);
+    let pack = dir.path().join("pack");
+    mdtf_ok(&["pack", "--profile", profile, s.to_str().unwrap(), "-o", pack.to_str().unwrap(), "-q"]);
     let m = mdtf_e2e::manifest(&pack);
-    let lut = m["luts"].as_array().unwrap().iter().find(|l| l["name"] == "alpha_u").unwrap().clone();
-    assert!(lut["meaning"].as_str().unwrap().contains("from the 3 boundaries found"), "{}", lut["meaning"]);
-    let png = dir.path().join("d.png");
+    let entry = m["luts"].as_array().unwrap().iter().find(|l| l["name"] == lut).unwrap().clone();
+    assert!(entry["meaning"].as_str().unwrap().contains(says), "{}", entry["meaning"]);
+    let png = dir.path().join("preview.png");
     mdtf_ok(&["preview", pack.to_str().unwrap(), "-o", png.to_str().unwrap(), "--size", "160", "-q"]);
-    assert_every_boundary_colour_shows(&png, 3, "distance-tf");
+    assert_every_boundary_colour_shows(&png, 3, profile);
+    entry
+}
+
+#[test]
+fn distance_tf_without_a_tf_colours_every_boundary_found() {
+    default_tf_of_the_shells("distance-tf", "alpha_u", "from the 3 boundaries found");
 }
 
 #[test]
 fn peak_finding_without_a_tf_renders_a_thin_widget_at_every_boundary_found() {
-    let dir = tempfile::tempdir().unwrap();
-    let s = dir.path().join("shells.nii.gz");
-    mdtf_ok(&["synth", "shells", "-o", s.to_str().unwrap(), "--size", "96", "-q"]);
-    let pack = dir.path().join("pf");
-    mdtf_ok(&["pack", "--profile", "peak-finding", s.to_str().unwrap(), "-o", pack.to_str().unwrap(), "-q"]);
-    let m = mdtf_e2e::manifest(&pack);
-    let lut = m["luts"].as_array().unwrap().iter().find(|l| l["name"] == "tf2d").unwrap().clone();
-    assert!(lut["meaning"].as_str().unwrap().contains("(3 found)"), "{}", lut["meaning"]);
+    let lut = default_tf_of_the_shells("peak-finding", "tf2d", "(3 found)");
     assert_eq!((lut["axes"][0]["size"].as_u64(), lut["axes"][1]["channel"].as_str()), (Some(1024), Some("inv_g")));
-    let png = dir.path().join("pf.png");
-    mdtf_ok(&["preview", pack.to_str().unwrap(), "-o", png.to_str().unwrap(), "--size", "160", "-q"]);
-    assert_every_boundary_colour_shows(&png, 3, "peak finding");
 }
 
 /// The NRRD payload of a 16-bit table as codes.
