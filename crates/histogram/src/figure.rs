@@ -82,6 +82,98 @@ fn plot_err<E: std::fmt::Debug>(e: E) -> String {
     format!("drawing the figure: {e:?}")
 }
 
+/// Width of the colour bar's area at the right of a 2D figure, pixels.
+const COLOUR_BAR_WIDTH: u32 = 130;
+/// Size of a figure of two 2D histograms side by side, pixels.
+pub const SIDE_BY_SIDE_SIZE: (u32, u32) = (1180, 560);
+
+/// Pixel ranges (x, y) of a plot on the bitmap.
+type PixelRect = (std::ops::Range<i32>, std::ops::Range<i32>);
+
+/// Draws the title and the labelled axes of `h`'s heat map in `area`;
+/// returns the plot's pixels, which [`fill_heat_map`] then fills.
+fn heat_map_axes(
+    area: &DrawingArea<BitMapBackend, plotters::coord::Shift>,
+    h: &Histogram,
+    labels: &Labels,
+) -> Result<PixelRect, String> {
+    let (ax, ay) = (&h.axes[0], &h.axes[1]);
+    let mut chart = ChartBuilder::on(area)
+        .caption(&labels.title, ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(48)
+        .y_label_area_size(70)
+        .build_cartesian_2d(ax.min..ax.max, ay.min..ay.max)
+        .map_err(plot_err)?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc(labels.axes.first().map_or("", String::as_str))
+        .y_desc(labels.axes.get(1).map_or("", String::as_str))
+        .axis_desc_style(("sans-serif", 14))
+        .label_style(("sans-serif", 12))
+        .draw()
+        .map_err(plot_err)?;
+    Ok(chart.plotting_area().get_pixel_range())
+}
+
+/// Draws the log count axis of a colour bar for counts up to `max` in
+/// `area`; returns the bar's pixels, which [`fill_colour_bar`] then fills.
+fn colour_bar_axes(
+    area: &DrawingArea<BitMapBackend, plotters::coord::Shift>,
+    max: u64,
+    scale: Scale,
+) -> Result<PixelRect, String> {
+    let top = max.max(1) as f64;
+    let mut bar = ChartBuilder::on(area)
+        .margin_top(12 + 30)
+        .margin_bottom(12 + 48)
+        .margin_right(12)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..1.0, (1.0..top.max(1.5)).log_scale())
+        .map_err(plot_err)?;
+    bar.configure_mesh()
+        .disable_mesh()
+        .disable_x_axis()
+        .y_desc(format!("voxels per bin ({scale:?} colours)"))
+        .y_label_formatter(&|c| format!("{}", c.round() as u64))
+        .axis_desc_style(("sans-serif", 12))
+        .label_style(("sans-serif", 11))
+        .draw()
+        .map_err(plot_err)?;
+    Ok(bar.plotting_area().get_pixel_range())
+}
+
+/// Fills the plot `rect` of an RGB bitmap `width` pixels wide with `h`'s
+/// heat map: each pixel shows the bin under its centre (first axis right, second up).
+fn fill_heat_map(pixels: &mut [u8], width: usize, (px, py): PixelRect, h: &Histogram, max: u64, scale: Scale) {
+    let (ax, ay) = (&h.axes[0], &h.axes[1]);
+    let (pw, ph) = ((px.end - px.start).max(1) as f64, (py.end - py.start).max(1) as f64);
+    for y in py.clone() {
+        let j = (((py.end - 1 - y) as f64 + 0.5) / ph * ay.bins as f64) as usize;
+        for x in px.clone() {
+            let i = (((x - px.start) as f64 + 0.5) / pw * ax.bins as f64) as usize;
+            let c = h.counts[j.min(ay.bins - 1) * ax.bins + i.min(ax.bins - 1)] as u64;
+            let o = 3 * (y as usize * width + x as usize);
+            pixels[o..o + 3].copy_from_slice(&count_colour(c, max, scale));
+        }
+    }
+}
+
+/// Fills the colour bar `rect`: at each height, the colour of the count the log axis beside it reads there.
+fn fill_colour_bar(pixels: &mut [u8], width: usize, (bx, by): PixelRect, max: u64, scale: Scale) {
+    let bh = (by.end - by.start).max(1) as f64;
+    for y in by.clone() {
+        let t = ((by.end - 1 - y) as f64 + 0.5) / bh;
+        let count = (max.max(1) as f64).powf(t).round() as u64;
+        let colour = count_colour(count.max(1), max.max(1), scale);
+        for x in bx.clone() {
+            let o = 3 * (y as usize * width + x as usize);
+            pixels[o..o + 3].copy_from_slice(&colour);
+        }
+    }
+}
+
 impl Histogram {
     /// The figure of a 1D or 2D histogram (None for 3D: see
     /// [`Histogram::rgb_projections`]), [`FIGURE_SIZE`] pixels.
@@ -99,76 +191,46 @@ impl Histogram {
 
     fn draw_2d(&self, pixels: &mut [u8], scale: Scale, labels: &Labels) -> Result<bool, String> {
         let (w, h) = FIGURE_SIZE;
-        let (ax, ay) = (&self.axes[0], &self.axes[1]);
         let max = self.max();
-        let (plot, bar_px);
+        let (plot, bar);
         {
             let root = BitMapBackend::with_buffer(pixels, (w, h)).into_drawing_area();
-            let (main, bar) = root.split_horizontally(w - 130);
-            let mut chart = ChartBuilder::on(&main)
-                .caption(&labels.title, ("sans-serif", 18))
-                .margin(12)
-                .x_label_area_size(48)
-                .y_label_area_size(70)
-                .build_cartesian_2d(ax.min..ax.max, ay.min..ay.max)
-                .map_err(plot_err)?;
-            chart
-                .configure_mesh()
-                .disable_mesh()
-                .x_desc(labels.axes.first().map_or("", String::as_str))
-                .y_desc(labels.axes.get(1).map_or("", String::as_str))
-                .axis_desc_style(("sans-serif", 14))
-                .label_style(("sans-serif", 12))
-                .draw()
-                .map_err(plot_err)?;
-            plot = chart.plotting_area().get_pixel_range();
-            let top = max.max(1) as f64;
-            let mut bar_chart = ChartBuilder::on(&bar)
-                .margin_top(12 + 30)
-                .margin_bottom(12 + 48)
-                .margin_right(12)
-                .y_label_area_size(70)
-                .build_cartesian_2d(0.0..1.0, (1.0..top.max(1.5)).log_scale())
-                .map_err(plot_err)?;
-            bar_chart
-                .configure_mesh()
-                .disable_mesh()
-                .disable_x_axis()
-                .y_desc(format!("voxels per bin ({scale:?} colours)"))
-                .y_label_formatter(&|c| format!("{}", c.round() as u64))
-                .axis_desc_style(("sans-serif", 12))
-                .label_style(("sans-serif", 11))
-                .draw()
-                .map_err(plot_err)?;
-            bar_px = bar_chart.plotting_area().get_pixel_range();
+            let (main, bar_area) = root.split_horizontally(w - COLOUR_BAR_WIDTH);
+            plot = heat_map_axes(&main, self, labels)?;
+            bar = colour_bar_axes(&bar_area, max, scale)?;
             root.present().map_err(plot_err)?;
         }
-        // the heat map: each plot pixel shows the bin under its centre (first axis right, second up)
-        let (px, py) = plot;
-        let (pw, ph) = ((px.end - px.start).max(1) as f64, (py.end - py.start).max(1) as f64);
-        for y in py.clone() {
-            let j = (((py.end - 1 - y) as f64 + 0.5) / ph * ay.bins as f64) as usize;
-            for x in px.clone() {
-                let i = (((x - px.start) as f64 + 0.5) / pw * ax.bins as f64) as usize;
-                let c = self.counts[j.min(ay.bins - 1) * ax.bins + i.min(ax.bins - 1)] as u64;
-                let o = 3 * (y as usize * w as usize + x as usize);
-                pixels[o..o + 3].copy_from_slice(&count_colour(c, max, scale));
-            }
-        }
-        // the colour bar: the ramp against the log count axis beside it
-        let (bx, by) = bar_px;
-        let bh = (by.end - by.start).max(1) as f64;
-        for y in by.clone() {
-            // the count at this height of the log axis, and its colour
-            let t = ((by.end - 1 - y) as f64 + 0.5) / bh;
-            let count = (max.max(1) as f64).powf(t).round() as u64;
-            let colour = count_colour(count.max(1), max.max(1), scale);
-            for x in bx.clone() {
-                let o = 3 * (y as usize * w as usize + x as usize);
-                pixels[o..o + 3].copy_from_slice(&colour);
-            }
-        }
+        fill_heat_map(pixels, w as usize, plot, self, max, scale);
+        fill_colour_bar(pixels, w as usize, bar, max, scale);
         Ok(true)
+    }
+
+    /// Two 2D histograms side by side over their own axes, sharing one
+    /// colour scale (the larger of their largest counts) and its bar: e.g.
+    /// the distance paper's normal | stretched (v, g_hit) figure.
+    /// [`SIDE_BY_SIDE_SIZE`] pixels; None unless both are 2D.
+    pub fn figure_beside(&self, other: &Histogram, scale: Scale, labels: [&Labels; 2]) -> Result<Option<Rgb>, String> {
+        if self.axes.len() != 2 || other.axes.len() != 2 {
+            return Ok(None);
+        }
+        font_once();
+        let (w, h) = SIDE_BY_SIDE_SIZE;
+        let mut pixels = vec![255u8; (w * h * 3) as usize];
+        let max = self.max().max(other.max());
+        let (plots, bar);
+        {
+            let root = BitMapBackend::with_buffer(&mut pixels, (w, h)).into_drawing_area();
+            let (panels, bar_area) = root.split_horizontally(w - COLOUR_BAR_WIDTH);
+            let (left, right) = panels.split_horizontally((w - COLOUR_BAR_WIDTH) / 2);
+            plots = [heat_map_axes(&left, self, labels[0])?, heat_map_axes(&right, other, labels[1])?];
+            bar = colour_bar_axes(&bar_area, max, scale)?;
+            root.present().map_err(plot_err)?;
+        }
+        let [p0, p1] = plots;
+        fill_heat_map(&mut pixels, w as usize, p0, self, max, scale);
+        fill_heat_map(&mut pixels, w as usize, p1, other, max, scale);
+        fill_colour_bar(&mut pixels, w as usize, bar, max, scale);
+        Ok(Some(Rgb { width: w as usize, height: h as usize, pixels }))
     }
 
     fn draw_1d(&self, pixels: &mut [u8], labels: &Labels) -> Result<bool, String> {

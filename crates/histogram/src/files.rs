@@ -65,9 +65,17 @@ pub fn write_stretched(
     title: &str,
 ) -> Result<(), VolumeError> {
     write_histogram(dir, stretched, scale, title)?;
-    let both = side_by_side(&normal.image(scale), &stretched.image(scale));
+    let left = Labels::of(normal, &format!("normal (v, g) of the traced voxels of {title}"));
+    let right = Labels::of(stretched, &format!("stretched (v, g_hit) of {title}"));
     let text = format!("left: normal (v, g) of traced voxels; right: stretched (v, g_hit); {}", normal.describe(scale));
-    write_png(&dir.join("normal_vs_stretched.png"), &both, &text)
+    match normal.figure_beside(stretched, scale, [&left, &right]).map_err(VolumeError::Fields)? {
+        Some(both) => crate::rgb::write_rgb_png(&dir.join("normal_vs_stretched.png"), &both, &text),
+        None => write_png(
+            &dir.join("normal_vs_stretched.png"),
+            &side_by_side(&normal.image(scale), &stretched.image(scale)),
+            &text,
+        ),
+    }
 }
 
 /// Writes `hvol.nrrd`, `position.nrrd`, `opacity.{nrrd,png}`, `hvol_per_v.csv` and `hvol.json`

@@ -20,7 +20,7 @@ mod rgb;
 pub use axis::{Axis, AxisSpec, DEFAULT_BINS, MAX_INTEGER_BINS};
 pub use boundaries::{CORE_HALF_WIDTH, DetectedBoundary, MIN_CORE_SHARE, MIN_RISE_CORRELATION, detect_boundaries};
 pub use count::{Histogram, count};
-pub use figure::{FIGURE_SIZE, Labels, PLOT_PIXELS, axis_label, count_colour};
+pub use figure::{FIGURE_SIZE, Labels, PLOT_PIXELS, SIDE_BY_SIDE_SIZE, axis_label, count_colour};
 pub use files::{write_histogram, write_hvol, write_stretched};
 pub use hvol::{HVOL_PARTS, HistogramVolume, HvolAccumulator, HvolAxes, HvolParams, histogram_volume};
 pub use hvol_derived::histogram_volume_derived;

@@ -363,3 +363,34 @@ fn figures_have_axes_labels_and_a_colour_bar_and_show_each_bin_in_place() {
         f1.pixels.chunks_exact(3).any(|p| p == [0, 0, 0]) && f1.pixels.chunks_exact(3).any(|p| p == [170, 170, 170])
     );
 }
+
+#[test]
+fn two_histograms_side_by_side_share_one_colour_scale() {
+    // the left's bins hold 1000 and 10 voxels, the right's one bin 100
+    let mut v = vec![2.5f32; 1000];
+    let mut g = vec![5.5f32; 1000];
+    v.extend([6.5f32; 10]);
+    g.extend([1.5f32; 10]);
+    let axes = vec![Axis::new("v", 0.0, 8.0, 8).unwrap(), Axis::new("g", 0.0, 6.0, 6).unwrap()];
+    let left = count(&[&v, &g], axes.clone(), None).unwrap();
+    let right = count(&[&[4.5f32; 100][..], &[3.5f32; 100][..]], axes, None).unwrap();
+    let labels = [&mdtf_histogram::Labels::of(&left, "left"), &mdtf_histogram::Labels::of(&right, "right")];
+    let fig = left.figure_beside(&right, Scale::Log, labels).unwrap().unwrap();
+    assert_eq!((fig.width as u32, fig.height as u32), mdtf_histogram::SIDE_BY_SIDE_SIZE);
+    assert!(fig.width <= 1200 && fig.height <= 1200);
+    let half = (fig.width - 130) / 2;
+    let count_in = |c: [u8; 3], xs: std::ops::Range<usize>| {
+        (0..fig.height)
+            .flat_map(|y| xs.clone().map(move |x| (x, y)))
+            .filter(|&(x, y)| fig.pixels[3 * (y * fig.width + x)..3 * (y * fig.width + x) + 3] == c)
+            .count()
+    };
+    // one scale for both: 1000 is the top on the left, 100 has its own (lower) colour on the right only
+    let (top, hundred) =
+        (mdtf_histogram::count_colour(1000, 1000, Scale::Log), mdtf_histogram::count_colour(100, 1000, Scale::Log));
+    assert!(count_in(top, 0..half) > 100 && count_in(top, half..fig.width - 130) == 0);
+    assert!(count_in(hundred, half..fig.width - 130) > 100 && count_in(hundred, 0..half) == 0);
+    // a 1D histogram has no side-by-side heat map
+    let one = count(&[&v], vec![Axis::new("v", 0.0, 8.0, 8).unwrap()], None).unwrap();
+    assert!(one.figure_beside(&right, Scale::Log, labels).unwrap().is_none());
+}
