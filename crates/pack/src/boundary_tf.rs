@@ -93,24 +93,17 @@ pub struct Tent<'a> {
 /// `tf2d_default` over (`v`, `g`): see the module docs.
 pub fn boundary_tf(v: &LutAxis, g: &LutAxis, tent: Tent, arches: &[BoundaryArch]) -> Lut {
     let opacity = boundary_opacities(arches);
-    let w = tent.half_width_voxels.max(1e-3);
-    let per_voxel: Vec<f64> = opacity.iter().map(|a| 1.0 - (1.0 - a).powf(1.0 / w)).collect();
-    let centre = |a: &LutAxis, i: usize| a.min + (i as f64 + 0.5) * (a.max - a.min) / a.size as f64;
+    let per_voxel = per_voxel_opacities(&opacity, tent.half_width_voxels);
     // each arch's g at every v cell centre, once
     let arch_g: Vec<Vec<Option<f64>>> =
-        (0..v.size).map(|i| arches.iter().map(|a| a.g_at(centre(v, i))).collect()).collect();
+        (0..v.size).map(|i| arches.iter().map(|a| a.g_at(v.centre(i))).collect()).collect();
     let mut values = Vec::with_capacity(4 * v.size * g.size);
     for j in 0..g.size {
-        let gc = centre(g, j);
+        let gc = g.centre(j);
         for (i, column) in arch_g.iter().enumerate() {
-            let owner = column
-                .iter()
-                .enumerate()
-                .filter_map(|(k, ga)| ga.map(|ga| (k, (gc / ga).ln().abs())))
-                .min_by(|a, b| a.1.total_cmp(&b.1))
-                .filter(|(_, miss)| *miss <= ARCH_RATIO.ln());
+            let owner = nearest_by_ratio(gc, column.iter().copied());
             match owner {
-                Some((k, _)) if tent.peak > 0.0 => {
+                Some(k) if tent.peak > 0.0 => {
                     let c = boundary_colour(k, arches.len());
                     let a = per_voxel[k] * (tent.opacity[j * v.size + i] as f64 / tent.peak).clamp(0.0, 1.0);
                     values.extend([c[0] as f32, c[1] as f32, c[2] as f32, a as f32]);
@@ -195,25 +188,18 @@ pub fn boundary_isosurface_tf(arches: &[BoundaryArch], v_range: [f64; 2]) -> TfF
 /// voxels), so that the surface accumulates about A_k. `v` and `g_hit` are
 /// the table's axes (256 cells each is the renderer's size).
 pub fn boundary_alpha_u(v: &LutAxis, g_hit: &LutAxis, alpha_d_voxels: f64, arches: &[BoundaryArch]) -> Lut {
-    let opacity = boundary_opacities(arches);
-    let w = alpha_d_voxels.max(1e-3);
-    let centre = |a: &LutAxis, i: usize| a.min + (i as f64 + 0.5) * (a.max - a.min) / a.size as f64;
+    let per_voxel = per_voxel_opacities(&boundary_opacities(arches), alpha_d_voxels);
     let mut values = Vec::with_capacity(4 * v.size * g_hit.size);
     for j in 0..g_hit.size {
-        let g = centre(g_hit, j);
+        let g = g_hit.centre(j);
         for i in 0..v.size {
-            let x = centre(v, i);
-            let owner = arches
-                .iter()
-                .enumerate()
-                .filter(|(_, a)| x > a.v_low && x < a.v_high && a.g_peak > 0.0)
-                .map(|(k, a)| (k, (g / a.g_peak).ln().abs()))
-                .min_by(|a, b| a.1.total_cmp(&b.1))
-                .filter(|(_, miss)| *miss <= ARCH_RATIO.ln());
-            match owner {
-                Some((k, _)) => {
+            let x = v.centre(i);
+            // every voxel traced to a boundary reads its peak g: the reference is G, wherever v is in its span
+            let peaks = arches.iter().map(|a| (x > a.v_low && x < a.v_high && a.g_peak > 0.0).then_some(a.g_peak));
+            match nearest_by_ratio(g, peaks) {
+                Some(k) => {
                     let c = boundary_colour(k, arches.len());
-                    let a = 1.0 - (1.0 - opacity[k]).powf(1.0 / w);
+                    let a = per_voxel[k];
                     values.extend([c[0] as f32, c[1] as f32, c[2] as f32, a as f32]);
                 }
                 None => values.extend([0.0; 4]),
@@ -237,6 +223,24 @@ pub fn boundary_alpha_u(v: &LutAxis, g_hit: &LutAxis, alpha_d_voxels: f64, arche
 
 /// Half-width of a boundary's isosurface widget, as a share of its value span.
 pub const ISOSURFACE_HALF_WIDTH: f64 = 0.01;
+
+/// The index of the reference g (None: not a candidate) nearest `g` by
+/// ratio, if within a factor [`ARCH_RATIO`] of it.
+fn nearest_by_ratio(g: f64, references: impl Iterator<Item = Option<f64>>) -> Option<usize> {
+    references
+        .enumerate()
+        .filter_map(|(k, r)| r.map(|r| (k, (g / r).ln().abs())))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .filter(|(_, miss)| *miss <= ARCH_RATIO.ln())
+        .map(|(k, _)| k)
+}
+
+/// Per-voxel opacities 1 - (1 - A)^(1 / w) that accumulate the surface
+/// opacities A over `w` voxels of full weight.
+fn per_voxel_opacities(surface: &[f64], w: f64) -> Vec<f64> {
+    let w = w.max(1e-3);
+    surface.iter().map(|a| 1.0 - (1.0 - a).powf(1.0 / w)).collect()
+}
 
 /// z with Phi(z) = t for t in (0, 1), Phi the standard normal CDF, by
 /// bisection (Phi is monotone; 64 halvings of [-40, 40] reach f64's resolution).

@@ -19,6 +19,13 @@ pub struct LutAxis {
     pub max: f64,
 }
 
+impl LutAxis {
+    /// The centre of cell `i` (channel units).
+    pub fn centre(&self, i: usize) -> f64 {
+        self.min + (i as f64 + 0.5) * (self.max - self.min) / self.size as f64
+    }
+}
+
 /// A lookup table in memory: RGBA in [0, 1] or a single channel, first axis fastest.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Lut {

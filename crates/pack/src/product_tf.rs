@@ -70,7 +70,6 @@ impl ProductFactor {
     /// The factor rasterised at its cell centres: `cells` per axis, first
     /// channel fastest; RGBA for widgets, opacity alone for a ramp.
     pub fn table(&self, k: usize, cells: usize) -> Lut {
-        let centre = |r: [f64; 2], i: usize| r[0] + (i as f64 + 0.5) * (r[1] - r[0]) / cells as f64;
         let axes: Vec<LutAxis> = self
             .channels
             .iter()
@@ -82,14 +81,14 @@ impl ProductFactor {
                 let mut v = Vec::with_capacity(4 * cells * cells);
                 for j in 0..cells {
                     for i in 0..cells {
-                        let x = [centre(self.ranges[0], i), centre(self.ranges[1], j)];
+                        let x = [axes[0].centre(i), axes[1].centre(j)];
                         v.extend(self.eval(&x).map(|x| x as f32));
                     }
                 }
                 (v, 4, "RGBA of its widgets".to_string())
             }
             FactorShape::Ramp([b, e]) => (
-                (0..cells).map(|i| self.eval(&[centre(self.ranges[0], i)])[3] as f32).collect(),
+                (0..cells).map(|i| self.eval(&[axes[0].centre(i)])[3] as f32).collect(),
                 1,
                 format!("opacity ramp from 0 at {b} to 1 at {e}"),
             ),
