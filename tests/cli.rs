@@ -762,7 +762,7 @@ fn the_default_slicer_tf_shows_every_boundary_the_histogram_volume_finds() {
         let text = String::from_utf8_lossy(&sheet);
         let at = text.find("mdtf contact sheet: ").expect("described");
         let line: String = text[at..].chars().take_while(|c| *c != '\0').collect();
-        assert!(line.contains("preview.png: the pack, rendered") && line.contains("histogram/hist_v_g.png"), "{line}");
+        assert!(line.contains("preview.png; histogram/hist_v_g.png; histogram/opacity.png"), "{line}");
         assert!(!line.contains(dir.path().to_str().unwrap()), "{line}");
     }
 }
@@ -793,6 +793,79 @@ fn assert_every_boundary_colour_shows(png: &Path, boundaries: usize, name: &str)
     for (k, n) in per.iter().enumerate() {
         assert!(*n as f64 >= 0.02 * foreground as f64, "{name}: boundary {k} shows in {n} of {foreground} pixels");
     }
+}
+
+#[test]
+fn a_head_ct_phantom_shows_its_skin_faintly_and_its_bone_through_it() {
+    // air -1000 HU | skin (soft tissue, 40) | skull (bone, 1000) | brain (30), layers 5.6 voxels
+    // thick, blurred by sigma 1 voxel, CT noise of 20 HU, stored as int16 like a scanner's output
+    use mdtf_datagen::{Boundary, RadialPhantom, add_gaussian_noise, grid_centre};
+    let n = 112;
+    let geometry = mdtf_volume::Geometry::new([n; 3], [1.0; 3]);
+    let e = n as f64;
+    let head = RadialPhantom {
+        centre: grid_centre(&geometry),
+        geometry,
+        sigma: 1.0,
+        outside: -1000.0,
+        boundaries: vec![
+            Boundary { radius: 0.45 * e, inside: 40.0 },
+            Boundary { radius: 0.40 * e, inside: 1000.0 },
+            Boundary { radius: 0.35 * e, inside: 30.0 },
+        ],
+    };
+    let mut ct = head.volume();
+    add_gaussian_noise(&mut ct, 20.0, 7);
+    ct.data.mapv_inplace(f32::round);
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("head-ct.nii.gz");
+    mdtf_volume::write_nifti(&input, &mdtf_volume::MultiField::from(ct), mdtf_volume::SampleType::I16).unwrap();
+    let out = dir.path().join("out");
+    let pipeline = shipped_pipeline("slicer-3dtf");
+    mdtf_ok(&[
+        "run",
+        pipeline.to_str().unwrap(),
+        "--input",
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("run_report.json")).unwrap()).unwrap();
+    let found = report["boundaries"].as_array().unwrap();
+    assert_eq!(found.len(), 2, "skin and bone (bone | brain shares the bone's arch): {found:?}");
+    let f = |b: &serde_json::Value, k: &str| b[k].as_f64().unwrap();
+    let skin = found.iter().find(|b| b["meets_background"] == true).expect("the skin meets the air");
+    let bone = found.iter().find(|b| b["meets_background"] == false).expect("the bone lies inside");
+    // the materials within 5 % of the boundary's step
+    for (b, low, high) in [(skin, -1000.0, 40.0), (bone, 35.0, 1000.0)] {
+        let tol = 0.05 * (high - low);
+        assert!((f(b, "v_low") - low).abs() < tol && (f(b, "v_high") - high).abs() < tol, "{b}");
+    }
+    // the skin faint, the bone opaque
+    let m = mdtf_e2e::manifest(&out.join("pack"));
+    let lut = m["luts"].as_array().unwrap().iter().find(|l| l["name"] == "tf2d_default").unwrap();
+    let meaning = lut["meaning"].as_str().unwrap();
+    assert!(meaning.contains("surface opacity 1.000") && meaning.contains("surface opacity 0.300"), "{meaning}");
+    // both show in the preview, and the noise of the air and the brain shows nowhere: no lone lit pixels
+    let preview = out.join("preview.png");
+    assert_every_boundary_colour_shows(&preview, 2, "head CT");
+    let (w, h, px) = mdtf_e2e::read_rgb_png(&preview);
+    let (w, h) = (w as usize, h as usize);
+    let lit = |x: usize, y: usize| px[3 * (y * w + x)..3 * (y * w + x) + 3].iter().map(|&c| c as u32).sum::<u32>() > 50;
+    let (mut foreground, mut lone) = (0, 0);
+    for y in 1..h - 1 {
+        for x in 1..w - 1 {
+            if lit(x, y) {
+                foreground += 1;
+                let neighbours =
+                    [(0, 1), (2, 1), (1, 0), (1, 2)].iter().filter(|(dx, dy)| lit(x + dx - 1, y + dy - 1)).count();
+                lone += usize::from(neighbours == 0);
+            }
+        }
+    }
+    assert!(foreground > w * h / 10 && lone * 1000 < foreground, "{lone} lone of {foreground} lit pixels");
 }
 
 /// Packs the shells phantom (96^3) as `profile` without a TF, checks that

@@ -9,7 +9,10 @@
 # - Debian's python3-venv when the interpreter cannot make one, dcm2niix (a
 #   reference DICOM converter), ParaView's pvbatch with xvfb-run (the export
 #   test opens its script in ParaView) and Mesa's EGL (VTK renders offscreen
-#   with it), as root with apt-get; otherwise the command to run is printed;
+#   with it), Chromium and its driver (the report test opens report.html in
+#   it), as root with apt-get; otherwise the command to run is printed;
+# - a real scan from a Debian package (Colin27's T1 MRI, mricron-data) in
+#   target/real-data, or $MDTF_REAL_DATA, exported as MDTF_REAL_DATA;
 # - cargo test --workspace.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -41,12 +44,15 @@ missing=()
 command -v pvbatch >/dev/null || missing+=(python3-paraview python3-numpy)
 command -v xvfb-run >/dev/null || missing+=(xvfb xauth)
 ldconfig -p 2>/dev/null | grep -q libEGL_mesa || missing+=(libegl1 libegl-mesa0 libgl1-mesa-dri)
+# what the report test runs: headless Chromium driven through chromedriver
+command -v chromium >/dev/null || missing+=(chromium)
+command -v chromedriver >/dev/null || missing+=(chromium-driver)
 if [ "${#missing[@]}" -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
     say "installing ${missing[*]} (apt-get)"
     apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
   else
-    die "${missing[*]} missing (the export tests render with ParaView and VTK): sudo apt-get install ${missing[*]}"
+    die "${missing[*]} missing (the export tests render with ParaView and VTK, the report test opens its page in Chromium): sudo apt-get install ${missing[*]}"
   fi
 fi
 
@@ -71,6 +77,24 @@ if [ ! -x "$venv/bin/python" ] || ! cmp -s tests/requirements.txt "$stamp"; then
   cp tests/requirements.txt "$stamp"
 fi
 export MDTF_PYTHON="$venv/bin/python"
+
+# a real MRI for the tests of figures, default TFs and the report: Debian's
+# mricron-data ships Colin27's T1 (ch2.nii.gz); apt-get download needs no root
+real="${MDTF_REAL_DATA:-$PWD/target/real-data}"
+if [ ! -f "$real/ch2.nii.gz" ]; then
+  command -v apt-get >/dev/null || die "the real-data tests need ch2.nii.gz (Debian package mricron-data) in $real"
+  say "fetching a real scan (Debian mricron-data: ch2.nii.gz) into $real"
+  tmp="$(mktemp -d)"
+  (cd "$tmp" && apt-get download -qq mricron-data 2>/dev/null \
+    || { [ "$(id -u)" = 0 ] && apt-get update -qq && apt-get download -qq mricron-data; }) \
+    || die "apt-get download mricron-data failed"
+  dpkg-deb -x "$tmp"/mricron-data_*.deb "$tmp/x"
+  mkdir -p "$real"
+  cp "$tmp/x/usr/share/mricron/templates/ch2.nii.gz" "$real/"
+  cp "$tmp/x/usr/share/doc/mricron-data/copyright" "$real/mricron-data.copyright"
+  rm -rf "$tmp"
+fi
+export MDTF_REAL_DATA="$real"
 
 say "cargo test --workspace"
 exec cargo test --workspace --locked "$@"

@@ -186,3 +186,22 @@ pub fn shared_data(rel: &str) -> PathBuf {
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"));
     base.join(rel)
 }
+
+/// A real scan that ships in a registry package, fetched by tests/run.sh
+/// into `$MDTF_REAL_DATA` (default `target/real-data`): `ch2.nii.gz` is
+/// Colin Holmes' T1 MRI (the average of 27 scans, 181 x 217 x 181 at 1 mm,
+/// uint8, with scalp and skull) from Debian's `mricron-data`. Panics with
+/// the command that fetches it when it is missing: these tests must run.
+pub fn real_scan(name: &str) -> PathBuf {
+    let dir = std::env::var_os("MDTF_REAL_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/real-data"));
+    let path = dir.join(name);
+    assert!(
+        path.is_file(),
+        "{} is missing: run the tests with `bash tests/run.sh`, which fetches it (Debian's mricron-data), \
+         or set MDTF_REAL_DATA to a folder holding it",
+        path.display()
+    );
+    path
+}

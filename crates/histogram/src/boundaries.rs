@@ -27,7 +27,9 @@
 //!    (the apex counts most), the centre v its count-weighted mean v, and
 //!    the two materials v_centre -+ G sqrt(2 pi) sigma / 2;
 //! 5. a patch whose centre lies within a quarter of a stronger boundary's v
-//!    span and whose G is within 25 % of it is part of that boundary.
+//!    span and whose G is within 25 % of it is part of that boundary;
+//! 6. a boundary meets the background when one of its materials lies within
+//!    a quarter of its span of the value most voxels hold.
 //!
 //! sigma is the histogram volume's one estimate for the whole volume, so
 //! the material values of a boundary much sharper or blurrier than the
@@ -63,6 +65,20 @@ pub struct DetectedBoundary {
     pub sigma: f64,
     /// Voxels in its core (|p| <= 0.5 sigma).
     pub core_voxels: u64,
+    /// The noise floor of g (rule 1 of the module docs): below it a voxel
+    /// is taken for noise inside a material, not for this boundary.
+    pub g_floor: f64,
+    /// One of its two materials is the background, the value held by the
+    /// most voxels (see [`background_value`]): the surface a ray from
+    /// outside meets first.
+    pub meets_background: bool,
+}
+
+impl DetectedBoundary {
+    /// The boundary's arch to draw on a (v, g) figure, labelled and coloured.
+    pub fn arch(&self, label: &str, colour: [u8; 3]) -> crate::ArchMark {
+        crate::ArchMark { v_low: self.v_low, v_high: self.v_high, g_peak: self.g_peak, label: label.into(), colour }
+    }
 }
 
 /// The boundaries of `hv`, strongest (most core voxels) first; see the module docs.
@@ -75,6 +91,7 @@ pub fn detect_boundaries(hv: &HistogramVolume) -> Vec<DetectedBoundary> {
         return Vec::new();
     }
     let floor = (2.0 * median_g(hv)).max(hv.g_thresh);
+    let background = background_value(hv);
     let core = CORE_HALF_WIDTH * sigma;
     let candidate = |i: usize| {
         let bg = i / nv;
@@ -119,13 +136,17 @@ pub fn detect_boundaries(hv: &HistogramVolume) -> Vec<DetectedBoundary> {
         let g_peak = patch.apex_g();
         let v_centre = patch.sv / patch.count;
         let half_span = g_peak * (2.0 * std::f64::consts::PI).sqrt() * sigma / 2.0;
+        let (v_low, v_high) = (v_centre - half_span, v_centre + half_span);
+        let near = |v: f64| (v - background).abs() <= 0.25 * (v_high - v_low);
         found.push(DetectedBoundary {
-            v_low: v_centre - half_span,
-            v_high: v_centre + half_span,
+            v_low,
+            v_high,
             v_centre,
             g_peak,
             sigma,
             core_voxels: patch.count as u64,
+            g_floor: floor,
+            meets_background: near(v_low) || near(v_high),
         });
     }
     found.sort_by(|a, b| b.core_voxels.cmp(&a.core_voxels).then(a.v_centre.total_cmp(&b.v_centre)));
@@ -140,6 +161,15 @@ pub fn detect_boundaries(hv: &HistogramVolume) -> Vec<DetectedBoundary> {
         }
     }
     kept
+}
+
+/// The background: the centre of the v bin holding the most voxels (air
+/// around a CT, the dark surround of an MRI or a micrograph, the ambient
+/// value of a simulation; inside a cropped scan, its commonest tissue).
+pub fn background_value(hv: &HistogramVolume) -> f64 {
+    let [av, _] = &hv.vg_axes;
+    let mode = hv.count_v.iter().enumerate().max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(&a.0))).map_or(0, |(i, _)| i);
+    av.centre(mode)
 }
 
 /// The median g of all counted voxels, from the (v, g) counts (a bin centre).

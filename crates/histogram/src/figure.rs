@@ -15,6 +15,7 @@ use crate::count::Histogram;
 use crate::image::{Scale, grey_level};
 use crate::rgb::Rgb;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 use plotters::style::{FontStyle, register_font};
 use std::sync::Once;
 
@@ -23,14 +24,68 @@ pub const PLOT_PIXELS: u32 = 512;
 /// Figure size, pixels (the plot, its axes, title and colour bar).
 pub const FIGURE_SIZE: (u32, u32) = (780, 620);
 
-/// What the figure says: its title (e.g. the input's name) and a label
-/// with units per axis.
+/// What the figure says: its title (e.g. the input's name), a label with
+/// units per axis, a note below the plot (e.g. how an axis was clipped) and
+/// the boundaries to draw on a (v, g) plot.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Labels {
     /// Title above the plot.
     pub title: String,
     /// One label per histogram axis, with units.
     pub axes: Vec<String>,
+    /// A line of small text below the plot.
+    pub note: Option<String>,
+    /// Boundaries drawn as their model arches (2D figures over (v, g) only).
+    pub arches: Vec<ArchMark>,
+}
+
+/// A boundary drawn on a (v, g) figure as the arch an ideal blurred step
+/// from `v_low` to `v_high` with peak gradient `g_peak` draws: g = G
+/// exp(-t^2 / 2) at v = v_low + (v_high - v_low) Phi(t), labelled at its apex.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArchMark {
+    /// Value of the material on the low side (input units).
+    pub v_low: f64,
+    /// Value of the material on the high side.
+    pub v_high: f64,
+    /// Peak gradient magnitude, at the apex (input units per world unit).
+    pub g_peak: f64,
+    /// Short label at the apex (e.g. the boundary's number).
+    pub label: String,
+    /// Line and label colour.
+    pub colour: [u8; 3],
+}
+
+/// An RGBA table over a 2D figure's two axes (e.g. a transfer function
+/// over (v, g)), drawn over the counts: each pixel mixes the table's colour
+/// in by the square root of its opacity relative to the table's largest,
+/// so that faint widgets still show; the counts are then drawn in greys on
+/// black so that white and coloured widgets both stand out.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Overlay<'a> {
+    /// Lower and upper edge and cells of the table along the figure's first axis (its units).
+    pub x: (f64, f64, usize),
+    /// The same along the second axis.
+    pub y: (f64, f64, usize),
+    /// RGBA per cell, first axis fastest; colour in [0, 1], opacity at least 0.
+    pub rgba: &'a [f32],
+}
+
+impl Overlay<'_> {
+    /// The largest opacity of the table (0 when it is empty).
+    fn max_alpha(&self) -> f32 {
+        self.rgba.chunks_exact(4).map(|c| c[3]).fold(0.0, f32::max)
+    }
+
+    /// RGBA of the cell holding (x, y), None outside the table.
+    fn at(&self, x: f64, y: f64) -> Option<&[f32]> {
+        let cell = |v: f64, (lo, hi, n): (f64, f64, usize)| {
+            let t = (v - lo) / (hi - lo);
+            (0.0..1.0).contains(&t).then(|| ((t * n as f64) as usize).min(n - 1))
+        };
+        let (i, j) = (cell(x, self.x)?, cell(y, self.y)?);
+        self.rgba.get(4 * (j * self.x.2 + i)..4 * (j * self.x.2 + i) + 4)
+    }
 }
 
 /// The label of channel `name` with its units, for the axes of histogram figures.
@@ -50,9 +105,26 @@ pub fn axis_label(name: &str) -> String {
 impl Labels {
     /// Labels for `h` titled `title`, each axis labelled by [`axis_label`].
     pub fn of(h: &Histogram, title: &str) -> Labels {
-        Labels { title: title.into(), axes: h.axes.iter().map(|a| axis_label(&a.name)).collect() }
+        Labels {
+            title: title.into(),
+            axes: h.axes.iter().map(|a| axis_label(&a.name)).collect(),
+            note: None,
+            arches: Vec::new(),
+        }
     }
 }
+
+/// The grey of count `c` under an [`Overlay`]: black for 0, else 40..200 by the scaled count.
+fn dark_count_colour(c: u64, max: u64, scale: Scale) -> [u8; 3] {
+    if c == 0 {
+        return [0, 0, 0];
+    }
+    let l = (40.0 + 160.0 * grey_level(c, max, scale) as f64 / 255.0).round() as u8;
+    [l, l, l]
+}
+
+/// How count colours are chosen: [`count_colour`] or, under an overlay, [`dark_count_colour`].
+type CountPalette = fn(u64, u64, Scale) -> [u8; 3];
 
 fn font_once() {
     static FONT: Once = Once::new();
@@ -97,14 +169,7 @@ fn heat_map_axes(
     h: &Histogram,
     labels: &Labels,
 ) -> Result<PixelRect, String> {
-    let (ax, ay) = (&h.axes[0], &h.axes[1]);
-    let mut chart = ChartBuilder::on(area)
-        .caption(&labels.title, ("sans-serif", 18))
-        .margin(12)
-        .x_label_area_size(48)
-        .y_label_area_size(70)
-        .build_cartesian_2d(ax.min..ax.max, ay.min..ay.max)
-        .map_err(plot_err)?;
+    let mut chart = heat_map_chart(area, h, labels)?;
     chart
         .configure_mesh()
         .disable_mesh()
@@ -117,17 +182,86 @@ fn heat_map_axes(
     Ok(chart.plotting_area().get_pixel_range())
 }
 
+type HeatMapChart<'a, 'b> = ChartContext<
+    'a,
+    BitMapBackend<'b>,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// The chart of `h`'s heat map in `area` (title, margins, label areas): the
+/// same layout each time it is built, so marks drawn on a second build
+/// land on the first one's axes.
+fn heat_map_chart<'a, 'b>(
+    area: &'a DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>,
+    h: &Histogram,
+    labels: &Labels,
+) -> Result<HeatMapChart<'a, 'b>, String> {
+    let (ax, ay) = (&h.axes[0], &h.axes[1]);
+    ChartBuilder::on(area)
+        .caption(&labels.title, ("sans-serif", 18))
+        .margin(12)
+        .margin_bottom(12 + area_below(labels) - 48)
+        .x_label_area_size(48)
+        .y_label_area_size(70)
+        .build_cartesian_2d(ax.min..ax.max, ay.min..ay.max)
+        .map_err(plot_err)
+}
+
+/// Draws `labels`' arches and note over a filled heat map in `area`.
+fn draw_marks(
+    area: &DrawingArea<BitMapBackend, plotters::coord::Shift>,
+    h: &Histogram,
+    labels: &Labels,
+) -> Result<(), String> {
+    let mut chart = heat_map_chart(area, h, labels)?;
+    let (ax, ay) = (&h.axes[0], &h.axes[1]);
+    let inside = |v: f64, g: f64| v >= ax.min && v <= ax.max && g >= ay.min && g <= ay.max;
+    for a in &labels.arches {
+        let colour = RGBColor(a.colour[0], a.colour[1], a.colour[2]);
+        let arch = (0..=80).map(|k| {
+            let t = -3.0 + 6.0 * k as f64 / 80.0;
+            let phi = 0.5 * (1.0 + libm::erf(t / std::f64::consts::SQRT_2));
+            (a.v_low + (a.v_high - a.v_low) * phi, a.g_peak * (-0.5 * t * t).exp())
+        });
+        let arch: Vec<(f64, f64)> = arch.filter(|&(v, g)| inside(v, g)).collect();
+        // a dark edge under the colour, so that any colour shows on light and dark plots
+        chart.draw_series(LineSeries::new(arch.iter().copied(), BLACK.stroke_width(4))).map_err(plot_err)?;
+        chart.draw_series(LineSeries::new(arch, colour.stroke_width(2))).map_err(plot_err)?;
+        let centre = 0.5 * (a.v_low + a.v_high);
+        if inside(centre, a.g_peak) {
+            let at = chart.backend_coord(&(centre, a.g_peak));
+            let font = ("sans-serif", 18).into_font();
+            let anchor = Pos::new(HPos::Center, VPos::Bottom);
+            for (dx, dy, c) in [(1, 1, BLACK), (-1, -1, BLACK), (0, 0, colour)] {
+                area.draw_text(&a.label, &font.color(&c).pos(anchor), (at.0 + dx, at.1 - 4 + dy)).map_err(plot_err)?;
+            }
+        }
+    }
+    if let Some(note) = &labels.note {
+        let (_, height) = area.dim_in_pixel();
+        area.draw_text(note, &("sans-serif", 12).into_font().color(&RGBColor(60, 60, 60)), (8, height as i32 - 22))
+            .map_err(plot_err)?;
+    }
+    Ok(())
+}
+
+/// Height of the area below a plot (tick labels, axis label and the note, if any), pixels.
+fn area_below(labels: &Labels) -> u32 {
+    if labels.note.is_some() { 48 + 20 } else { 48 }
+}
+
 /// Draws the log count axis of a colour bar for counts up to `max` in
 /// `area`; returns the bar's pixels, which [`fill_colour_bar`] then fills.
 fn colour_bar_axes(
     area: &DrawingArea<BitMapBackend, plotters::coord::Shift>,
     max: u64,
     scale: Scale,
+    below: u32,
 ) -> Result<PixelRect, String> {
     let top = max.max(1) as f64;
     let mut bar = ChartBuilder::on(area)
         .margin_top(12 + 30)
-        .margin_bottom(12 + 48)
+        .margin_bottom(12 + below)
         .margin_right(12)
         .y_label_area_size(70)
         .build_cartesian_2d(0.0..1.0, (1.0..top.max(1.5)).log_scale())
@@ -146,27 +280,57 @@ fn colour_bar_axes(
 
 /// Fills the plot `rect` of an RGB bitmap `width` pixels wide with `h`'s
 /// heat map: each pixel shows the bin under its centre (first axis right, second up).
-fn fill_heat_map(pixels: &mut [u8], width: usize, (px, py): PixelRect, h: &Histogram, max: u64, scale: Scale) {
+/// Under an `overlay`, the counts are dark greys and the table's colours are mixed in.
+fn fill_heat_map(
+    pixels: &mut [u8],
+    width: usize,
+    (px, py): PixelRect,
+    h: &Histogram,
+    (max, scale): (u64, Scale),
+    overlay: Option<&Overlay>,
+) {
     let (ax, ay) = (&h.axes[0], &h.axes[1]);
     let (pw, ph) = ((px.end - px.start).max(1) as f64, (py.end - py.start).max(1) as f64);
+    let palette: CountPalette = if overlay.is_some() { dark_count_colour } else { count_colour };
+    let alpha_max = overlay.map_or(0.0, |o| o.max_alpha());
     for y in py.clone() {
-        let j = (((py.end - 1 - y) as f64 + 0.5) / ph * ay.bins as f64) as usize;
+        let ty = ((py.end - 1 - y) as f64 + 0.5) / ph;
+        let j = (ty * ay.bins as f64) as usize;
         for x in px.clone() {
-            let i = (((x - px.start) as f64 + 0.5) / pw * ax.bins as f64) as usize;
+            let tx = ((x - px.start) as f64 + 0.5) / pw;
+            let i = (tx * ax.bins as f64) as usize;
             let c = h.counts[j.min(ay.bins - 1) * ax.bins + i.min(ax.bins - 1)] as u64;
+            let mut rgb = palette(c, max, scale);
+            if let Some(cell) =
+                overlay.and_then(|o| o.at(ax.min + tx * (ax.max - ax.min), ay.min + ty * (ay.max - ay.min)))
+                && alpha_max > 0.0
+            {
+                let mix = (cell[3] / alpha_max).clamp(0.0, 1.0).sqrt();
+                for k in 0..3 {
+                    let tf = 255.0 * cell[k].clamp(0.0, 1.0);
+                    rgb[k] = (rgb[k] as f32 * (1.0 - mix) + tf * mix).round() as u8;
+                }
+            }
             let o = 3 * (y as usize * width + x as usize);
-            pixels[o..o + 3].copy_from_slice(&count_colour(c, max, scale));
+            pixels[o..o + 3].copy_from_slice(&rgb);
         }
     }
 }
 
 /// Fills the colour bar `rect`: at each height, the colour of the count the log axis beside it reads there.
-fn fill_colour_bar(pixels: &mut [u8], width: usize, (bx, by): PixelRect, max: u64, scale: Scale) {
+fn fill_colour_bar(
+    pixels: &mut [u8],
+    width: usize,
+    (bx, by): PixelRect,
+    max: u64,
+    scale: Scale,
+    palette: CountPalette,
+) {
     let bh = (by.end - by.start).max(1) as f64;
     for y in by.clone() {
         let t = ((by.end - 1 - y) as f64 + 0.5) / bh;
         let count = (max.max(1) as f64).powf(t).round() as u64;
-        let colour = count_colour(count.max(1), max.max(1), scale);
+        let colour = palette(count.max(1), max.max(1), scale);
         for x in bx.clone() {
             let o = 3 * (y as usize * width + x as usize);
             pixels[o..o + 3].copy_from_slice(&colour);
@@ -178,18 +342,29 @@ impl Histogram {
     /// The figure of a 1D or 2D histogram (None for 3D: see
     /// [`Histogram::rgb_projections`]), [`FIGURE_SIZE`] pixels.
     pub fn figure(&self, scale: Scale, labels: &Labels) -> Result<Option<Rgb>, String> {
+        self.figure_with(scale, labels, None)
+    }
+
+    /// [`Histogram::figure`] with an RGBA table drawn over a 2D histogram's counts.
+    pub fn figure_with(&self, scale: Scale, labels: &Labels, overlay: Option<&Overlay>) -> Result<Option<Rgb>, String> {
         font_once();
         let (w, h) = FIGURE_SIZE;
         let mut pixels = vec![255u8; (w * h * 3) as usize];
         let drawn = match self.axes.len() {
-            2 => self.draw_2d(&mut pixels, scale, labels)?,
+            2 => self.draw_2d(&mut pixels, scale, labels, overlay)?,
             1 => self.draw_1d(&mut pixels, labels)?,
             _ => return Ok(None),
         };
         Ok(drawn.then_some(Rgb { width: w as usize, height: h as usize, pixels }))
     }
 
-    fn draw_2d(&self, pixels: &mut [u8], scale: Scale, labels: &Labels) -> Result<bool, String> {
+    fn draw_2d(
+        &self,
+        pixels: &mut [u8],
+        scale: Scale,
+        labels: &Labels,
+        overlay: Option<&Overlay>,
+    ) -> Result<bool, String> {
         let (w, h) = FIGURE_SIZE;
         let max = self.max();
         let (plot, bar);
@@ -197,11 +372,18 @@ impl Histogram {
             let root = BitMapBackend::with_buffer(pixels, (w, h)).into_drawing_area();
             let (main, bar_area) = root.split_horizontally(w - COLOUR_BAR_WIDTH);
             plot = heat_map_axes(&main, self, labels)?;
-            bar = colour_bar_axes(&bar_area, max, scale)?;
+            bar = colour_bar_axes(&bar_area, max, scale, area_below(labels))?;
             root.present().map_err(plot_err)?;
         }
-        fill_heat_map(pixels, w as usize, plot, self, max, scale);
-        fill_colour_bar(pixels, w as usize, bar, max, scale);
+        fill_heat_map(pixels, w as usize, plot, self, (max, scale), overlay);
+        let palette: CountPalette = if overlay.is_some() { dark_count_colour } else { count_colour };
+        fill_colour_bar(pixels, w as usize, bar, max, scale, palette);
+        if !labels.arches.is_empty() || labels.note.is_some() {
+            let root = BitMapBackend::with_buffer(pixels, (w, h)).into_drawing_area();
+            let (main, _) = root.split_horizontally(w - COLOUR_BAR_WIDTH);
+            draw_marks(&main, self, labels)?;
+            root.present().map_err(plot_err)?;
+        }
         Ok(true)
     }
 
@@ -223,13 +405,13 @@ impl Histogram {
             let (panels, bar_area) = root.split_horizontally(w - COLOUR_BAR_WIDTH);
             let (left, right) = panels.split_horizontally((w - COLOUR_BAR_WIDTH) / 2);
             plots = [heat_map_axes(&left, self, labels[0])?, heat_map_axes(&right, other, labels[1])?];
-            bar = colour_bar_axes(&bar_area, max, scale)?;
+            bar = colour_bar_axes(&bar_area, max, scale, area_below(labels[0]))?;
             root.present().map_err(plot_err)?;
         }
         let [p0, p1] = plots;
-        fill_heat_map(&mut pixels, w as usize, p0, self, max, scale);
-        fill_heat_map(&mut pixels, w as usize, p1, other, max, scale);
-        fill_colour_bar(&mut pixels, w as usize, bar, max, scale);
+        fill_heat_map(&mut pixels, w as usize, p0, self, (max, scale), None);
+        fill_heat_map(&mut pixels, w as usize, p1, other, (max, scale), None);
+        fill_colour_bar(&mut pixels, w as usize, bar, max, scale, count_colour);
         Ok(Some(Rgb { width: w as usize, height: h as usize, pixels }))
     }
 

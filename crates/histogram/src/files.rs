@@ -3,9 +3,9 @@
 
 use crate::axis::Axis;
 use crate::count::Histogram;
-use crate::figure::Labels;
+use crate::figure::{ArchMark, Labels, Overlay};
 use crate::hvol::HistogramVolume;
-use crate::image::{Grey, Scale, side_by_side, write_exr, write_png};
+use crate::image::{Scale, side_by_side, write_exr, write_png};
 use mdtf_volume::nrrd::{TableAxis, write_counts_nrrd, write_table_nrrd};
 use mdtf_volume::{VolumeError, write_file_atomically};
 use std::path::Path;
@@ -24,6 +24,19 @@ fn write_json(path: &Path, value: &serde_json::Value) -> Result<(), VolumeError>
 /// for 2D the exact counts as `.exr`; for 3D the colour-volume picture
 /// `_rgb.png` of the three primary-plane projections, into `dir`.
 pub fn write_histogram(dir: &Path, h: &Histogram, scale: Scale, title: &str) -> Result<(), VolumeError> {
+    write_histogram_marked(dir, h, scale, title, None, &[])
+}
+
+/// [`write_histogram`] with a note below the 2D or 1D figure (e.g. how an
+/// axis was clipped) and boundaries drawn on a (v, g) figure.
+pub fn write_histogram_marked(
+    dir: &Path,
+    h: &Histogram,
+    scale: Scale,
+    title: &str,
+    note: Option<&str>,
+    arches: &[ArchMark],
+) -> Result<(), VolumeError> {
     let stem: Vec<&str> = h.axes.iter().map(|a| a.name.as_str()).collect();
     let stem = format!("hist_{}", stem.join("_"));
     write_counts_nrrd(&dir.join(format!("{stem}.nrrd")), &table_axes(&h.axes), &h.counts)?;
@@ -33,7 +46,9 @@ pub fn write_histogram(dir: &Path, h: &Histogram, scale: Scale, title: &str) -> 
             "png": "first axis to the right, second axis upward" }),
     )?;
     if h.axes.len() <= 2 {
-        let labels = Labels::of(h, &format!("{stem} of {title}"));
+        let mut labels = Labels::of(h, &format!("{stem} of {title}"));
+        labels.note = note.map(String::from);
+        labels.arches = arches.to_vec();
         let figure = h.figure(scale, &labels).map_err(VolumeError::Fields)?;
         if let Some(f) = figure {
             let text = format!("{}; axes: {}; {}", labels.title, labels.axes.join(" | "), h.describe(scale));
@@ -78,22 +93,53 @@ pub fn write_stretched(
     }
 }
 
+/// Writes a figure of the 2D histogram `h` with the RGBA table `overlay`
+/// over its counts (see [`Overlay`]) as the PNG `path`.
+pub fn write_overlay_figure(
+    path: &Path,
+    h: &Histogram,
+    scale: Scale,
+    labels: &Labels,
+    overlay: &Overlay,
+) -> Result<(), VolumeError> {
+    let figure = h.figure_with(scale, labels, Some(overlay)).map_err(VolumeError::Fields)?;
+    let Some(f) = figure else { return Err(VolumeError::Fields("an overlay needs a 2D histogram".into())) };
+    let text = format!(
+        "{}; axes: {}; {}; table drawn over the counts",
+        labels.title,
+        labels.axes.join(" | "),
+        h.describe(scale)
+    );
+    crate::rgb::write_rgb_png(path, &f, &text)
+}
+
+/// Colour of the default opacity drawn over the histogram volume's counts in `opacity.png`.
+const OPACITY_COLOUR: [f32; 3] = [1.0, 0.85, 0.3];
+
 /// Writes `hvol.nrrd`, `position.nrrd`, `opacity.{nrrd,png}`, `hvol_per_v.csv` and `hvol.json`
-/// (with the boundaries [`crate::detect_boundaries`] finds).
-pub fn write_hvol(dir: &Path, hv: &HistogramVolume) -> Result<(), VolumeError> {
+/// (with the boundaries [`crate::detect_boundaries`] finds). `opacity.png`
+/// draws the opacity over the (v, g) counts, with `arches` (e.g. the
+/// boundaries found, in their colours) and the tent's width stated; `title` names the input.
+pub fn write_hvol(dir: &Path, hv: &HistogramVolume, title: &str, arches: &[ArchMark]) -> Result<(), VolumeError> {
     write_counts_nrrd(&dir.join("hvol.nrrd"), &table_axes(&hv.hist.axes), &hv.hist.counts)?;
     let vg = table_axes(&hv.vg_axes);
     write_table_nrrd(&dir.join("position.nrrd"), &vg, &hv.position)?;
     write_table_nrrd(&dir.join("opacity.nrrd"), &vg, &hv.opacity)?;
-    let (w, h) = (hv.vg_axes[0].bins, hv.vg_axes[1].bins);
-    let mut pixels = vec![0u8; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            pixels[(h - 1 - y) * w + x] = (hv.opacity[y * w + x].clamp(0.0, 1.0) * 255.0).round() as u8;
-        }
-    }
-    let text = format!("opacity alpha(v, g) = tent(p(v, g)), half-width {}; sigma {}", hv.tent_width, hv.sigma);
-    write_png(&dir.join("opacity.png"), &Grey { width: w, height: h, pixels }, &text)?;
+    let counts = Histogram {
+        axes: hv.vg_axes.to_vec(),
+        counts: hv.count_vg.iter().map(|&c| c.min(u32::MAX as u64) as u32).collect(),
+    };
+    let rgba: Vec<f32> =
+        hv.opacity.iter().flat_map(|&a| [OPACITY_COLOUR[0], OPACITY_COLOUR[1], OPACITY_COLOUR[2], a]).collect();
+    let [av, ag] = &hv.vg_axes;
+    let overlay = Overlay { x: (av.min, av.max, av.bins), y: (ag.min, ag.max, ag.bins), rgba: &rgba };
+    let mut labels = Labels::of(&counts, &format!("default opacity over the (v, g) histogram of {title}"));
+    labels.note = Some(format!(
+        "opacity = tent of the position p(v, g), half-width {:.3} (sigma {:.3} world units); drawn at the square root of opacity",
+        hv.tent_width, hv.sigma
+    ));
+    labels.arches = arches.to_vec();
+    write_overlay_figure(&dir.join("opacity.png"), &counts, Scale::Log, &labels, &overlay)?;
     let mut csv = String::from("v,voxels,mean_g,mean_f2\n");
     for b in 0..hv.count_v.len() {
         csv += &format!("{},{},{},{}\n", hv.vg_axes[0].centre(b), hv.count_v[b], hv.mean_g_v[b], hv.mean_h_v[b]);

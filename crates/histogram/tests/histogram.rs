@@ -348,7 +348,10 @@ fn figures_have_axes_labels_and_a_colour_bar_and_show_each_bin_in_place() {
     assert!((n_top as f64 - bw * bh).abs() <= 0.1 * bw * bh + bw + bh, "{n_top} pixels for a {bw} x {bh} cell");
     assert!((n_low as f64 - n_top as f64).abs() <= bw + bh, "{n_low} vs {n_top}");
     // a figure without labels differs from the labelled one: the labels are drawn
-    let bare = h.figure(Scale::Log, &mdtf_histogram::Labels { title: String::new(), axes: vec![String::new(); 2] });
+    let bare = h.figure(
+        Scale::Log,
+        &mdtf_histogram::Labels { title: String::new(), axes: vec![String::new(); 2], note: None, arches: vec![] },
+    );
     assert_ne!(bare.unwrap().unwrap().pixels, fig.pixels);
     // written with the labels in the PNG's text too
     let dir = tempfile::tempdir().unwrap();
@@ -362,6 +365,84 @@ fn figures_have_axes_labels_and_a_colour_bar_and_show_each_bin_in_place() {
     assert!(
         f1.pixels.chunks_exact(3).any(|p| p == [0, 0, 0]) && f1.pixels.chunks_exact(3).any(|p| p == [170, 170, 170])
     );
+}
+
+#[test]
+fn a_table_over_the_counts_shows_its_colour_where_it_is_opaque_and_arches_follow_the_model() {
+    // counts in bins (2, 5) and (6, 1) of 8 x 6; a 4 x 3 table (cells of 2 x 2
+    // bins), red and opaque in its cell (1, 2) (v 2..4, g 4..6, over bin (2, 5)),
+    // green at a quarter of that in (3, 0) (v 6..8, g 0..2, over bin (6, 1))
+    let mut v = vec![2.5f32; 1000];
+    let mut g = vec![5.5f32; 1000];
+    v.extend([6.5f32; 10]);
+    g.extend([1.5f32; 10]);
+    let axes = vec![Axis::new("v", 0.0, 8.0, 8).unwrap(), Axis::new("g", 0.0, 6.0, 6).unwrap()];
+    let h = count(&[&v, &g], axes, None).unwrap();
+    let mut rgba = vec![0.0f32; 4 * 12];
+    rgba[4 * (2 * 4 + 1)..4 * (2 * 4 + 1) + 4].copy_from_slice(&[1.0, 0.0, 0.0, 0.8]);
+    rgba[4 * 3..4 * 3 + 4].copy_from_slice(&[0.0, 1.0, 0.0, 0.2]);
+    let overlay = mdtf_histogram::Overlay { x: (0.0, 8.0, 4), y: (0.0, 6.0, 3), rgba: &rgba };
+    let labels = mdtf_histogram::Labels::of(&h, "test input");
+    let fig = h.figure_with(Scale::Log, &labels, Some(&overlay)).unwrap().unwrap();
+    let plot_width = mdtf_histogram::FIGURE_SIZE.0 as usize - 130;
+    let pixels_of = |c: [u8; 3]| {
+        (0..fig.height)
+            .flat_map(|y| (0..plot_width).map(move |x| (x, y)))
+            .filter(|&(x, y)| fig.pixels[3 * (y * fig.width + x)..3 * (y * fig.width + x) + 3] == c)
+            .collect::<Vec<_>>()
+    };
+    // the opaque cell is pure red (relative opacity 1) over its counts and empty bins alike
+    let red = pixels_of([255, 0, 0]);
+    // the quarter-opacity cell: green mixed in by sqrt(0.25) = 0.5 over black (empty bins)
+    // and over bin (6, 1)'s grey 40 + 160 * log-level
+    let green = pixels_of([0, 128, 0]);
+    let grey = (40.0 + 160.0 * mdtf_histogram::grey_level(10, 1000, Scale::Log) as f64 / 255.0).round();
+    let on_counts =
+        pixels_of([(grey * 0.5).round() as u8, (grey * 0.5 + 127.5).round() as u8, (grey * 0.5).round() as u8]);
+    assert!(
+        red.len() > 1000 && green.len() > 1000 && on_counts.len() > 100,
+        "{} {} {}",
+        red.len(),
+        green.len(),
+        on_counts.len()
+    );
+    // red lies above and left of green, a cell apart: 2 cells in v and 2 in g between their centres
+    let mean = |p: &[(usize, usize)]| {
+        let n = p.len() as f64;
+        (p.iter().map(|q| q.0 as f64).sum::<f64>() / n, p.iter().map(|q| q.1 as f64).sum::<f64>() / n)
+    };
+    let ((xr, yr), (xg, yg)) = (mean(&red), mean(&green));
+    assert!(xg > xr && yg > yr, "red ({xr}, {yr}), green ({xg}, {yg})");
+    // without the table, bin (2, 5) is grey at the top of the dark ramp, 200, and empty bins black
+    let bare = h
+        .figure_with(Scale::Log, &labels, Some(&mdtf_histogram::Overlay { rgba: &[0.0; 48], ..overlay }))
+        .unwrap()
+        .unwrap();
+    let bare_count = |c: [u8; 3]| {
+        (0..bare.height)
+            .flat_map(|y| (0..plot_width).map(move |x| (x, y)))
+            .filter(|&(x, y)| bare.pixels[3 * (y * bare.width + x)..3 * (y * bare.width + x) + 3] == c)
+            .count()
+    };
+    assert!(bare_count([200, 200, 200]) > 100 && bare_count([0, 0, 0]) > 10 * red.len());
+    // an arch in pure blue, from v 1 to 7 with peak g 5: its apex column is at v = 4, right of
+    // red's left edge; drawn only when asked for
+    let mut arched = labels.clone();
+    arched.arches =
+        vec![mdtf_histogram::ArchMark { v_low: 1.0, v_high: 7.0, g_peak: 5.0, label: "1".into(), colour: [0, 0, 255] }];
+    arched.note = Some("a note".into());
+    let with_arch = h.figure_with(Scale::Log, &arched, Some(&overlay)).unwrap().unwrap();
+    let blue: Vec<(usize, usize)> = (0..with_arch.height)
+        .flat_map(|y| (0..plot_width).map(move |x| (x, y)))
+        .filter(|&(x, y)| {
+            with_arch.pixels[3 * (y * with_arch.width + x)..3 * (y * with_arch.width + x) + 3] == [0, 0, 255]
+        })
+        .collect();
+    assert!(pixels_of([0, 0, 255]).is_empty() && blue.len() > 200, "{}", blue.len());
+    // the arch is symmetric about v = 4: its blue pixels' mean x is where the red cell (v 2..4) ends
+    let (xb, _) = mean(&blue);
+    let red_right = red.iter().map(|p| p.0).max().unwrap() as f64;
+    assert!((xb - red_right).abs() < 6.0, "arch centre {xb}, v = 4 at {red_right}");
 }
 
 #[test]

@@ -11,11 +11,20 @@
 //! * a cell belongs to the boundary whose v span holds its v and whose arch
 //!   g(v) is nearest its g by ratio, if that ratio is within a factor of
 //!   [`ARCH_RATIO`]; other cells stay transparent;
-//! * boundary k's surface opacity, what a ray crossing it accumulates, is
-//!   A_k = [`MAX_BOUNDARY_OPACITY`] n_min / n_k, at least
-//!   [`MIN_BOUNDARY_OPACITY`], with n_k the voxels in its core: a larger
-//!   surface (most often an outer one, such as the skin) is more
-//!   transparent, the smallest is the most opaque;
+//! * cells with g below the boundaries' noise floor (twice the median g,
+//!   as detection takes it) are noise inside a material, and transparent:
+//!   near its two materials an arch's g falls to the noise's;
+//! * boundary k's surface opacity, what a ray crossing it accumulates: a
+//!   lone boundary is opaque ([`MAX_BOUNDARY_OPACITY`]); of several, one
+//!   that meets the background (the value most voxels hold: air around a
+//!   head, which every ray from outside crosses first, e.g. the skin) gets
+//!   at most [`OUTER_BOUNDARY_OPACITY`] (less if the n_min / n_k rule over
+//!   all the boundaries gives less), and the others A_k =
+//!   [`MAX_BOUNDARY_OPACITY`] n_min / n_k, at least
+//!   [`MIN_BOUNDARY_OPACITY`], with n_k the voxels in its core and n_min
+//!   the fewest among them: a larger surface (most often an outer one) is
+//!   more transparent, the smallest is the most opaque. When every
+//!   boundary meets the background, the n_min / n_k rule covers them all;
 //! * a cell's opacity, per voxel of path as the renderers take it, is
 //!   a_k = 1 - (1 - A_k)^(1 / w) times the tent of p (the histogram
 //!   volume's default opacity divided by its peak), w being the tent's
@@ -39,6 +48,10 @@ pub struct BoundaryArch {
     pub g_peak: f64,
     /// Voxels in its core (what sets its opacity).
     pub core_voxels: u64,
+    /// g below which a cell is noise inside a material, not this boundary.
+    pub g_floor: f64,
+    /// One of its materials is the background (what rays from outside cross first).
+    pub meets_background: bool,
 }
 
 /// Colours of the detected boundaries, in order (then repeated).
@@ -49,6 +62,9 @@ pub const BOUNDARY_PALETTE: [[f64; 3]; 6] =
 pub const MAX_BOUNDARY_OPACITY: f64 = 1.0;
 /// Least opacity of any boundary.
 pub const MIN_BOUNDARY_OPACITY: f64 = 0.1;
+/// Surface opacity of a boundary that meets the background, when there are
+/// others: faint enough that the ones inside show through it.
+pub const OUTER_BOUNDARY_OPACITY: f64 = 0.3;
 /// How far (as a ratio) a cell's g may be from a boundary's arch to belong to it.
 pub const ARCH_RATIO: f64 = 2.0;
 
@@ -72,10 +88,18 @@ pub fn boundary_colour(k: usize, count: usize) -> [f64; 3] {
 
 /// The surface opacity A_k of each boundary (see the module docs).
 pub fn boundary_opacities(arches: &[BoundaryArch]) -> Vec<f64> {
-    let least = arches.iter().map(|a| a.core_voxels.max(1)).min().unwrap_or(1) as f64;
+    let all_outer = arches.iter().all(|a| a.meets_background);
+    let inner = |a: &BoundaryArch| all_outer || !a.meets_background;
+    let least_of = |keep: &dyn Fn(&BoundaryArch) -> bool| {
+        arches.iter().filter(|a| keep(a)).map(|a| a.core_voxels.max(1)).min().unwrap_or(1) as f64
+    };
+    let (least_inner, least_all) = (least_of(&inner), least_of(&|_| true));
+    let by_size = |least: f64, a: &BoundaryArch| {
+        (MAX_BOUNDARY_OPACITY * least / a.core_voxels.max(1) as f64).max(MIN_BOUNDARY_OPACITY)
+    };
     arches
         .iter()
-        .map(|a| (MAX_BOUNDARY_OPACITY * least / a.core_voxels.max(1) as f64).max(MIN_BOUNDARY_OPACITY))
+        .map(|a| if inner(a) { by_size(least_inner, a) } else { by_size(least_all, a).min(OUTER_BOUNDARY_OPACITY) })
         .collect()
 }
 
@@ -101,7 +125,8 @@ pub fn boundary_tf(v: &LutAxis, g: &LutAxis, tent: Tent, arches: &[BoundaryArch]
     for j in 0..g.size {
         let gc = g.centre(j);
         for (i, column) in arch_g.iter().enumerate() {
-            let owner = nearest_by_ratio(gc, column.iter().copied());
+            let above_noise = column.iter().zip(arches).map(|(g_arch, a)| g_arch.filter(|_| gc >= a.g_floor));
+            let owner = nearest_by_ratio(gc, above_noise);
             match owner {
                 Some(k) if tent.peak > 0.0 => {
                     let c = boundary_colour(k, arches.len());
@@ -262,6 +287,28 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_boundary_that_meets_the_background_is_faint_and_the_smallest_inner_one_opaque() {
+        let arch = |core_voxels, meets_background| BoundaryArch {
+            v_low: 0.0,
+            v_high: 1.0,
+            g_peak: 1.0,
+            core_voxels,
+            g_floor: 0.0,
+            meets_background,
+        };
+        // skin (outer), bone, a small inner boundary; then an outer surface much larger than the rest
+        let head = [arch(40_000, true), arch(60_000, false), arch(20_000, false)];
+        assert_eq!(boundary_opacities(&head), vec![OUTER_BOUNDARY_OPACITY, 1.0 / 3.0, 1.0]);
+        let large_outer = [arch(100_000, true), arch(60_000, false), arch(20_000, false)];
+        assert_eq!(boundary_opacities(&large_outer), vec![0.2, 1.0 / 3.0, 1.0]);
+        // alone, the outer one is opaque; all outer: by core voxels among them
+        assert_eq!(boundary_opacities(&[arch(40_000, true)]), vec![1.0]);
+        assert_eq!(boundary_opacities(&[arch(40_000, true), arch(10_000, true)]), vec![0.25, 1.0]);
+        // the least is a floor
+        assert_eq!(boundary_opacities(&[arch(1_000_000, false), arch(1_000, false)]), vec![MIN_BOUNDARY_OPACITY, 1.0]);
+    }
+
+    #[test]
     fn the_arch_is_the_erf_boundarys_g_as_a_function_of_v() {
         // an erf boundary from 20 to 230, sigma 2: at distance x, v = 20 + 210 Phi(x / 2), g = G exp(-x^2 / 8)
         let arch = BoundaryArch {
@@ -269,6 +316,8 @@ mod tests {
             v_high: 230.0,
             g_peak: 210.0 / (2.0 * (2.0 * std::f64::consts::PI).sqrt()),
             core_voxels: 1,
+            g_floor: 0.0,
+            meets_background: true,
         };
         for x in [-3.0f64, -1.0, -0.2, 0.0, 0.7, 2.5] {
             let phi = 0.5 * (1.0 + libm::erf(x / 2.0 / std::f64::consts::SQRT_2));
@@ -282,10 +331,15 @@ mod tests {
 
     #[test]
     fn cells_go_to_the_nearest_arch_with_its_colour_and_the_larger_surface_is_more_transparent() {
-        let arches = [
-            BoundaryArch { v_low: 0.0, v_high: 200.0, g_peak: 40.0, core_voxels: 40_000 },
-            BoundaryArch { v_low: 50.0, v_high: 150.0, g_peak: 10.0, core_voxels: 10_000 },
-        ];
+        let arch = |v_low, v_high, g_peak, core_voxels| BoundaryArch {
+            v_low,
+            v_high,
+            g_peak,
+            core_voxels,
+            g_floor: 5.0,
+            meets_background: false,
+        };
+        let arches = [arch(0.0, 200.0, 40.0, 40_000), arch(50.0, 150.0, 10.0, 10_000)];
         assert_eq!(boundary_opacities(&arches), vec![0.25, 1.0]);
         let (v, g) = (
             LutAxis { channel: "v".into(), size: 100, min: 0.0, max: 200.0 },
@@ -302,6 +356,11 @@ mod tests {
         assert_eq!(at(50, 9), &[0.2, 0.55, 1.0, a1]);
         // g = 2.5: four times below the second arch, sixteen below the first: nobody's
         assert_eq!(at(50, 2), &[0.0; 4]);
+        // v = 53 (cell 26): the second arch's leg, g 1.7 there; g = 1.5 and 2.5 are
+        // within its ratio but lie below the noise floor (5): noise, not the boundary
+        let leg = arches[1].g_at(53.0).unwrap();
+        assert!((1.6..1.8).contains(&leg) && arches[0].g_at(53.0).unwrap() > 30.0, "{leg}");
+        assert_eq!((at(26, 1), at(26, 2)), (&[0.0; 4][..], &[0.0; 4][..]));
         assert!(
             lut.meaning.contains("0.0000..200.0000 (peak g 40.0000) colour [1, 0.55, 0.1] surface opacity 0.250"),
             "{}",

@@ -4,8 +4,10 @@
 
 pub mod boundary_chain;
 pub mod channels;
+pub mod figures;
 pub mod file;
 pub mod gaussians;
 pub mod pack_inputs;
+pub mod report_page;
 pub mod run;
 pub mod validate;

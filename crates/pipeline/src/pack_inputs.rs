@@ -33,7 +33,14 @@ fn hvol_or_computed<'a>(
 fn arches_of(hv: &HistogramVolume) -> Vec<BoundaryArch> {
     detect_boundaries(hv)
         .into_iter()
-        .map(|b| BoundaryArch { v_low: b.v_low, v_high: b.v_high, g_peak: b.g_peak, core_voxels: b.core_voxels })
+        .map(|b| BoundaryArch {
+            v_low: b.v_low,
+            v_high: b.v_high,
+            g_peak: b.g_peak,
+            core_voxels: b.core_voxels,
+            g_floor: b.g_floor,
+            meets_background: b.meets_background,
+        })
         .collect()
 }
 

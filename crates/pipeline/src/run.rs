@@ -9,7 +9,8 @@ use mdtf_boundary::{AlphaMap, BoundaryInput};
 use mdtf_datagen::{MultiFieldPhantom, RadialPhantom, add_gaussian_noise, erf_sphere, min_extent};
 use mdtf_derive::{DeriveParams, Item, Kernel};
 use mdtf_histogram::{
-    Axis, AxisSpec, HvolParams, Scale, count, histogram_volume, hit_mask, write_histogram, write_hvol, write_stretched,
+    Axis, AxisSpec, HvolParams, Scale, count, histogram_volume, hit_mask, write_histogram, write_histogram_marked,
+    write_hvol, write_stretched,
 };
 use mdtf_pack::{PackParams, PackWriter, Profile, Provenance, parse_tf};
 use mdtf_volume::dicom::DicomOptions;
@@ -61,6 +62,13 @@ pub struct RunReport {
     pub input: String,
     /// Grid size.
     pub dims: [usize; 3],
+    /// Grid spacing, world units.
+    pub spacing: [f64; 3],
+    /// The input's fields, when it has more than one.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub fields: Vec<String>,
+    /// Finite range of the (first) field, input units.
+    pub value_range: Option<[f64; 2]>,
     /// What the reader assumed or repaired (e.g. a DICOM series resampled
     /// onto a regular grid), and what a stage left out (e.g. a boundary below
     /// the tracing thresholds).
@@ -72,6 +80,8 @@ pub struct RunReport {
     /// (`[histogram] hvol`): the materials they separate and their peak g.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub boundaries: Vec<mdtf_histogram::DetectedBoundary>,
+    /// Whether the histogram volume was built (so `boundaries` says what was found).
+    pub hvol_built: bool,
     /// The stages, in order.
     pub stages: Vec<StageReport>,
     /// Total wall time, seconds.
@@ -171,7 +181,8 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     } else {
         (input.into_scalar().map_err(|e| fail("input")(e.to_string()))?, None)
     };
-    let value_range = value.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
+    let finite_range = value.finite_range().map(|(lo, hi)| [lo as f64, hi as f64]);
+    let value_range = finite_range.map_or(0.0, |[lo, hi]| hi - lo);
 
     // derive (only the items the later stages use)
     let kernel: Kernel = match &p.derive.kernel {
@@ -319,9 +330,13 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         stage("keep", t, n, written);
     }
 
-    // histograms (the histogram volume is kept for the pack's default opacity)
+    // histograms (the histogram volume is kept for the pack's default opacity;
+    // it comes first so that the boundaries it shows are drawn on the others)
     let mut hvol_kept = None;
     let mut boundaries = Vec::new();
+    let mut arches = Vec::new();
+    // the 2D histograms the pack's TFs are drawn over, after the pack
+    let mut figure_hists: Vec<mdtf_histogram::Histogram> = Vec::new();
     if let Some(h) = &p.histogram {
         on_stage("histogram");
         let t = Instant::now();
@@ -333,11 +348,38 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             AxisSpec::qbert(name).resolve(name, data.samples()).map_err(|e| err(e.to_string()))
         };
         let axes: Vec<Axis> = vec![axis("v", v)?, axis("g", g)?];
+        let g_clip = AxisSpec::qbert("g").clip_percent.1;
         let mut outputs = Vec::new();
+        if h.hvol
+            && let Some(f2) = get("f2")
+        {
+            let hv = histogram_volume(v.samples(), g.samples(), f2.samples(), &HvolParams::default())
+                .map_err(|e| err(e.to_string()))?;
+            boundaries = mdtf_histogram::detect_boundaries(&hv);
+            arches = crate::figures::boundary_arches(&boundaries);
+            write_hvol(&hdir, &hv, &input_name, &arches).map_err(|e| err(e.to_string()))?;
+            outputs.push("histogram/opacity.png".into());
+            // the pack needs only the 2D opacity: free the 3D counts (64 MiB at 256^3) now
+            let mut hv = hv;
+            hv.hist.counts = Vec::new();
+            hvol_kept = Some(hv);
+        }
         if h.joint {
             let hist = count(&[v.samples(), g.samples()], axes.clone(), None).map_err(|e| err(e.to_string()))?;
-            write_histogram(&hdir, &hist, Scale::Log, &input_name).map_err(|e| err(e.to_string()))?;
+            let outside = n as u64 - hist.total();
+            let note = crate::figures::clip_note(&axes[1], g_clip, outside);
+            write_histogram_marked(&hdir, &hist, Scale::Log, &input_name, Some(&note), &arches)
+                .map_err(|e| err(e.to_string()))?;
             outputs.push("histogram/hist_v_g.png".into());
+            if outside > 0 {
+                warnings.push(format!(
+                    "histogram: {outside} of {n} voxels lie outside the (v, g) histogram and are not counted \
+                     (its g axis stops at {:.4}, the top {g_clip} % of g clipped as Teem's qbert does; NaN values \
+                     are never counted)",
+                    axes[1].max
+                ));
+            }
+            figure_hists.push(hist);
             // peak finding's TF domain: (v, 1/g)
             if let Some(inv_g) = get("inv_g")
                 && let Some(ia) = Axis::inverse_gradient(g.samples(), 256)
@@ -346,6 +388,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
                     .map_err(|e| err(e.to_string()))?;
                 write_histogram(&hdir, &hist, Scale::Log, &input_name).map_err(|e| err(e.to_string()))?;
                 outputs.push("histogram/hist_v_inv_g.png".into());
+                figure_hists.push(hist);
             }
         }
         if h.stretched
@@ -360,19 +403,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
                 count(&[v.samples(), g_hit.samples()], sa, Some(&traced)).map_err(|e| err(e.to_string()))?;
             write_stretched(&hdir, &normal, &stretched, Scale::Log, &input_name).map_err(|e| err(e.to_string()))?;
             outputs.push("histogram/normal_vs_stretched.png".into());
-        }
-        if h.hvol
-            && let Some(f2) = get("f2")
-        {
-            let hv = histogram_volume(v.samples(), g.samples(), f2.samples(), &HvolParams::default())
-                .map_err(|e| err(e.to_string()))?;
-            write_hvol(&hdir, &hv).map_err(|e| err(e.to_string()))?;
-            outputs.push("histogram/opacity.png".into());
-            boundaries = mdtf_histogram::detect_boundaries(&hv);
-            // the pack needs only the 2D opacity: free the 3D counts (64 MiB at 256^3) now
-            let mut hv = hv;
-            hv.hist.counts = Vec::new();
-            hvol_kept = Some(hv);
+            figure_hists.push(stretched);
         }
         stage("histogram", t, n, outputs);
     }
@@ -433,7 +464,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         } else {
             None
         };
-        let params = PackParams { profile, ranges, fields, dtype: None, nifti: p.pack.nifti };
+        let params = PackParams { profile, ranges, fields: fields.clone(), dtype: None, nifti: p.pack.nifti };
         let sources = BTreeMap::new();
         let layouts = mdtf_pack::texture_layouts(&params);
         let mut writer = PackWriter::new(&pdir, &params, geo.clone(), &sources);
@@ -460,6 +491,11 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             pack_chans.retain(|(c, _)| layouts[i + 1..].iter().any(|l| uses(l, c)) || (normals_pending && c == "v"));
         }
         writer.finish(&luts, provenance).map_err(|e| err(e.to_string()))?;
+        if !figure_hists.is_empty() {
+            let hists: Vec<&mdtf_histogram::Histogram> = figure_hists.iter().collect();
+            crate::figures::write_tf_figures(&dir.join("histogram"), &luts, &hists, &input_name, &arches)
+                .map_err(|e| err(e.to_string()))?;
+        }
         if let Some(g) = &gaussians {
             let json = serde_json::to_string_pretty(g).map_err(|e| err(e.to_string()))?;
             write_file_atomically(&pdir.join("gaussians.json"), |w| w.write_all(json.as_bytes()))
@@ -481,20 +517,10 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         let cam = mdtf_preview::Camera { azimuth: 30.0, elevation: 20.0, size: 512, step: 0.5 };
         mdtf_preview::preview_named(&pdir, &dir.join("preview.png"), &cam, true, &opts.output.join("pack"))
             .map_err(|e| fail("preview")(e.to_string()))?;
-        // the contact sheet: every picture of the run side by side
-        let mut pictures: Vec<(PathBuf, &str)> = Vec::new();
-        for (f, caption) in [
-            ("preview.png", "preview.png: the pack, rendered"),
-            ("histogram/hist_v_g.png", "histogram/hist_v_g.png: (v, g)"),
-            ("histogram/normal_vs_stretched.png", "normal | stretched (v, g_hit)"),
-            ("histogram/opacity.png", "histogram/opacity.png: tent of p(v, g)"),
-            ("boundary/boundary_report.png", "boundary/boundary_report.png"),
-        ] {
-            if dir.join(f).exists() {
-                pictures.push((dir.join(f), caption));
-            }
-        }
-        let refs: Vec<(&Path, &str)> = pictures.iter().map(|(p, c)| (p.as_path(), *c)).collect();
+        // the contact sheet: every picture of the run side by side, named
+        let pictures: Vec<(PathBuf, String)> =
+            crate::report_page::figures_in(dir).into_iter().map(|f| (dir.join(&f.file), f.file)).collect();
+        let refs: Vec<(&Path, &str)> = pictures.iter().map(|(p, c)| (p.as_path(), c.as_str())).collect();
         mdtf_preview::contact_sheet(&refs, 3, 384, &dir.join("contact_sheet.png"))
             .map_err(|e| fail("preview")(e.to_string()))?;
         stage("preview", t, 512 * 512, vec!["preview.png".into(), "contact_sheet.png".into()]);
@@ -505,17 +531,34 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         output: opts.output.display().to_string(),
         input: input_name,
         dims: geo.dims,
+        spacing: geo.spacing,
+        fields,
+        value_range: finite_range,
         warnings,
         boundary,
         boundaries,
+        hvol_built: hvol_kept.is_some(),
         stages,
         total_seconds: start.elapsed().as_secs_f64(),
     };
     let json = serde_json::to_string_pretty(&report).map_err(|e| fail("report")(e.to_string()))?;
     write_file_atomically(&dir.join("run_report.json"), |w| w.write_all(json.as_bytes()))
         .map_err(|e| fail("report")(e.to_string()))?;
+    write_report_page(p, &report, dir).map_err(|e| fail("report")(e.to_string()))?;
     out.publish(&inputs).map_err(|e| fail("output")(e.to_string()))?;
     Ok(report)
+}
+
+/// Writes report.html into the staging folder `dir` from the report, the
+/// settings and the pack's manifest (absent for mesh packs).
+fn write_report_page(p: &Pipeline, report: &RunReport, dir: &Path) -> Result<(), String> {
+    let settings = toml::to_string_pretty(p).map_err(|e| e.to_string())?;
+    let manifest: Option<mdtf_pack::Manifest> =
+        std::fs::read_to_string(dir.join("pack/manifest.json")).ok().and_then(|t| serde_json::from_str(&t).ok());
+    let figures = crate::report_page::figures_in(dir);
+    let page =
+        crate::report_page::PageInputs { report, settings: &settings, manifest: manifest.as_ref(), figures: &figures };
+    crate::report_page::write(dir, &page).map_err(|e| e.to_string())
 }
 
 /// Every file a run reads: the pipeline file, the input and the TF file.

@@ -162,7 +162,8 @@ pub fn validate(n: usize, dir: &Path, params: &ValidateParams) -> Result<Vec<Che
     out.push(check("histogram: worst |p(v,g) - x|, voxels", worst_p, 0.1, true));
     let hdir = dir.join("histogram");
     std::fs::create_dir_all(&hdir).map_err(|e| e.to_string())?;
-    write_hvol(&hdir, &hv).map_err(|e| e.to_string())?;
+    let arches = crate::figures::boundary_arches(&mdtf_histogram::detect_boundaries(&hv));
+    write_hvol(&hdir, &hv, "the validation erf sphere", &arches).map_err(|e| e.to_string())?;
     let traced = hit_mask(b.hit.samples());
     let axes = vec![
         Axis::new("v", 0.0, 255.0, 256).map_err(|e| e.to_string())?,

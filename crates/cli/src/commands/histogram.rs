@@ -129,7 +129,8 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
             &value
         };
         let hv = progress.step("histogram volume", || histogram_volume_derived(values, &d, &p))?;
-        write_hvol(out, &hv)?;
+        let arches = mdtf_pipeline::figures::boundary_arches(&mdtf_histogram::detect_boundaries(&hv));
+        write_hvol(out, &hv, &title, &arches)?;
         progress.note(&format!("histogram volume: sigma {:.4} world units, g_thresh {:.4}", hv.sigma, hv.g_thresh));
     }
     folder.publish(&inputs)?;

@@ -38,6 +38,10 @@ pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
     }
     table += &format!("{:<22} {:>9.3}\n", "total", report.total_seconds);
     progress.note(&table);
-    progress.note(&format!("wrote {} ({}; report in run_report.json)", args.output.display(), report.input));
+    progress.note(&format!(
+        "wrote {} ({}; report.html to open in a browser, run_report.json)",
+        args.output.display(),
+        report.input
+    ));
     Ok(())
 }

@@ -1,0 +1,375 @@
+//! `report.html`: one self-contained page per run, to open in a browser.
+//! It holds what the run read (the input's grid and range), what it did
+//! (the resolved settings, the stage table), what it found (the boundaries
+//! in the histogram volume, the tracing's counts), every figure with a
+//! caption, the warnings, and how to decode the pack. Figures are linked
+//! by relative paths inside the output folder; there is no script, font
+//! or stylesheet from the network.
+
+use crate::run::RunReport;
+use mdtf_pack::Manifest;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// The page's file name in the output folder.
+pub const REPORT_PAGE: &str = "report.html";
+
+/// A figure of the run: a PNG inside the output folder and what it shows.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Figure {
+    /// Path relative to the output folder, with `/` separators.
+    pub file: String,
+    /// One or two sentences saying what the picture shows and how to read it.
+    pub caption: String,
+}
+
+/// Figures a run may write, in the order the page shows them, with their captions.
+const KNOWN_FIGURES: [(&str, &str); 8] = [
+    (
+        "preview.png",
+        "The pack rendered from its manifest as a renderer would (azimuth 30 deg, elevation 20 deg, \
+         step 0.5 voxel), with the transfer function the pack holds.",
+    ),
+    (
+        "histogram/hist_v_g.png",
+        "Joint histogram of the value v and the gradient magnitude g, log counts. A boundary between \
+         two materials draws an arch from one material's value to the other's, highest at the \
+         boundary's centre (Kindlmann and Durkin).",
+    ),
+    (
+        "histogram/opacity.png",
+        "The default opacity from the histogram volume: a tent of the position function p(v, g), \
+         opaque where a voxel sits on a boundary's centre.",
+    ),
+    (
+        "histogram/hist_v_inv_g.png",
+        "Joint histogram of v and 1/g, the domain of the peak-finding transfer function, log counts.",
+    ),
+    (
+        "histogram/normal_vs_stretched.png",
+        "The traced voxels' (v, g) histogram beside their (v, g_hit): tracing each voxel to its \
+         boundary gives it the boundary's peak gradient, so each arch becomes a short flat run.",
+    ),
+    (
+        "boundary/boundary_report.png",
+        "Boundary tracing by distance from the boundary: how many voxels were traced and hit, and \
+         the mean g_hit, per distance.",
+    ),
+    (
+        "histogram/hist_v_g_hit.png",
+        "The stretched histogram alone: v against the gradient magnitude at each traced voxel's boundary \
+         hit, log counts.",
+    ),
+    ("histogram/hist_v.png", "Histogram of the value v, log and linear bars overlaid."),
+];
+
+/// The figures present in `dir`, the known ones first with their captions,
+/// then any other PNG of the histogram and boundary folders by name.
+pub fn figures_in(dir: &Path) -> Vec<Figure> {
+    let mut figures: Vec<Figure> = KNOWN_FIGURES
+        .iter()
+        .filter(|(f, _)| dir.join(f).is_file())
+        .map(|(f, c)| Figure { file: (*f).into(), caption: (*c).into() })
+        .collect();
+    for sub in ["histogram", "boundary"] {
+        let Ok(entries) = std::fs::read_dir(dir.join(sub)) else { continue };
+        let mut others: Vec<String> = entries
+            .filter_map(|e| e.ok()?.file_name().into_string().ok())
+            .filter(|n| n.ends_with(".png"))
+            .map(|n| format!("{sub}/{n}"))
+            .filter(|f| !figures.iter().any(|k| &k.file == f))
+            .collect();
+        others.sort();
+        figures.extend(others.into_iter().map(|f| Figure { caption: f.clone(), file: f }));
+    }
+    figures
+}
+
+/// What the page shows beside the run report.
+pub struct PageInputs<'a> {
+    /// The run's report.
+    pub report: &'a RunReport,
+    /// The resolved settings of the run as TOML.
+    pub settings: &'a str,
+    /// The pack's manifest, when the run wrote a volume pack.
+    pub manifest: Option<&'a Manifest>,
+    /// The figures, in order.
+    pub figures: &'a [Figure],
+}
+
+/// The page as HTML.
+pub fn render(page: &PageInputs) -> String {
+    let r = page.report;
+    let mut h = String::with_capacity(16 * 1024);
+    let title = format!("mdtf run of {}", r.input);
+    let _ = write!(
+        h,
+        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
+         <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\
+         <title>{}</title><style>{STYLE}</style></head><body>\n<h1>{}</h1>\n",
+        esc(&title),
+        esc(&title)
+    );
+    let _ = writeln!(
+        h,
+        "<p class=\"sub\">pipeline <code>{}</code>, output <code>{}</code>, {:.2} s in all</p>",
+        esc(&r.pipeline),
+        esc(&r.output),
+        r.total_seconds
+    );
+    input_section(&mut h, r);
+    warnings_section(&mut h, r);
+    boundaries_section(&mut h, r);
+    figures_section(&mut h, page.figures);
+    stages_section(&mut h, r);
+    if let Some(m) = page.manifest {
+        pack_section(&mut h, m);
+    }
+    let _ = writeln!(
+        h,
+        "<h2>Settings</h2>\n<p>The pipeline as this run resolved it (defaults filled in); \
+         run it again with <code>mdtf run FILE.toml</code>.</p>\n<pre>{}</pre>",
+        esc(page.settings)
+    );
+    h.push_str("</body></html>\n");
+    h
+}
+
+/// Writes the page into `dir` (atomically).
+pub fn write(dir: &Path, page: &PageInputs) -> std::io::Result<()> {
+    let html = render(page);
+    mdtf_volume::write_file_atomically(&dir.join(REPORT_PAGE), |w| w.write_all(html.as_bytes()))
+        .map_err(std::io::Error::other)
+}
+
+const STYLE: &str = "body{font-family:system-ui,sans-serif;max-width:72rem;margin:1.5rem auto;padding:0 1rem;\
+color:#222;line-height:1.45}h1{font-size:1.5rem;margin-bottom:.2rem}h2{font-size:1.2rem;margin-top:2rem;\
+border-bottom:1px solid #ccc}.sub{color:#555;margin-top:0}table{border-collapse:collapse;margin:.5rem 0}\
+td,th{border:1px solid #ccc;padding:.2rem .5rem;text-align:left;vertical-align:top}td.n{text-align:right;\
+font-variant-numeric:tabular-nums}th{background:#f2f2f2}.warn{background:#fff4d6;border-left:4px solid #e0a800;\
+padding:.4rem .8rem}figure{display:inline-block;vertical-align:top;margin:.5rem 1rem 1rem 0;max-width:34rem}\
+figure img{max-width:100%;border:1px solid #ddd}figcaption{font-size:.9rem;color:#333}\
+pre{background:#f7f7f7;padding:.6rem;overflow-x:auto}.swatch{display:inline-block;width:1em;height:1em;\
+border:1px solid #888;vertical-align:middle}";
+
+fn input_section(h: &mut String, r: &RunReport) {
+    let [nx, ny, nz] = r.dims;
+    let [sx, sy, sz] = r.spacing;
+    let _ = writeln!(h, "<h2>Input</h2>\n<table>");
+    row(h, "file", &esc(&r.input));
+    row(h, "grid", &format!("{nx} x {ny} x {nz} ({} voxels)", nx * ny * nz));
+    row(h, "spacing", &format!("{sx} x {sy} x {sz} world units"));
+    if !r.fields.is_empty() {
+        row(h, "fields", &esc(&r.fields.join(", ")));
+    }
+    if let Some([lo, hi]) = r.value_range {
+        row(h, "value range", &format!("{} .. {} (finite values)", num(lo), num(hi)));
+    }
+    h.push_str("</table>\n");
+}
+
+fn warnings_section(h: &mut String, r: &RunReport) {
+    if r.warnings.is_empty() {
+        return;
+    }
+    h.push_str("<h2>Warnings</h2>\n<div class=\"warn\"><ul>\n");
+    for w in &r.warnings {
+        let _ = writeln!(h, "<li>{}</li>", esc(w));
+    }
+    h.push_str("</ul></div>\n");
+}
+
+fn boundaries_section(h: &mut String, r: &RunReport) {
+    if r.hvol_built {
+        h.push_str("<h2>Boundaries found</h2>\n");
+        if r.boundaries.is_empty() {
+            h.push_str(
+                "<p>No boundary stood out in the histogram volume (no patch of (v, g) bins near an arch's \
+                 apex, above twice the noise floor). The default transfer function is the plain tent of \
+                 the position function.</p>\n",
+            );
+        } else {
+            h.push_str(
+                "<p>From the histogram volume (Kindlmann and Durkin's position function), strongest first. \
+                 The default transfer functions give each its colour.</p>\n<table><tr><th>#</th><th>colour</th>\
+                 <th>low material v</th><th>centre v</th><th>high material v</th><th>peak g (per world unit)</th>\
+                 <th>sigma (world units)</th><th>core voxels</th></tr>\n",
+            );
+            let n = r.boundaries.len();
+            for (k, b) in r.boundaries.iter().enumerate() {
+                let [cr, cg, cb] = mdtf_pack::boundary_colour(k, n).map(|c| (c * 255.0).round() as u8);
+                let _ = writeln!(
+                    h,
+                    "<tr><td class=\"n\">{}</td><td><span class=\"swatch\" style=\"background:rgb({cr},{cg},{cb})\">\
+                     </span></td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
+                     <td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td></tr>",
+                    k + 1,
+                    num(b.v_low),
+                    num(b.v_centre),
+                    num(b.v_high),
+                    num(b.g_peak),
+                    num(b.sigma),
+                    b.core_voxels
+                );
+            }
+            h.push_str("</table>\n");
+        }
+    }
+    if let Some(b) = &r.boundary {
+        let c = &b.counts;
+        let _ = writeln!(
+            h,
+            "<h2>Boundary tracing</h2>\n<p>Every voxel was traced along its gradient to the nearest zero \
+             crossing of f''.</p>\n<pre>{}</pre>\n<pre>{}</pre>",
+            esc(&serde_json::to_string_pretty(&b.resolved).unwrap_or_default()),
+            esc(&serde_json::to_string_pretty(c).unwrap_or_default())
+        );
+    }
+}
+
+fn figures_section(h: &mut String, figures: &[Figure]) {
+    if figures.is_empty() {
+        return;
+    }
+    h.push_str("<h2>Figures</h2>\n");
+    for f in figures {
+        let _ = writeln!(
+            h,
+            "<figure><a href=\"{0}\"><img src=\"{0}\" alt=\"{0}\"></a><figcaption><code>{0}</code>: {1}</figcaption></figure>",
+            esc(&f.file),
+            esc(&f.caption)
+        );
+    }
+}
+
+fn stages_section(h: &mut String, r: &RunReport) {
+    h.push_str(
+        "<h2>Stages</h2>\n<table><tr><th>stage</th><th>seconds</th><th>Mvoxel/s</th><th>peak memory (MiB)</th>\
+         <th>wrote</th></tr>\n",
+    );
+    for s in &r.stages {
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td class=\"n\">{:.3}</td><td class=\"n\">{:.1}</td><td class=\"n\">{:.0}</td><td>{}</td></tr>",
+            esc(&s.stage),
+            s.seconds,
+            s.mvoxel_per_s,
+            s.peak_mib,
+            esc(&s.outputs.join(", "))
+        );
+    }
+    let _ = writeln!(
+        h,
+        "<tr><th>total</th><td class=\"n\">{:.3}</td><td></td><td></td><td></td></tr></table>",
+        r.total_seconds
+    );
+}
+
+fn pack_section(h: &mut String, m: &Manifest) {
+    let _ = writeln!(
+        h,
+        "<h2>The pack</h2>\n<p>Profile <code>{}</code>, described in full by <code>pack/manifest.json</code>. \
+         Each texture is a raw file of little-endian samples (components fastest, then x, y, z) with a \
+         detached NRRD header. A channel's value is <code>offset + scale x code</code>.</p>",
+        esc(&m.profile)
+    );
+    h.push_str("<table><tr><th>texture</th><th>files</th><th>type</th><th>components</th></tr>\n");
+    for t in &m.textures {
+        let dtype = serde_json::to_value(t.dtype).ok().and_then(|v| v.as_str().map(String::from)).unwrap_or_default();
+        let order: Vec<&str> = t.component_order.iter().map(|c| c.as_deref().unwrap_or("-")).collect();
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td><code>pack/{}</code>, <code>pack/{}</code></td><td>{}</td><td>{}</td></tr>",
+            esc(&t.name),
+            esc(&t.header),
+            esc(&t.data),
+            esc(&dtype),
+            esc(&order.join(", "))
+        );
+    }
+    h.push_str(
+        "</table>\n<table><tr><th>channel</th><th>meaning</th><th>units</th><th>in</th><th>offset</th>\
+         <th>scale</th><th>range</th></tr>\n",
+    );
+    for c in &m.channels {
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}[{}]</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
+             <td class=\"n\">{} .. {}</td></tr>",
+            esc(&c.name),
+            esc(&c.meaning),
+            esc(&c.units),
+            esc(&c.texture),
+            c.component,
+            num(c.decode.offset),
+            num(c.decode.scale),
+            num(c.range[0]),
+            num(c.range[1])
+        );
+    }
+    h.push_str("</table>\n");
+    if !m.luts.is_empty() {
+        h.push_str("<table><tr><th>table</th><th>meaning</th><th>axes</th><th>file</th></tr>\n");
+        for l in &m.luts {
+            let axes: Vec<String> = l
+                .axes
+                .iter()
+                .map(|a| format!("{} ({} cells, {} .. {})", a.channel, a.size, num(a.min), num(a.max)))
+                .collect();
+            let _ = writeln!(
+                h,
+                "<tr><td>{}</td><td>{}</td><td>{}</td><td><code>pack/{}</code></td></tr>",
+                esc(&l.name),
+                esc(&l.meaning),
+                esc(&axes.join(" x ")),
+                esc(l.file_u8.as_deref().unwrap_or(&l.file_f32))
+            );
+        }
+        h.push_str("</table>\n");
+    }
+}
+
+fn row(h: &mut String, key: &str, value_html: &str) {
+    let _ = writeln!(h, "<tr><th>{key}</th><td>{value_html}</td></tr>");
+}
+
+/// A number with about 4 significant digits, without trailing noise.
+fn num(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return format!("{x}");
+    }
+    let digits = (3 - x.abs().log10().floor() as i32).clamp(0, 8) as usize;
+    let s = format!("{x:.digits$}");
+    if s.contains('.') { s.trim_end_matches('0').trim_end_matches('.').to_string() } else { s }
+}
+
+/// `s` with the five characters HTML gives meaning to escaped.
+fn esc(s: &str) -> String {
+    let mut o = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => o.push_str("&amp;"),
+            '<' => o.push_str("&lt;"),
+            '>' => o.push_str("&gt;"),
+            '"' => o.push_str("&quot;"),
+            '\'' => o.push_str("&#39;"),
+            c => o.push(c),
+        }
+    }
+    o
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn text_is_escaped_and_numbers_keep_four_digits() {
+        assert_eq!(esc("a<b & \"c\" 'd'>"), "a&lt;b &amp; &quot;c&quot; &#39;d&#39;&gt;");
+        assert_eq!(num(108.30873870849), "108.3");
+        assert_eq!(num(0.0012345), "0.001234");
+        assert_eq!(num(-119.22), "-119.2");
+        assert_eq!(num(254.0), "254");
+        assert_eq!(num(12345.6), "12346");
+    }
+}
