@@ -10,7 +10,7 @@
 //! log10(1 - dot) in quarter decades. The paper's binning is the CSV's
 //! second table.
 
-use mdtf_volume::{VolumeError, write_file_atomically};
+use mdtf_volume::{PngColour, VolumeError, write_file_atomically};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -192,24 +192,97 @@ impl Report {
     pub fn write(&self, dir: &Path) -> Result<(), VolumeError> {
         let csv = self.csv();
         write_file_atomically(&dir.join("boundary_report.csv"), |w| w.write_all(csv.as_bytes()))?;
-        let (w, h, rgb) = self.plot();
+        let (w, h) = FIGURE_SIZE;
+        let rgb = self.figure().map_err(VolumeError::Fields)?;
         let text = format!(
-            "x: log10(1 - dot) from {LOG_FLOOR} to {:.2}; black: cumulative percent (0..100); red: mean distance \
-             (0..{:.3}); blue: mean g (0..{:.3}); mean dot {:.6}",
+            "x: log10(1 - dot) from {LOG_FLOOR} to {:.2}; top: percent of voxels per bin and cumulative; middle: mean \
+             distance to the boundary (world units); bottom: mean g (value units per world unit); mean dot {:.6}",
             LOG_FLOOR + LOG_BINS as f64 * LOG_BIN_WIDTH,
-            self.max_distance(),
-            self.max_g(),
             self.mean_dot
         );
-        write_file_atomically(&dir.join("boundary_report.png"), |out| {
-            let mut enc = png::Encoder::new(out, w, h);
-            enc.set_color(png::ColorType::Rgb);
-            enc.set_depth(png::BitDepth::Eight);
-            enc.add_text_chunk("Description".into(), text.clone()).map_err(std::io::Error::other)?;
-            let mut writer = enc.write_header().map_err(std::io::Error::other)?;
-            writer.write_image_data(&rgb).map_err(std::io::Error::other)?;
-            writer.finish().map_err(std::io::Error::other)
-        })
+        mdtf_volume::write_png(&dir.join("boundary_report.png"), w as usize, h as usize, PngColour::Rgb, &rgb, &text)
+    }
+
+    /// The figure: three panels over the shared axis log10(1 - dot) (the
+    /// share of voxels per bin and its running sum, the mean distance, the
+    /// mean g), with labelled axes in their units and a legend;
+    /// [`FIGURE_SIZE`] RGB pixels, rows from the top.
+    pub fn figure(&self) -> Result<Vec<u8>, String> {
+        use plotters::prelude::*;
+        let err = |e: &dyn std::fmt::Debug| format!("drawing the boundary report: {e:?}");
+        mdtf_volume::register_figure_font();
+        let (w, h) = FIGURE_SIZE;
+        let mut pixels = vec![255u8; (w * h * 3) as usize];
+        {
+            let root = BitMapBackend::with_buffer(&mut pixels, (w, h)).into_drawing_area();
+            let title = format!(
+                "boundary tracing: {} voxels with a kept boundary ({} outliers left out), mean dot {:.5}",
+                self.hits, self.outliers, self.mean_dot
+            );
+            let root = root.titled(&title, ("sans-serif", 16)).map_err(|e| err(&e))?;
+            let panels = root.split_evenly((3, 1));
+            let x_range = LOG_FLOOR..LOG_FLOOR + LOG_BINS as f64 * LOG_BIN_WIDTH;
+            let centre = |b: &ReportBin| 0.5 * (b.lo + b.hi);
+            let curves: [(&str, f64, RGBColor); 3] = [
+                ("voxels (percent)", 100.0, BLACK),
+                ("mean distance to the boundary (world units)", 1.1 * self.max_distance(), RGBColor(200, 30, 30)),
+                ("mean g (value units per world unit)", 1.1 * self.max_g(), RGBColor(30, 60, 200)),
+            ];
+            for (k, (panel, (label, top, colour))) in panels.iter().zip(curves).enumerate() {
+                let mut chart = ChartBuilder::on(panel)
+                    .margin(8)
+                    .x_label_area_size(if k == 2 { 44 } else { 20 })
+                    .y_label_area_size(64)
+                    .build_cartesian_2d(x_range.clone(), 0.0..top)
+                    .map_err(|e| err(&e))?;
+                let mut mesh = chart.configure_mesh();
+                mesh.light_line_style(RGBColor(235, 235, 235)).y_desc(label).axis_desc_style(("sans-serif", 12));
+                mesh.label_style(("sans-serif", 11));
+                if k == 2 {
+                    mesh.x_desc("log10(1 - dot): how far the gradient at the voxel turns from the one at its boundary");
+                }
+                mesh.draw().map_err(|e| err(&e))?;
+                if k == 0 {
+                    let grey = RGBColor(170, 170, 170);
+                    chart
+                        .draw_series(
+                            self.bins.iter().map(|b| Rectangle::new([(b.lo, 0.0), (b.hi, b.percent)], grey.filled())),
+                        )
+                        .map_err(|e| err(&e))?
+                        .label("per bin")
+                        .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], grey.filled()));
+                    chart
+                        .draw_series(LineSeries::new(
+                            self.bins.iter().map(|b| (centre(b), b.cumulative_percent)),
+                            BLACK.stroke_width(2),
+                        ))
+                        .map_err(|e| err(&e))?
+                        .label("cumulative, from the most aligned")
+                        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], BLACK.stroke_width(2)));
+                    chart
+                        .configure_series_labels()
+                        .position(SeriesLabelPosition::UpperRight)
+                        .background_style(WHITE.mix(0.85))
+                        .border_style(BLACK)
+                        .label_font(("sans-serif", 12))
+                        .draw()
+                        .map_err(|e| err(&e))?;
+                } else {
+                    let value = |b: &ReportBin| if k == 1 { b.mean_distance } else { b.mean_g };
+                    chart
+                        .draw_series(LineSeries::new(
+                            self.bins.iter().map(|b| (centre(b), value(b))),
+                            colour.stroke_width(2),
+                        ))
+                        .map_err(|e| err(&e))?;
+                    chart
+                        .draw_series(self.bins.iter().map(|b| Circle::new((centre(b), value(b)), 3, colour.filled())))
+                        .map_err(|e| err(&e))?;
+                }
+            }
+            root.present().map_err(|e| err(&e))?;
+        }
+        Ok(pixels)
     }
 
     fn max_distance(&self) -> f64 {
@@ -219,70 +292,10 @@ impl Report {
     fn max_g(&self) -> f64 {
         self.bins.iter().map(|b| b.mean_g).fold(0.0, f64::max).max(1e-9)
     }
-
-    /// A 640x400 RGB plot against log10(1 - dot) over the whole log axis:
-    /// cumulative percent (black), mean distance (red) and mean g (blue),
-    /// each scaled to the plot height; axis ranges go into the PNG's text chunk.
-    fn plot(&self) -> (u32, u32, Vec<u8>) {
-        let (w, h, m) = (640usize, 400usize, 40usize);
-        let mut img = vec![255u8; w * h * 3];
-        let put = |img: &mut Vec<u8>, x: usize, y: usize, c: [u8; 3]| {
-            if x < w && y < h {
-                img[(y * w + x) * 3..(y * w + x) * 3 + 3].copy_from_slice(&c);
-            }
-        };
-        for x in m..w - m {
-            put(&mut img, x, h - m, [0, 0, 0]);
-        }
-        for y in m..h - m {
-            put(&mut img, m, y, [0, 0, 0]);
-        }
-        let span = LOG_BINS as f64 * LOG_BIN_WIDTH;
-        let to_px = |b: &ReportBin, frac: f64| {
-            let centre = 0.5 * (b.lo + b.hi);
-            let x = m as f64 + (centre - LOG_FLOOR) / span * (w - 2 * m) as f64;
-            let y = (h - m) as f64 - frac.clamp(0.0, 1.0) * (h - 2 * m) as f64;
-            (x, y)
-        };
-        let (dmax, gmax) = (self.max_distance(), self.max_g());
-        // (height fraction of a bin, colour) per curve
-        let value = |curve: usize, b: &ReportBin| match curve {
-            0 => b.cumulative_percent / 100.0,
-            1 => b.mean_distance / dmax,
-            _ => b.mean_g / gmax,
-        };
-        let colours = [[0u8, 0, 0], [200, 30, 30], [30, 60, 200]];
-        for (curve, colour) in colours.iter().enumerate() {
-            let pts: Vec<(f64, f64)> = self.bins.iter().map(|b| to_px(b, value(curve, b))).collect();
-            for pair in pts.windows(2) {
-                let ((xa, ya), (xb, yb)) = (pair[0], pair[1]);
-                let steps = ((xb - xa).abs().max((yb - ya).abs()).ceil() as usize).max(1);
-                for s in 0..=steps {
-                    let t = s as f64 / steps as f64;
-                    put(
-                        &mut img,
-                        (xa + t * (xb - xa)).round() as usize,
-                        (ya + t * (yb - ya)).round() as usize,
-                        *colour,
-                    );
-                }
-            }
-            for &(x, y) in &pts {
-                for dx in 0..3 {
-                    for dy in 0..3 {
-                        put(
-                            &mut img,
-                            (x.round() as usize + dx).saturating_sub(1),
-                            (y.round() as usize + dy).saturating_sub(1),
-                            *colour,
-                        );
-                    }
-                }
-            }
-        }
-        (w as u32, h as u32, img)
-    }
 }
+
+/// Size of the report's figure, pixels.
+pub const FIGURE_SIZE: (u32, u32) = (780, 720);
 
 #[cfg(test)]
 mod tests {
@@ -312,5 +325,22 @@ mod tests {
         assert!(csv.contains("\ndot_x100,voxels"), "{csv}");
         assert!(csv.contains("\n50,1,20.0"), "{csv}");
         assert!(csv.contains("\n-7.00,-6.75,1,20.0"), "{csv}");
+
+        // the figure: the mean distance in red in the middle third, the mean g in blue in the
+        // bottom third, the points further right the less aligned their bin
+        let fig = r.figure().unwrap();
+        let (w, h) = (FIGURE_SIZE.0 as usize, FIGURE_SIZE.1 as usize);
+        let where_is = |c: [u8; 3]| -> Vec<(usize, usize)> {
+            (0..h)
+                .flat_map(|y| (0..w).map(move |x| (x, y)))
+                .filter(|&(x, y)| fig[3 * (y * w + x)..3 * (y * w + x) + 3] == c)
+                .collect()
+        };
+        let (red, blue) = (where_is([200, 30, 30]), where_is([30, 60, 200]));
+        assert!(red.len() > 50 && red.iter().all(|p| p.1 > h / 3 && p.1 < 2 * h / 3), "{}", red.len());
+        assert!(blue.len() > 50 && blue.iter().all(|p| p.1 > 2 * h / 3), "{}", blue.len());
+        // the five bins span log10(1 - dot) -7 .. -0.25 of the axis -7 .. 0.5: the points reach 90 % across
+        let (lo, hi) = (red.iter().map(|p| p.0).min().unwrap(), red.iter().map(|p| p.0).max().unwrap());
+        assert!((hi - lo) as f64 > 0.75 * w as f64, "{lo}..{hi}");
     }
 }

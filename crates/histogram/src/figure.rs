@@ -16,8 +16,6 @@ use crate::image::{Scale, grey_level};
 use crate::rgb::Rgb;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
-use plotters::style::{FontStyle, register_font};
-use std::sync::Once;
 
 /// Largest side of the plotting area, pixels.
 pub const PLOT_PIXELS: u32 = 512;
@@ -125,14 +123,6 @@ fn dark_count_colour(c: u64, max: u64, scale: Scale) -> [u8; 3] {
 
 /// How count colours are chosen: [`count_colour`] or, under an overlay, [`dark_count_colour`].
 type CountPalette = fn(u64, u64, Scale) -> [u8; 3];
-
-fn font_once() {
-    static FONT: Once = Once::new();
-    FONT.call_once(|| {
-        // the bundled font parses; a failure would only cost the text, not the figure
-        let _ = register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular());
-    });
-}
 
 /// A viridis-like ramp at t in [0, 1] (five anchors, linear between).
 fn ramp(t: f64) -> [u8; 3] {
@@ -347,7 +337,7 @@ impl Histogram {
 
     /// [`Histogram::figure`] with an RGBA table drawn over a 2D histogram's counts.
     pub fn figure_with(&self, scale: Scale, labels: &Labels, overlay: Option<&Overlay>) -> Result<Option<Rgb>, String> {
-        font_once();
+        mdtf_volume::register_figure_font();
         let (w, h) = FIGURE_SIZE;
         let mut pixels = vec![255u8; (w * h * 3) as usize];
         let drawn = match self.axes.len() {
@@ -395,7 +385,7 @@ impl Histogram {
         if self.axes.len() != 2 || other.axes.len() != 2 {
             return Ok(None);
         }
-        font_once();
+        mdtf_volume::register_figure_font();
         let (w, h) = SIDE_BY_SIDE_SIZE;
         let mut pixels = vec![255u8; (w * h * 3) as usize];
         let max = self.max().max(other.max());

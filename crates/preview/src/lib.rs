@@ -227,12 +227,7 @@ fn draw_captions(
     cell: usize,
 ) -> Result<(), PreviewError> {
     use plotters::prelude::*;
-    static FONT: std::sync::Once = std::sync::Once::new();
-    FONT.call_once(|| {
-        // a font that does not register costs the captions, not the sheet
-        let _ =
-            plotters::style::register_font("sans-serif", plotters::style::FontStyle::Normal, dejavu::sans::regular());
-    });
+    mdtf_volume::register_figure_font();
     let fail = |e: &dyn std::fmt::Debug| PreviewError::Pack(format!("drawing the contact sheet's captions: {e:?}"));
     let root = BitMapBackend::with_buffer(sheet, (w as u32, h as u32)).into_drawing_area();
     let style = ("sans-serif", 14).into_font().color(&RGBColor(230, 230, 230));

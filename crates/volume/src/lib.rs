@@ -40,7 +40,7 @@ pub use io::{Format, WriteOptions, read, read_scalar, read_with_info, write, wri
 pub use limits::{available_memory, human_bytes};
 pub use nifti_io::{read_nifti, read_nifti_with_info, write_nifti};
 pub use output::{Inputs, OutputFolder, write_file_atomically};
-pub use png_out::{PngColour, write_png};
+pub use png_out::{PngColour, register_figure_font, write_png};
 pub use range::{finite_range, finite_sample_range, median, order_statistic};
 pub use raw::{RawSpec, read_raw};
 pub use samples::{FileInfo, NanPolicy, ReadOptions};

@@ -1,5 +1,5 @@
 //! 8-bit PNG pictures (histograms, previews), written atomically with a
-//! description in a tEXt chunk.
+//! description in a tEXt chunk, and the font their text is drawn in.
 
 use crate::error::Result;
 use crate::output::write_file_atomically;
@@ -37,4 +37,15 @@ pub fn write_png(
         writer.write_image_data(pixels).map_err(std::io::Error::other)?;
         writer.finish().map_err(std::io::Error::other)
     })
+}
+
+/// Registers the bundled DejaVu Sans as plotters' "sans-serif" (once per
+/// process), so that figures need no system font. A failure would cost the
+/// text of a figure, not the figure, so it is not reported.
+pub fn register_figure_font() {
+    static FONT: std::sync::Once = std::sync::Once::new();
+    FONT.call_once(|| {
+        let _ =
+            plotters::style::register_font("sans-serif", plotters::style::FontStyle::Normal, dejavu::sans::regular());
+    });
 }
