@@ -172,6 +172,35 @@ fn gaussian_tf_pack_decodes_to_the_fields_and_their_multi_field_gradient() {
         gn.iter().zip(truth.gnorm.data.iter()).map(|(&d, &t)| (d, t as f64, t as f64 > 0.1 * peak)),
     );
     assert!(mean <= 0.02, "||G||: mean relative error {mean} over {n} voxels (step {step})");
+    // every pair of fields has its joint histogram, and every field one against ||G||: the
+    // (a, b) counts are the phantom's own fields binned over the axes the JSON states
+    let hist = pack.parent().unwrap().join("histogram");
+    for pair in ["a_b", "a_c", "b_c", "a_gnorm", "b_gnorm", "c_gnorm"] {
+        assert!(hist.join(format!("hist_{pair}.png")).is_file(), "hist_{pair}.png");
+    }
+    let json: Value = serde_json::from_slice(&std::fs::read(hist.join("hist_a_b.json")).unwrap()).unwrap();
+    let axis = |k: usize| {
+        let a = &json["axes"][k];
+        (a["min"].as_f64().unwrap(), a["max"].as_f64().unwrap(), a["bins"].as_u64().unwrap() as usize)
+    };
+    let ((lo0, hi0, n0), (lo1, hi1, n1)) = (axis(0), axis(1));
+    let bin = |x: f32, lo: f64, hi: f64, n: usize| {
+        let t = (x as f64 - lo) / (hi - lo);
+        (0.0..=1.0).contains(&t).then(|| ((t * n as f64) as usize).min(n - 1))
+    };
+    let mut want = vec![0i64; n0 * n1];
+    for (&a, &b) in sampled.fields[0].data.iter().zip(sampled.fields[1].data.iter()) {
+        if let (Some(i), Some(j)) = (bin(a, lo0, hi0, n0), bin(b, lo1, hi1, n1)) {
+            want[j * n0 + i] += 1;
+        }
+    }
+    let got = mdtf_e2e::nrrd_u32(&hist.join("hist_a_b.nrrd"));
+    let off: i64 = got.iter().zip(&want).map(|(&g, &w)| (g as i64 - w).abs()).sum();
+    let total: i64 = want.iter().sum();
+    assert!(
+        total as usize == sampled.fields[0].data.len() && off * 10_000 <= total,
+        "{off} of {total} voxels binned apart"
+    );
 }
 
 #[test]

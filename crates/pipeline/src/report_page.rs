@@ -80,7 +80,14 @@ pub fn figures_in(dir: &Path) -> Vec<Figure> {
             .filter(|f| !figures.iter().any(|k| &k.file == f))
             .collect();
         others.sort();
-        figures.extend(others.into_iter().map(|f| Figure { caption: f.clone(), file: f }));
+        figures.extend(others.into_iter().map(|f| {
+            let caption = if f.starts_with("histogram/hist_") {
+                "A joint histogram of the channels its name lists (first to the right, second upward), log counts."
+            } else {
+                "A figure of the run."
+            };
+            Figure { caption: caption.into(), file: f }
+        }));
     }
     figures
 }
