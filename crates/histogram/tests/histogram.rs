@@ -312,15 +312,29 @@ fn histogram_volume_derived_on_the_fly_equals_the_stored_one() {
     assert!(e.unwrap_err().to_string().contains("one field"));
 }
 
-#[test]
-fn figures_have_axes_labels_and_a_colour_bar_and_show_each_bin_in_place() {
-    // 2D: counts only in bin (2, 5) of 8 x 6 (1000) and bin (6, 1) (10)
+/// A (v, g) histogram of 8 x 6 bins with 1000 voxels in bin (2, 5) and 10 in bin (6, 1), and its samples.
+fn two_bins() -> (mdtf_histogram::Histogram, Vec<f32>) {
     let mut v = vec![2.5f32; 1000];
     let mut g = vec![5.5f32; 1000];
     v.extend([6.5f32; 10]);
     g.extend([1.5f32; 10]);
     let axes = vec![Axis::new("v", 0.0, 8.0, 8).unwrap(), Axis::new("g", 0.0, 6.0, 6).unwrap()];
-    let h = count(&[&v, &g], axes, None).unwrap();
+    (count(&[&v, &g], axes, None).unwrap(), v)
+}
+
+/// The pixels of `fig` left of its colour bar (the right 130) that have colour `c`.
+fn pixels_of(fig: &mdtf_histogram::Rgb, c: [u8; 3]) -> Vec<(usize, usize)> {
+    let plot_width = fig.width - 130;
+    (0..fig.height)
+        .flat_map(|y| (0..plot_width).map(move |x| (x, y)))
+        .filter(|&(x, y)| fig.pixels[3 * (y * fig.width + x)..3 * (y * fig.width + x) + 3] == c)
+        .collect()
+}
+
+#[test]
+fn figures_have_axes_labels_and_a_colour_bar_and_show_each_bin_in_place() {
+    // 2D: counts only in bin (2, 5) of 8 x 6 (1000) and bin (6, 1) (10)
+    let (h, v) = two_bins();
     let labels = mdtf_histogram::Labels::of(&h, "test input");
     assert_eq!(labels.axes, ["v (input units)", "g = |grad v| (input units per world unit)"]);
     let fig = h.figure(Scale::Log, &labels).unwrap().unwrap();
@@ -372,33 +386,21 @@ fn a_table_over_the_counts_shows_its_colour_where_it_is_opaque_and_arches_follow
     // counts in bins (2, 5) and (6, 1) of 8 x 6; a 4 x 3 table (cells of 2 x 2
     // bins), red and opaque in its cell (1, 2) (v 2..4, g 4..6, over bin (2, 5)),
     // green at a quarter of that in (3, 0) (v 6..8, g 0..2, over bin (6, 1))
-    let mut v = vec![2.5f32; 1000];
-    let mut g = vec![5.5f32; 1000];
-    v.extend([6.5f32; 10]);
-    g.extend([1.5f32; 10]);
-    let axes = vec![Axis::new("v", 0.0, 8.0, 8).unwrap(), Axis::new("g", 0.0, 6.0, 6).unwrap()];
-    let h = count(&[&v, &g], axes, None).unwrap();
+    let (h, _) = two_bins();
     let mut rgba = vec![0.0f32; 4 * 12];
     rgba[4 * (2 * 4 + 1)..4 * (2 * 4 + 1) + 4].copy_from_slice(&[1.0, 0.0, 0.0, 0.8]);
     rgba[4 * 3..4 * 3 + 4].copy_from_slice(&[0.0, 1.0, 0.0, 0.2]);
     let overlay = mdtf_histogram::Overlay { x: (0.0, 8.0, 4), y: (0.0, 6.0, 3), rgba: &rgba };
     let labels = mdtf_histogram::Labels::of(&h, "test input");
     let fig = h.figure_with(Scale::Log, &labels, Some(&overlay)).unwrap().unwrap();
-    let plot_width = mdtf_histogram::FIGURE_SIZE.0 as usize - 130;
-    let pixels_of = |c: [u8; 3]| {
-        (0..fig.height)
-            .flat_map(|y| (0..plot_width).map(move |x| (x, y)))
-            .filter(|&(x, y)| fig.pixels[3 * (y * fig.width + x)..3 * (y * fig.width + x) + 3] == c)
-            .collect::<Vec<_>>()
-    };
     // the opaque cell is pure red (relative opacity 1) over its counts and empty bins alike
-    let red = pixels_of([255, 0, 0]);
+    let red = pixels_of(&fig, [255, 0, 0]);
     // the quarter-opacity cell: green mixed in by sqrt(0.25) = 0.5 over black (empty bins)
     // and over bin (6, 1)'s grey 40 + 160 * log-level
-    let green = pixels_of([0, 128, 0]);
+    let green = pixels_of(&fig, [0, 128, 0]);
     let grey = (40.0 + 160.0 * mdtf_histogram::grey_level(10, 1000, Scale::Log) as f64 / 255.0).round();
     let on_counts =
-        pixels_of([(grey * 0.5).round() as u8, (grey * 0.5 + 127.5).round() as u8, (grey * 0.5).round() as u8]);
+        pixels_of(&fig, [(grey * 0.5).round() as u8, (grey * 0.5 + 127.5).round() as u8, (grey * 0.5).round() as u8]);
     assert!(
         red.len() > 1000 && green.len() > 1000 && on_counts.len() > 100,
         "{} {} {}",
@@ -418,13 +420,7 @@ fn a_table_over_the_counts_shows_its_colour_where_it_is_opaque_and_arches_follow
         .figure_with(Scale::Log, &labels, Some(&mdtf_histogram::Overlay { rgba: &[0.0; 48], ..overlay }))
         .unwrap()
         .unwrap();
-    let bare_count = |c: [u8; 3]| {
-        (0..bare.height)
-            .flat_map(|y| (0..plot_width).map(move |x| (x, y)))
-            .filter(|&(x, y)| bare.pixels[3 * (y * bare.width + x)..3 * (y * bare.width + x) + 3] == c)
-            .count()
-    };
-    assert!(bare_count([200, 200, 200]) > 100 && bare_count([0, 0, 0]) > 10 * red.len());
+    assert!(pixels_of(&bare, [200, 200, 200]).len() > 100 && pixels_of(&bare, [0, 0, 0]).len() > 10 * red.len());
     // an arch in pure blue, from v 1 to 7 with peak g 5: its apex column is at v = 4, right of
     // red's left edge; drawn only when asked for
     let mut arched = labels.clone();
@@ -432,13 +428,8 @@ fn a_table_over_the_counts_shows_its_colour_where_it_is_opaque_and_arches_follow
         vec![mdtf_histogram::ArchMark { v_low: 1.0, v_high: 7.0, g_peak: 5.0, label: "1".into(), colour: [0, 0, 255] }];
     arched.note = Some("a note".into());
     let with_arch = h.figure_with(Scale::Log, &arched, Some(&overlay)).unwrap().unwrap();
-    let blue: Vec<(usize, usize)> = (0..with_arch.height)
-        .flat_map(|y| (0..plot_width).map(move |x| (x, y)))
-        .filter(|&(x, y)| {
-            with_arch.pixels[3 * (y * with_arch.width + x)..3 * (y * with_arch.width + x) + 3] == [0, 0, 255]
-        })
-        .collect();
-    assert!(pixels_of([0, 0, 255]).is_empty() && blue.len() > 200, "{}", blue.len());
+    let blue = pixels_of(&with_arch, [0, 0, 255]);
+    assert!(pixels_of(&fig, [0, 0, 255]).is_empty() && blue.len() > 200, "{}", blue.len());
     // the arch is symmetric about v = 4: its blue pixels' mean x is where the red cell (v 2..4) ends
     let (xb, _) = mean(&blue);
     let red_right = red.iter().map(|p| p.0).max().unwrap() as f64;
