@@ -926,14 +926,37 @@ fn gaussian_tf_packs_scalar_data_with_the_papers_tables_and_default_or_fitted_gt
     mdtf_ok(&["pack", "--profile", "gaussian-tf", s.to_str().unwrap(), "-o", g.to_str().unwrap(), "-q"]);
     let m = mdtf_e2e::manifest(&g);
     assert_eq!(m["textures"][0]["component_order"], serde_json::json!(["v", "g"]));
-    // the paper's default: one triangular GTF, width 1, at the median v of the voxels with a gradient
+    // without a TF: a triangular GTF of the paper's form (width 1) at each boundary found, in its
+    // colour: every GTF sits at one of the shells' three boundary centres (20|230, 230|140, 140|60)
+    // and each centre has one
     let gaussians: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(g.join("gaussians.json")).unwrap()).unwrap();
-    assert_eq!(gaussians.as_array().unwrap().len(), 1);
-    assert_eq!(gaussians[0]["triangular"], true);
-    assert_eq!(gaussians[0]["k"], serde_json::json!([[1.0]]));
-    let c = gaussians[0]["centre"][0].as_f64().unwrap();
-    assert!(c > 25.0 && c < 225.0, "the median of the boundary voxels lies between the materials: {c}");
+    let centres: Vec<f64> = gaussians.as_array().unwrap().iter().map(|p| p["centre"][0].as_f64().unwrap()).collect();
+    let truth = [125.0, 185.0, 100.0];
+    let near = |a: f64, b: f64| (a - b).abs() < 15.0;
+    assert!(centres.iter().all(|c| truth.iter().any(|t| near(*c, *t))), "{centres:?}");
+    assert!(truth.iter().all(|t| centres.iter().any(|c| near(*c, *t))), "{centres:?}");
+    for (k, p) in gaussians.as_array().unwrap().iter().enumerate() {
+        assert_eq!((&p["triangular"], &p["k"]), (&serde_json::json!(true), &serde_json::json!([[1.0]])));
+        assert_eq!(p["colour"], serde_json::json!(mdtf_pack::BOUNDARY_PALETTE[k]), "{p}");
+    }
+    // no boundary (noise about 100): the paper's default, one white triangular GTF at the median
+    let mut flat = mdtf_volume::Volume::zeros(mdtf_volume::Geometry::new([32; 3], [1.0; 3]));
+    flat.data.fill(100.0);
+    mdtf_datagen::add_gaussian_noise(&mut flat, 10.0, 3);
+    let noise = dir.path().join("noise.nii.gz");
+    mdtf_volume::write_volume(&noise, &flat, &Default::default(), &[]).unwrap();
+    let ng = dir.path().join("ng");
+    mdtf_ok(&["pack", "--profile", "gaussian-tf", noise.to_str().unwrap(), "-o", ng.to_str().unwrap(), "-q"]);
+    let paper: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(ng.join("gaussians.json")).unwrap()).unwrap();
+    assert_eq!(paper.as_array().unwrap().len(), 1, "{paper}");
+    assert_eq!(
+        (&paper[0]["colour"], &paper[0]["k"]),
+        (&serde_json::json!([1.0, 1.0, 1.0]), &serde_json::json!([[1.0]]))
+    );
+    let c = paper[0]["centre"][0].as_f64().unwrap();
+    assert!((c - 100.0).abs() < 2.0, "the median of the noise: {c}");
 
     // IGauss (eq. 16) and erf(x) - erf(y), decoded from their 16-bit codes, against quadrature
     let luts = m["luts"].as_array().unwrap();

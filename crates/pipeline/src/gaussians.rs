@@ -3,7 +3,12 @@
 //!
 //! The primitives come from, in order: the TF file's `gaussian` widgets; a
 //! GTF fitted to the voxels of a mask (the paper's section 6: the mean and
-//! covariance of a probed region); the paper's default TF (section 3.2,
+//! covariance of a probed region); on scalar data, the boundaries found in
+//! the histogram volume: one triangular GTF of the paper's form (K = 1) at
+//! each boundary's centre value, in its colour, with the extinction per
+//! voxel that accumulates the boundary's surface opacity over the two world
+//! units of path a head-on ray spends in it (see
+//! [`mdtf_pack::boundary_opacities`]); else the paper's default TF (section 3.2,
 //! Fig. 5): one triangular GTF centred at each field's median, of width one
 //! (K = 1 on scalar data, where v and g share value units, so it selects the
 //! voxels within about one world unit of the median's isosurface;
@@ -19,10 +24,15 @@
 //! near 1 and the TGTF fills the volume with fog.
 
 use mdtf_pack::{
-    ERF_DOMAIN, ERF_SIZE, GaussianPrimitive, IGAUSS_DOMAIN, IGAUSS_SIZE, Lut, LutAxis, TfFile, erf_difference_table,
-    igauss_table,
+    BoundaryArch, ERF_DOMAIN, ERF_SIZE, GaussianPrimitive, IGAUSS_DOMAIN, IGAUSS_SIZE, Lut, LutAxis, TfFile,
+    erf_difference_table, igauss_table,
 };
 use mdtf_volume::Volume;
+
+/// World units of path a ray crossing a boundary head-on spends inside its
+/// triangular GTF of width 1: |v - c| / g < 1 holds within about one world
+/// unit on each side of the isosurface v = c.
+pub const BOUNDARY_TGTF_PATH: f64 = 2.0;
 
 /// The primitives of the pack: see the module docs. `fields` names the TF
 /// axes (the input's fields, or "v" for scalar data), each a channel in `chans`.
@@ -33,6 +43,7 @@ pub fn gaussians(
     chans: &[(String, Volume)],
     fields: &[String],
     gradient: &str,
+    arches: &[BoundaryArch],
 ) -> Result<Vec<GaussianPrimitive>, String> {
     if let Some(tf) = tf {
         return Ok(tf.gaussians());
@@ -54,6 +65,23 @@ pub fn gaussians(
         return Ok(vec![p]);
     }
     let multi = fields.len() > 1;
+    if !multi && !arches.is_empty() {
+        let spacing = data.first().map_or(1.0, |v| v.geometry.spacing.iter().copied().fold(f64::INFINITY, f64::min));
+        let path_voxels = BOUNDARY_TGTF_PATH / spacing.max(1e-12);
+        let surface = mdtf_pack::boundary_opacities(arches);
+        return Ok(arches
+            .iter()
+            .zip(surface)
+            .enumerate()
+            .map(|(k, (a, opacity))| GaussianPrimitive {
+                centre: vec![0.5 * (a.v_low + a.v_high)],
+                k: vec![vec![1.0]],
+                alpha_max: 1.0 - (1.0 - opacity).powf(1.0 / path_voxels.max(1e-3)),
+                colour: mdtf_pack::boundary_colour(k, arches.len()),
+                triangular: true,
+            })
+            .collect());
+    }
     let g = get(gradient)?.samples();
     let median = mdtf_volume::median;
     let g_cut = 2.0 * median(g).unwrap_or(0.0);

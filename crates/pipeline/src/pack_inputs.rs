@@ -29,6 +29,16 @@ fn hvol_or_computed<'a>(
     })
 }
 
+/// The arches of the boundaries found in the histogram volume of the value
+/// volume `v` (`hvol` when the caller has it, else derived with `kernel`), strongest first.
+pub fn detected_arches(
+    v: &Volume,
+    hvol: Option<&HistogramVolume>,
+    kernel: mdtf_derive::Kernel,
+) -> Result<Vec<BoundaryArch>, HistogramError> {
+    Ok(arches_of(&*hvol_or_computed(hvol, v, kernel)?))
+}
+
 /// The arches of the boundaries found in `hv`, strongest first.
 fn arches_of(hv: &HistogramVolume) -> Vec<BoundaryArch> {
     detect_boundaries(hv)

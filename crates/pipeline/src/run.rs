@@ -467,7 +467,17 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             };
             let (axes, gradient) =
                 if fields.is_empty() { (vec!["v".to_string()], "g") } else { (fields.clone(), "gnorm") };
-            Some(crate::gaussians::gaussians(tf.as_ref(), mask.as_ref(), &pack_chans, &axes, gradient).map_err(err)?)
+            let arches = match pack_chans.iter().find(|(c, _)| c == "v") {
+                Some((_, v)) if fields.is_empty() && tf.is_none() && mask.is_none() => {
+                    crate::pack_inputs::detected_arches(v, hvol_kept.as_ref(), kernel)
+                        .map_err(|e| err(e.to_string()))?
+                }
+                _ => Vec::new(),
+            };
+            Some(
+                crate::gaussians::gaussians(tf.as_ref(), mask.as_ref(), &pack_chans, &axes, gradient, &arches)
+                    .map_err(err)?,
+            )
         } else {
             None
         };
