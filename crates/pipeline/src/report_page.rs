@@ -81,7 +81,11 @@ pub fn figures_in(dir: &Path) -> Vec<Figure> {
             .collect();
         others.sort();
         figures.extend(others.into_iter().map(|f| {
-            let caption = if f.starts_with("histogram/hist_") {
+            let caption = if f.starts_with("histogram/tf_") {
+                "A transfer-function table of the pack over the histogram of its two channels: the table's \
+                 colour mixed into the counts (greys) by the square root of its opacity, the boundaries \
+                 found drawn as their model arches."
+            } else if f.starts_with("histogram/hist_") {
                 "A joint histogram of the channels its name lists (first to the right, second upward), log counts."
             } else {
                 "A figure of the run."

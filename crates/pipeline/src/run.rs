@@ -561,7 +561,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let json = serde_json::to_string_pretty(&report).map_err(|e| fail("report")(e.to_string()))?;
     write_file_atomically(&dir.join("run_report.json"), |w| w.write_all(json.as_bytes()))
         .map_err(|e| fail("report")(e.to_string()))?;
-    write_report_page(p, &report, dir).map_err(|e| fail("report")(e.to_string()))?;
+    write_report_page(p, opts, &report, dir).map_err(|e| fail("report")(e.to_string()))?;
     out.publish(&inputs).map_err(|e| fail("output")(e.to_string()))?;
     Ok(report)
 }
@@ -617,8 +617,25 @@ fn field_pair_histograms(
 
 /// Writes report.html into the staging folder `dir` from the report, the
 /// settings and the pack's manifest (absent for mesh packs).
-fn write_report_page(p: &Pipeline, report: &RunReport, dir: &Path) -> Result<(), String> {
-    let settings = toml::to_string_pretty(p).map_err(|e| e.to_string())?;
+fn write_report_page(p: &Pipeline, opts: &RunOptions, report: &RunReport, dir: &Path) -> Result<(), String> {
+    // the settings as run: `--input` in place of the pipeline's input, and no meshing section unless meshing ran
+    let mut resolved = p.clone();
+    if let Some(f) = &opts.input {
+        resolved.input.file = Some(f.clone());
+    }
+    let mut table = toml::Table::try_from(&resolved).map_err(|e| e.to_string())?;
+    if resolved.pack.profile != "projected-tetrahedra" {
+        table.remove("tetra");
+    }
+    if let Some(toml::Value::Table(input)) = table.get_mut("input")
+        && input.contains_key("file")
+    {
+        // a file replaces the phantom
+        for k in ["phantom", "size", "sigma", "noise"] {
+            input.remove(k);
+        }
+    }
+    let settings = toml::to_string_pretty(&table).map_err(|e| e.to_string())?;
     let manifest: Option<mdtf_pack::Manifest> =
         std::fs::read_to_string(dir.join("pack/manifest.json")).ok().and_then(|t| serde_json::from_str(&t).ok());
     let figures = crate::report_page::figures_in(dir);
