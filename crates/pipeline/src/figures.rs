@@ -1,10 +1,15 @@
-//! Figures that join two stages' results: the boundaries found in the
-//! histogram volume drawn on the (v, g) histograms, and the pack's 2D
-//! transfer functions drawn over the histograms of their two channels.
+//! Figures that join two stages' results or several channels: the
+//! boundaries found in the histogram volume drawn on the (v, g) histograms,
+//! the pack's 2D transfer functions drawn over the histograms of their two
+//! channels, and the joint histograms of a multi-field input's fields.
 
-use mdtf_histogram::{ArchMark, DetectedBoundary, Histogram, Labels, Overlay, Scale, write_overlay_figure};
+use mdtf_histogram::{
+    ArchMark, Axis, AxisSpec, DetectedBoundary, Histogram, Labels, Overlay, Scale, count, write_histogram,
+    write_overlay_figure,
+};
 use mdtf_pack::Lut;
-use mdtf_volume::VolumeError;
+use mdtf_volume::{Volume, VolumeError};
+use std::collections::BTreeMap;
 use std::path::Path;
 
 /// The boundaries as arches to draw, numbered from 1 as the report lists
@@ -59,6 +64,55 @@ pub fn write_tf_figures(
         let file = format!("tf_{}.png", lut.name);
         write_overlay_figure(&dir.join(&file), h, Scale::Log, &labels, &overlay)?;
         written.push(file);
+    }
+    Ok(written)
+}
+
+/// Fields whose pairs get joint histograms (the first ones of the input).
+pub const MAX_PAIRED_FIELDS: usize = 4;
+
+/// The joint histograms of a multi-field input: every pair of its first
+/// [`MAX_PAIRED_FIELDS`] fields, and each of them against ||G|| when it was
+/// derived (the gaussian-tf pack's gradient), written into `hdir`; returns
+/// the figures written, relative to the run's folder.
+pub fn write_field_pair_histograms(
+    fields: &[String],
+    chans: &BTreeMap<String, Volume>,
+    hdir: &Path,
+    title: &str,
+) -> Result<Vec<String>, String> {
+    let named: Vec<(&str, &Volume)> =
+        fields.iter().take(MAX_PAIRED_FIELDS).filter_map(|f| chans.get(f).map(|v| (f.as_str(), v))).collect();
+    let axis = |name: &str, v: &Volume, spec: AxisSpec| spec.resolve(name, v.samples()).map_err(|e| e.to_string());
+    let axes: Vec<Axis> = named.iter().map(|(f, v)| axis(f, v, AxisSpec::qbert(f))).collect::<Result<_, _>>()?;
+    let mut pairs: Vec<(usize, Option<usize>)> = Vec::new();
+    for a in 0..named.len() {
+        pairs.extend((a + 1..named.len()).map(|b| (a, Some(b))));
+    }
+    // ||G|| has g's long tail: clipped as g is
+    let gnorm = match chans.get("gnorm") {
+        Some(v) => Some((
+            v,
+            axis("gnorm", v, AxisSpec { clip_percent: AxisSpec::qbert("g").clip_percent, ..AxisSpec::qbert("gnorm") })?,
+        )),
+        None => None,
+    };
+    if gnorm.is_some() {
+        pairs.extend((0..named.len()).map(|a| (a, None)));
+    }
+    let mut written = Vec::new();
+    for (a, b) in pairs {
+        let (second, second_axis) = match b {
+            Some(b) => (named[b].1, axes[b].clone()),
+            None => match &gnorm {
+                Some((v, ax)) => (*v, ax.clone()),
+                None => continue,
+            },
+        };
+        let hist = count(&[named[a].1.samples(), second.samples()], vec![axes[a].clone(), second_axis.clone()], None)
+            .map_err(|e| e.to_string())?;
+        write_histogram(hdir, &hist, Scale::Log, title).map_err(|e| e.to_string())?;
+        written.push(format!("histogram/hist_{}_{}.png", axes[a].name, second_axis.name));
     }
     Ok(written)
 }

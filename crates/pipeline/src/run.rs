@@ -159,7 +159,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         needed.extend(["v", "g"].map(String::from));
         if h.joint {
             // several fields: the joint histograms of each pair of them (up to MAX_PAIRED_FIELDS)
-            needed.extend(fields.iter().take(MAX_PAIRED_FIELDS).cloned());
+            needed.extend(fields.iter().take(crate::figures::MAX_PAIRED_FIELDS).cloned());
         }
         if h.stretched {
             needed.extend(["g_hit", "hit"].map(String::from));
@@ -396,7 +396,8 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             }
         }
         if h.joint && !fields.is_empty() {
-            outputs.extend(field_pair_histograms(&fields, &chans, &hdir, &input_name).map_err(err)?);
+            outputs
+                .extend(crate::figures::write_field_pair_histograms(&fields, &chans, &hdir, &input_name).map_err(err)?);
         }
         if h.stretched
             && let (Some(g_hit), Some(hit)) = (get("g_hit"), get("hit"))
@@ -564,55 +565,6 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     write_report_page(p, opts, &report, dir).map_err(|e| fail("report")(e.to_string()))?;
     out.publish(&inputs).map_err(|e| fail("output")(e.to_string()))?;
     Ok(report)
-}
-
-/// Fields whose pairs get joint histograms (the first ones of the input).
-pub const MAX_PAIRED_FIELDS: usize = 4;
-
-/// The joint histograms of a multi-field input: every pair of its first
-/// [`MAX_PAIRED_FIELDS`] fields, and each of them against ||G|| when it was
-/// derived (the gaussian-tf pack's gradient), written into `hdir`; returns
-/// the figures written, relative to the run's folder.
-fn field_pair_histograms(
-    fields: &[String],
-    chans: &BTreeMap<String, Volume>,
-    hdir: &Path,
-    title: &str,
-) -> Result<Vec<String>, String> {
-    let named: Vec<(&str, &Volume)> =
-        fields.iter().take(MAX_PAIRED_FIELDS).filter_map(|f| chans.get(f).map(|v| (f.as_str(), v))).collect();
-    let axis = |name: &str, v: &Volume, spec: AxisSpec| spec.resolve(name, v.samples()).map_err(|e| e.to_string());
-    let axes: Vec<Axis> = named.iter().map(|(f, v)| axis(f, v, AxisSpec::qbert(f))).collect::<Result<_, _>>()?;
-    let mut pairs: Vec<(usize, Option<usize>)> = Vec::new();
-    for a in 0..named.len() {
-        pairs.extend((a + 1..named.len()).map(|b| (a, Some(b))));
-    }
-    // ||G|| has g's long tail: clipped as g is
-    let gnorm = match chans.get("gnorm") {
-        Some(v) => Some((
-            v,
-            axis("gnorm", v, AxisSpec { clip_percent: AxisSpec::qbert("g").clip_percent, ..AxisSpec::qbert("gnorm") })?,
-        )),
-        None => None,
-    };
-    if gnorm.is_some() {
-        pairs.extend((0..named.len()).map(|a| (a, None)));
-    }
-    let mut written = Vec::new();
-    for (a, b) in pairs {
-        let (second, second_axis) = match b {
-            Some(b) => (named[b].1, axes[b].clone()),
-            None => match &gnorm {
-                Some((v, ax)) => (*v, ax.clone()),
-                None => continue,
-            },
-        };
-        let hist = count(&[named[a].1.samples(), second.samples()], vec![axes[a].clone(), second_axis.clone()], None)
-            .map_err(|e| e.to_string())?;
-        write_histogram(hdir, &hist, Scale::Log, title).map_err(|e| e.to_string())?;
-        written.push(format!("histogram/hist_{}_{}.png", axes[a].name, second_axis.name));
-    }
-    Ok(written)
 }
 
 /// Writes report.html into the staging folder `dir` from the report, the
