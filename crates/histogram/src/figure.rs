@@ -455,3 +455,61 @@ impl Histogram {
         Ok(true)
     }
 }
+
+/// Size of the figure of a 3D histogram's three primary-plane projections, pixels.
+pub const PROJECTIONS_SIZE: (u32, u32) = (1260, 470);
+
+impl Histogram {
+    /// The colour-volume picture of a 3D histogram ([`Histogram::rgb_projections`])
+    /// as a figure: the three projections side by side, each over its two
+    /// channels' axes in their units, titled `title`; None unless 3D.
+    pub fn projections_figure(&self, scale: Scale, title: &str) -> Result<Option<Rgb>, String> {
+        let Some(img) = self.rgb_projections(scale) else { return Ok(None) };
+        mdtf_volume::register_figure_font();
+        let (w, h) = PROJECTIONS_SIZE;
+        let mut pixels = vec![255u8; (w * h * 3) as usize];
+        let bins: Vec<usize> = self.axes.iter().map(|a| a.bins).collect();
+        let gap = (img.width - 2 * bins[0] - bins[1]) / 2;
+        // (first axis, second axis, the panel's left column in `img`)
+        let panels = [(0usize, 1usize, 0usize), (0, 2, bins[0] + gap), (1, 2, 2 * (bins[0] + gap))];
+        let mut rects = Vec::new();
+        {
+            let root = BitMapBackend::with_buffer(&mut pixels, (w, h)).into_drawing_area();
+            let root = root.titled(title, ("sans-serif", 18)).map_err(plot_err)?;
+            for (area, &(a, b, _)) in root.split_evenly((1, 3)).iter().zip(&panels) {
+                let (xa, ya) = (&self.axes[a], &self.axes[b]);
+                let mut chart = ChartBuilder::on(area)
+                    .margin(10)
+                    .x_label_area_size(44)
+                    .y_label_area_size(64)
+                    .build_cartesian_2d(xa.min..xa.max, ya.min..ya.max)
+                    .map_err(plot_err)?;
+                chart
+                    .configure_mesh()
+                    .disable_mesh()
+                    .x_desc(axis_label(&xa.name))
+                    .y_desc(axis_label(&ya.name))
+                    .axis_desc_style(("sans-serif", 12))
+                    .label_style(("sans-serif", 11))
+                    .draw()
+                    .map_err(plot_err)?;
+                rects.push(chart.plotting_area().get_pixel_range());
+            }
+            root.present().map_err(plot_err)?;
+        }
+        for ((px, py), &(a, b, x0)) in rects.into_iter().zip(&panels) {
+            let (na, nb) = (bins[a], bins[b]);
+            let (pw, ph) = ((px.end - px.start).max(1) as f64, (py.end - py.start).max(1) as f64);
+            for y in py.clone() {
+                let ib = ((((py.end - 1 - y) as f64 + 0.5) / ph * nb as f64) as usize).min(nb - 1);
+                for x in px.clone() {
+                    let ia = ((((x - px.start) as f64 + 0.5) / pw * na as f64) as usize).min(na - 1);
+                    let from = 3 * ((img.height - 1 - ib) * img.width + x0 + ia);
+                    let to = 3 * (y as usize * w as usize + x as usize);
+                    pixels[to..to + 3].copy_from_slice(&img.pixels[from..from + 3]);
+                }
+            }
+        }
+        Ok(Some(Rgb { width: w as usize, height: h as usize, pixels }))
+    }
+}

@@ -58,7 +58,10 @@ pub fn write_histogram_marked(
     if h.axes.len() == 2 {
         write_exr(&dir.join(format!("{stem}.exr")), h)?;
     }
-    if let Some(rgb) = h.rgb_projections(scale) {
+    if let Some(rgb) = h
+        .projections_figure(scale, &format!("{stem} of {title}: primary-plane projections"))
+        .map_err(VolumeError::Fields)?
+    {
         let text = format!(
             "primary-plane projections ({0}, {1}) | ({0}, {2}) | ({1}, {2}); {0} red, {1} green, {2} blue; {3}",
             h.axes[0].name,

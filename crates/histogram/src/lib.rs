@@ -22,7 +22,9 @@ pub use boundaries::{
     CORE_HALF_WIDTH, DetectedBoundary, MIN_CORE_SHARE, MIN_RISE_CORRELATION, background_value, detect_boundaries,
 };
 pub use count::{Histogram, count};
-pub use figure::{ArchMark, FIGURE_SIZE, Labels, Overlay, PLOT_PIXELS, SIDE_BY_SIDE_SIZE, axis_label, count_colour};
+pub use figure::{
+    ArchMark, FIGURE_SIZE, Labels, Overlay, PLOT_PIXELS, PROJECTIONS_SIZE, SIDE_BY_SIDE_SIZE, axis_label, count_colour,
+};
 pub use files::{write_histogram, write_histogram_marked, write_hvol, write_overlay_figure, write_stretched};
 pub use hvol::{HVOL_PARTS, HistogramVolume, HvolAccumulator, HvolAxes, HvolParams, histogram_volume};
 pub use hvol_derived::histogram_volume_derived;

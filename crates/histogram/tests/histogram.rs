@@ -466,3 +466,38 @@ fn two_histograms_side_by_side_share_one_colour_scale() {
     let one = count(&[&v], vec![Axis::new("v", 0.0, 8.0, 8).unwrap()], None).unwrap();
     assert!(one.figure_beside(&right, Scale::Log, labels).unwrap().is_none());
 }
+
+#[test]
+fn the_projections_figure_shows_each_panel_over_its_own_axes() {
+    // all voxels in one bin of a 4 x 4 x 4 (v, g, f2) histogram: v 3/3, g 0/3, f2 1/3 of their ranges
+    let (v, g, f2) = (vec![3.5f32; 50], vec![0.5f32; 50], vec![1.5f32; 50]);
+    let axes = ["v", "g", "f2"].map(|n| Axis::new(n, 0.0, 4.0, 4).unwrap()).to_vec();
+    let h = count(&[&v, &g, &f2], axes, None).unwrap();
+    let fig = h.projections_figure(Scale::Linear, "test input").unwrap().unwrap();
+    assert_eq!((fig.width as u32, fig.height as u32), mdtf_histogram::PROJECTIONS_SIZE);
+    let lift = |x: f64| (255.0 * (0.25 + 0.75 * x)).round() as u8;
+    let colour = [lift(1.0), lift(0.0), lift(1.0 / 3.0)];
+    let third = fig.width / 3;
+    for panel in 0..3 {
+        let columns: Vec<usize> = (0..fig.height)
+            .flat_map(|y| (panel * third..(panel + 1) * third).map(move |x| (x, y)))
+            .filter(|&(x, y)| {
+                // within a code of the colour (its blue, 127.5, rounds either way)
+                (0..3).all(|k| fig.pixels[3 * (y * fig.width + x) + k].abs_diff(colour[k]) <= 1)
+            })
+            .map(|(x, _)| x - panel * third)
+            .collect();
+        assert!(columns.len() > 500, "panel {panel}: {} pixels", columns.len());
+        // the bin's column: v = 3.5 (right quarter) in the (v, g) and (v, f2) panels, g = 0.5 (left) in (g, f2)
+        let mean = columns.iter().sum::<usize>() as f64 / columns.len() as f64 / third as f64;
+        let right = panel < 2;
+        assert!(if right { mean > 0.7 } else { mean < 0.4 }, "panel {panel}: mean column {mean} of the third");
+    }
+    assert!(
+        count(&[&v, &g], vec![Axis::new("v", 0.0, 4.0, 4).unwrap(), Axis::new("g", 0.0, 4.0, 4).unwrap()], None)
+            .unwrap()
+            .projections_figure(Scale::Linear, "2D")
+            .unwrap()
+            .is_none()
+    );
+}
