@@ -134,12 +134,25 @@ fn assert_page_matches_its_run(name: &str, out: &Path, seen: &Value) {
         );
     }
     let boundaries = report["boundaries"].as_array().cloned().unwrap_or_default();
+    // the opacities the default slicer TF was built with, as its manifest entry lists them
+    let tf_meaning = m["luts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|l| l["name"] == "tf2d_default")
+        .and_then(|l| l["meaning"].as_str().map(String::from));
     for (k, b) in boundaries.iter().enumerate() {
         let rows = rows_starting(seen, &(k + 1).to_string());
+        if let (Some(meaning), Some(row)) = (&tf_meaning, rows.iter().find(|r| r.len() == 10))
+            && meaning.contains("surface opacity")
+        {
+            let listed = meaning.split("surface opacity ").nth(k + 1).map(|t| &t[..5]);
+            assert_eq!(listed, Some(row[9]), "{name}: boundary {k}'s surface opacity, {meaning}");
+        }
         let centre = b["v_centre"].as_f64().unwrap();
         let g = b["g_peak"].as_f64().unwrap();
         assert!(
-            rows.iter().any(|r| r.len() == 8 && close(number(r[3]), centre) && close(number(r[5]), g)),
+            rows.iter().any(|r| r.len() == 10 && close(number(r[3]), centre) && close(number(r[5]), g)),
             "{name}: boundary {k} (centre {centre}, G {g}) in {rows:?}"
         );
     }

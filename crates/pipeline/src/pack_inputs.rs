@@ -41,8 +41,13 @@ pub fn detected_arches(
 
 /// The arches of the boundaries found in `hv`, strongest first.
 fn arches_of(hv: &HistogramVolume) -> Vec<BoundaryArch> {
-    detect_boundaries(hv)
-        .into_iter()
+    arches_from(&detect_boundaries(hv))
+}
+
+/// The pack's arches of detected boundaries, in the same order.
+pub fn arches_from(boundaries: &[mdtf_histogram::DetectedBoundary]) -> Vec<BoundaryArch> {
+    boundaries
+        .iter()
         .map(|b| BoundaryArch {
             v_low: b.v_low,
             v_high: b.v_high,

@@ -202,25 +202,31 @@ fn boundaries_section(h: &mut String, r: &RunReport) {
         } else {
             h.push_str(
                 "<p>From the histogram volume (Kindlmann and Durkin's position function), strongest first. \
-                 The default transfer functions give each its colour.</p>\n<table><tr><th>#</th><th>colour</th>\
+                 The default transfer functions give each its colour and surface opacity (what a ray crossing \
+                 it accumulates: the smallest inner surface opaque, larger ones fainter, one meeting the \
+                 background at most 0.3).</p>\n<table><tr><th>#</th><th>colour</th>\
                  <th>low material v</th><th>centre v</th><th>high material v</th><th>peak g (per world unit)</th>\
-                 <th>sigma (world units)</th><th>core voxels</th></tr>\n",
+                 <th>sigma (world units)</th><th>core voxels</th><th>meets the background</th>\
+                 <th>surface opacity</th></tr>\n",
             );
             let n = r.boundaries.len();
-            for (k, b) in r.boundaries.iter().enumerate() {
+            let opacity = mdtf_pack::boundary_opacities(&crate::pack_inputs::arches_from(&r.boundaries));
+            for ((k, b), a) in r.boundaries.iter().enumerate().zip(opacity) {
                 let [cr, cg, cb] = mdtf_pack::boundary_colour(k, n).map(|c| (c * 255.0).round() as u8);
                 let _ = writeln!(
                     h,
                     "<tr><td class=\"n\">{}</td><td><span class=\"swatch\" style=\"background:rgb({cr},{cg},{cb})\">\
                      </span></td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
-                     <td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td></tr>",
+                     <td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td>{}</td>\
+                     <td class=\"n\">{a:.3}</td></tr>",
                     k + 1,
                     num(b.v_low),
                     num(b.v_centre),
                     num(b.v_high),
                     num(b.g_peak),
                     num(b.sigma),
-                    b.core_voxels
+                    b.core_voxels,
+                    if b.meets_background { "yes" } else { "no" }
                 );
             }
             h.push_str("</table>\n");
