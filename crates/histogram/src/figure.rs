@@ -13,7 +13,7 @@
 
 use crate::count::Histogram;
 use crate::image::{Scale, grey_level};
-use crate::rgb::Rgb;
+use crate::rgb::{GAP, Rgb};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
@@ -190,8 +190,8 @@ fn heat_map_chart<'a, 'b>(
     ChartBuilder::on(area)
         .caption(&labels.title, ("sans-serif", 18))
         .margin(12)
-        .margin_bottom(12 + area_below(labels) - 48)
-        .x_label_area_size(48)
+        .margin_bottom(12 + note_height(labels))
+        .x_label_area_size(AXIS_LABEL_AREA)
         .y_label_area_size(70)
         .build_cartesian_2d(ax.min..ax.max, ay.min..ay.max)
         .map_err(plot_err)
@@ -235,9 +235,12 @@ fn draw_marks(
     Ok(())
 }
 
-/// Height of the area below a plot (tick labels, axis label and the note, if any), pixels.
-fn area_below(labels: &Labels) -> u32 {
-    if labels.note.is_some() { 48 + 20 } else { 48 }
+/// Height of the tick labels and axis label below a heat map, pixels.
+const AXIS_LABEL_AREA: u32 = 48;
+
+/// Height of the line of the note below the axis label (0 without a note), pixels.
+fn note_height(labels: &Labels) -> u32 {
+    if labels.note.is_some() { 20 } else { 0 }
 }
 
 /// Draws the log count axis of a colour bar for counts up to `max` in
@@ -268,43 +271,55 @@ fn colour_bar_axes(
     Ok(bar.plotting_area().get_pixel_range())
 }
 
+/// Calls `paint(x, y, i, j, tx, ty)` for every pixel (x, y) of the plot
+/// `rect`, with the cell (i, j) of an `nx` x `ny` grid under the pixel's
+/// centre (first axis right, second up) and that centre's position (tx, ty)
+/// in [0, 1] along each axis.
+fn each_plot_pixel(
+    (px, py): &PixelRect,
+    (nx, ny): (usize, usize),
+    mut paint: impl FnMut(usize, usize, usize, usize, f64, f64),
+) {
+    let (pw, ph) = ((px.end - px.start).max(1) as f64, (py.end - py.start).max(1) as f64);
+    for y in py.clone() {
+        let ty = ((py.end - 1 - y) as f64 + 0.5) / ph;
+        let j = ((ty * ny as f64) as usize).min(ny - 1);
+        for x in px.clone() {
+            let tx = ((x - px.start) as f64 + 0.5) / pw;
+            let i = ((tx * nx as f64) as usize).min(nx - 1);
+            paint(x as usize, y as usize, i, j, tx, ty);
+        }
+    }
+}
+
 /// Fills the plot `rect` of an RGB bitmap `width` pixels wide with `h`'s
 /// heat map: each pixel shows the bin under its centre (first axis right, second up).
 /// Under an `overlay`, the counts are dark greys and the table's colours are mixed in.
 fn fill_heat_map(
     pixels: &mut [u8],
     width: usize,
-    (px, py): PixelRect,
+    rect: PixelRect,
     h: &Histogram,
     (max, scale): (u64, Scale),
     overlay: Option<&Overlay>,
 ) {
     let (ax, ay) = (&h.axes[0], &h.axes[1]);
-    let (pw, ph) = ((px.end - px.start).max(1) as f64, (py.end - py.start).max(1) as f64);
     let palette: CountPalette = if overlay.is_some() { dark_count_colour } else { count_colour };
     let alpha_max = overlay.map_or(0.0, |o| o.max_alpha());
-    for y in py.clone() {
-        let ty = ((py.end - 1 - y) as f64 + 0.5) / ph;
-        let j = (ty * ay.bins as f64) as usize;
-        for x in px.clone() {
-            let tx = ((x - px.start) as f64 + 0.5) / pw;
-            let i = (tx * ax.bins as f64) as usize;
-            let c = h.counts[j.min(ay.bins - 1) * ax.bins + i.min(ax.bins - 1)] as u64;
-            let mut rgb = palette(c, max, scale);
-            if let Some(cell) =
-                overlay.and_then(|o| o.at(ax.min + tx * (ax.max - ax.min), ay.min + ty * (ay.max - ay.min)))
-                && alpha_max > 0.0
-            {
-                let mix = (cell[3] / alpha_max).clamp(0.0, 1.0).sqrt();
-                for k in 0..3 {
-                    let tf = 255.0 * cell[k].clamp(0.0, 1.0);
-                    rgb[k] = (rgb[k] as f32 * (1.0 - mix) + tf * mix).round() as u8;
-                }
+    each_plot_pixel(&rect, (ax.bins, ay.bins), |x, y, i, j, tx, ty| {
+        let mut rgb = palette(h.counts[j * ax.bins + i] as u64, max, scale);
+        if let Some(cell) = overlay.and_then(|o| o.at(ax.min + tx * (ax.max - ax.min), ay.min + ty * (ay.max - ay.min)))
+            && alpha_max > 0.0
+        {
+            let mix = (cell[3] / alpha_max).clamp(0.0, 1.0).sqrt();
+            for k in 0..3 {
+                let tf = 255.0 * cell[k].clamp(0.0, 1.0);
+                rgb[k] = (rgb[k] as f32 * (1.0 - mix) + tf * mix).round() as u8;
             }
-            let o = 3 * (y as usize * width + x as usize);
-            pixels[o..o + 3].copy_from_slice(&rgb);
         }
-    }
+        let o = 3 * (y * width + x);
+        pixels[o..o + 3].copy_from_slice(&rgb);
+    });
 }
 
 /// Fills the colour bar `rect`: at each height, the colour of the count the log axis beside it reads there.
@@ -362,7 +377,7 @@ impl Histogram {
             let root = BitMapBackend::with_buffer(pixels, (w, h)).into_drawing_area();
             let (main, bar_area) = root.split_horizontally(w - COLOUR_BAR_WIDTH);
             plot = heat_map_axes(&main, self, labels)?;
-            bar = colour_bar_axes(&bar_area, max, scale, area_below(labels))?;
+            bar = colour_bar_axes(&bar_area, max, scale, AXIS_LABEL_AREA + note_height(labels))?;
             root.present().map_err(plot_err)?;
         }
         fill_heat_map(pixels, w as usize, plot, self, (max, scale), overlay);
@@ -395,7 +410,7 @@ impl Histogram {
             let (panels, bar_area) = root.split_horizontally(w - COLOUR_BAR_WIDTH);
             let (left, right) = panels.split_horizontally((w - COLOUR_BAR_WIDTH) / 2);
             plots = [heat_map_axes(&left, self, labels[0])?, heat_map_axes(&right, other, labels[1])?];
-            bar = colour_bar_axes(&bar_area, max, scale, area_below(labels[0]))?;
+            bar = colour_bar_axes(&bar_area, max, scale, AXIS_LABEL_AREA + note_height(labels[0]))?;
             root.present().map_err(plot_err)?;
         }
         let [p0, p1] = plots;
@@ -469,9 +484,8 @@ impl Histogram {
         let (w, h) = PROJECTIONS_SIZE;
         let mut pixels = vec![255u8; (w * h * 3) as usize];
         let bins: Vec<usize> = self.axes.iter().map(|a| a.bins).collect();
-        let gap = (img.width - 2 * bins[0] - bins[1]) / 2;
         // (first axis, second axis, the panel's left column in `img`)
-        let panels = [(0usize, 1usize, 0usize), (0, 2, bins[0] + gap), (1, 2, 2 * (bins[0] + gap))];
+        let panels = [(0usize, 1usize, 0usize), (0, 2, bins[0] + GAP), (1, 2, 2 * (bins[0] + GAP))];
         let mut rects = Vec::new();
         {
             let root = BitMapBackend::with_buffer(&mut pixels, (w, h)).into_drawing_area();
@@ -497,18 +511,12 @@ impl Histogram {
             }
             root.present().map_err(plot_err)?;
         }
-        for ((px, py), &(a, b, x0)) in rects.into_iter().zip(&panels) {
-            let (na, nb) = (bins[a], bins[b]);
-            let (pw, ph) = ((px.end - px.start).max(1) as f64, (py.end - py.start).max(1) as f64);
-            for y in py.clone() {
-                let ib = ((((py.end - 1 - y) as f64 + 0.5) / ph * nb as f64) as usize).min(nb - 1);
-                for x in px.clone() {
-                    let ia = ((((x - px.start) as f64 + 0.5) / pw * na as f64) as usize).min(na - 1);
-                    let from = 3 * ((img.height - 1 - ib) * img.width + x0 + ia);
-                    let to = 3 * (y as usize * w as usize + x as usize);
-                    pixels[to..to + 3].copy_from_slice(&img.pixels[from..from + 3]);
-                }
-            }
+        for (rect, &(a, b, x0)) in rects.iter().zip(&panels) {
+            each_plot_pixel(rect, (bins[a], bins[b]), |x, y, ia, ib, _, _| {
+                let from = 3 * ((img.height - 1 - ib) * img.width + x0 + ia);
+                let to = 3 * (y * w as usize + x);
+                pixels[to..to + 3].copy_from_slice(&img.pixels[from..from + 3]);
+            });
         }
         Ok(Some(Rgb { width: w as usize, height: h as usize, pixels }))
     }

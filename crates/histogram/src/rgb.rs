@@ -26,7 +26,7 @@ pub struct Rgb {
 }
 
 /// Gap between the panels, pixels (mid grey).
-const GAP: usize = 4;
+pub(crate) const GAP: usize = 4;
 
 impl Histogram {
     /// The three primary-plane projections of a 3D histogram as one RGB

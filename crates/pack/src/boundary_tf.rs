@@ -262,7 +262,7 @@ fn nearest_by_ratio(g: f64, references: impl Iterator<Item = Option<f64>>) -> Op
 
 /// Per-voxel opacities 1 - (1 - A)^(1 / w) that accumulate the surface
 /// opacities A over `w` voxels of full weight.
-fn per_voxel_opacities(surface: &[f64], w: f64) -> Vec<f64> {
+pub fn per_voxel_opacities(surface: &[f64], w: f64) -> Vec<f64> {
     let w = w.max(1e-3);
     surface.iter().map(|a| 1.0 - (1.0 - a).powf(1.0 / w)).collect()
 }

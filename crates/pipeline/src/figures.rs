@@ -85,34 +85,24 @@ pub fn write_field_pair_histograms(
         fields.iter().take(MAX_PAIRED_FIELDS).filter_map(|f| chans.get(f).map(|v| (f.as_str(), v))).collect();
     let axis = |name: &str, v: &Volume, spec: AxisSpec| spec.resolve(name, v.samples()).map_err(|e| e.to_string());
     let axes: Vec<Axis> = named.iter().map(|(f, v)| axis(f, v, AxisSpec::qbert(f))).collect::<Result<_, _>>()?;
-    let mut pairs: Vec<(usize, Option<usize>)> = Vec::new();
+    // (the first field's index, the second channel and its axis)
+    let mut pairs: Vec<(usize, &Volume, Axis)> = Vec::new();
     for a in 0..named.len() {
-        pairs.extend((a + 1..named.len()).map(|b| (a, Some(b))));
+        pairs.extend((a + 1..named.len()).map(|b| (a, named[b].1, axes[b].clone())));
     }
-    // ||G|| has g's long tail: clipped as g is
-    let gnorm = match chans.get("gnorm") {
-        Some(v) => Some((
-            v,
-            axis("gnorm", v, AxisSpec { clip_percent: AxisSpec::qbert("g").clip_percent, ..AxisSpec::qbert("gnorm") })?,
-        )),
-        None => None,
-    };
-    if gnorm.is_some() {
-        pairs.extend((0..named.len()).map(|a| (a, None)));
+    if let Some(gnorm) = chans.get("gnorm") {
+        // ||G|| has g's long tail: clipped as g is
+        let spec = AxisSpec { clip_percent: AxisSpec::qbert("g").clip_percent, ..AxisSpec::qbert("gnorm") };
+        let gnorm_axis = axis("gnorm", gnorm, spec)?;
+        pairs.extend((0..named.len()).map(|a| (a, gnorm, gnorm_axis.clone())));
     }
     let mut written = Vec::new();
-    for (a, b) in pairs {
-        let (second, second_axis) = match b {
-            Some(b) => (named[b].1, axes[b].clone()),
-            None => match &gnorm {
-                Some((v, ax)) => (*v, ax.clone()),
-                None => continue,
-            },
-        };
-        let hist = count(&[named[a].1.samples(), second.samples()], vec![axes[a].clone(), second_axis.clone()], None)
+    for (a, second, second_axis) in pairs {
+        let file = format!("histogram/hist_{}_{}.png", axes[a].name, second_axis.name);
+        let hist = count(&[named[a].1.samples(), second.samples()], vec![axes[a].clone(), second_axis], None)
             .map_err(|e| e.to_string())?;
         write_histogram(hdir, &hist, Scale::Log, title).map_err(|e| e.to_string())?;
-        written.push(format!("histogram/hist_{}_{}.png", axes[a].name, second_axis.name));
+        written.push(file);
     }
     Ok(written)
 }

@@ -23,6 +23,7 @@
 //! isosurface lies in the boundaries' far tails, where (v - c) / g stays
 //! near 1 and the TGTF fills the volume with fog.
 
+use mdtf_histogram::HistogramVolume;
 use mdtf_pack::{
     BoundaryArch, ERF_DOMAIN, ERF_SIZE, GaussianPrimitive, IGAUSS_DOMAIN, IGAUSS_SIZE, Lut, LutAxis, TfFile,
     erf_difference_table, igauss_table,
@@ -37,13 +38,15 @@ pub const BOUNDARY_TGTF_PATH: f64 = 2.0;
 /// The primitives of the pack: see the module docs. `fields` names the TF
 /// axes (the input's fields, or "v" for scalar data), each a channel in `chans`.
 /// `gradient` names the gradient channel (g or gnorm), used to pick the voxels the medians are over.
+/// `boundaries_from` is the histogram volume when the caller has one (else
+/// it is derived from the value, with the kernel) for the boundaries' TGTFs.
 pub fn gaussians(
     tf: Option<&TfFile>,
     mask: Option<&Volume>,
     chans: &[(String, Volume)],
     fields: &[String],
     gradient: &str,
-    arches: &[BoundaryArch],
+    boundaries_from: (Option<&HistogramVolume>, mdtf_derive::Kernel),
 ) -> Result<Vec<GaussianPrimitive>, String> {
     if let Some(tf) = tf {
         return Ok(tf.gaussians());
@@ -65,22 +68,12 @@ pub fn gaussians(
         return Ok(vec![p]);
     }
     let multi = fields.len() > 1;
-    if !multi && !arches.is_empty() {
-        let spacing = data.first().map_or(1.0, |v| v.geometry.spacing.iter().copied().fold(f64::INFINITY, f64::min));
-        let path_voxels = BOUNDARY_TGTF_PATH / spacing.max(1e-12);
-        let surface = mdtf_pack::boundary_opacities(arches);
-        return Ok(arches
-            .iter()
-            .zip(surface)
-            .enumerate()
-            .map(|(k, (a, opacity))| GaussianPrimitive {
-                centre: vec![0.5 * (a.v_low + a.v_high)],
-                k: vec![vec![1.0]],
-                alpha_max: 1.0 - (1.0 - opacity).powf(1.0 / path_voxels.max(1e-3)),
-                colour: mdtf_pack::boundary_colour(k, arches.len()),
-                triangular: true,
-            })
-            .collect());
+    if let [value] = &data[..] {
+        let (hvol, kernel) = boundaries_from;
+        let arches = crate::pack_inputs::detected_arches(value, hvol, kernel).map_err(|e| e.to_string())?;
+        if !arches.is_empty() {
+            return Ok(boundary_tgtfs(&arches, &value.geometry));
+        }
     }
     let g = get(gradient)?.samples();
     let median = mdtf_volume::median;
@@ -103,6 +96,25 @@ pub fn gaussians(
         k[a][a] = if multi && range > 0.0 { 1.0 / range } else { 1.0 };
     }
     Ok(vec![GaussianPrimitive { centre, k, alpha_max: 1.0, colour: [1.0, 1.0, 1.0], triangular: true }])
+}
+
+/// One triangular GTF per boundary (see the module docs).
+fn boundary_tgtfs(arches: &[BoundaryArch], geometry: &mdtf_volume::Geometry) -> Vec<GaussianPrimitive> {
+    let spacing = geometry.spacing.iter().copied().fold(f64::INFINITY, f64::min);
+    let per_voxel =
+        mdtf_pack::per_voxel_opacities(&mdtf_pack::boundary_opacities(arches), BOUNDARY_TGTF_PATH / spacing.max(1e-12));
+    arches
+        .iter()
+        .zip(per_voxel)
+        .enumerate()
+        .map(|(k, (a, alpha_max))| GaussianPrimitive {
+            centre: vec![0.5 * (a.v_low + a.v_high)],
+            k: vec![vec![1.0]],
+            alpha_max,
+            colour: mdtf_pack::boundary_colour(k, arches.len()),
+            triangular: true,
+        })
+        .collect()
 }
 
 /// The IGauss table (eq. 16, 128^2 over [-10, 10]^2) and the erf-difference

@@ -438,6 +438,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         stages: serde_json::to_value(p).unwrap_or(serde_json::Value::Null),
     };
     let mut table_names: Vec<String> = Vec::new();
+    let mut pack_outputs: Vec<String> = vec!["pack/manifest.json".into()];
     if profile == Profile::ProjectedTetrahedra {
         let value = get("v").ok_or_else(|| err("no value volume".into()))?;
         let mesh = mdtf_tetra::tetrahedralise(value, p.tetra.tets, "v").map_err(|e| err(e.to_string()))?;
@@ -468,15 +469,9 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             };
             let (axes, gradient) =
                 if fields.is_empty() { (vec!["v".to_string()], "g") } else { (fields.clone(), "gnorm") };
-            let arches = match pack_chans.iter().find(|(c, _)| c == "v") {
-                Some((_, v)) if fields.is_empty() && tf.is_none() && mask.is_none() => {
-                    crate::pack_inputs::detected_arches(v, hvol_kept.as_ref(), kernel)
-                        .map_err(|e| err(e.to_string()))?
-                }
-                _ => Vec::new(),
-            };
+            let boundaries_from = (hvol_kept.as_ref(), kernel);
             Some(
-                crate::gaussians::gaussians(tf.as_ref(), mask.as_ref(), &pack_chans, &axes, gradient, &arches)
+                crate::gaussians::gaussians(tf.as_ref(), mask.as_ref(), &pack_chans, &axes, gradient, boundaries_from)
                     .map_err(err)?,
             )
         } else {
@@ -511,8 +506,9 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         writer.finish(&luts, provenance).map_err(|e| err(e.to_string()))?;
         if !figure_hists.is_empty() {
             let hists: Vec<&mdtf_histogram::Histogram> = figure_hists.iter().collect();
-            crate::figures::write_tf_figures(&dir.join("histogram"), &luts, &hists, &input_name, &arches)
+            let written = crate::figures::write_tf_figures(&dir.join("histogram"), &luts, &hists, &input_name, &arches)
                 .map_err(|e| err(e.to_string()))?;
+            pack_outputs.extend(written.into_iter().map(|f| format!("histogram/{f}")));
         }
         if let Some(g) = &gaussians {
             let json = serde_json::to_string_pretty(g).map_err(|e| err(e.to_string()))?;
@@ -520,7 +516,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
                 .map_err(|e| err(e.to_string()))?;
         }
     }
-    stage(pack_stage, t, n, vec!["pack/manifest.json".into()]);
+    stage(pack_stage, t, n, pack_outputs);
 
     let previewable = match profile {
         Profile::Slicer3dtf | Profile::DistanceTf => true,

@@ -92,16 +92,11 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
             None => None,
         };
         let (axes, gradient) = if fields.is_empty() { (vec!["v".to_string()], "g") } else { (fields.clone(), "gnorm") };
-        let arches = match chans.iter().find(|(c, _)| c == "v") {
-            Some((_, v)) if fields.is_empty() && tf.is_none() && mask.is_none() => {
-                progress.step("boundaries", || pack_inputs::detected_arches(v, None, kernel))?
-            }
-            _ => Vec::new(),
-        };
-        Some(
-            gaussians::gaussians(tf.as_ref(), mask.as_ref(), &chans, &axes, gradient, &arches)
-                .map_err(anyhow::Error::msg)?,
-        )
+        let primitives = progress.step("Gaussian primitives", || {
+            gaussians::gaussians(tf.as_ref(), mask.as_ref(), &chans, &axes, gradient, (None, kernel))
+                .map_err(anyhow::Error::msg)
+        })?;
+        Some(primitives)
     } else {
         if args.gtf_from_mask.is_some() {
             bail!("--gtf-from-mask applies to --profile gaussian-tf");
