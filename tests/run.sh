@@ -81,16 +81,17 @@ export MDTF_PYTHON="$venv/bin/python"
 # a real MRI for the tests of figures, default TFs and the report: Debian's
 # mricron-data ships Colin27's T1 (ch2.nii.gz); apt-get download needs no root
 real="${MDTF_REAL_DATA:-$PWD/target/real-data}"
-if [ ! -f "$real/ch2.nii.gz" ]; then
+if [ ! -f "$real/ch2.nii.gz" ] || [ ! -f "$real/ch2bet.nii.gz" ]; then
   command -v apt-get >/dev/null || die "the real-data tests need ch2.nii.gz (Debian package mricron-data) in $real"
-  say "fetching a real scan (Debian mricron-data: ch2.nii.gz) into $real"
+  say "fetching real scans (Debian mricron-data: ch2.nii.gz, ch2bet.nii.gz) into $real"
   tmp="$(mktemp -d)"
   (cd "$tmp" && apt-get download -qq mricron-data 2>/dev/null \
     || { [ "$(id -u)" = 0 ] && apt-get update -qq && apt-get download -qq mricron-data; }) \
     || die "apt-get download mricron-data failed"
   dpkg-deb -x "$tmp"/mricron-data_*.deb "$tmp/x"
   mkdir -p "$real"
-  cp "$tmp/x/usr/share/mricron/templates/ch2.nii.gz" "$real/"
+  # ch2bet: the same T1 with everything but the brain removed (the second field of a real stack)
+  cp "$tmp/x/usr/share/mricron/templates/ch2.nii.gz" "$tmp/x/usr/share/mricron/templates/ch2bet.nii.gz" "$real/"
   cp "$tmp/x/usr/share/doc/mricron-data/copyright" "$real/mricron-data.copyright"
   rm -rf "$tmp"
 fi

@@ -646,8 +646,10 @@ pub struct ValidateArgs {
     after_help = "Orthographic ray casting with emission-absorption compositing front to back, opacity corrected\n\
 for the step; slicer-3dtf classifies with its 3D (or 2D) TF LUT, distance-tf with alpha_u(v, g_hit) x alpha_d(d),\n\
 gaussian-tf with the pack's Gaussian primitives (gaussians.json), peak-finding with its peak and\n\
-pre-integration tables (1D peak finding on v);\n\
-Blinn-Phong shading from the normal channel, weighted by 1 - (1 - g/g_max)^2.\n\n\
+pre-integration tables (1D peak finding on v), projected-tetrahedra with the primitives of its\n\
+gaussians.json over the mesh's (s, g) resampled onto a grid (at most 192 nodes a side);\n\
+Blinn-Phong shading from the normal channel (without one, from the value's gradient by central\n\
+differences), weighted by 1 - (1 - g/g_max)^2.\n\n\
 Example:\n  mdtf preview out/pack -o preview.png --view 30,20 --size 512"
 )]
 pub struct PreviewArgs {

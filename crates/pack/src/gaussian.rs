@@ -103,8 +103,11 @@ impl GaussianPrimitive {
         }
         let a = d.iter().zip(&p1).map(|(x, y)| x * y).sum::<f64>() / dn;
         let b = a + dn;
-        let p1n2: f64 = p1.iter().map(|x| x * x).sum();
-        let s = (-p1n2 + a * a).exp();
+        // the squared distance of the segment's line from the centre, summed
+        // directly: |p1|^2 - a^2 cancels to garbage (even to +inf under exp)
+        // when g_hat is tiny and the coordinates huge
+        let perp2: f64 = p1.iter().zip(&d).map(|(p, x)| (p - a * x / dn).powi(2)).sum();
+        let s = (-perp2).exp();
         let diff = erf_difference(b, a);
         std::f64::consts::PI.sqrt() / 2.0 * s / dn * diff
     }
@@ -341,6 +344,15 @@ mod tests {
         assert!((p.density(&[104.0, 4.0]) - (-0.25f64).exp()).abs() < 1e-15);
         assert_eq!(p.density(&[100.0, 0.0]), 0.0);
         assert_eq!(p.segment_integral(&[100.0, 0.0], &[101.0, 0.0]), 0.0);
+        // a near-zero gradient (a mesh's flat background) puts the segment ~1e32
+        // from the centre: the density there is 0, not NaN
+        let far = p.segment_integral(&[255.0, 1e-30], &[254.0, 3e-30]);
+        assert_eq!(far, 0.0, "far from the centre with g ~ 1e-30");
+        // and a segment crossing the centre with a tiny g still integrates to ~ sqrt(pi)/2 g / (K |dv|)
+        let g = 1e-3;
+        let across = p.segment_integral(&[90.0, g], &[110.0, g]);
+        let expected = std::f64::consts::PI.sqrt() * g / (0.5 * 20.0);
+        assert!((across - expected).abs() < 1e-9 * expected.max(1e-12) + 1e-15, "{across:e} vs {expected:e}");
     }
 
     #[test]

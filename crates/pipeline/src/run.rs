@@ -446,6 +446,25 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         warnings.extend(out.notes.iter().map(|n| format!("tetra: {n}")));
         let report = mdtf_tetra::MeshReport::default();
         mdtf_tetra::write_pack(&pdir, &mesh, &report, &out, Some(&geo), provenance).map_err(|e| err(e.to_string()))?;
+        drop(mesh);
+        // the (s, g) TF the preview draws and a renderer can start from: the TF
+        // file's Gaussians, else a TGTF at each boundary found (as gaussian-tf's default)
+        let value_and_g: Vec<(String, Volume)> =
+            ["v", "g"].into_iter().filter_map(|c| chans.remove(c).map(|v| (c.to_string(), v))).collect();
+        let tf_gaussians = tf.as_ref().filter(|t| !t.gaussians().is_empty());
+        let g = crate::gaussians::gaussians(
+            tf_gaussians,
+            None,
+            &value_and_g,
+            &["v".into()],
+            "g",
+            (hvol_kept.as_ref(), kernel),
+        )
+        .map_err(err)?;
+        let json = serde_json::to_string_pretty(&g).map_err(|e| err(e.to_string()))?;
+        write_file_atomically(&pdir.join("gaussians.json"), |w| w.write_all(json.as_bytes()))
+            .map_err(|e| err(e.to_string()))?;
+        pack_outputs.push("pack/gaussians.json".into());
     } else {
         // the pack is the last stage to read the channels: they move into it
         let mut pack_chans: Vec<(String, Volume)> =
@@ -523,7 +542,8 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         Profile::GaussianTf => true,
         // with a TF, or the default one from the boundaries found
         Profile::PeakFinding => table_names.iter().any(|l| ["tf2d", "peak_table", "product_0"].contains(&l.as_str())),
-        Profile::ProjectedTetrahedra => false,
+        // the mesh resampled onto a grid, with the TF of its gaussians.json
+        Profile::ProjectedTetrahedra => true,
     };
     if p.preview && previewable {
         on_stage("preview");

@@ -1,15 +1,19 @@
 //! Preview of an mdtf pack: decode it from its manifest alone and ray-cast
 //! it the way its renderer family would (3D or 2D TF LUT for slicer-3dtf,
 //! alpha_u(v, g_hit) x alpha_d(d) for distance-tf, Gaussian primitives with
-//! a Riemann sum or the analytic segment integral for gaussian-tf; a product
-//! TF's factor tables, whatever the profile), with Blinn-Phong shading
-//! where the profile has normals. A check that the pack is complete, and a
-//! picture to look at before loading it into the real renderer.
+//! a Riemann sum or the analytic segment integral for gaussian-tf and for a
+//! projected-tetrahedra mesh resampled onto a grid; a product TF's factor
+//! tables, whatever the profile), with Blinn-Phong shading from the normals
+//! where the profile packs them, else from the value's gradient. A check
+//! that the pack is complete, and a picture to look at before loading it
+//! into the real renderer.
 
 mod load;
+mod mesh;
 mod render;
 
 pub use load::{LoadedPack, Table, decode_channels, load, load_channels};
+pub use mesh::{MESH_GRID_MAX, mesh_channels, resample};
 pub use render::{Camera, Classifier, channels_read, render, render_without_skipping};
 
 use mdtf_volume::VolumeError;
@@ -57,16 +61,24 @@ pub fn classifier(pack: &LoadedPack, analytic: bool) -> Result<Classifier, Previ
             alpha_u: table("alpha_u"),
             alpha_d: table("alpha_d").ok_or_else(|| PreviewError::Pack("distance-tf pack without alpha_d".into()))?,
         }),
-        "gaussian-tf" => {
+        "gaussian-tf" | "projected-tetrahedra" => {
             let primitives = pack.gaussians.clone().filter(|g| !g.is_empty()).ok_or_else(|| {
-                PreviewError::Pack("gaussian-tf pack without gaussians.json (mdtf pack writes it)".into())
+                PreviewError::Pack(format!(
+                    "{} pack without gaussians.json (mdtf run writes it)",
+                    pack.manifest.profile
+                ))
             })?;
             let m = primitives.iter().map(|p| p.fields()).max().unwrap_or(0);
             // the TF axes are the packed fields in texture order; the gradient
-            // channel (g for scalar data, gnorm otherwise) follows them for triangular GTFs
+            // channel (g for scalar data, gnorm otherwise) follows them for
+            // triangular GTFs. A mesh's TF is over its scalar s (read as v) and g.
             let is_gradient = |c: &str| c == "gnorm" || c == "g";
             let mut fields: Vec<String> = Vec::new();
             let mut gradient = None;
+            if pack.manifest.mesh.is_some() {
+                fields.push("v".into());
+                gradient = Some("g".to_string());
+            }
             for t in &pack.manifest.textures {
                 for c in t.component_order.iter().flatten() {
                     if is_gradient(c) {
@@ -148,7 +160,11 @@ pub fn preview_named(
     let mut pack = load_channels(dir, &|_| false)?;
     let c = classifier(&pack, analytic)?;
     let read = channels_read(&c);
-    pack.channels = decode_channels(dir, &pack.manifest, &|n| read.iter().any(|r| r == n))?;
+    pack.channels = if pack.manifest.mesh.is_some() {
+        mesh_channels(dir, &pack.manifest, MESH_GRID_MAX)?
+    } else {
+        decode_channels(dir, &pack.manifest, &|n| read.iter().any(|r| r == n))?
+    };
     let img = render(&pack.channels, &c, cam);
     let text = format!(
         "mdtf preview of {} ({}), azimuth {} elevation {}, step {} voxel",

@@ -125,7 +125,7 @@ fn decode_texture(
 
 /// `dir/name`, refused when a link takes it outside the pack folder (the
 /// manifest check already refuses names that climb out).
-fn pack_file(dir: &Path, name: &str) -> Result<PathBuf, PreviewError> {
+pub(crate) fn pack_file(dir: &Path, name: &str) -> Result<PathBuf, PreviewError> {
     let path = dir.join(name);
     let (Ok(inside), Ok(root)) = (path.canonicalize(), dir.canonicalize()) else {
         return Ok(path); // missing: opening it reports the error with the name

@@ -508,6 +508,8 @@ fn render_impl(
         Classifier::Gaussian { channels: names, .. } => names.iter().map(|c| data(c)).collect(),
         _ => Vec::new(),
     };
+    // what is shaded by its gradient where the pack has no normals: the value, else the TF's first channel
+    let shading_scalar = v_data.or_else(|| table_chans.first().copied().flatten());
     let g_max = get("g").and_then(|v| v.finite_range()).map_or(1.0, |r| r.1.max(1e-12) as f64);
     let light = [-dir[0] + 0.3 * up[0], -dir[1] + 0.3 * up[1], -dir[2] + 0.3 * up[2]];
     let ll = (light.iter().map(|x| x * x).sum::<f64>()).sqrt();
@@ -604,7 +606,7 @@ fn render_impl(
                 }
                 let sample = |d: Option<&[f32]>| d.map_or(0.0, |d| cell.sample(d));
                 // where the sample is shaded: at the sample, or at a peak found between samples
-                let mut shade = cell;
+                let (mut shade, mut shade_at) = (cell, p);
                 let ([r, gr, b], a) = match classifier {
                     Classifier::Lut(t) => {
                         let [r, gr, b, a] = lookup(t, &coords(&cell, &table_chans));
@@ -631,7 +633,8 @@ fn render_impl(
                             Some((v0, p0, pk)) => {
                                 // the secant's root of v(t) = first peak on the segment
                                 let t = if v1 != v0 { ((pk[0] - v0) / (v1 - v0)).clamp(0.0, 1.0) as f64 } else { 1.0 };
-                                shade = Cell::at(dims, [0, 1, 2].map(|k| p0[k] + t * (p[k] - p0[k])));
+                                shade_at = [0, 1, 2].map(|k| p0[k] + t * (p[k] - p0[k]));
+                                shade = Cell::at(dims, shade_at);
                                 composite_peaks(preintegration, &pk)
                             }
                             None => {
@@ -665,7 +668,8 @@ fn render_impl(
                             // there, with the TF's opacity whatever the step (the paper's
                             // section 3: constant opacity at peaks)
                             Some((s, p0)) => {
-                                shade = Cell::at(dims, [0, 1, 2].map(|k| p0[k] + s * (p[k] - p0[k])));
+                                shade_at = [0, 1, 2].map(|k| p0[k] + s * (p[k] - p0[k]));
+                                shade = Cell::at(dims, shade_at);
                                 ([r, gr, b], (a as f64).min(0.999))
                             }
                             None => ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(step_vox)),
@@ -697,8 +701,21 @@ fn render_impl(
                     continue;
                 }
                 let mut colour = [r as f64, gr as f64, b as f64];
-                if let (Some(nxv), Some(nyv), Some(nzv)) = (nx, ny, nz) {
-                    let n = [shade.sample(nxv) as f64, shade.sample(nyv) as f64, shade.sample(nzv) as f64];
+                let normal = match (nx, ny, nz, shading_scalar) {
+                    (Some(nxv), Some(nyv), Some(nzv), _) => {
+                        Some([shade.sample(nxv) as f64, shade.sample(nyv) as f64, shade.sample(nzv) as f64])
+                    }
+                    // no normals in the pack: the gradient of its value, by central differences
+                    (_, _, _, Some(f)) => Some([0, 1, 2].map(|a| {
+                        let mut ahead = shade_at;
+                        let mut behind = shade_at;
+                        ahead[a] += 1.0;
+                        behind[a] -= 1.0;
+                        (Cell::at(dims, ahead).sample(f) - Cell::at(dims, behind).sample(f)) as f64 / g.spacing[a]
+                    })),
+                    _ => None,
+                };
+                if let Some(n) = normal {
                     let nl = (n.iter().map(|x| x * x).sum::<f64>()).sqrt();
                     if nl > 1e-6 {
                         let n = n.map(|x| x / nl);

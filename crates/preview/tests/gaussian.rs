@@ -38,3 +38,48 @@ fn analytic_integration_beats_the_riemann_sum_at_a_coarse_step() {
     assert!(reference.iter().filter(|&&x| x > 10).count() > 500, "the shell is visible");
     assert!(ea < er, "analytic {ea} should beat Riemann {er}");
 }
+
+/// Without normal channels the preview shades by the value's gradient (central
+/// differences): on the erf sphere that matches shading by its exact normals.
+#[test]
+fn shading_by_the_value_gradient_matches_the_true_normals() {
+    let t = erf_sphere(Geometry::new([48; 3], [1.0; 3]), 14.0, 2.0, 0.0, 255.0, None).truth();
+    let mut channels: BTreeMap<String, Volume> =
+        [("v".to_string(), t.v.clone()), ("g".to_string(), t.g.clone())].into_iter().collect();
+    let classify = Classifier::Gaussian {
+        primitives: vec![GaussianPrimitive {
+            centre: vec![128.0],
+            k: vec![vec![0.25]],
+            alpha_max: 0.8,
+            colour: [1.0, 0.6, 0.3],
+            triangular: false,
+        }],
+        channels: vec!["v".into()],
+        analytic: true,
+        sqrt_last: false,
+    };
+    let cam = Camera { azimuth: 30.0, elevation: 20.0, size: 64, step: 0.5 };
+    let from_gradient = render(&channels, &classify, &cam);
+    for (i, name) in ["nx", "ny", "nz"].iter().enumerate() {
+        channels
+            .insert(name.to_string(), Volume { geometry: t.v.geometry.clone(), data: t.normal.fields[i].data.clone() });
+    }
+    let from_normals = render(&channels, &classify, &cam);
+    // g = 0 makes the shading weight 0: the unshaded picture
+    let mut flat = channels.clone();
+    flat.retain(|c, _| c == "v");
+    flat.insert("g".into(), Volume::new(t.v.geometry.clone(), ndarray::Array3::zeros((48, 48, 48))).unwrap());
+    let unshaded = render(&flat, &classify, &cam);
+    let lit: Vec<usize> = (0..64 * 64).filter(|&p| from_normals[3 * p] > 30).collect();
+    let red = |img: &[u8], p: usize| img[3 * p] as f64;
+    let mean_diff =
+        |a: &[u8], b: &[u8]| lit.iter().map(|&p| (red(a, p) - red(b, p)).abs()).sum::<f64>() / lit.len() as f64;
+    let (to_normals, to_unshaded) = (mean_diff(&from_gradient, &from_normals), mean_diff(&from_gradient, &unshaded));
+    eprintln!(
+        "{} lit pixels; shaded by the gradient vs by the true normals: mean |diff| {to_normals:.2} of 255, vs unshaded {to_unshaded:.1}",
+        lit.len()
+    );
+    assert!(lit.len() > 300, "{}", lit.len());
+    assert!(to_unshaded > 20.0, "the gradient shades: {to_unshaded}");
+    assert!(to_normals < 2.0, "{to_normals}");
+}

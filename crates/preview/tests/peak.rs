@@ -66,7 +66,9 @@ fn peak_finding_composites_every_peak_a_segment_crosses_in_ray_order() {
     // boundary, so one step of 2 crosses both): red, weak, at v = 120, met
     // first by a ray entering the sphere; blue, dense, at v = 136
     let v = erf_sphere(Geometry::new([48; 3], [1.0; 3]), 14.0, 2.0, 0.0, 255.0, None).volume();
-    let channels: BTreeMap<String, Volume> = [("v".to_string(), v)].into_iter().collect();
+    // g = 0 everywhere: the shading weight 1 - (1 - g / g_max)^2 is 0, so the colours composite unshaded
+    let flat = Volume::new(v.geometry.clone(), ndarray::Array3::zeros((48, 48, 48))).unwrap();
+    let channels: BTreeMap<String, Volume> = [("v".to_string(), v), ("g".to_string(), flat)].into_iter().collect();
     let (tau_red, tau_blue) = (-(1.0f64 - 0.3).ln(), -(1.0f64 - 0.9).ln()); // opacities 0.3 and 0.9 at d = 1
     let samples: Vec<String> = (0..256)
         .map(|k| match k {
@@ -83,7 +85,7 @@ fn peak_finding_composites_every_peak_a_segment_crosses_in_ray_order() {
     );
     // a ray through the shell: red 0.3 first, then blue (1 - 0.3) 0.9 = 0.63;
     // the exit meets blue first, then red: (1 - 0.93) (0.9 blue + 0.1 x 0.3 red);
-    // no normals, so no shading. Highest peak only: no red; the wrong order: red 0.03
+    // unshaded (see g above). Highest peak only: no red; the wrong order: red 0.03
     let (want_red, want_blue) = (0.3 + 0.07 * 0.03, 0.63 + 0.07 * 0.9);
     let lit: Vec<&[u8]> = img.chunks_exact(3).filter(|px| px[2] > 30).collect();
     let near = |got: u8, want: f64| (got as f64 / 255.0 - want).abs() < 0.03;
