@@ -254,4 +254,13 @@ fn projected_tetrahedra_pack_holds_the_sphere_s_and_g_at_every_point() {
     for t in ["pt_front", "pt_back", "pt_gaussian", "pt_triangle_rise", "pt_triangle_fall", "pt_sinusoid"] {
         assert!(luts.contains(&t), "{t} missing from {luts:?}");
     }
+    // the (s, g) TF the preview draws: one TGTF at the sphere's one boundary, half way between its values
+    let g: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(pack.join("gaussians.json")).unwrap()).unwrap();
+    let (lo, hi) = s_g.chunks_exact(2).fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), c| (a.min(c[0]), b.max(c[0])));
+    let centre = g[0]["centre"][0].as_f64().unwrap();
+    let mid = 0.5 * (lo + hi) as f64;
+    assert_eq!(g.as_array().unwrap().len(), 1, "{g}");
+    assert!((centre - mid).abs() <= 0.05 * (hi - lo) as f64, "TGTF at {centre}, boundary at {mid}");
+    assert!(pack.parent().unwrap().join("preview.png").is_file());
 }
