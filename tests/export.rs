@@ -48,9 +48,9 @@ impl Packs {
 /// The rendered cases, each a slicer-3dtf pack, its export and its preview:
 /// `sphere` and `shells` with the default TF (for the shells, three
 /// coloured semi-transparent boundaries); `shells` and `shells-tf` (with
-/// SHELLS_TF) without their normal texture (so that neither side shades
-/// their semi-transparent layers: the preview weights shading by g, VTK
-/// does not); `oblique`, the sphere on a rotated anisotropic grid.
+/// SHELLS_TF) without their normal texture and previewed `--no-shading`
+/// (so that neither side shades their semi-transparent layers: the preview
+/// weights shading by g, VTK does not); `oblique`, the sphere on a rotated anisotropic grid.
 fn packs() -> &'static Packs {
     static P: OnceLock<Packs> = OnceLock::new();
     P.get_or_init(|| {
@@ -90,14 +90,13 @@ fn packs() -> &'static Packs {
             let export = out.join("export");
             mdtf_ok(&["export", pack.to_str().unwrap(), "-o", export.to_str().unwrap(), "-q"]);
             let preview = out.join("preview.png");
-            mdtf_ok(&[
-                "preview",
-                pack.to_str().unwrap(),
-                "-o",
-                preview.to_str().unwrap(),
-                "--size",
-                &PIXELS.to_string(),
-            ]);
+            let size = PIXELS.to_string();
+            let mut args = vec!["preview", pack.to_str().unwrap(), "-o", preview.to_str().unwrap(), "--size", &size];
+            // (without normals the preview would shade by the value's gradient: off, as in VTK)
+            if *case == "shells-tf" || *case == "shells" {
+                args.push("--no-shading");
+            }
+            mdtf_ok(&args);
         }
         Packs { dir }
     })

@@ -672,6 +672,9 @@ pub struct PreviewArgs {
     /// `riemann` classifies both at the samples only.
     #[arg(long, value_enum, default_value_t = IntegrationArg::Analytic)]
     pub integration: IntegrationArg,
+    /// Composite the TF's colours unlit (as a renderer without shading shows them).
+    #[arg(long)]
+    pub no_shading: bool,
 }
 
 /// `--integration` values.

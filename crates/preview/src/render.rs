@@ -20,6 +20,9 @@ pub struct Camera {
     pub size: usize,
     /// Distance between samples, voxels (of the smallest spacing).
     pub step: f64,
+    /// Blinn-Phong shading (from the normal channel, else the value's
+    /// gradient); `false` composites the TF's colours unlit.
+    pub shaded: bool,
 }
 
 impl Camera {
@@ -715,7 +718,7 @@ fn render_impl(
                     })),
                     _ => None,
                 };
-                if let Some(n) = normal {
+                if let Some(n) = normal.filter(|_| cam.shaded) {
                     let nl = (n.iter().map(|x| x * x).sum::<f64>()).sqrt();
                     if nl > 1e-6 {
                         let n = n.map(|x| x / nl);

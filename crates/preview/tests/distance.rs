@@ -40,7 +40,7 @@ fn distance_classifier_skips_empty_blocks_without_changing_a_pixel() {
         Classifier::Distance { alpha_u: Some(alpha_u), alpha_d },
     ] {
         for (azimuth, elevation) in [(30.0, 20.0), (0.0, 0.0), (90.0, 45.0)] {
-            let cam = Camera { azimuth, elevation, size: 64, step: 0.5 };
+            let cam = Camera { azimuth, elevation, size: 64, step: 0.5, shaded: true };
             let skipped = render(&channels, &classifier, &cam);
             assert_eq!(skipped, render_without_skipping(&channels, &classifier, &cam), "view {azimuth},{elevation}");
             // the sphere shows and the corners of the image (outside it) stay black

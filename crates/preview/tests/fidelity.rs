@@ -31,7 +31,7 @@ fn decoded_pack_renders_like_the_float_fields() {
     pack(&chans, &params, &tf.slicer_luts(), dir.path(), prov, &BTreeMap::new()).unwrap();
     let loaded = load(dir.path()).unwrap();
     let c = classifier(&loaded, true).unwrap();
-    let cam = Camera { azimuth: 30.0, elevation: 20.0, size: 96, step: 0.5 };
+    let cam = Camera { azimuth: 30.0, elevation: 20.0, size: 96, step: 0.5, shaded: true };
     let from_pack = render(&loaded.channels, &c, &cam);
     let floats: BTreeMap<String, Volume> = chans.into_iter().collect();
     let from_floats = render(&floats, &c, &cam);
@@ -95,7 +95,7 @@ fn a_camera_out_of_range_is_refused_before_the_pack_is_read() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("no-pack");
     let png = dir.path().join("p.png");
-    let good = Camera { azimuth: 30.0, elevation: 20.0, size: 64, step: 0.5 };
+    let good = Camera { azimuth: 30.0, elevation: 20.0, size: 64, step: 0.5, shaded: true };
     for (cam, want) in [
         (Camera { step: 1e-6, ..good }, "--step must be 0.01 to 16 voxels"),
         (Camera { elevation: f64::INFINITY, ..good }, "elevation must be a finite number"),

@@ -26,7 +26,7 @@ fn analytic_integration_beats_the_riemann_sum_at_a_coarse_step() {
         analytic,
         sqrt_last: false,
     };
-    let cam = |step| Camera { azimuth: 30.0, elevation: 20.0, size: 64, step };
+    let cam = |step| Camera { azimuth: 30.0, elevation: 20.0, size: 64, step, shaded: true };
     let reference = render(&channels, &classify(false), &cam(0.02));
     let riemann = render(&channels, &classify(false), &cam(1.5));
     let analytic = render(&channels, &classify(true), &cam(1.5));
@@ -58,7 +58,7 @@ fn shading_by_the_value_gradient_matches_the_true_normals() {
         analytic: true,
         sqrt_last: false,
     };
-    let cam = Camera { azimuth: 30.0, elevation: 20.0, size: 64, step: 0.5 };
+    let cam = Camera { azimuth: 30.0, elevation: 20.0, size: 64, step: 0.5, shaded: true };
     let from_gradient = render(&channels, &classify, &cam);
     for (i, name) in ["nx", "ny", "nz"].iter().enumerate() {
         channels
@@ -82,4 +82,6 @@ fn shading_by_the_value_gradient_matches_the_true_normals() {
     assert!(lit.len() > 300, "{}", lit.len());
     assert!(to_unshaded > 20.0, "the gradient shades: {to_unshaded}");
     assert!(to_normals < 2.0, "{to_normals}");
+    // shading off: the same unlit picture, with the normals present
+    assert_eq!(render(&channels, &classify, &Camera { shaded: false, ..cam }), unshaded);
 }

@@ -49,7 +49,7 @@ fn peak_finding_finds_the_feature_that_coarse_sampling_misses() {
         preintegration: preintegration.clone(),
         find_peaks,
     };
-    let cam = |step| Camera { azimuth: 30.0, elevation: 20.0, size: 64, step };
+    let cam = |step| Camera { azimuth: 30.0, elevation: 20.0, size: 64, step, shaded: true };
     let post = render(&channels, &classify(false), &cam(2.0));
     let peak = render(&channels, &classify(true), &cam(2.0));
     let lit = |img: &[u8]| img.chunks_exact(3).filter(|px| px[0] > 30).count();
@@ -81,7 +81,7 @@ fn peak_finding_composites_every_peak_a_segment_crosses_in_ray_order() {
     let img = render(
         &channels,
         &Classifier::Peak { peak_table, preintegration, find_peaks: true },
-        &Camera { azimuth: 30.0, elevation: 20.0, size: 64, step: 2.0 },
+        &Camera { azimuth: 30.0, elevation: 20.0, size: 64, step: 2.0, shaded: true },
     );
     // a ray through the shell: red 0.3 first, then blue (1 - 0.3) 0.9 = 0.63;
     // the exit meets blue first, then red: (1 - 0.93) (0.9 blue + 0.1 x 0.3 red);
@@ -137,7 +137,7 @@ fn chordal_peak_finding_finds_a_thin_2d_feature_that_coarse_sampling_misses() {
     };
     let table = table_with(0.9);
     let classify = |find_peaks| Classifier::Chord { tf: table.clone(), cells_per_sample: 2.0, find_peaks };
-    let cam = |step| Camera { azimuth: 30.0, elevation: 20.0, size: 64, step };
+    let cam = |step| Camera { azimuth: 30.0, elevation: 20.0, size: 64, step, shaded: true };
     let reference = lit_pixels(&render(&channels, &classify(false), &cam(0.05)));
     let post = coverage(&render(&channels, &classify(false), &cam(2.0)), &reference);
     let peak = coverage(&render(&channels, &classify(true), &cam(2.0)), &reference);

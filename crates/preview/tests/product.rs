@@ -62,7 +62,7 @@ fn a_2d_tf_times_a_ramp_renders_as_the_brute_force_3d_table_of_the_product() {
     axes.push(factors[1].axes[0].clone());
     let brute = Classifier::Lut(Table { axes, components: 4, values });
     let classify = Classifier::Product { factors, cells_per_sample: 2.0, find_peaks: false };
-    let cam = Camera { azimuth: 30.0, elevation: 20.0, size: 64, step: 0.5 };
+    let cam = Camera { azimuth: 30.0, elevation: 20.0, size: 64, step: 0.5, shaded: true };
     let got = render(&channels, &classify, &cam);
     assert_eq!(got, render(&channels, &brute, &cam));
     assert_eq!(got, render_without_skipping(&channels, &classify, &cam), "skipping changes no pixel");
@@ -87,7 +87,7 @@ fn chordal_peak_finding_in_a_product_finds_the_thin_feature_coarse_sampling_miss
     let luts = tf.product.as_ref().unwrap().luts(&["v".into(), "inv_g".into(), "w".into()], 1024).unwrap();
     let factors: Vec<Table> = luts.iter().map(to_table).collect();
     let classify = |find_peaks| Classifier::Product { factors: factors.clone(), cells_per_sample: 2.0, find_peaks };
-    let cam = |step| Camera { azimuth: 30.0, elevation: 20.0, size: 64, step };
+    let cam = |step| Camera { azimuth: 30.0, elevation: 20.0, size: 64, step, shaded: true };
     let lit = |img: &[u8]| img.chunks_exact(3).map(|px| px[0] > 30).collect::<Vec<bool>>();
     let reference = lit(&render(&channels, &classify(false), &cam(0.05)));
     let cover = |img: &[u8]| {

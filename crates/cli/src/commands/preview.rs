@@ -14,8 +14,13 @@ pub fn run(args: &PreviewArgs, progress: &Progress) -> Result<()> {
     let angle = |text: &str, name: &str| -> Result<f64> {
         text.trim().parse().with_context(|| format!("--view: {name} '{text}' is not a number"))
     };
-    let cam =
-        Camera { azimuth: angle(az, "azimuth")?, elevation: angle(el, "elevation")?, size: args.size, step: args.step };
+    let cam = Camera {
+        azimuth: angle(az, "azimuth")?,
+        elevation: angle(el, "elevation")?,
+        size: args.size,
+        step: args.step,
+        shaded: !args.no_shading,
+    };
     // the library's own check, here so that a bad view fails before the pack is read
     if let Err(e) = cam.check() {
         bail!(e);
