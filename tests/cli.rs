@@ -1060,6 +1060,39 @@ fn a_failed_pipeline_run_changes_nothing() {
 }
 
 #[test]
+fn a_pipeline_files_typos_are_reported_at_their_line_before_the_input_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    // the input does not exist: an error about it would mean it was read first
+    let missing = dir.path().join("missing.nii.gz");
+    let out = dir.path().join("out");
+    let cases = [
+        ("[derive]\nkernel = \"centrl4\"\n", 7, "unknown kernel 'centrl4'"),
+        ("[pack]\nprofile = \"slicer3dtf\"\n", 6, "unknown profile 'slicer3dtf'"),
+        ("[boundary]\ntolerence = 0.1\n", 7, "unknown field `tolerence`"),
+    ];
+    for (section, line, message) in cases {
+        let text = if section.starts_with("[pack]") {
+            format!("description = \"typo\"\n\n[input]\n\n{section}")
+        } else {
+            format!("description = \"typo\"\n\n[pack]\nprofile = \"slicer-3dtf\"\n\n{section}")
+        };
+        let file = dir.path().join("typo.toml");
+        std::fs::write(&file, &text).unwrap();
+        let e = mdtf_err(&[
+            "run",
+            file.to_str().unwrap(),
+            "--input",
+            missing.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(e.contains(&format!("line {line}")) && e.contains(message), "{text}\n{e}");
+        assert!(!e.contains("missing.nii.gz"), "{e}");
+        assert!(!out.exists());
+    }
+}
+
+#[test]
 fn kept_normals_are_derived_before_the_keep_stage() {
     // the slicer run derives normals late, just before their texture, unless a kept volume needs them
     let dir = tempfile::tempdir().unwrap();

@@ -229,6 +229,56 @@ fn peak_finding_pack_decodes_to_the_shells_and_their_inverse_gradient() {
     assert!(hist.join("hist_v_inv_g.png").exists());
 }
 
+/// Over several fields, peak finding's default TF is over (first field,
+/// 1/sqrt(||G||)) of the normalised fields: at the first sphere's centre
+/// value it is opaque for 1/sqrt(||G||) up to 1/(0.3 G/span), G = its
+/// analytic peak gradient, span its range; and the preview shows it.
+#[test]
+fn peak_finding_over_several_fields_draws_the_first_fields_boundary() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = shipped_pipeline("peak-finding");
+    let out = dir.path().join("multi");
+    let size = format!("input.size={SIZE}");
+    mdtf_ok(&[
+        "run",
+        file.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--set",
+        &size,
+        "--set",
+        "input.phantom=multifield",
+        "-q",
+    ]);
+    let sigma = parse(&std::fs::read_to_string(&file).unwrap(), &[]).unwrap().input.sigma;
+    let a = &MultiFieldPhantom::new(geometry(), sigma).volume().fields[0];
+    let (lo, hi) = a.data.iter().fold((f64::MAX, f64::MIN), |(l, h), &x| (l.min(x as f64), h.max(x as f64)));
+    // field a: an erf sphere from 0 to 100 of blur sigma, peak g 100 / (sigma sqrt(2 pi)) per mm
+    let g_normalised = 100.0 / (sigma * (2.0 * std::f64::consts::PI).sqrt()) / (hi - lo);
+    let pack = out.join("pack");
+    let m = mdtf_e2e::manifest(&pack);
+    let lut = m["luts"].as_array().unwrap().iter().find(|l| l["name"] == "tf2d").expect("a default tf2d");
+    let axis = |k: usize, f: &str| lut["axes"][k][f].clone();
+    assert_eq!((axis(0, "channel"), axis(1, "channel")), (serde_json::json!("a"), serde_json::json!("inv_g")));
+    let (nv, ni) = (axis(0, "size").as_u64().unwrap() as usize, axis(1, "size").as_u64().unwrap() as usize);
+    let (v_min, v_max) = (axis(0, "min").as_f64().unwrap(), axis(0, "max").as_f64().unwrap());
+    let inv_top = axis(1, "max").as_f64().unwrap();
+    let table = mdtf_e2e::nrrd_f32(&pack.join(lut["file_f32"].as_str().unwrap()));
+    let opaque = |i: usize| -> Vec<usize> { (0..ni).filter(|&j| table[4 * (j * nv + i) + 3] > 0.5).collect() };
+    // the widget's column: at the sphere's centre value
+    let column = (0..nv).max_by_key(|&i| opaque(i).len()).unwrap();
+    let value = v_min + (column as f64 + 0.5) * (v_max - v_min) / nv as f64;
+    assert!((value - (lo + hi) / 2.0).abs() < 0.05 * (hi - lo), "widget at {value}, range {lo}..{hi}");
+    let cells = opaque(column);
+    let reach = (*cells.last().unwrap() as f64 + 1.0) * inv_top / ni as f64;
+    let want = 1.0 / (0.3 * g_normalised);
+    eprintln!("widget at a = {value:.2}, opaque up to 1/sqrt(||G||) = {reach:.3} mm (analytic {want:.3})");
+    assert!(cells[0] == 0 && (reach / want - 1.0).abs() < 0.1, "opaque up to 1/g {reach}, want {want}");
+    let (w, h, px) = mdtf_e2e::read_rgb_png(&out.join("preview.png"));
+    let lit = px.chunks_exact(3).filter(|c| c.iter().map(|&x| x as u32).sum::<u32>() >= 30).count();
+    assert!(lit as f64 >= 0.02 * (w * h) as f64, "{lit} of {} preview pixels lit", w * h);
+}
+
 #[test]
 fn projected_tetrahedra_pack_holds_the_sphere_s_and_g_at_every_point() {
     let dir = tempfile::tempdir().unwrap();

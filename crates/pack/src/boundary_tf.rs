@@ -203,6 +203,33 @@ pub fn boundary_isosurface_tf(arches: &[BoundaryArch], v_range: [f64; 2]) -> TfF
     }
 }
 
+/// How far above a boundary's peak the rectangles of
+/// [`multi_field_isosurface_tf`] reach (a bound, not a limit any data meets).
+const OPEN_ABOVE: f64 = 1e6;
+
+/// [`boundary_isosurface_tf`] for a multi-field pack, whose peak-finding TF
+/// is over (field 0, 1/sqrt(||G||)) with every field normalised to [0, 1]
+/// by its range: `arches` are field 0's boundaries (in its units), `span`
+/// the width of the range field 0 is normalised by. sqrt(||G||) is at least
+/// field 0's |grad f| / `span`, and the other fields only raise it, so each
+/// rectangle runs in g from 0.3 times its peak (in normalised units per
+/// world unit) up without a practical bound (a million times the peak).
+pub fn multi_field_isosurface_tf(arches: &[BoundaryArch], v_range: [f64; 2], span: f64) -> TfFile {
+    let scale = if span > 0.0 { 1.0 / span } else { 0.0 };
+    let normalised: Vec<BoundaryArch> =
+        arches.iter().map(|a| BoundaryArch { g_peak: a.g_peak * scale, g_floor: a.g_floor * scale, ..*a }).collect();
+    let mut tf = boundary_isosurface_tf(&normalised, v_range);
+    for (w, a) in tf.widgets.iter_mut().zip(&normalised) {
+        if let Widget::Rectangle(r) = &mut w.shape {
+            let (low, high) = (0.3 * a.g_peak, OPEN_ABOVE * a.g_peak);
+            r.centre[1] = (low + high) / 2.0;
+            r.half_size[1] = (high - low) / 2.0;
+        }
+    }
+    tf.g_range[1] = normalised.iter().map(|a| OPEN_ABOVE * a.g_peak).fold(tf.g_range[1], f64::max);
+    tf
+}
+
 /// alpha_u over (v, g_hit) for the distance-TF renderer, from the
 /// boundaries: every voxel traced to boundary k reads g_hit near its peak g
 /// (the stretched histogram's rows), so a cell whose v lies in boundary k's
@@ -366,5 +393,30 @@ mod tests {
             "{}",
             lut.meaning
         );
+    }
+
+    #[test]
+    fn the_multi_field_isosurfaces_are_over_normalised_g_and_open_above() {
+        // field 0 from 0 to 400 (span 400), a boundary 100..300 of peak g 40 per mm: 0.1 normalised
+        let arch = BoundaryArch {
+            v_low: 100.0,
+            v_high: 300.0,
+            g_peak: 40.0,
+            core_voxels: 1000,
+            g_floor: 4.0,
+            meets_background: false,
+        };
+        let tf = multi_field_isosurface_tf(&[arch], [0.0, 400.0], 400.0);
+        let alpha = |v, g| tf.eval2(v, g)[3];
+        // at the centre value: from 0.3 of the normalised peak (0.03) up, however much the other fields add
+        assert_eq!((alpha(200.0, 0.029), alpha(200.0, 0.031), alpha(200.0, 0.1)), (0.0, 1.0, 1.0));
+        assert_eq!((alpha(200.0, 1000.0), alpha(200.0, 0.99e5)), (1.0, 1.0));
+        // thin in value: 1 % of the boundary's span (2) each side
+        assert_eq!((alpha(201.9, 0.1), alpha(202.1, 0.1), alpha(197.9, 0.1)), (1.0, 0.0, 0.0));
+        // its 2D peak-finding table over inv_g in [0, 100]: at v = 200 every cell whose centre (j + 1/2)
+        // lies below 1/0.03 = 33.3 is opaque
+        let lut = tf.peak_finding_tf2d([0.0, 100.0], [400, 100]).unwrap();
+        let a = |j: usize| lut.values[4 * (j * 400 + 200) + 3];
+        assert_eq!((a(0), a(32), a(33), a(99)), (1.0, 1.0, 0.0, 0.0));
     }
 }

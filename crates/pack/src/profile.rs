@@ -7,7 +7,7 @@ use std::str::FromStr;
 
 /// A renderer family's pack layout.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
+#[serde(try_from = "String", into = "String")]
 pub enum Profile {
     /// Kniss et al.'s 3D-TF slicer: RGBA8 `data` (v, g, f'', unused) and RGBA8 `normal` (nx, ny, nz, g).
     Slicer3dtf,
@@ -134,5 +134,18 @@ impl fmt::Display for Profile {
             Profile::PeakFinding => "peak-finding",
             Profile::ProjectedTetrahedra => "projected-tetrahedra",
         })
+    }
+}
+
+impl TryFrom<String> for Profile {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, Self::Error> {
+        s.parse()
+    }
+}
+
+impl From<Profile> for String {
+    fn from(p: Profile) -> String {
+        p.to_string()
     }
 }

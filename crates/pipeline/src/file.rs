@@ -75,8 +75,9 @@ impl Default for InputSection {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields, default)]
 pub struct DeriveSection {
-    /// Kernel name (central4, central, bspline3, catmull-rom, gauss:SIGMA); default central4.
-    pub kernel: Option<String>,
+    /// Kernel (central4, central, bspline3, catmull-rom, gauss:SIGMA), checked
+    /// when the file is read; default [`mdtf_derive::DEFAULT_KERNEL`].
+    pub kernel: Option<mdtf_derive::Kernel>,
 }
 
 /// `[histogram]`: which pictures to make.
@@ -102,7 +103,7 @@ impl Default for HistogramSection {
 #[serde(deny_unknown_fields)]
 pub struct PackSection {
     /// Profile: slicer-3dtf, distance-tf, gaussian-tf, peak-finding or projected-tetrahedra.
-    pub profile: String,
+    pub profile: mdtf_pack::Profile,
     /// Transfer-function file (relative to the pipeline file).
     #[serde(default)]
     pub tf: Option<PathBuf>,
@@ -207,7 +208,7 @@ mod tests {
             .unwrap();
         assert_eq!(p.input.size, 32);
         assert_eq!(p.boundary.g_min, Some(2.5));
-        assert_eq!(p.derive.kernel.as_deref(), Some("central"));
+        assert_eq!(p.derive.kernel, Some(mdtf_derive::Kernel::Central));
         let e = parse(text, &["input.sise=3".into()]).unwrap_err();
         assert!(e.contains("sise") && e.contains("--set"), "{e}");
     }
@@ -217,5 +218,18 @@ mod tests {
         let text = "[pack]\nprofile = \"slicer-3dtf\"\n[input]\nsize = 64\nbogus=1\n";
         let e = parse(text, &[]).unwrap_err();
         assert!(e.contains("line 5") && e.contains("bogus=1"), "{e}");
+    }
+
+    #[test]
+    fn a_kernel_or_profile_typo_is_shown_at_its_line() {
+        let e = parse("[pack]\nprofile = \"slicer-3dtf\"\n[derive]\nkernel = \"gauss:-1\"\n", &[]).unwrap_err();
+        assert!(e.contains("line 4") && e.contains("unknown kernel 'gauss:-1'"), "{e}");
+        let e = parse("[pack]\nprofile = \"peak\"\n", &[]).unwrap_err();
+        assert!(e.contains("line 2") && e.contains("unknown profile 'peak'"), "{e}");
+        let p = parse("[pack]\nprofile = \"peak-finding\"\n[derive]\nkernel = \"gauss:1.5\"\n", &[]).unwrap();
+        assert_eq!(
+            (p.pack.profile, p.derive.kernel),
+            (mdtf_pack::Profile::PeakFinding, Some(mdtf_derive::Kernel::Gauss { sigma: 1.5 }))
+        );
     }
 }

@@ -9,6 +9,7 @@ use mdtf_histogram::{
 };
 use mdtf_pack::{
     BoundaryArch, Lut, LutAxis, Profile, Tent, TfFile, boundary_alpha_u, boundary_isosurface_tf, boundary_tf,
+    multi_field_isosurface_tf,
 };
 use mdtf_volume::Volume;
 use std::collections::BTreeMap;
@@ -106,8 +107,10 @@ pub fn ranges(
 /// ([`mdtf_pack::boundary_alpha_u`]). gaussian-tf gets the IGauss and
 /// erf-difference tables. A product TF in `tf` gets one table per factor,
 /// `product_k`, whichever the profile (its channels must be among `chans`).
-/// Scalar peak-finding packs without a TF get a tf2d over (v, 1/g) of thin
-/// widgets at the boundaries found ([`mdtf_pack::boundary_isosurface_tf`]).
+/// Peak-finding packs without a TF get a tf2d over (v, 1/g) of thin
+/// widgets at the boundaries found ([`mdtf_pack::boundary_isosurface_tf`]);
+/// multi-field ones over (first field, 1/sqrt(||G||)), at the boundaries of
+/// the first field ([`mdtf_pack::multi_field_isosurface_tf`]).
 pub fn luts(
     profile: Profile,
     tf: Option<&TfFile>,
@@ -228,6 +231,26 @@ pub fn luts(
                         "{}; the default TF: a thin constant rectangle at the centre value of each boundary found in the \
                          histogram volume ({} found), its colour and surface opacity as slicer-3dtf's default gives them",
                         lut.meaning,
+                        arches.len()
+                    );
+                    out.push(lut);
+                }
+            } else if profile == Profile::PeakFinding
+                && let Some(r) = ranges.get("inv_g")
+                && let Some((name, first)) = chans.first().filter(|(c, _)| c != "inv_g")
+                && let Some((lo, hi)) = first.finite_range()
+            {
+                // multi-field data without a TF: thin widgets at the boundaries of the first field
+                let arches = detected_arches(first, None, kernel)?;
+                let (lo, hi) = (lo as f64, hi as f64);
+                let default = multi_field_isosurface_tf(&arches, [lo, hi], hi - lo);
+                if let Some(mut lut) = default.peak_finding_tf2d(*r, [1024, 1024]) {
+                    lut.axes[0].channel = name.clone();
+                    lut.meaning = format!(
+                        "RGBA over ({name}, inv_g), for multidimensional peak finding; the default TF: a thin constant \
+                         rectangle at the centre value of each boundary found in the histogram volume of {name} ({} \
+                         found), open towards small inv_g (the other fields only raise ||G||), its colour and surface \
+                         opacity as slicer-3dtf's default gives them",
                         arches.len()
                     );
                     out.push(lut);

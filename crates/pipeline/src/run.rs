@@ -150,7 +150,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     stage("input", t, n, vec![]);
 
     // which channels the later stages need
-    let profile: Profile = p.pack.profile.parse().map_err(fail("pack"))?;
+    let profile = p.pack.profile;
     let fields: Vec<String> =
         if input.fields.len() > 1 { input.fields.iter().map(|f| f.name.clone()).collect() } else { vec![] };
     let mut needed = profile.channels(&fields);
@@ -189,10 +189,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let value_range = finite_range.map_or(0.0, |[lo, hi]| hi - lo);
 
     // derive (only the items the later stages use)
-    let kernel: Kernel = match &p.derive.kernel {
-        Some(k) => k.parse().map_err(|e: mdtf_derive::UnknownKernel| fail("derive")(e.to_string()))?,
-        None => mdtf_derive::DEFAULT_KERNEL,
-    };
+    let kernel: Kernel = p.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL);
     let mut items = Vec::new();
     if tracing || needs("g") {
         items.push(Item::G);
@@ -384,9 +381,13 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
                 ));
             }
             figure_hists.push(hist);
-            // peak finding's TF domain: (v, 1/g)
+            // peak finding's TF domain: (v, 1/g); for several fields 1/g is of
+            // their normalised ||G||, so its axis comes from the gradient it inverts
+            let inverted: Option<Vec<f32>> = (!fields.is_empty())
+                .then(|| get("inv_g").map(|i| i.samples().iter().map(|&x| 1.0 / x).collect()))
+                .flatten();
             if let Some(inv_g) = get("inv_g")
-                && let Some(ia) = Axis::inverse_gradient(g.samples(), 256)
+                && let Some(ia) = Axis::inverse_gradient(inverted.as_deref().unwrap_or(g.samples()), 256)
             {
                 let hist = count(&[v.samples(), inv_g.samples()], vec![axes[0].clone(), ia], None)
                     .map_err(|e| err(e.to_string()))?;
@@ -548,7 +549,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     if p.preview && previewable {
         on_stage("preview");
         let t = Instant::now();
-        let cam = mdtf_preview::Camera { azimuth: 30.0, elevation: 20.0, size: 512, step: 0.5 };
+        let cam = mdtf_preview::Camera { azimuth: 30.0, elevation: 20.0, size: 512, step: 0.5, shaded: true };
         mdtf_preview::preview_named(&pdir, &dir.join("preview.png"), &cam, true, &opts.output.join("pack"))
             .map_err(|e| fail("preview")(e.to_string()))?;
         // the contact sheet: every picture of the run side by side, named
@@ -592,7 +593,7 @@ fn write_report_page(p: &Pipeline, opts: &RunOptions, report: &RunReport, dir: &
         resolved.input.file = Some(f.clone());
     }
     let mut table = toml::Table::try_from(&resolved).map_err(|e| e.to_string())?;
-    if resolved.pack.profile != "projected-tetrahedra" {
+    if resolved.pack.profile != Profile::ProjectedTetrahedra {
         table.remove("tetra");
     }
     if let Some(toml::Value::Table(input)) = table.get_mut("input")

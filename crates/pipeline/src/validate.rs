@@ -75,10 +75,7 @@ pub fn validate(n: usize, dir: &Path, params: &ValidateParams) -> Result<Vec<Che
     let mut out = Vec::new();
 
     // derive
-    let kernel = match &params.derive.kernel {
-        Some(k) => k.parse().map_err(|e: mdtf_derive::UnknownKernel| e.to_string())?,
-        None => mdtf_derive::DEFAULT_KERNEL,
-    };
+    let kernel = params.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL);
     let d = DeriveParams { items: vec![Item::G, Item::F2, Item::Normal], kernel, ..Default::default() };
     let mut derived = mdtf_derive::run(&MultiField::from(value.clone()), &d).map_err(|e| e.to_string())?;
     let normal = derived.items.remove(2).1;
