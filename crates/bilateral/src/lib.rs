@@ -130,6 +130,12 @@ struct Neighbour {
     w: f32,
 }
 
+/// The neighbourhood's box radius in voxels along x, y and z on a grid of
+/// `spacing` (world units, x, y, z): how far one filtered voxel reads (its halo).
+pub fn box_radius(spacing: [f64; 3], params: &BilateralParams) -> [usize; 3] {
+    radius(spacing, params.sigma_d, params.k, params.mode).0
+}
+
 /// The neighbourhood's radius in voxels per axis, and its cut in units of sigma_d.
 fn radius(spacing: [f64; 3], sigma_d: f64, k: f64, mode: Mode) -> ([usize; 3], f64) {
     let cut = match mode {

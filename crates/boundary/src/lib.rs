@@ -288,6 +288,21 @@ pub fn resolve(
 
 /// Traces every voxel.
 pub fn run(input: &BoundaryInput, params: &BoundaryParams) -> Result<BoundaryOutput, BoundaryError> {
+    run_block(input, params, 0)
+}
+
+/// Traces every voxel of a block (a z-slab) whose first plane is plane
+/// `first_plane` of the whole volume. Ray positions are computed in the
+/// whole volume's voxel coordinates, so the block's voxels whose rays stay
+/// inside it (those at least the plan's halo from its cut faces) get the
+/// whole-volume run's bits. The thresholds the defaults take from the data
+/// (the noise floor's median of g) are the block's own: pass `g_min` and
+/// `g_hit_min` from the whole volume for identical results.
+pub fn run_block(
+    input: &BoundaryInput,
+    params: &BoundaryParams,
+    first_plane: usize,
+) -> Result<BoundaryOutput, BoundaryError> {
     let geo = &input.g.geometry;
     if !input.f2.geometry.same_grid(geo) || !input.normal.geometry.same_grid(geo) {
         return Err(BoundaryError::Geometry(format!(
@@ -309,10 +324,10 @@ pub fn run(input: &BoundaryInput, params: &BoundaryParams) -> Result<BoundaryOut
     let floor = noise_floor(input.g.samples(), input.value_range, geo.min_spacing());
     let r = resolve(params, geo, input.value_range, floor)?;
     let g_max = mdtf_volume::finite_sample_range(input.g.samples()).map_or(0.0, |r| r.1);
-    fn grid<'v>(v: &'v Array3<f32>, dims: [usize; 3]) -> Grid<'v> {
-        Grid::new(v.as_slice().unwrap_or(&[]), dims)
+    fn grid(v: &Array3<f32>, dims: [usize; 3], first_plane: usize) -> Grid<'_> {
+        Grid::at(v.as_slice().unwrap_or(&[]), dims, [0, 0, first_plane])
     }
-    let grid = |v| grid(v, geo.dims);
+    let grid = |v| grid(v, geo.dims, first_plane);
     let fields = Fields {
         g: grid(&input.g.data),
         f2: grid(&input.f2.data),

@@ -5,26 +5,44 @@
 pub(crate) struct Grid<'a> {
     pub data: &'a [f32],
     pub dims: [usize; 3],
-    /// dims - 1 per axis: the largest position inside the grid.
+    /// Position of the grid's first sample per axis: 0 for a whole volume,
+    /// the block's first plane for a block. Positions are in the whole
+    /// volume's voxel coordinates, so a block computes them with the same bits.
+    low: [f32; 3],
+    /// low + dims - 1 per axis: the largest position inside the grid.
     top: [f32; 3],
-    /// The largest cell origin per axis (dims - 2, or 0 for an axis of one sample).
+    /// The largest cell origin per axis (low + dims - 2, or low for an axis of one sample).
     last_cell: [f32; 3],
 }
 
 impl<'a> Grid<'a> {
-    /// The grid of `data` (x fastest) with `dims`.
+    /// The grid of `data` (x fastest) with `dims`, its first sample at position 0.
+    #[cfg(test)]
     pub fn new(data: &'a [f32], dims: [usize; 3]) -> Grid<'a> {
-        let top = dims.map(|n| n.saturating_sub(1) as f32);
-        let last_cell = dims.map(|n| n.saturating_sub(2) as f32);
-        Grid { data, dims, top, last_cell }
+        Grid::at(data, dims, [0; 3])
+    }
+
+    /// The grid of `data` (x fastest) with `dims`, its first sample at
+    /// position `first` (voxels) of the whole volume.
+    pub fn at(data: &'a [f32], dims: [usize; 3], first: [usize; 3]) -> Grid<'a> {
+        let low = first.map(|f| f as f32);
+        let top = [0, 1, 2].map(|a| (first[a] + dims[a].saturating_sub(1)) as f32);
+        let last_cell = [0, 1, 2].map(|a| (first[a] + dims[a].saturating_sub(2)) as f32);
+        Grid { data, dims, low, top, last_cell }
     }
 }
 
 impl Grid<'_> {
-    /// The largest position inside the grid along `axis` (dims - 1).
+    /// The largest position inside the grid along `axis`.
     #[inline(always)]
     pub fn top(&self, axis: usize) -> f32 {
         self.top[axis]
+    }
+
+    /// The smallest position inside the grid along `axis`.
+    #[inline(always)]
+    pub fn low(&self, axis: usize) -> f32 {
+        self.low[axis]
     }
 
     /// Cell origin (lower corner, so that corner + 1 is inside the grid along
@@ -36,10 +54,10 @@ impl Grid<'_> {
         let mut origin = [0f32; 3];
         let mut t = [0f32; 3];
         for a in 0..3 {
-            let x = p[a].max(0.0).min(self.top[a]);
+            let x = p[a].max(self.low[a]).min(self.top[a]);
             let f = x.floor().min(self.last_cell[a]);
-            // 0 <= f < 2^24: exact as an integer
-            i0[a] = f as u32 as usize;
+            // 0 <= f - low < 2^24: exact as an integer
+            i0[a] = (f - self.low[a]) as u32 as usize;
             origin[a] = f;
             t[a] = x - f;
         }
@@ -89,10 +107,10 @@ impl Grid<'_> {
         let mut first = [0isize; 3];
         let mut interior = true;
         for a in 0..3 {
-            let x = p[a].max(0.0).min(self.top[a]);
+            let x = p[a].max(self.low[a]).min(self.top[a]);
             let f = x.floor();
             w[a] = catmull_rom_weights(x - f);
-            let f = f as u32 as usize;
+            let f = (f - self.low[a]) as u32 as usize;
             // the four samples f - 1 ..= f + 2 inside the grid: no clamping needed
             interior &= f >= 1 && f + 2 < self.dims[a];
             first[a] = f as isize - 1;
@@ -198,7 +216,7 @@ impl<'a> RayCells<'a> {
         }
         // Outside the grid the interpolant is clamped, not a cubic in t: such
         // a sample covers only itself.
-        let outside = (0..3).any(|a| !(p[a] >= 0.0 && p[a] <= self.grid.top[a]));
+        let outside = (0..3).any(|a| !(p[a] >= self.grid.low[a] && p[a] <= self.grid.top[a]));
         (self.t_enter, self.t_exit) = if outside { (t, t) } else { (lo.min(t), hi.max(t)) };
         self.t0 = t;
         // x lerps: linear in s, A + B s, for the four (y, z) corner pairs

@@ -137,7 +137,8 @@ fn march(f: &Fields, s: &TraceSettings, i: usize, j: usize, k: usize) -> Result<
         return Err(HitCode::NotTraced);
     }
     let n = [n[0] / len, n[1] / len, n[2] / len];
-    let origin = [i as f32, j as f32, k as f32];
+    // in the whole volume's voxel coordinates (exact integers), so a block's rays have the whole volume's bits
+    let origin = [i as f32 + f.f2.low(0), j as f32 + f.f2.low(1), k as f32 + f.f2.low(2)];
 
     // Follow the direction in which g increases: f'' = n^T H n is the
     // derivative of g along n, so g increases along +n where f'' > 0.
@@ -148,7 +149,7 @@ fn march(f: &Fields, s: &TraceSettings, i: usize, j: usize, k: usize) -> Result<
     // the last step that stays inside the volume
     let mut t_max = f32::INFINITY;
     for a in 0..3 {
-        let face = if dir[a] > 0.0 { f.f2.top(a) } else { 0.0 };
+        let face = if dir[a] > 0.0 { f.f2.top(a) } else { f.f2.low(a) };
         if dir[a] != 0.0 {
             t_max = t_max.min((face - origin[a]) / dir[a]);
         }

@@ -50,6 +50,21 @@ impl Volume {
     pub fn non_finite_count(&self) -> u64 {
         self.data.iter().filter(|v| !v.is_finite()).count() as u64
     }
+
+    /// A copy of the planes `z` (a z-slab, clamped to the grid), placed in the
+    /// world where they are in this volume: the block a slab-by-slab run reads.
+    pub fn z_slab(&self, z: std::ops::Range<usize>) -> Volume {
+        let nz = self.geometry.dims[2];
+        let (z0, z1) = (z.start.min(nz), z.end.min(nz).max(z.start.min(nz)));
+        let mut geometry = self.geometry.clone();
+        geometry.dims[2] = z1 - z0;
+        let shift = z0 as f64 * geometry.spacing[2];
+        for a in 0..3 {
+            geometry.origin[a] += shift * geometry.directions[2][a];
+        }
+        let data = self.data.slice_axis(ndarray::Axis(0), ndarray::Slice::from(z0..z1)).to_owned();
+        Volume { geometry, data }
+    }
 }
 
 /// One named field of a [`MultiField`].
@@ -144,5 +159,34 @@ impl MultiField {
 impl From<Volume> for MultiField {
     fn from(v: Volume) -> MultiField {
         MultiField { geometry: v.geometry, fields: vec![Field { name: "value".into(), data: v.data }] }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_z_slab_holds_the_planes_where_the_volume_has_them() {
+        let mut geometry = Geometry::new([3, 2, 5], [0.5, 0.7, 1.5]).with_origin([10.0, -4.0, 2.0]);
+        let (c, s) = (0.6_f64, 0.8_f64);
+        geometry.directions = [[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]];
+        geometry.directions.swap(1, 2); // an oblique z axis: (0, 0, 1) and (-s, c, 0) exchanged
+        let data = Array3::from_shape_fn((5, 2, 3), |(k, j, i)| (100 * k + 10 * j + i) as f32);
+        let v = Volume::new(geometry.clone(), data).unwrap();
+        let slab = v.z_slab(2..4);
+        assert_eq!(slab.geometry.dims, [3, 2, 2]);
+        assert_eq!(slab.data[[0, 1, 2]], 212.0);
+        assert_eq!(slab.data[[1, 0, 0]], 300.0);
+        let world = |g: &Geometry, ijk: [f64; 3]| {
+            let m = g.world_from_voxel();
+            [0, 1, 2].map(|r| m[r][0] * ijk[0] + m[r][1] * ijk[1] + m[r][2] * ijk[2] + m[r][3])
+        };
+        let (a, b) = (world(&slab.geometry, [1.0, 1.0, 1.0]), world(&geometry, [1.0, 1.0, 3.0]));
+        for r in 0..3 {
+            assert!((a[r] - b[r]).abs() < 1e-12, "{a:?} vs {b:?}");
+        }
+        assert_eq!(v.z_slab(4..9).geometry.dims[2], 1, "clamped to the grid");
+        assert_eq!(v.z_slab(7..9).geometry.dims[2], 0);
     }
 }
