@@ -1372,3 +1372,23 @@ fn tetra_marks_the_cells_a_tf_can_show_as_a_brute_force_box_test_does() {
     // the widgets pick some cells and leave others
     assert!(shown > 0 && checked > 0, "{shown} shown, {checked} samples of skipped cells");
 }
+
+#[test]
+fn run_plan_prints_the_steps_and_the_halo_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let pipeline = shipped_pipeline("distance-tf");
+    let text = mdtf_ok(&["run", pipeline.to_str().unwrap(), "--plan", "-o", out.to_str().unwrap()]);
+    for line in [
+        "2 derive           reads v -> g f2 nx ny nz [g, f2, normal]",
+        "3 boundary         reads g f2 nx ny nz -> g_hit hit distance; frees f2",
+        "median of g (the noise floor: g_min, g_hit_min) -> boundary",
+        // the shipped phantom: 1 mm voxels, central4 (2) + d_max 15 + 2 for g's tricubic at the hit
+        "halo of a block: x 19, y 19, z 19 voxels",
+    ] {
+        assert!(text.contains(line), "missing {line:?} in:\n{text}");
+    }
+    assert!(!out.exists(), "--plan wrote {}", out.display());
+    let slicer = mdtf_ok(&["run", shipped_pipeline("slicer-3dtf").to_str().unwrap(), "--plan"]);
+    assert!(slicer.contains("pack             reads v g f2 -> nx ny nz") && !slicer.contains("boundary"), "{slicer}");
+}

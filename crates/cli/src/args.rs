@@ -616,6 +616,11 @@ pub struct RunArgs {
     /// Override a pipeline parameter, SECTION.KEY=VALUE (repeatable; VALUE is TOML, else a string).
     #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
     pub set: Vec<String>,
+    /// Print the plan instead of running it: the derive items, whether the tracing runs, what each
+    /// step reads, makes and frees, the whole-volume reductions and a block's halo. Reads the input
+    /// (to learn its fields and grid) and writes nothing.
+    #[arg(long)]
+    pub plan: bool,
 }
 
 /// `mdtf validate`.

@@ -103,13 +103,17 @@ pub fn run(value: &Volume, params: &BoundaryChainParams) -> Result<BoundaryChain
 /// The bilateral pre-filter of one channel: sigma_r is a fraction of the channel's own range.
 pub fn prefilter(v: &Volume, p: &Prefilter) -> Result<Volume, BilateralError> {
     let range = v.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
-    let bp = BilateralParams {
+    mdtf_bilateral::run(v, &prefilter_params(p, range))
+}
+
+/// The bilateral parameters of the pre-filter of a channel whose finite range spans `range`.
+pub fn prefilter_params(p: &Prefilter, range: f64) -> BilateralParams {
+    BilateralParams {
         sigma_d: p.sigma_d,
         sigma_r: p.sigma_r * range.max(f64::MIN_POSITIVE),
         range_units: RangeUnits::Value,
         ..BilateralParams::default()
-    };
-    mdtf_bilateral::run(v, &bp)
+    }
 }
 
 /// The chain after derive: pre-filter g and f'' if asked, then trace.

@@ -2,12 +2,12 @@
 //! `mdtf histogram` and later the pack stage ask for by name.
 
 use crate::boundary_chain::{self, BoundaryChainParams, ChainError};
-use mdtf_derive::{DeriveParams, Item};
+use crate::channel::{Channel, Producer};
+use mdtf_derive::DeriveParams;
 use mdtf_volume::{MultiField, Volume};
 use std::collections::BTreeMap;
 
-/// Channel names computed from a value volume (fields of a multi-field input are channels too).
-pub const CHANNEL_NAMES: &str = "v, g, f2, nx, ny, nz, inv_g, gnorm, g_hit, hit, distance";
+pub use crate::channel::CHANNEL_NAMES;
 
 /// Computes the named channels of `input`: its fields by name (`v` is the
 /// first field), `g` and `f2` by the derive stage, `g_hit`, `hit` and
@@ -22,22 +22,17 @@ pub fn compute(
         return Err(ChainError::Unknown("the input has no fields".into()));
     };
     let geometry = &input.geometry;
-    let needs = |n: &str| names.iter().any(|x| x == n);
-    let tracing = needs("g_hit") || needs("hit") || needs("distance");
+    let field_names: Vec<String> = input.fields.iter().map(|f| f.name.clone()).collect();
     let multi = input.fields.len() > 1;
+    let mut wanted = std::collections::BTreeSet::new();
+    for n in names {
+        wanted.insert(Channel::named(n, &field_names).map_err(|e| ChainError::Unknown(e.to_string()))?);
+    }
+    let needs = |n: &str| names.iter().any(|x| x == n);
+    let tracing = wanted.iter().any(|c| c.producer(multi) == Producer::Trace);
     // one derive pass serves both the derivative channels and the tracing,
     // computing only the items asked for (each is a full volume)
-    let mut items = Vec::new();
-    for (item, wanted) in [
-        (Item::G, tracing || needs("g")),
-        (Item::F2, tracing || needs("f2")),
-        (Item::Normal, tracing || ["nx", "ny", "nz"].iter().any(|n| needs(n))),
-        (Item::InvG, needs("inv_g") && !multi),
-    ] {
-        if wanted {
-            items.push(item);
-        }
-    }
+    let (items, multi_items) = crate::plan::derive_items(&wanted, multi, tracing, false);
     // derived channels by name, moved out of the derive output (no copies)
     let mut derived: BTreeMap<String, Volume> = BTreeMap::new();
     if !items.is_empty() {
@@ -53,8 +48,6 @@ pub fn compute(
         derived.extend(mdtf_derive::run(value_input, &d)?.items.into_iter().flat_map(|(_, mf)| mf.into_volumes()));
     }
     // several fields: ||G|| and 1/g (from ||G||) in one pass over all of them
-    let multi_items: Vec<Item> =
-        [(Item::Gnorm, "gnorm"), (Item::InvG, "inv_g")].into_iter().filter(|(_, c)| needs(c)).map(|(i, _)| i).collect();
     if multi && !multi_items.is_empty() {
         let d = DeriveParams {
             items: multi_items,
@@ -113,6 +106,7 @@ pub fn compute(
 mod tests {
     use super::*;
     use mdtf_datagen::erf_sphere;
+    use mdtf_derive::Item;
     use mdtf_volume::Geometry;
 
     #[test]

@@ -1,13 +1,22 @@
 //! Composition of mdtf stages, run in process without intermediate files:
 //! the stage crates never call each other; chains, pipeline files
 //! ([`file`]) and their runner ([`run`]) live here.
+//!
+//! What a run computes is decided once, by [`plan::Plan::resolve`] from what
+//! its outputs read (pack profile, histograms, kept channels), over the
+//! channel table [`channel::TABLE`] (each channel's producer, prerequisites
+//! and halo); `mdtf run --plan` prints the plan. To add a channel: a
+//! [`channel::Channel`] variant and its row, the derive item or stage that
+//! produces it, and its meaning in `mdtf_pack::describe` if it is packed.
 
 pub mod boundary_chain;
+pub mod channel;
 pub mod channels;
 pub mod figures;
 pub mod file;
 pub mod gaussians;
 pub mod pack_inputs;
+pub mod plan;
 pub mod report_page;
 pub mod run;
 pub mod validate;

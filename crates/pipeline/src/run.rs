@@ -5,6 +5,7 @@
 //! as it was.
 
 use crate::file::{PhantomKind, Pipeline};
+use crate::plan::{Plan, Step};
 use mdtf_boundary::{AlphaMap, BoundaryInput};
 use mdtf_datagen::{MultiFieldPhantom, RadialPhantom, add_gaussian_noise, erf_sphere, min_extent};
 use mdtf_derive::{DeriveParams, Item, Kernel};
@@ -149,33 +150,14 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let n = geo.voxel_count();
     stage("input", t, n, vec![]);
 
-    // which channels the later stages need
+    // what the outputs need: derive items, tracing, when each channel is freed
     let profile = p.pack.profile;
-    let fields: Vec<String> =
-        if input.fields.len() > 1 { input.fields.iter().map(|f| f.name.clone()).collect() } else { vec![] };
-    let mut needed = profile.channels(&fields);
-    needed.extend(p.keep.iter().cloned());
-    if let Some(h) = &p.histogram {
-        needed.extend(["v", "g"].map(String::from));
-        if h.joint {
-            // several fields: the joint histograms of each pair of them (up to MAX_PAIRED_FIELDS)
-            needed.extend(fields.iter().take(crate::figures::MAX_PAIRED_FIELDS).cloned());
-        }
-        if h.stretched {
-            needed.extend(["g_hit", "hit"].map(String::from));
-        }
-        if h.hvol {
-            needed.push("f2".into());
-        }
-    }
-    if profile == Profile::Slicer3dtf && p.pack.tf.is_none() {
-        needed.push("f2".into());
-    }
-    if profile == Profile::ProjectedTetrahedra {
-        needed.push("v".into()); // the meshed scalar
-    }
-    let needs = |c: &str| needed.iter().any(|x| x == c);
-    let tracing = ["g_hit", "hit", "distance"].iter().any(|c| needs(c));
+    let field_names: Vec<String> = input.fields.iter().map(|f| f.name.clone()).collect();
+    let plan = Plan::resolve(p, &field_names, &geo).map_err(|e| fail("plan")(e.to_string()))?;
+    let fields = plan.fields.clone();
+    let needs = |c: &str| plan.wants(c);
+    let tracing = plan.trace;
+    let defer_normals = plan.defer_normals;
     // Every channel lives here once; stages borrow them and the pack takes them at the end.
     let mut chans: BTreeMap<String, Volume> = BTreeMap::new();
     let multi = input.fields.len() > 1;
@@ -190,27 +172,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
 
     // derive (only the items the later stages use)
     let kernel: Kernel = p.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL);
-    let mut items = Vec::new();
-    if tracing || needs("g") {
-        items.push(Item::G);
-    }
-    if tracing || needs("f2") {
-        items.push(Item::F2);
-    }
-    // Without tracing, nothing before the pack reads the normals: they are
-    // derived just before the texture that holds them, after the textures
-    // before it are written and their channels freed (3 f32 volumes fewer at
-    // the memory peak).
-    let wants_normals = ["nx", "ny", "nz"].iter().any(|c| needs(c));
-    let kept_normal = p.keep.iter().any(|c| ["nx", "ny", "nz"].contains(&c.as_str()));
-    let defer_normals = wants_normals && !tracing && !kept_normal && profile != Profile::ProjectedTetrahedra;
-    if tracing || (wants_normals && !defer_normals) {
-        items.push(Item::Normal);
-    }
-    // several fields: 1/g comes from ||G|| of all of them, in the multi-field pass
-    if needs("inv_g") && !multi {
-        items.push(Item::InvG);
-    }
+    let items = plan.derive.clone();
     let mut normal: Option<MultiField> = None;
     // the value volume goes into derive as a one-field MultiField and comes back out: no copy
     let mut value_mf = MultiField::from(value);
@@ -230,8 +192,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         }
         stage("derive", t, n, vec![]);
     }
-    let multi_items: Vec<Item> =
-        [(Item::Gnorm, "gnorm"), (Item::InvG, "inv_g")].into_iter().filter(|(_, c)| needs(c)).map(|(i, _)| i).collect();
+    let multi_items = plan.derive_fields.clone();
     if let Some(mf) = &input
         && !multi_items.is_empty()
     {
@@ -300,10 +261,8 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             }
         }
         // derived only for the tracing: free them now
-        for c in ["g", "f2"] {
-            if !needs(c) {
-                chans.remove(c);
-            }
+        for c in plan.freed_after(Step::Trace) {
+            chans.remove(&c.name(&fields));
         }
         stage("boundary", t, n, vec!["boundary/boundary_report.csv".into(), "boundary/boundary_report.png".into()]);
     }
@@ -582,6 +541,17 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     write_report_page(p, opts, &report, dir).map_err(|e| fail("report")(e.to_string()))?;
     out.publish(&inputs).map_err(|e| fail("output")(e.to_string()))?;
     Ok(report)
+}
+
+/// The plan [`run`] follows for `p`, with the input's name and grid. It reads
+/// the input (or builds the phantom) to learn its fields and grid, and
+/// writes nothing.
+pub fn plan(p: &Pipeline, opts: &RunOptions) -> Result<(Plan, String, Geometry), RunError> {
+    let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let (input, name, _) = load_input(p, opts, &base)?;
+    let fields: Vec<String> = input.fields.iter().map(|f| f.name.clone()).collect();
+    let plan = Plan::resolve(p, &fields, &input.geometry).map_err(|e| fail("plan")(e.to_string()))?;
+    Ok((plan, name, input.geometry))
 }
 
 /// Writes report.html into the staging folder `dir` from the report, the

@@ -4,7 +4,7 @@ use crate::args::RunArgs;
 use crate::progress::Progress;
 use anyhow::{Context, Result};
 use mdtf_pipeline::file::parse;
-use mdtf_pipeline::run::{RunOptions, run as run_pipeline};
+use mdtf_pipeline::run::{RunOptions, plan as plan_pipeline, run as run_pipeline};
 
 /// Parses the pipeline, runs it, prints the stage table.
 pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
@@ -13,6 +13,14 @@ pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
     let pipeline = parse(&text, &args.set).map_err(|e| anyhow::anyhow!("{}: {e}", args.pipeline.display()))?;
     let opts =
         RunOptions { pipeline_path: args.pipeline.clone(), input: args.input.clone(), output: args.output.clone() };
+    if args.plan {
+        let (plan, input, geo) = plan_pipeline(&pipeline, &opts)?;
+        let [nx, ny, nz] = geo.dims;
+        let [sx, sy, sz] = geo.spacing;
+        println!("plan of {} on {input} ({nx} x {ny} x {nz}, spacing {sx} x {sy} x {sz})", args.pipeline.display());
+        println!("{plan}");
+        return Ok(());
+    }
     // one line per stage: the spinner names the running stage, and each stage
     // gets its own finished line with its wall time when the next one starts
     let current: std::sync::Mutex<Option<(String, std::time::Instant)>> = std::sync::Mutex::new(None);

@@ -1,0 +1,271 @@
+//! The channel table: every per-voxel channel a run can read or compute,
+//! the stage that produces it, what it needs first, and how far a block of
+//! it reaches into its neighbours (its halo). Channels are typed keys; their
+//! names are for files and manifests. Adding a channel is one row here plus
+//! its producer in [`crate::run`].
+
+use mdtf_derive::{Item, Kernel};
+
+/// A per-voxel channel of a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Channel {
+    /// The value: the input, or its first field.
+    Value,
+    /// Field `k` of a multi-field input (named after the field).
+    Field(usize),
+    /// Gradient magnitude g = |grad f| of the value.
+    G,
+    /// Second directional derivative f'' of the value along its gradient.
+    F2,
+    /// Unit normal, x component.
+    Nx,
+    /// Unit normal, y component.
+    Ny,
+    /// Unit normal, z component.
+    Nz,
+    /// Inverse gradient magnitude (of ||G|| when there are several fields).
+    InvG,
+    /// ||Df^T Df|| of the normalised fields.
+    Gnorm,
+    /// g at the boundary hit.
+    GHit,
+    /// The tracing's hit code per voxel.
+    Hit,
+    /// Distance to the nearest boundary, world units.
+    Distance,
+}
+
+/// The stage that makes a channel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Producer {
+    /// Read from the input (or the phantom).
+    Input,
+    /// The derive pass over the value alone, with this item.
+    Derive(Item),
+    /// The derive pass over all the fields (several fields only), with this item.
+    DeriveFields(Item),
+    /// The boundary tracing (after the optional pre-filter of g and f'').
+    Trace,
+}
+
+/// One row of the table.
+#[derive(Debug, Clone, Copy)]
+pub struct Row {
+    /// The channel.
+    pub channel: Channel,
+    /// Its name in files, manifests and pipeline files (fields use their own).
+    pub name: &'static str,
+    /// Who makes it for a one-field input.
+    pub producer: Producer,
+    /// Who makes it when the input has several fields (where that differs).
+    pub producer_multi: Option<Producer>,
+    /// Channels its producer reads (the derive pass over all fields reads every field).
+    pub prerequisites: &'static [Channel],
+}
+
+const NORMAL_IN: &[Channel] = &[Channel::Value];
+const TRACE_IN: &[Channel] = &[Channel::G, Channel::F2, Channel::Nx, Channel::Ny, Channel::Nz];
+
+/// Every named channel (the fields are not rows: they are the input's).
+pub const TABLE: [Row; 11] = [
+    Row { channel: Channel::Value, name: "v", producer: Producer::Input, producer_multi: None, prerequisites: &[] },
+    Row {
+        channel: Channel::G,
+        name: "g",
+        producer: Producer::Derive(Item::G),
+        producer_multi: None,
+        prerequisites: &[Channel::Value],
+    },
+    Row {
+        channel: Channel::F2,
+        name: "f2",
+        producer: Producer::Derive(Item::F2),
+        producer_multi: None,
+        prerequisites: &[Channel::Value],
+    },
+    Row {
+        channel: Channel::Nx,
+        name: "nx",
+        producer: Producer::Derive(Item::Normal),
+        producer_multi: None,
+        prerequisites: NORMAL_IN,
+    },
+    Row {
+        channel: Channel::Ny,
+        name: "ny",
+        producer: Producer::Derive(Item::Normal),
+        producer_multi: None,
+        prerequisites: NORMAL_IN,
+    },
+    Row {
+        channel: Channel::Nz,
+        name: "nz",
+        producer: Producer::Derive(Item::Normal),
+        producer_multi: None,
+        prerequisites: NORMAL_IN,
+    },
+    Row {
+        channel: Channel::InvG,
+        name: "inv_g",
+        producer: Producer::Derive(Item::InvG),
+        producer_multi: Some(Producer::DeriveFields(Item::InvG)),
+        prerequisites: &[Channel::Value],
+    },
+    Row {
+        channel: Channel::Gnorm,
+        name: "gnorm",
+        producer: Producer::DeriveFields(Item::Gnorm),
+        producer_multi: None,
+        prerequisites: &[],
+    },
+    Row {
+        channel: Channel::GHit,
+        name: "g_hit",
+        producer: Producer::Trace,
+        producer_multi: None,
+        prerequisites: TRACE_IN,
+    },
+    Row {
+        channel: Channel::Hit,
+        name: "hit",
+        producer: Producer::Trace,
+        producer_multi: None,
+        prerequisites: TRACE_IN,
+    },
+    Row {
+        channel: Channel::Distance,
+        name: "distance",
+        producer: Producer::Trace,
+        producer_multi: None,
+        prerequisites: TRACE_IN,
+    },
+];
+
+/// Every channel name, for messages and `--help`.
+pub const CHANNEL_NAMES: &str = "v, g, f2, nx, ny, nz, inv_g, gnorm, g_hit, hit, distance";
+
+impl Channel {
+    /// The channel called `name` for an input with these fields (a field's
+    /// own name wins over a table name it shadows, as the input's data is what the user means).
+    pub fn parse(name: &str, fields: &[String]) -> Option<Channel> {
+        if let Some(k) = fields.iter().position(|f| f == name) {
+            return Some(Channel::Field(k));
+        }
+        TABLE.iter().find(|r| r.name == name).map(|r| r.channel)
+    }
+
+    /// The channel called `name`, or an error listing the valid names.
+    pub fn named(name: &str, fields: &[String]) -> Result<Channel, UnknownChannel> {
+        Channel::parse(name, fields).ok_or_else(|| UnknownChannel {
+            name: name.to_string(),
+            fields: if fields.is_empty() { String::new() } else { format!(", or a field: {}", fields.join(", ")) },
+        })
+    }
+
+    /// Its name in files and manifests (`fields`: the input's field names).
+    pub fn name(self, fields: &[String]) -> String {
+        match self {
+            Channel::Field(k) => fields.get(k).cloned().unwrap_or_else(|| format!("field{k}")),
+            c => c.row().map_or("?", |r| r.name).to_string(),
+        }
+    }
+
+    /// Its row of the table (None for the fields).
+    pub fn row(self) -> Option<&'static Row> {
+        TABLE.iter().find(|r| r.channel == self)
+    }
+
+    /// Who makes it; `multi`: the input has several fields.
+    pub fn producer(self, multi: bool) -> Producer {
+        match self.row() {
+            Some(r) if multi => r.producer_multi.unwrap_or(r.producer),
+            Some(r) => r.producer,
+            None => Producer::Input,
+        }
+    }
+
+    /// How many voxels of its neighbours along each axis (x, y, z) one voxel of
+    /// the channel reads, through every stage before it: the halo a block
+    /// needs to compute it exactly as the whole volume does.
+    pub fn halo(self, multi: bool, reach: &Reach) -> [usize; 3] {
+        match self.producer(multi) {
+            Producer::Input => [0; 3],
+            Producer::Derive(_) | Producer::DeriveFields(_) => reach.kernel,
+            Producer::Trace => {
+                let mut h = [0; 3];
+                for a in 0..3 {
+                    h[a] = reach.kernel[a] + reach.prefilter[a] + reach.trace[a];
+                }
+                h
+            }
+        }
+    }
+}
+
+/// How far each stage reaches, in voxels per axis (x, y, z).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Reach {
+    /// The derivative kernel's support radius.
+    pub kernel: [usize; 3],
+    /// The bilateral pre-filter's box radius (0 without pre-filter).
+    pub prefilter: [usize; 3],
+    /// The tracing: d_max, plus the two voxels past a cell's origin that g's
+    /// tricubic interpolation at the hit reads.
+    pub trace: [usize; 3],
+}
+
+impl Reach {
+    /// The reach of `kernel`, an optional pre-filter radius and a tracing
+    /// distance `d_max` (world units) on a grid of `spacing` (x, y, z).
+    pub fn new(kernel: Kernel, prefilter: [usize; 3], d_max: f64, spacing: [f64; 3]) -> Reach {
+        Reach {
+            kernel: spacing.map(|s| kernel.axis_taps(s).radius()),
+            prefilter,
+            // a ray ends within d_max; g at its hit is tricubic, reading 2 voxels past the hit's cell
+            trace: spacing.map(|s| (d_max / s - 1e-9).ceil().max(0.0) as usize + 2),
+        }
+    }
+}
+
+/// A channel name that is neither in the table nor a field.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("unknown channel '{name}' (valid: {CHANNEL_NAMES}{fields})")]
+pub struct UnknownChannel {
+    /// The name asked for.
+    pub name: String,
+    /// The input's fields, as text for the message.
+    pub fields: String,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_row_is_found_by_its_name_and_names_are_the_listed_ones() {
+        let names: Vec<&str> = TABLE.iter().map(|r| r.name).collect();
+        assert_eq!(names.join(", "), CHANNEL_NAMES);
+        for r in &TABLE {
+            assert_eq!(Channel::parse(r.name, &[]), Some(r.channel));
+            assert_eq!(r.channel.name(&[]), r.name);
+        }
+        let fields = vec!["t1".to_string(), "g".to_string()];
+        assert_eq!(Channel::parse("g", &fields), Some(Channel::Field(1)), "a field shadows a table name");
+        assert_eq!(Channel::Field(1).name(&fields), "g");
+        let e = Channel::named("nope", &fields).unwrap_err().to_string();
+        assert!(e.contains("'nope'") && e.contains("distance") && e.contains("t1, g"), "{e}");
+    }
+
+    #[test]
+    fn a_traced_channel_reaches_through_the_kernel_the_prefilter_and_the_ray() {
+        // central4 reads 2 voxels each side; d_max 15 mm on 1 x 1 x 2.5 mm voxels
+        let reach = Reach::new(Kernel::Central4, [3, 3, 1], 15.0, [1.0, 1.0, 2.5]);
+        assert_eq!(reach.kernel, [2, 2, 2]);
+        assert_eq!(reach.trace, [17, 17, 8]);
+        assert_eq!(Channel::Distance.halo(false, &reach), [22, 22, 11]);
+        assert_eq!(Channel::G.halo(false, &reach), [2, 2, 2]);
+        assert_eq!(Channel::Value.halo(false, &reach), [0, 0, 0]);
+        assert_eq!(Channel::InvG.producer(true), Producer::DeriveFields(Item::InvG));
+        assert_eq!(Channel::InvG.producer(false), Producer::Derive(Item::InvG));
+    }
+}

@@ -1,0 +1,441 @@
+//! The plan of a run, resolved once from what its outputs need (in the
+//! spirit of Teem gage's `gageUpdate`): which derive items, whether the
+//! pre-filter and the tracing run, the steps in order with the channels each
+//! reads and makes, the step after which each channel is last read, the
+//! whole-volume reductions each step waits for, and the halo a block of the
+//! volume needs. `mdtf run --plan` prints it.
+
+use crate::channel::{Channel, Producer, Reach, UnknownChannel};
+use crate::file::Pipeline;
+use mdtf_derive::Item;
+use mdtf_pack::Profile;
+use mdtf_volume::Geometry;
+use std::collections::BTreeSet;
+use std::fmt;
+
+/// A step of a run, in the order they run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Step {
+    /// Read the input (or build the phantom).
+    Input,
+    /// Derivatives of the value.
+    Derive,
+    /// Derivatives of all the fields together (several fields).
+    DeriveFields,
+    /// Bilateral pre-filter of g and f''.
+    Prefilter,
+    /// Distance-to-boundary tracing.
+    Trace,
+    /// Write the kept channels as volumes.
+    Keep,
+    /// Histograms and the histogram volume.
+    Histogram,
+    /// The texture pack (for meshes: meshing and the tetra tables).
+    Pack,
+    /// The preview rendered from the pack.
+    Preview,
+}
+
+impl Step {
+    /// The step's name in the plan and the run report.
+    pub fn name(self) -> &'static str {
+        match self {
+            Step::Input => "input",
+            Step::Derive => "derive",
+            Step::DeriveFields => "derive (fields)",
+            Step::Prefilter => "prefilter",
+            Step::Trace => "boundary",
+            Step::Keep => "keep",
+            Step::Histogram => "histogram",
+            Step::Pack => "pack",
+            Step::Preview => "preview",
+        }
+    }
+}
+
+/// One planned step: what it reads and what it makes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlannedStep {
+    /// The step.
+    pub step: Step,
+    /// Channels it reads.
+    pub reads: BTreeSet<Channel>,
+    /// Channels it makes.
+    pub makes: BTreeSet<Channel>,
+}
+
+/// A reduction over the whole volume that a step waits for (pass 1 of a
+/// block execution; these merge exactly across blocks).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reduction {
+    /// What is reduced, e.g. "finite range of v".
+    pub what: String,
+    /// The steps that need it.
+    pub before: Vec<Step>,
+}
+
+/// The resolved plan of a run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// The input's field names (empty for one field).
+    pub fields: Vec<String>,
+    /// Channels the outputs read.
+    pub wanted: BTreeSet<Channel>,
+    /// Items of the derive pass over the value, in order.
+    pub derive: Vec<Item>,
+    /// Items of the derive pass over all fields, in order.
+    pub derive_fields: Vec<Item>,
+    /// The normals are derived just before the pack texture that holds them
+    /// (nothing earlier reads them), so fewer volumes are held at the peak.
+    pub defer_normals: bool,
+    /// Whether g and f'' are pre-filtered before the tracing.
+    pub prefilter: bool,
+    /// Whether the tracing runs.
+    pub trace: bool,
+    /// The steps in order.
+    pub steps: Vec<PlannedStep>,
+    /// The reductions and who waits for them.
+    pub reductions: Vec<Reduction>,
+    /// How far each stage reaches, voxels per axis.
+    pub reach: Reach,
+    /// The halo a block needs (x, y, z voxels): the widest of the wanted channels'.
+    pub halo: [usize; 3],
+}
+
+/// Why a pipeline cannot be planned.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlanError {
+    /// `keep` names a channel that does not exist.
+    #[error("keep: {0}")]
+    Keep(UnknownChannel),
+    /// The pack profile asks for a channel the table lacks (a bug, not a user error).
+    #[error("pack: {0}")]
+    Pack(UnknownChannel),
+}
+
+impl Plan {
+    /// Resolves the plan of `p` on an input with these `fields` (empty or
+    /// one: a scalar) on `geometry`.
+    pub fn resolve(p: &Pipeline, fields: &[String], geometry: &Geometry) -> Result<Plan, PlanError> {
+        let fields: Vec<String> = if fields.len() > 1 { fields.to_vec() } else { Vec::new() };
+        let multi = !fields.is_empty();
+        let profile = p.pack.profile;
+        let mut pack = BTreeSet::new();
+        for name in profile.channels(&fields) {
+            pack.insert(Channel::named(&name, &fields).map_err(PlanError::Pack)?);
+        }
+        if profile == Profile::Slicer3dtf && p.pack.tf.is_none() {
+            pack.insert(Channel::F2);
+        }
+        if profile == Profile::ProjectedTetrahedra {
+            // the meshed scalar
+            pack.insert(Channel::Value);
+        }
+        let mut keep = BTreeSet::new();
+        for name in &p.keep {
+            keep.insert(Channel::named(name, &fields).map_err(PlanError::Keep)?);
+        }
+        let mut hist = BTreeSet::new();
+        if let Some(h) = &p.histogram {
+            hist.extend([Channel::Value, Channel::G]);
+            if h.joint {
+                hist.extend((0..fields.len().min(crate::figures::MAX_PAIRED_FIELDS)).map(Channel::Field));
+                if pack.contains(&Channel::InvG) || keep.contains(&Channel::InvG) {
+                    hist.insert(Channel::InvG);
+                }
+            }
+            if h.stretched {
+                hist.extend([Channel::GHit, Channel::Hit]);
+            }
+            if h.hvol {
+                hist.insert(Channel::F2);
+            }
+        }
+        let wanted: BTreeSet<Channel> = pack.iter().chain(&keep).chain(&hist).copied().collect();
+        let trace = wanted.iter().any(|c| c.producer(multi) == Producer::Trace);
+        let normals = [Channel::Nx, Channel::Ny, Channel::Nz];
+        let wants_normals = normals.iter().any(|c| wanted.contains(c));
+        let kept_normal = normals.iter().any(|c| keep.contains(c));
+        let defer_normals = wants_normals && !trace && !kept_normal && profile != Profile::ProjectedTetrahedra;
+
+        let (derive, derive_fields) = derive_items(&wanted, multi, trace, defer_normals);
+        let prefilter = trace && p.prefilter.is_some();
+
+        let made_by = |item: &Item, fields_pass: bool| -> Vec<Channel> {
+            crate::channel::TABLE
+                .iter()
+                .map(|r| r.channel)
+                .filter(|c| {
+                    let want = if fields_pass { Producer::DeriveFields(*item) } else { Producer::Derive(*item) };
+                    c.producer(multi) == want
+                })
+                .collect()
+        };
+        let mut steps = Vec::new();
+        let mut input_makes: BTreeSet<Channel> = BTreeSet::from([Channel::Value]);
+        input_makes.extend((0..fields.len()).map(Channel::Field));
+        steps.push(PlannedStep { step: Step::Input, reads: BTreeSet::new(), makes: input_makes });
+        if !derive.is_empty() {
+            let makes =
+                derive.iter().flat_map(|i| made_by(i, false)).filter(|c| !defer_normals || !normals.contains(c));
+            steps.push(PlannedStep {
+                step: Step::Derive,
+                reads: BTreeSet::from([Channel::Value]),
+                makes: makes.collect(),
+            });
+        }
+        if !derive_fields.is_empty() {
+            steps.push(PlannedStep {
+                step: Step::DeriveFields,
+                reads: (0..fields.len()).map(Channel::Field).collect(),
+                makes: derive_fields.iter().flat_map(|i| made_by(i, true)).collect(),
+            });
+        }
+        let trace_reads: BTreeSet<Channel> = [Channel::G, Channel::F2, Channel::Nx, Channel::Ny, Channel::Nz].into();
+        if prefilter {
+            steps.push(PlannedStep {
+                step: Step::Prefilter,
+                reads: [Channel::G, Channel::F2].into(),
+                makes: BTreeSet::new(),
+            });
+        }
+        if trace {
+            steps.push(PlannedStep {
+                step: Step::Trace,
+                reads: trace_reads,
+                makes: [Channel::GHit, Channel::Hit, Channel::Distance].into(),
+            });
+        }
+        if !keep.is_empty() {
+            steps.push(PlannedStep { step: Step::Keep, reads: keep, makes: BTreeSet::new() });
+        }
+        if p.histogram.is_some() {
+            steps.push(PlannedStep { step: Step::Histogram, reads: hist, makes: BTreeSet::new() });
+        }
+        // the deferred normals are made inside the pack step, from the value
+        let mut pack_reads = pack.clone();
+        let mut pack_makes = BTreeSet::new();
+        if defer_normals {
+            pack_reads.retain(|c| !normals.contains(c));
+            pack_reads.insert(Channel::Value);
+            pack_makes.extend(normals);
+        }
+        steps.push(PlannedStep { step: Step::Pack, reads: pack_reads, makes: pack_makes });
+        if p.preview {
+            steps.push(PlannedStep { step: Step::Preview, reads: BTreeSet::new(), makes: BTreeSet::new() });
+        }
+
+        let kernel = p.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL);
+        let prefilter_radius = match (&p.prefilter, prefilter) {
+            (Some(pf), true) => {
+                mdtf_bilateral::box_radius(geometry.spacing, &crate::boundary_chain::prefilter_params(pf, 1.0))
+            }
+            _ => [0; 3],
+        };
+        let d_max = if trace { p.boundary.d_max.unwrap_or(mdtf_boundary::default_d_max(geometry)) } else { 0.0 };
+        let reach = Reach::new(kernel, prefilter_radius, d_max, geometry.spacing);
+        let mut halo = [0; 3];
+        for c in &wanted {
+            let h = c.halo(multi, &reach);
+            for a in 0..3 {
+                halo[a] = halo[a].max(h[a]);
+            }
+        }
+        let reductions = reductions(p, &steps, trace, prefilter, multi);
+        Ok(Plan {
+            fields,
+            wanted,
+            derive,
+            derive_fields,
+            defer_normals,
+            prefilter,
+            trace,
+            steps,
+            reductions,
+            reach,
+            halo,
+        })
+    }
+
+    /// Whether some output reads the channel called `name`.
+    pub fn wants(&self, name: &str) -> bool {
+        Channel::parse(name, &self.fields).is_some_and(|c| self.wanted.contains(&c))
+    }
+
+    /// The last step that reads `c` (after it the channel can be freed).
+    pub fn last_reader(&self, c: Channel) -> Option<Step> {
+        self.steps.iter().rev().find(|s| s.reads.contains(&c)).map(|s| s.step)
+    }
+
+    /// The channels no step after `step` reads, among those it or an earlier step made.
+    pub fn freed_after(&self, step: Step) -> Vec<Channel> {
+        let made: BTreeSet<Channel> =
+            self.steps.iter().filter(|s| s.step <= step).flat_map(|s| s.makes.clone()).collect();
+        made.into_iter().filter(|&c| self.last_reader(c) == Some(step)).collect()
+    }
+}
+
+/// The items of the derive pass over the value and of the pass over all
+/// fields that make the `wanted` channels and, when `trace`, the tracing's
+/// inputs (g, f'', normal); `defer_normals`: the normals are made later.
+pub fn derive_items(
+    wanted: &BTreeSet<Channel>,
+    multi: bool,
+    trace: bool,
+    defer_normals: bool,
+) -> (Vec<Item>, Vec<Item>) {
+    let wants = |c: Channel| wanted.contains(&c);
+    let wants_normals = [Channel::Nx, Channel::Ny, Channel::Nz].into_iter().any(wants);
+    let mut derive = Vec::new();
+    if trace || wants(Channel::G) {
+        derive.push(Item::G);
+    }
+    if trace || wants(Channel::F2) {
+        derive.push(Item::F2);
+    }
+    if trace || (wants_normals && !defer_normals) {
+        derive.push(Item::Normal);
+    }
+    let made_by = |p: Producer| wanted.iter().any(|c| c.producer(multi) == p);
+    if made_by(Producer::Derive(Item::InvG)) {
+        derive.push(Item::InvG);
+    }
+    let fields = [Item::Gnorm, Item::InvG].into_iter().filter(|&i| made_by(Producer::DeriveFields(i))).collect();
+    (derive, fields)
+}
+
+/// The whole-volume reductions the steps wait for.
+fn reductions(p: &Pipeline, steps: &[PlannedStep], trace: bool, prefilter: bool, multi: bool) -> Vec<Reduction> {
+    let has = |s: Step| steps.iter().any(|x| x.step == s);
+    let mut out = Vec::new();
+    let mut add = |what: &str, before: Vec<Step>| {
+        let before: Vec<Step> = before.into_iter().filter(|&s| has(s)).collect();
+        if !before.is_empty() {
+            out.push(Reduction { what: what.to_string(), before });
+        }
+    };
+    add("finite range of v (derive's epsilon, tracing thresholds)", vec![Step::Derive, Step::Trace]);
+    if multi {
+        add("finite range of each field (its [0, 1] normalisation)", vec![Step::DeriveFields]);
+    }
+    if prefilter {
+        add("finite ranges of g and f'' (the range sigma)", vec![Step::Prefilter]);
+    }
+    if trace && p.boundary.g_min.is_none() {
+        add("median of g (the noise floor: g_min, g_hit_min)", vec![Step::Trace]);
+    }
+    if p.histogram.is_some() {
+        add("exact percentiles of g (the histogram's g axis, as Teem's qbert clips it)", vec![Step::Histogram]);
+    }
+    if p.histogram.as_ref().is_some_and(|h| h.hvol) {
+        add("histogram volume (v, g, f'') counts and sums (boundaries, default opacity)", vec![Step::Pack]);
+    }
+    add("finite range of every packed channel (its quantisation)", vec![Step::Pack]);
+    out
+}
+
+impl fmt::Display for Plan {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let names = |set: &BTreeSet<Channel>| -> String {
+            set.iter().map(|c| c.name(&self.fields)).collect::<Vec<_>>().join(" ")
+        };
+        writeln!(f, "channels the outputs read: {}", names(&self.wanted))?;
+        writeln!(f, "steps:")?;
+        for (i, s) in self.steps.iter().enumerate() {
+            let mut line = format!("  {} {:<16}", i + 1, s.step.name());
+            if !s.reads.is_empty() {
+                line += &format!(" reads {}", names(&s.reads));
+            }
+            if !s.makes.is_empty() {
+                line += &format!(" -> {}", names(&s.makes));
+            }
+            let freed: BTreeSet<Channel> = self.freed_after(s.step).into_iter().collect();
+            if !freed.is_empty() && s.step != Step::Pack {
+                line += &format!("; frees {}", names(&freed));
+            }
+            match s.step {
+                Step::Derive => line += &format!(" [{}]", item_names(&self.derive)),
+                Step::DeriveFields => line += &format!(" [{}]", item_names(&self.derive_fields)),
+                _ => {}
+            }
+            writeln!(f, "{}", line.trim_end())?;
+        }
+        writeln!(f, "whole-volume reductions (they finish before the steps that need them):")?;
+        for r in &self.reductions {
+            let before: Vec<&str> = r.before.iter().map(|s| s.name()).collect();
+            writeln!(f, "  {} -> {}", r.what, before.join(", "))?;
+        }
+        let [x, y, z] = self.halo;
+        let r = &self.reach;
+        write!(
+            f,
+            "halo of a block: x {x}, y {y}, z {z} voxels (kernel {:?}, pre-filter {:?}, tracing {:?})",
+            r.kernel,
+            r.prefilter,
+            if self.trace { r.trace } else { [0; 3] }
+        )
+    }
+}
+
+fn item_names(items: &[Item]) -> String {
+    items.iter().map(|i| i.name()).collect::<Vec<_>>().join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shipped(name: &str, fields: &[&str]) -> Plan {
+        let path = format!("{}/../../pipelines/{name}.toml", env!("CARGO_MANIFEST_DIR"));
+        let text = std::fs::read_to_string(&path).unwrap();
+        let p = crate::file::parse(&text, &[]).unwrap();
+        let fields: Vec<String> = fields.iter().map(|f| f.to_string()).collect();
+        Plan::resolve(&p, &fields, &Geometry::new([64; 3], [1.0; 3])).unwrap()
+    }
+
+    fn steps(plan: &Plan) -> Vec<&'static str> {
+        plan.steps.iter().map(|s| s.step.name()).collect()
+    }
+
+    #[test]
+    fn each_shipped_pipeline_derives_only_what_its_outputs_read() {
+        let slicer = shipped("slicer-3dtf", &[]);
+        assert_eq!(slicer.derive, [Item::G, Item::F2]);
+        assert!(slicer.defer_normals && !slicer.trace && slicer.halo == [2; 3]);
+        assert_eq!(steps(&slicer), ["input", "derive", "histogram", "pack", "preview"]);
+
+        let distance = shipped("distance-tf", &[]);
+        assert_eq!(distance.derive, [Item::G, Item::F2, Item::Normal]);
+        assert!(distance.trace && !distance.prefilter && !distance.defer_normals);
+        // central4's 2 voxels + d_max 15 voxels + 2 for g's tricubic at the hit
+        assert_eq!(distance.halo, [19; 3]);
+        // f'' is read by the tracing alone: freed after it; g by the histogram too
+        assert_eq!(distance.freed_after(Step::Trace), [Channel::F2]);
+        assert_eq!(distance.last_reader(Channel::G), Some(Step::Histogram));
+
+        let gaussian = shipped("gaussian-tf", &["a", "b", "c"]);
+        assert_eq!(
+            (gaussian.derive.as_slice(), gaussian.derive_fields.as_slice()),
+            (&[Item::G][..], &[Item::Gnorm][..])
+        );
+        let peak = shipped("peak-finding", &[]);
+        assert_eq!((peak.derive.as_slice(), peak.derive_fields.as_slice()), (&[Item::G, Item::InvG][..], &[][..]));
+        // several fields: 1/g comes from ||G|| of all of them
+        let peak2 = shipped("peak-finding", &["t1", "brain"]);
+        assert_eq!((peak2.derive.as_slice(), peak2.derive_fields.as_slice()), (&[Item::G][..], &[Item::InvG][..]));
+    }
+
+    #[test]
+    fn an_unknown_kept_channel_is_refused_when_planning() {
+        let text = "keep = [\"g\", \"distanse\"]\n[pack]\nprofile = \"slicer-3dtf\"\n";
+        let p = crate::file::parse(text, &[]).unwrap();
+        let e = Plan::resolve(&p, &[], &Geometry::new([8; 3], [1.0; 3])).unwrap_err().to_string();
+        assert!(e.starts_with("keep: unknown channel 'distanse'") && e.contains("distance"), "{e}");
+        let with_prefilter = "[prefilter]\nsigma_d = 2.0\nsigma_r = 0.1\n[pack]\nprofile = \"distance-tf\"\n";
+        let p = crate::file::parse(with_prefilter, &[]).unwrap();
+        let plan = Plan::resolve(&p, &[], &Geometry::new([64, 64, 64], [1.0, 1.0, 2.0])).unwrap();
+        // pre-filter box ceil(2.5 x 2 / s): 5, 5, 3; rays of 15 mm: 15 + 2, 15 + 2, 8 + 2
+        assert_eq!((plan.reach.prefilter, plan.halo), ([5, 5, 3], [2 + 5 + 17, 2 + 5 + 17, 2 + 3 + 10]));
+        assert!(plan.to_string().contains("halo of a block: x 24, y 24, z 15 voxels"), "{plan}");
+    }
+}
