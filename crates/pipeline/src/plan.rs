@@ -191,7 +191,8 @@ impl Plan {
                 makes: derive_fields.iter().flat_map(|i| made_by(i, true)).collect(),
             });
         }
-        let trace_reads: BTreeSet<Channel> = [Channel::G, Channel::F2, Channel::Nx, Channel::Ny, Channel::Nz].into();
+        let trace_reads: BTreeSet<Channel> =
+            Channel::Distance.row().map_or(&[][..], |r| r.prerequisites).iter().copied().collect();
         if prefilter {
             steps.push(PlannedStep {
                 step: Step::Prefilter,
