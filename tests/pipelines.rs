@@ -277,6 +277,12 @@ fn peak_finding_over_several_fields_draws_the_first_fields_boundary() {
     let (w, h, px) = mdtf_e2e::read_rgb_png(&out.join("preview.png"));
     let lit = px.chunks_exact(3).filter(|c| c.iter().map(|&x| x as u32).sum::<u32>() >= 30).count();
     assert!(lit as f64 >= 0.02 * (w * h) as f64, "{lit} of {} preview pixels lit", w * h);
+    // the (a, 1/g) histogram is named by the field, so the TF is drawn over it too
+    let hist = out.join("histogram");
+    let axes: Value = serde_json::from_slice(&std::fs::read(hist.join("hist_a_inv_g.json")).unwrap()).unwrap();
+    assert_eq!((axes["axes"][0]["name"].as_str(), axes["axes"][1]["name"].as_str()), (Some("a"), Some("inv_g")));
+    let (fw, fh, _) = mdtf_e2e::read_rgb_png(&hist.join("tf_tf2d.png"));
+    assert!(fw >= 256 && fh >= 256 && fw <= 1200 && fh <= 1200, "tf_tf2d.png is {fw} x {fh}");
 }
 
 #[test]

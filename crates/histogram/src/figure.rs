@@ -92,7 +92,7 @@ pub fn axis_label(name: &str) -> String {
         "v" => "v (input units)".into(),
         "g" => "g = |grad v| (input units per world unit)".into(),
         "f2" => "f'' along the gradient (input units per world unit^2)".into(),
-        "inv_g" => "1/g (world units per input unit)".into(),
+        "inv_g" => "1/g (world units per input unit; of several fields 1/sqrt(||G||), world units)".into(),
         "g_hit" => "g at the boundary hit (input units per world unit)".into(),
         "distance" => "distance to the boundary (world units)".into(),
         "gnorm" => "||G|| (per world unit^2)".into(),

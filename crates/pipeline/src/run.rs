@@ -348,10 +348,16 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             if let Some(inv_g) = get("inv_g")
                 && let Some(ia) = Axis::inverse_gradient(inverted.as_deref().unwrap_or(g.samples()), 256)
             {
-                let hist = count(&[v.samples(), inv_g.samples()], vec![axes[0].clone(), ia], None)
-                    .map_err(|e| err(e.to_string()))?;
+                // several fields: the value is the first field, named as the pack's TF axis names it
+                let mut va = axes[0].clone();
+                if let Some(first) = fields.first() {
+                    va.name = first.clone();
+                }
+                let name = format!("histogram/hist_{}_inv_g.png", va.name);
+                let hist =
+                    count(&[v.samples(), inv_g.samples()], vec![va, ia], None).map_err(|e| err(e.to_string()))?;
                 write_histogram(&hdir, &hist, Scale::Log, &input_name).map_err(|e| err(e.to_string()))?;
-                outputs.push("histogram/hist_v_inv_g.png".into());
+                outputs.push(name);
                 figure_hists.push(hist);
             }
         }
