@@ -32,8 +32,13 @@ fn run_shows_something(pipeline: &str, input: &Path, out: &Path) {
     // peak finding's (v, 1/g) histogram holds the voxels near boundaries (a
     // 1/g axis in the wrong units leaves it all but empty)
     if pipeline == "peak-finding" {
-        let counts: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(out.join("histogram/hist_v_inv_g.json")).unwrap()).unwrap();
+        // named by the value, or by the first field of a stack
+        let file = std::fs::read_dir(out.join("histogram"))
+            .unwrap()
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .find(|p| p.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.ends_with("_inv_g.json")))
+            .unwrap_or_else(|| panic!("{pipeline}: no (value, 1/g) histogram in {}", out.display()));
+        let counts: serde_json::Value = serde_json::from_slice(&std::fs::read(&file).unwrap()).unwrap();
         let report: serde_json::Value =
             serde_json::from_slice(&std::fs::read(out.join("run_report.json")).unwrap()).unwrap();
         let voxels: f64 = report["dims"].as_array().unwrap().iter().map(|d| d.as_f64().unwrap()).product();
