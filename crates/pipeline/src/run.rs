@@ -160,7 +160,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let defer_normals = plan.defer_normals;
     // Every channel lives here once; stages borrow them and the pack takes them at the end.
     let mut chans: BTreeMap<String, Volume> = BTreeMap::new();
-    let multi = input.fields.len() > 1;
+    let multi = !fields.is_empty();
     let (value, input) = if multi {
         let value = input.field_volume(0).ok_or_else(|| fail("input")("no fields".into()))?;
         (value, Some(input))
