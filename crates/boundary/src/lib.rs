@@ -47,7 +47,7 @@ mod trace;
 
 pub use alpha::AlphaMap;
 pub use lost::{LOST_MIN_SHARE, LostBoundary};
-pub use report::{Report, ReportBin, ReportInput, ReportThresholds};
+pub use report::{Report, ReportAccumulator, ReportBin, ReportInput, ReportThresholds};
 pub use trace::HitCode;
 
 use mdtf_volume::{Geometry, MultiField, Volume};
@@ -216,8 +216,14 @@ impl BoundaryOutput {
             g: g.samples(),
             g_hit: self.g_hit.samples(),
         };
-        let r = &self.resolved;
-        Report::new(input, ReportThresholds { g_min: r.fig2_g_min, g_hit_min: r.fig2_g_hit_min })
+        Report::new(input, self.resolved.report_thresholds())
+    }
+}
+
+impl ResolvedParams {
+    /// The Fig. 2 report's thresholds.
+    pub fn report_thresholds(&self) -> ReportThresholds {
+        ReportThresholds { g_min: self.fig2_g_min, g_hit_min: self.fig2_g_hit_min }
     }
 }
 
@@ -291,18 +297,84 @@ pub fn run(input: &BoundaryInput, params: &BoundaryParams) -> Result<BoundaryOut
     run_block(input, params, 0)
 }
 
-/// Traces every voxel of a block (a z-slab) whose first plane is plane
-/// `first_plane` of the whole volume. Ray positions are computed in the
-/// whole volume's voxel coordinates, so the block's voxels whose rays stay
-/// inside it (those at least the plan's halo from its cut faces) get the
-/// whole-volume run's bits. The thresholds the defaults take from the data
-/// (the noise floor's median of g) are the block's own: pass `g_min` and
-/// `g_hit_min` from the whole volume for identical results.
-pub fn run_block(
+/// What the tracing of a block takes from the whole volume (reductions of a
+/// first pass), so that a slab-by-slab run gives the whole-volume run's bits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VolumeStats {
+    /// Value range (max - min) of the data g and f'' came from.
+    pub value_range: f64,
+    /// [`noise_floor`] of the whole g volume, value units per world unit.
+    pub noise_floor: f64,
+    /// Largest finite g of the whole volume (0 without one): the axis of the crossings' histogram.
+    pub g_max: f32,
+}
+
+impl VolumeStats {
+    /// The statistics of a whole g volume whose data span `value_range`.
+    pub fn of(g: &Volume, value_range: f64) -> VolumeStats {
+        let noise_floor = noise_floor(g.samples(), value_range, g.geometry.min_spacing());
+        VolumeStats { value_range, noise_floor, g_max: g_max(g.samples()) }
+    }
+}
+
+/// The largest finite g of `g` (0 without one), as [`VolumeStats::g_max`] takes it.
+pub fn g_max(g: &[f32]) -> f32 {
+    mdtf_volume::finite_sample_range(g).map_or(0.0, |r| r.1)
+}
+
+/// The g at the zero crossings of the traced voxels, counted over
+/// [0, [`VolumeStats::g_max`]]; the counts of blocks add up exactly.
+#[derive(Debug, Clone)]
+pub struct Crossings(lost::CrossingHistogram);
+
+impl Crossings {
+    /// Adds another block's crossings.
+    pub fn merge(&mut self, other: &Crossings) {
+        self.0.merge(&other.0);
+    }
+
+    /// The boundaries the thresholds of `r` took out of the outputs, and a
+    /// sentence on each for warnings.
+    pub fn lost(&self, r: &ResolvedParams) -> (Vec<LostBoundary>, Vec<String>) {
+        let cut = r.g_min.max(r.g_hit_min);
+        let lost = lost::lost_boundaries(&self.0, G_HIT_MIN_FLOORS * r.noise_floor, cut);
+        let warnings = lost.iter().map(|l| lost_warning(l, r)).collect();
+        (lost, warnings)
+    }
+}
+
+/// The tracing of a block's own planes.
+#[derive(Debug, Clone)]
+pub struct BlockTrace {
+    /// Distance (world units), on the traced planes.
+    pub distance: Volume,
+    /// g at the zero crossing.
+    pub g_hit: Volume,
+    /// [`HitCode`] as a number.
+    pub hit: Volume,
+    /// Dot product of the unit gradients at the voxel and at the hit.
+    pub dot: Volume,
+    /// How many voxels got each code.
+    pub counts: TraceCounts,
+    /// The crossings' g, to merge and then look for lost boundaries in.
+    pub crossings: Crossings,
+    /// The thresholds and sampling used.
+    pub resolved: ResolvedParams,
+}
+
+/// Traces the planes `planes` of a block (a z-slab of g, f'' and normal
+/// whose first plane is plane `first_plane` of the whole volume). Ray
+/// positions are in the whole volume's voxel coordinates and the defaults
+/// come from `stats`, so every traced voxel whose ray stays inside the block
+/// (those at least the plan's halo from its cut faces) gets the whole-volume
+/// run's bits. `input.value_range` is not read (`stats` has it).
+pub fn trace_block(
     input: &BoundaryInput,
     params: &BoundaryParams,
     first_plane: usize,
-) -> Result<BoundaryOutput, BoundaryError> {
+    planes: std::ops::Range<usize>,
+    stats: &VolumeStats,
+) -> Result<BlockTrace, BoundaryError> {
     let geo = &input.g.geometry;
     if !input.f2.geometry.same_grid(geo) || !input.normal.geometry.same_grid(geo) {
         return Err(BoundaryError::Geometry(format!(
@@ -321,9 +393,13 @@ pub fn run_block(
             input.normal.fields.len()
         )));
     }
-    let floor = noise_floor(input.g.samples(), input.value_range, geo.min_spacing());
-    let r = resolve(params, geo, input.value_range, floor)?;
-    let g_max = mdtf_volume::finite_sample_range(input.g.samples()).map_or(0.0, |r| r.1);
+    if planes.start > planes.end || planes.end > geo.dims[2] {
+        return Err(BoundaryError::Geometry(format!(
+            "planes {planes:?} to trace are not within the block's {} planes",
+            geo.dims[2]
+        )));
+    }
+    let r = resolve(params, geo, stats.value_range, stats.noise_floor)?;
     fn grid(v: &Array3<f32>, dims: [usize; 3], first_plane: usize) -> Grid<'_> {
         Grid::at(v.as_slice().unwrap_or(&[]), dims, [0, 0, first_plane])
     }
@@ -343,27 +419,28 @@ pub fn run_block(
         g_probe: r.g_min.min(r.noise_floor) as f32,
     };
     let plane = geo.dims[0] * geo.dims[1];
-    let mut distance = Volume::zeros(geo.clone());
-    let mut g_hit = Volume::zeros(geo.clone());
-    let mut hit = Volume::zeros(geo.clone());
-    let mut dot = Volume::zeros(geo.clone());
+    let out_geo = geo.z_slab(planes.clone());
+    let mut distance = Volume::zeros(out_geo.clone());
+    let mut g_hit = Volume::zeros(out_geo.clone());
+    let mut hit = Volume::zeros(out_geo.clone());
+    let mut dot = Volume::zeros(out_geo);
     let mut counts = TraceCounts::default();
-    let mut crossings = lost::CrossingHistogram::new(g_max);
+    let mut crossings = lost::CrossingHistogram::new(stats.g_max);
     {
         let d = distance.data.as_slice_mut().unwrap_or(&mut []);
         let gh = g_hit.data.as_slice_mut().unwrap_or(&mut []);
         let h = hit.data.as_slice_mut().unwrap_or(&mut []);
         let dt = dot.data.as_slice_mut().unwrap_or(&mut []);
         let per_plane: Vec<(TraceCounts, lost::CrossingHistogram)> = d
-            .par_chunks_mut(plane)
-            .zip(gh.par_chunks_mut(plane))
-            .zip(h.par_chunks_mut(plane))
-            .zip(dt.par_chunks_mut(plane))
+            .par_chunks_mut(plane.max(1))
+            .zip(gh.par_chunks_mut(plane.max(1)))
+            .zip(h.par_chunks_mut(plane.max(1)))
+            .zip(dt.par_chunks_mut(plane.max(1)))
             .enumerate()
             .map(|(k, (((d, gh), h), dt))| {
-                let mut hist = lost::CrossingHistogram::new(g_max);
+                let mut hist = lost::CrossingHistogram::new(stats.g_max);
                 let out = trace::PlaneOut { distance: d, g_hit: gh, hit: h, dot: dt, crossings: &mut hist };
-                (trace_plane(&fields, &settings, k, out), hist)
+                (trace_plane(&fields, &settings, planes.start + k, out), hist)
             })
             .collect();
         for (c, h) in per_plane {
@@ -371,10 +448,30 @@ pub fn run_block(
             crossings.merge(&h);
         }
     }
+    Ok(BlockTrace { distance, g_hit, hit, dot, counts, crossings: Crossings(crossings), resolved: r })
+}
+
+/// Traces every voxel of a block (a z-slab) whose first plane is plane
+/// `first_plane` of the whole volume. Ray positions are computed in the
+/// whole volume's voxel coordinates, so the block's voxels whose rays stay
+/// inside it (those at least the plan's halo from its cut faces) get the
+/// whole-volume run's bits. The thresholds the defaults take from the data
+/// (the noise floor's median of g) are the block's own: pass `g_min` and
+/// `g_hit_min` from the whole volume, or use [`trace_block`] with the
+/// whole volume's [`VolumeStats`], for identical results.
+pub fn run_block(
+    input: &BoundaryInput,
+    params: &BoundaryParams,
+    first_plane: usize,
+) -> Result<BoundaryOutput, BoundaryError> {
+    let stats = VolumeStats::of(input.g, input.value_range);
+    let planes = 0..input.g.geometry.dims[2];
+    let BlockTrace { distance, g_hit, hit, dot, counts, crossings, resolved: r } =
+        trace_block(input, params, first_plane, planes, &stats)?;
     let hit_mask = |f: &dyn Fn(f32) -> f32| {
         let data =
             ndarray::Zip::from(&distance.data).and(&hit.data).map_collect(|&d, &h| if h == 1.0 { f(d) } else { 0.0 });
-        Volume { geometry: geo.clone(), data }
+        Volume { geometry: distance.geometry.clone(), data }
     };
     let d_max = r.d_max as f32;
     let flipped = params.flipped.then(|| hit_mask(&|d| d_max - d));
@@ -383,9 +480,7 @@ pub fn run_block(
         .iter()
         .map(|a| (a.file_name().to_string(), hit_mask(&|d| a.eval(d as f64, r.d_max) as f32)))
         .collect();
-    let cut = r.g_min.max(r.g_hit_min);
-    let lost = lost::lost_boundaries(&crossings, G_HIT_MIN_FLOORS * r.noise_floor, cut);
-    let warnings = lost.iter().map(|l| lost_warning(l, &r)).collect();
+    let (lost, warnings) = crossings.lost(&r);
     Ok(BoundaryOutput { distance, g_hit, hit, dot, flipped, alpha, counts, resolved: r, lost, warnings })
 }
 

@@ -96,31 +96,72 @@ fn log_bin(dot: f64) -> usize {
     (((l - LOG_FLOOR) / LOG_BIN_WIDTH).floor().max(0.0) as usize).min(LOG_BINS - 1)
 }
 
-impl Report {
-    /// Builds the report from the per-voxel outputs, leaving out hits below the thresholds.
-    pub fn new(input: ReportInput, thresholds: ReportThresholds) -> Report {
-        let mut log = vec![Sums::default(); LOG_BINS];
-        let mut paper = vec![Sums::default(); 201];
-        let (mut sum_dot, mut hits, mut outliers) = (0.0, 0u64, 0u64);
+/// The report's sums over the voxels seen so far: feed it the blocks of a
+/// slab-by-slab run in voxel order and it finishes into the report of the
+/// whole volume, bit for bit (the sums run in the same order).
+#[derive(Clone)]
+pub struct ReportAccumulator {
+    log: Vec<Sums>,
+    paper: Vec<Sums>,
+    sum_dot: f64,
+    hits: u64,
+    outliers: u64,
+    thresholds: ReportThresholds,
+}
+
+impl ReportAccumulator {
+    /// Empty sums for a report with `thresholds`.
+    pub fn new(thresholds: ReportThresholds) -> ReportAccumulator {
+        ReportAccumulator {
+            log: vec![Sums::default(); LOG_BINS],
+            paper: vec![Sums::default(); 201],
+            sum_dot: 0.0,
+            hits: 0,
+            outliers: 0,
+            thresholds,
+        }
+    }
+
+    /// Adds the voxels of `input`, leaving out hits below the thresholds.
+    pub fn add(&mut self, input: ReportInput) {
+        let thresholds = self.thresholds;
         for i in 0..input.hit.len() {
             if input.hit[i] != 1.0 {
                 continue;
             }
             let (g, g_hit) = (input.g[i] as f64, input.g_hit[i] as f64);
             if g < thresholds.g_min || g_hit < thresholds.g_hit_min {
-                outliers += 1;
+                self.outliers += 1;
                 continue;
             }
             let dot = input.dot[i] as f64;
             let p = ((dot * 100.0).round().clamp(-100.0, 100.0) as i32 + 100) as usize;
-            for s in [&mut log[log_bin(dot)], &mut paper[p]] {
+            for s in [&mut self.log[log_bin(dot)], &mut self.paper[p]] {
                 s.voxels += 1;
                 s.distance += input.distance[i] as f64;
                 s.g += g;
             }
-            sum_dot += dot;
-            hits += 1;
+            self.sum_dot += dot;
+            self.hits += 1;
         }
+    }
+
+    /// The report of every voxel added.
+    pub fn finish(self) -> Report {
+        Report::from_sums(self)
+    }
+}
+
+impl Report {
+    /// Builds the report from the per-voxel outputs, leaving out hits below the thresholds.
+    pub fn new(input: ReportInput, thresholds: ReportThresholds) -> Report {
+        let mut acc = ReportAccumulator::new(thresholds);
+        acc.add(input);
+        acc.finish()
+    }
+
+    fn from_sums(acc: ReportAccumulator) -> Report {
+        let ReportAccumulator { log, paper, sum_dot, hits, outliers, thresholds } = acc;
         let total = hits.max(1) as f64;
         let table = |sums: &[Sums], edges: &dyn Fn(usize) -> (f64, f64)| {
             let mut cumulative = 0.0;

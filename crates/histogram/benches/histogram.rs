@@ -48,5 +48,5 @@ fn hvol_of_stored_channels_256_cubed(bencher: divan::Bencher) {
     let (v, g, h) = sphere_channels(256);
     bencher
         .counter(ItemsCount::new(v.len()))
-        .bench(|| histogram_volume(&v, &g, &h, &HvolParams::default()).map(|hv| hv.sigma));
+        .bench(|| histogram_volume(&v, &g, &h, 256 * 256, &HvolParams::default()).map(|hv| hv.sigma));
 }

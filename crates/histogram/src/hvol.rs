@@ -157,6 +157,15 @@ impl HvolAccumulator {
         count_and_sum(&[v, g, h], &self.binners, &self.strides, 0..n, &mut self.counts, &mut self.parts[at].1);
     }
 
+    /// Adds z-slice `k` of a volume of `slices` slices (its v, g and f''
+    /// samples) to the part [`fixed_parts`] puts it in. Feeding every slice
+    /// in order, from any number of blocks, gives the sums of
+    /// [`histogram_volume`] bit for bit.
+    pub fn add_slice(&mut self, k: usize, slices: usize, v: &[f32], g: &[f32], h: &[f32]) {
+        let part = fixed_parts(slices).iter().position(|p| p.contains(&k)).unwrap_or(0);
+        self.add(part, v, g, h);
+    }
+
     /// Merges the accumulators of every task (counts in any order, sums in
     /// part order) and derives sigma, p(v, g) and the default opacity.
     pub fn finish(tasks: Vec<HvolAccumulator>, params: &HvolParams) -> Result<HistogramVolume, HistogramError> {
@@ -180,30 +189,37 @@ impl HvolAccumulator {
     }
 }
 
-/// Builds the histogram volume of value `v`, gradient magnitude `g` and second derivative `h`.
+/// Builds the histogram volume of value `v`, gradient magnitude `g` and
+/// second derivative `h`, x-fastest volumes of `plane` voxels per z-slice.
+/// The sums are kept per fixed part of the slices and their runs of equal
+/// bins are cut at every slice, so the result does not depend on the thread
+/// count and equals, bit for bit, the one fed slice by slice
+/// ([`histogram_volume_derived`](crate::histogram_volume_derived), a
+/// slab-by-slab run: see [`HvolAccumulator::add_slice`]).
 pub fn histogram_volume(
     v: &[f32],
     g: &[f32],
     h: &[f32],
+    plane: usize,
     params: &HvolParams,
 ) -> Result<HistogramVolume, HistogramError> {
     let n = v.len();
     if g.len() != n || h.len() != n {
         return Err(HistogramError::Geometry("v, g and f2 must have the same number of voxels".into()));
     }
+    if plane == 0 || n % plane != 0 {
+        return Err(HistogramError::Geometry(format!("{n} voxels are not whole z-slices of {plane} voxels")));
+    }
     let axes = HvolAxes::of(v, g, h, params)?;
-    // One pass: the (v, g, f'') counts and the per-(v, g) sums over the
-    // voxels inside all three ranges. One accumulator per thread; the sums
-    // are kept per fixed part of the voxels, so they do not depend on the
-    // thread count.
-    let parts = fixed_parts(n);
+    let slices = n / plane;
+    let parts = fixed_parts(slices);
     let tasks: Vec<HvolAccumulator> = part_groups(rayon::current_num_threads())
         .into_par_iter()
         .map(|group| {
             let mut acc = HvolAccumulator::new(&axes, n)?;
-            for p in group {
-                let range = parts[p].clone();
-                acc.add(p, &v[range.clone()], &g[range.clone()], &h[range]);
+            for k in parts[group.start].start..parts[group.end - 1].end {
+                let at = k * plane..(k + 1) * plane;
+                acc.add_slice(k, slices, &v[at.clone()], &g[at.clone()], &h[at]);
             }
             Ok(acc)
         })

@@ -63,8 +63,7 @@ pub fn histogram_volume_derived(
         |_| HvolAccumulator::new(&axes, n),
         |acc, k, slice| {
             if let Ok(acc) = acc {
-                let part = parts.iter().position(|p| p.contains(&k)).unwrap_or(0);
-                acc.add(part, &v[k * plane..(k + 1) * plane], &slice[0], &slice[1]);
+                acc.add_slice(k, nz, &v[k * plane..(k + 1) * plane], &slice[0], &slice[1]);
             }
         },
     )?;

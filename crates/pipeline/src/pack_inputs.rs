@@ -133,7 +133,13 @@ pub fn luts(
                         let (Some(v), Some(g), Some(f2)) = (get("v"), get("g"), get("f2")) else {
                             return Err(HistogramError::Degenerate("the default opacity needs v, g and f2".into()));
                         };
-                        computed = histogram_volume(v.samples(), g.samples(), f2.samples(), &HvolParams::default())?;
+                        computed = histogram_volume(
+                            v.samples(),
+                            g.samples(),
+                            f2.samples(),
+                            v.plane_len(),
+                            &HvolParams::default(),
+                        )?;
                         &computed
                     }
                 };

@@ -313,7 +313,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         if h.hvol
             && let Some(f2) = get("f2")
         {
-            let hv = histogram_volume(v.samples(), g.samples(), f2.samples(), &HvolParams::default())
+            let hv = histogram_volume(v.samples(), g.samples(), f2.samples(), v.plane_len(), &HvolParams::default())
                 .map_err(|e| err(e.to_string()))?;
             boundaries = mdtf_histogram::detect_boundaries(&hv);
             arches = crate::figures::boundary_arches(&boundaries);

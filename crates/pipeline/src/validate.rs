@@ -140,6 +140,7 @@ pub fn validate(n: usize, dir: &Path, params: &ValidateParams) -> Result<Vec<Che
         value.samples(),
         g.samples(),
         f2.samples(),
+        value.plane_len(),
         &HvolParams { g_thresh: Some(0.0), ..Default::default() },
     )
     .map_err(|e| e.to_string())?;

@@ -30,6 +30,20 @@ impl Geometry {
         self
     }
 
+    /// The grid of planes `z` (clamped to the grid) where they lie in this
+    /// one: the geometry of a z-slab of a slab-by-slab run.
+    pub fn z_slab(&self, z: std::ops::Range<usize>) -> Geometry {
+        let nz = self.dims[2];
+        let (z0, z1) = (z.start.min(nz), z.end.min(nz).max(z.start.min(nz)));
+        let mut geometry = self.clone();
+        geometry.dims[2] = z1 - z0;
+        let shift = z0 as f64 * geometry.spacing[2];
+        for a in 0..3 {
+            geometry.origin[a] += shift * geometry.directions[2][a];
+        }
+        geometry
+    }
+
     /// Number of voxels.
     pub fn voxel_count(&self) -> usize {
         self.dims.iter().product()

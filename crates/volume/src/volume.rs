@@ -35,6 +35,11 @@ impl Volume {
         Volume { geometry, data }
     }
 
+    /// Voxels per z-slice (nx * ny).
+    pub fn plane_len(&self) -> usize {
+        self.geometry.dims[0] * self.geometry.dims[1]
+    }
+
     /// The samples as one slice in x-fastest order.
     pub fn samples(&self) -> &[f32] {
         // Constructors keep the array in standard layout.
@@ -56,12 +61,7 @@ impl Volume {
     pub fn z_slab(&self, z: std::ops::Range<usize>) -> Volume {
         let nz = self.geometry.dims[2];
         let (z0, z1) = (z.start.min(nz), z.end.min(nz).max(z.start.min(nz)));
-        let mut geometry = self.geometry.clone();
-        geometry.dims[2] = z1 - z0;
-        let shift = z0 as f64 * geometry.spacing[2];
-        for a in 0..3 {
-            geometry.origin[a] += shift * geometry.directions[2][a];
-        }
+        let geometry = self.geometry.z_slab(z0..z1);
         let data = self.data.slice_axis(ndarray::Axis(0), ndarray::Slice::from(z0..z1)).to_owned();
         Volume { geometry, data }
     }
