@@ -207,7 +207,7 @@ pub fn histogram_volume(
     if g.len() != n || h.len() != n {
         return Err(HistogramError::Geometry("v, g and f2 must have the same number of voxels".into()));
     }
-    if plane == 0 || n % plane != 0 {
+    if plane == 0 || !n.is_multiple_of(plane) {
         return Err(HistogramError::Geometry(format!("{n} voxels are not whole z-slices of {plane} voxels")));
     }
     let axes = HvolAxes::of(v, g, h, params)?;
