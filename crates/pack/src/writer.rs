@@ -11,6 +11,7 @@ use crate::{Lut, PackError, PackParams};
 use mdtf_volume::{Geometry, Volume, VolumeError, write_file_atomically};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
+use std::ops::Range;
 use std::path::Path;
 
 /// The textures of `params.profile`, in order, with `params.dtype` applied.
@@ -51,49 +52,94 @@ impl<'a> TextureEncoder<'a> {
         layout: &TextureLayout,
         get: &dyn Fn(&str) -> Option<&'v Volume>,
     ) -> Result<Prepared<'v>, PackError> {
-        let geometry = &self.geometry;
         let mut decodes = Vec::with_capacity(layout.components.len());
         for (ci, c) in layout.components.iter().enumerate() {
             let Some(c) = c else {
                 decodes.push(None);
                 continue;
             };
-            let v = get(c).ok_or_else(|| PackError::MissingChannels {
-                profile: self.params.profile.to_string(),
-                missing: format!("{c} (made by the {} stage)", describe(c, !self.params.fields.is_empty()).2),
-            })?;
-            if !v.geometry.same_grid(geometry) {
+            let v = get(c).ok_or_else(|| self.missing(c))?;
+            if !v.geometry.same_grid(&self.geometry) {
                 return Err(PackError::Geometry(format!("channel {c} is not on the grid of the pack")));
             }
-            let [min, max] = match self.params.ranges.get(c) {
-                Some(r) => *r,
-                // unit normals: the range is known, no pass over the data
-                None if matches!(c.as_str(), "nx" | "ny" | "nz") => [-1.0, 1.0],
+            let range = match self.known_range(c) {
+                Some(r) => r,
                 None => *self
                     .measured
                     .entry(c.clone())
                     .or_insert_with(|| v.finite_range().map_or([0.0, 0.0], |(lo, hi)| [lo as f64, hi as f64])),
             };
-            let (meaning, units, stage, signed) = describe(c, !self.params.fields.is_empty());
-            let d = decode_for(c, min, max, layout.dtype, signed)?;
-            let top = layout.dtype.max_code().unwrap_or(0.0);
-            self.entries.push(ChannelEntry {
-                name: c.to_string(),
-                meaning: meaning.into(),
-                units: units.into(),
-                texture: layout.name.clone(),
-                component: ci,
-                decode: d,
-                range: [d.offset, d.offset + d.scale * top],
-                source: self
-                    .sources
-                    .get(c)
-                    .cloned()
-                    .unwrap_or(ChannelSource { stage: stage.into(), params: serde_json::Value::Null }),
-            });
+            let d = self.record(layout, ci, c, range)?;
             decodes.push(Some((v.samples(), d)));
         }
-        Ok(Prepared { dtype: layout.dtype, dims: geometry.dims, decodes })
+        Ok(Prepared { dtype: layout.dtype, dims: self.geometry.dims, decodes })
+    }
+
+    /// Records the manifest entries of texture `layout` whose channels all
+    /// have known ranges (given, or the normals'), for a texture fed slab by
+    /// slab: its decodes per component (None: unused).
+    fn prepare_ranged(&mut self, layout: &TextureLayout) -> Result<Vec<Option<Decode>>, PackError> {
+        let mut decodes = Vec::with_capacity(layout.components.len());
+        for (ci, c) in layout.components.iter().enumerate() {
+            let Some(c) = c else {
+                decodes.push(None);
+                continue;
+            };
+            let Some(range) = self.known_range(c) else {
+                return Err(PackError::Geometry(format!(
+                    "channel {c} of texture {} has no code range: a texture written slab by slab needs each \
+                     channel's range before its first slab",
+                    layout.name
+                )));
+            };
+            decodes.push(Some(self.record(layout, ci, c, range)?));
+        }
+        Ok(decodes)
+    }
+
+    /// The code range of channel `c` known without reading it: given, or [-1, 1] for unit normals.
+    fn known_range(&self, c: &str) -> Option<[f64; 2]> {
+        match self.params.ranges.get(c) {
+            Some(r) => Some(*r),
+            None if matches!(c, "nx" | "ny" | "nz") => Some([-1.0, 1.0]),
+            None => None,
+        }
+    }
+
+    fn missing(&self, c: &str) -> PackError {
+        PackError::MissingChannels {
+            profile: self.params.profile.to_string(),
+            missing: format!("{c} (made by the {} stage)", describe(c, !self.params.fields.is_empty()).2),
+        }
+    }
+
+    /// Records component `ci` (channel `c`, coded over `[min, max]`) of
+    /// texture `layout` in the manifest; returns its decode.
+    fn record(
+        &mut self,
+        layout: &TextureLayout,
+        ci: usize,
+        c: &str,
+        [min, max]: [f64; 2],
+    ) -> Result<Decode, PackError> {
+        let (meaning, units, stage, signed) = describe(c, !self.params.fields.is_empty());
+        let d = decode_for(c, min, max, layout.dtype, signed)?;
+        let top = layout.dtype.max_code().unwrap_or(0.0);
+        self.entries.push(ChannelEntry {
+            name: c.to_string(),
+            meaning: meaning.into(),
+            units: units.into(),
+            texture: layout.name.clone(),
+            component: ci,
+            decode: d,
+            range: [d.offset, d.offset + d.scale * top],
+            source: self
+                .sources
+                .get(c)
+                .cloned()
+                .unwrap_or(ChannelSource { stage: stage.into(), params: serde_json::Value::Null }),
+        });
+        Ok(d)
     }
 
     /// Quantises texture `layout` into `sink`, a slab of z-slices at a time
@@ -216,6 +262,92 @@ impl<'a> PackWriter<'a> {
         Ok(())
     }
 
+    /// Quantises texture `layout` a slab of z-slices at a time and writes it:
+    /// `slab(z)` gives the texture's channels on planes `z` (each a volume of
+    /// those planes), for each range of `slabs` in turn (in order, covering
+    /// every plane once). Every channel needs its code range in the pack's
+    /// parameters (unit normals excepted), since no slab sees the whole
+    /// channel; the bytes equal [`PackWriter::add`]'s with those ranges.
+    pub fn add_slabs(
+        &mut self,
+        layout: &TextureLayout,
+        slabs: &[Range<usize>],
+        slab: &mut dyn FnMut(Range<usize>) -> Result<Vec<(String, Volume)>, PackError>,
+    ) -> Result<(), PackError> {
+        let nz = self.encoder.geometry.dims[2];
+        let covered = slabs.first().is_some_and(|s| s.start == 0)
+            && slabs.last().is_some_and(|s| s.end == nz)
+            && slabs.windows(2).all(|w| w[0].end == w[1].start)
+            && slabs.iter().all(|s| s.start < s.end);
+        if !covered {
+            return Err(PackError::Geometry(format!("the slabs {slabs:?} do not cover the {nz} planes in order")));
+        }
+        if self.encoder.params.nifti {
+            return Err(PackError::Geometry(
+                "NIfTI copies of the textures hold the components slowest and need each whole texture; \
+                 they cannot be written slab by slab"
+                    .into(),
+            ));
+        }
+        let decodes = self.encoder.prepare_ranged(layout)?;
+        let mut failure: Option<PackError> = None;
+        let geometry = self.encoder.geometry.clone();
+        let fields = !self.encoder.params.fields.is_empty();
+        let profile = self.encoder.params.profile.to_string();
+        let mut write_slabs = |w: &mut dyn std::io::Write| -> std::io::Result<()> {
+            let mut bytes = Vec::new();
+            for z in slabs {
+                let chans = match slab(z.clone()) {
+                    Ok(c) => c,
+                    Err(e) => {
+                        failure = Some(e);
+                        return Err(std::io::Error::other("a slab's channels could not be made"));
+                    }
+                };
+                let mut slab_decodes = Vec::with_capacity(decodes.len());
+                for (c, d) in layout.components.iter().zip(&decodes) {
+                    let (Some(c), Some(d)) = (c, d) else {
+                        slab_decodes.push(None);
+                        continue;
+                    };
+                    let Some((_, v)) = chans.iter().find(|(n, _)| n == c) else {
+                        failure = Some(PackError::MissingChannels {
+                            profile: profile.clone(),
+                            missing: format!("{c} (made by the {} stage)", describe(c, fields).2),
+                        });
+                        return Err(std::io::Error::other("a channel is missing from a slab"));
+                    };
+                    if v.geometry.dims != [geometry.dims[0], geometry.dims[1], z.len()] {
+                        failure = Some(PackError::Geometry(format!(
+                            "channel {c} of planes {z:?} has {} voxels, not {} x {} x {}",
+                            v.geometry.dims_string(),
+                            geometry.dims[0],
+                            geometry.dims[1],
+                            z.len()
+                        )));
+                        return Err(std::io::Error::other("a slab is not on the pack's grid"));
+                    }
+                    slab_decodes.push(Some((v.samples(), *d)));
+                }
+                let p = Prepared {
+                    dtype: layout.dtype,
+                    dims: [geometry.dims[0], geometry.dims[1], z.len()],
+                    decodes: slab_decodes,
+                };
+                bytes.resize(p.plane_bytes() * z.len(), 0);
+                p.encode_planes(0, &mut bytes);
+                w.write_all(&bytes)?;
+            }
+            Ok(())
+        };
+        let written = write_texture(self.dir, &geometry, layout, TextureBytes::Slabs(&mut write_slabs), false);
+        if let Some(e) = failure {
+            return Err(e);
+        }
+        self.textures.push(written?);
+        Ok(())
+    }
+
     /// Writes the lookup tables and `manifest.json`; returns the manifest.
     pub fn finish(self, luts: &[Lut], provenance: Provenance) -> Result<Manifest, PackError> {
         let e = self.encoder;
@@ -227,6 +359,8 @@ impl<'a> PackWriter<'a> {
 pub(crate) enum TextureBytes<'a, 'v> {
     Whole(&'a [u8]),
     Streamed(&'a Prepared<'v>),
+    /// Written by the closure, slab by slab.
+    Slabs(&'a mut dyn FnMut(&mut dyn std::io::Write) -> std::io::Result<()>),
 }
 
 /// Writes one texture's bytes as `<name>.raw` with a detached NRRD header
@@ -242,9 +376,11 @@ pub(crate) fn write_texture(
     let comps = layout.components.len();
     let data_file = format!("{}.raw", layout.name);
     let header_file = format!("{}.nhdr", layout.name);
-    write_file_atomically(&dir.join(&data_file), |w| match &bytes {
+    let mut bytes = bytes;
+    write_file_atomically(&dir.join(&data_file), |w| match &mut bytes {
         TextureBytes::Whole(b) => w.write_all(b),
         TextureBytes::Streamed(p) => p.stream(&mut |b| w.write_all(b)),
+        TextureBytes::Slabs(f) => f(w),
     })?;
     let type_name = match layout.dtype {
         Dtype::U8 => "uint8",
