@@ -26,6 +26,7 @@ pub mod metaimage;
 mod nifti_io;
 pub mod nrrd;
 pub mod output;
+mod planes;
 mod png_out;
 mod range;
 mod raw;
@@ -40,6 +41,7 @@ pub use io::{Format, WriteOptions, read, read_scalar, read_with_info, write, wri
 pub use limits::{available_memory, human_bytes};
 pub use nifti_io::{read_nifti, read_nifti_with_info, write_nifti};
 pub use output::{Inputs, OutputFolder, write_file_atomically};
+pub use planes::PlaneReader;
 pub use png_out::{PngColour, register_figure_font, write_png};
 pub use range::{finite_range, finite_sample_range, median, order_statistic};
 pub use raw::{RawSpec, read_raw};

@@ -12,7 +12,7 @@ use crate::geometry::Geometry;
 use crate::limits::check_dims;
 use crate::output::write_file_atomically;
 use crate::samples::{
-    FieldAxis, FileInfo, ReadOptions, SampleLayout, drain_rest, open_maybe_gz, read_decoded, write_fields,
+    FieldAxis, FileInfo, ReadOptions, SampleLayout, SampleStream, drain_rest, open_maybe_gz, read_decoded, write_fields,
 };
 use crate::volume::{Field, MultiField};
 use nifti::NiftiHeader;
@@ -44,6 +44,22 @@ pub fn read_nifti(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
 
 /// [`read_nifti`], also returning how the file stores its samples.
 pub fn read_nifti_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiField, FileInfo)> {
+    let (mut stream, geometry) = open_samples(path)?;
+    let (layout, compressed) = (stream.layout, stream.compressed);
+    let arrays = read_decoded(path, &mut stream.src, &layout, compressed, opts)?;
+    // Trailing bytes are allowed in NIfTI; draining still checks a gzip CRC.
+    drain_rest(path, &mut stream.src, compressed)?;
+    let fields = arrays
+        .into_iter()
+        .enumerate()
+        .map(|(i, data)| Field { name: if layout.fields == 1 { "value".into() } else { format!("field{i}") }, data })
+        .collect();
+    let info = FileInfo::new("NIfTI-1", &layout, compressed);
+    Ok((MultiField::new(geometry, fields)?, info))
+}
+
+/// The samples of a NIfTI-1 file as a stream at its first sample, with their layout and grid.
+pub(crate) fn open_samples(path: &Path) -> Result<(SampleStream, Geometry)> {
     let (mut src, compressed) = open_maybe_gz(path)?;
     let mut head = vec![0u8; HEADER_BYTES];
     let got = read_up_to(&mut src, &mut head).map_err(|e| stream_error(path, e, compressed))?;
@@ -85,16 +101,7 @@ pub fn read_nifti_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiFie
     if skipped < skip {
         return Err(VolumeError::Truncated { path: path.to_path_buf(), expected: layout.byte_len(), found: 0 });
     }
-    let arrays = read_decoded(path, &mut src, &layout, compressed, opts)?;
-    // Trailing bytes are allowed in NIfTI; draining still checks a gzip CRC.
-    drain_rest(path, &mut src, compressed)?;
-    let fields = arrays
-        .into_iter()
-        .enumerate()
-        .map(|(i, data)| Field { name: if layout.fields == 1 { "value".into() } else { format!("field{i}") }, data })
-        .collect();
-    let info = FileInfo::new("NIfTI-1", &layout, compressed);
-    Ok((MultiField::new(geometry, fields)?, info))
+    Ok((SampleStream { src, layout, compressed }, geometry))
 }
 
 fn read_up_to(src: &mut dyn Read, buf: &mut [u8]) -> std::io::Result<usize> {

@@ -94,6 +94,16 @@ impl SampleLayout {
     }
 }
 
+/// A file's samples as a stream positioned at the first one.
+pub(crate) struct SampleStream {
+    /// The bytes from the first sample on (decompressed when `compressed`).
+    pub src: Box<dyn Read>,
+    /// How they are laid out.
+    pub layout: SampleLayout,
+    /// Whether the file stores them gzip-compressed.
+    pub compressed: bool,
+}
+
 /// Reads exactly the samples of `layout` from `src` and decodes them, in
 /// chunks (no second copy of the volume as bytes), into one array per field
 /// with the scale and the NaN policy applied. A short stream is reported as

@@ -18,7 +18,7 @@ use crate::geometry::Geometry;
 use crate::limits::check_dims;
 use crate::output::{OutputLock, StagedFile, old_pair_data, publish_pair, sweep, write_file_atomically};
 use crate::samples::{
-    FieldAxis, FileInfo, ReadOptions, SampleLayout, decode_fields, drain_rest, read_decoded, write_fields,
+    FieldAxis, FileInfo, ReadOptions, SampleLayout, SampleStream, decode_fields, drain_rest, read_decoded, write_fields,
 };
 use crate::volume::{Field, MultiField};
 use header::format_vector;
@@ -32,6 +32,44 @@ pub fn read_nrrd(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
 
 /// [`read_nrrd`], also returning how the file stores its samples.
 pub fn read_nrrd_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiField, FileInfo)> {
+    let DataStart { header: h, layout, geometry, data_path, data } = open_data(path)?;
+    let arrays = match h.encoding {
+        Encoding::Raw => read_raw_encoded(&data_path, data, &h, &layout, opts)?,
+        Encoding::Gzip => {
+            let mut gz = flate2::bufread::MultiGzDecoder::new(data);
+            skip_bytes(&data_path, &mut gz, h.byte_skip as u64, &layout, true)?;
+            let arrays = read_decoded(&data_path, &mut gz, &layout, true, opts)?;
+            let extra = drain_rest(&data_path, &mut gz, true)?;
+            refuse_extra(&data_path, &layout, extra)?;
+            arrays
+        }
+        Encoding::Ascii => {
+            let (bytes, ascii_layout) = read_ascii(&data_path, data, &layout)?;
+            decode_fields(&data_path, &bytes, &ascii_layout, opts)?
+        }
+    };
+    let names = match &h.field_names {
+        Some(n) if n.len() == arrays.len() => n.clone(),
+        _ if arrays.len() == 1 => vec!["value".to_string()],
+        _ => (0..arrays.len()).map(|i| format!("field{i}")).collect(),
+    };
+    let fields = names.into_iter().zip(arrays).map(|(name, data)| Field { name, data }).collect();
+    let format = if h.data_file.is_some() { "NRRD (detached header)" } else { "NRRD" };
+    let info = FileInfo::new(format, &layout, h.encoding == Encoding::Gzip);
+    Ok((MultiField::new(geometry, fields)?, info))
+}
+
+/// A NRRD's header, layout and grid, and its data stream after the skipped lines.
+struct DataStart {
+    header: NrrdHeader,
+    layout: SampleLayout,
+    geometry: Geometry,
+    /// The file the samples are in (the header itself when attached).
+    data_path: PathBuf,
+    data: Box<dyn BufRead>,
+}
+
+fn open_data(path: &Path) -> Result<DataStart> {
     let file = std::fs::File::open(path).map_err(|e| VolumeError::io(path, e))?;
     if file.metadata().map_err(|e| VolumeError::io(path, e))?.len() == 0 {
         return Err(VolumeError::Empty { path: path.to_path_buf() });
@@ -62,30 +100,22 @@ pub fn read_nrrd_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiFiel
             return Err(VolumeError::Truncated { path: data_path, expected: layout.byte_len(), found: 0 });
         }
     }
-    let arrays = match h.encoding {
-        Encoding::Raw => read_raw_encoded(&data_path, data, &h, &layout, opts)?,
-        Encoding::Gzip => {
-            let mut gz = flate2::bufread::MultiGzDecoder::new(data);
-            skip_bytes(&data_path, &mut gz, h.byte_skip as u64, &layout, true)?;
-            let arrays = read_decoded(&data_path, &mut gz, &layout, true, opts)?;
-            let extra = drain_rest(&data_path, &mut gz, true)?;
-            refuse_extra(&data_path, &layout, extra)?;
-            arrays
-        }
-        Encoding::Ascii => {
-            let (bytes, ascii_layout) = read_ascii(&data_path, data, &layout)?;
-            decode_fields(&data_path, &bytes, &ascii_layout, opts)?
-        }
-    };
-    let names = match &h.field_names {
-        Some(n) if n.len() == arrays.len() => n.clone(),
-        _ if arrays.len() == 1 => vec!["value".to_string()],
-        _ => (0..arrays.len()).map(|i| format!("field{i}")).collect(),
-    };
-    let fields = names.into_iter().zip(arrays).map(|(name, data)| Field { name, data }).collect();
-    let format = if h.data_file.is_some() { "NRRD (detached header)" } else { "NRRD" };
-    let info = FileInfo::new(format, &layout, h.encoding == Encoding::Gzip);
-    Ok((MultiField::new(geometry, fields)?, info))
+    Ok(DataStart { header: h, layout, geometry, data_path, data })
+}
+
+/// The samples of a raw or gzip NRRD (attached or detached) as a stream at
+/// its first sample, with their layout and grid; None for encodings read
+/// only whole (ascii, or raw samples located from the file's end).
+pub(crate) fn open_samples(path: &Path) -> Result<Option<(SampleStream, Geometry)>> {
+    let DataStart { header: h, layout, geometry, data_path, data } = open_data(path)?;
+    if h.encoding == Encoding::Ascii || (h.encoding == Encoding::Raw && h.byte_skip == -1) {
+        return Ok(None);
+    }
+    let gzip = h.encoding == Encoding::Gzip;
+    let mut src: Box<dyn Read> =
+        if gzip { Box::new(flate2::bufread::MultiGzDecoder::new(data)) } else { Box::new(data) };
+    skip_bytes(&data_path, &mut src, h.byte_skip.max(0) as u64, &layout, gzip)?;
+    Ok(Some((SampleStream { src, layout, compressed: gzip }, geometry)))
 }
 
 fn refuse_extra(path: &Path, layout: &SampleLayout, extra: u64) -> Result<()> {
