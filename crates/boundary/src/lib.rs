@@ -230,7 +230,13 @@ impl ResolvedParams {
 /// The noise floor of a g volume: max(2 x median g, 1e-3 x value range /
 /// L_min), value units per world unit. With no finite g, the second term.
 pub fn noise_floor(g: &[f32], value_range: f64, l_min: f64) -> f64 {
-    let median = mdtf_volume::median(g).unwrap_or(0.0) as f64;
+    noise_floor_of_median(mdtf_volume::median(g), value_range, l_min)
+}
+
+/// [`noise_floor`] from the median of g (None: no finite g), for runs that
+/// find the median over blocks.
+pub fn noise_floor_of_median(median: Option<f32>, value_range: f64, l_min: f64) -> f64 {
+    let median = median.unwrap_or(0.0) as f64;
     (NOISE_FLOOR_MEDIANS * median).max(NOISE_FLOOR_RANGE_FRACTION * value_range / l_min.max(f64::MIN_POSITIVE))
 }
 

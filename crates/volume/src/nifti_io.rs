@@ -378,6 +378,62 @@ pub fn write_nifti(path: &Path, mf: &MultiField, ty: SampleType) -> Result<()> {
     })
 }
 
+/// Writes a one-field `.nii` or `.nii.gz` on `geometry` slab by slab (for
+/// runs that never hold the whole volume): `slab(z)` gives the samples of
+/// planes `z` (x-fastest) for each range of `slabs` in turn, in order and
+/// covering every plane. The bytes equal [`write_nifti`]'s of the whole
+/// volume; atomic like it.
+pub fn write_nifti_slabs(
+    path: &Path,
+    geometry: &Geometry,
+    ty: SampleType,
+    slabs: &[std::ops::Range<usize>],
+    slab: &mut dyn FnMut(std::ops::Range<usize>) -> std::io::Result<Vec<f32>>,
+) -> Result<()> {
+    let nz = geometry.dims[2];
+    if slabs.first().map(|s| s.start) != Some(0)
+        || slabs.last().map(|s| s.end) != Some(nz)
+        || slabs.windows(2).any(|w| w[0].end != w[1].start)
+    {
+        return Err(VolumeError::header(path, format!("the slabs {slabs:?} do not cover the {nz} planes in order")));
+    }
+    let header =
+        header_bytes(&header_for(geometry), &geometry.dims, ty).ok_or_else(|| VolumeError::UnsupportedType {
+            path: path.to_path_buf(),
+            name: ty.name().into(),
+            supported: "f32, u8, u16, i16 for writing",
+        })?;
+    let plane = geometry.dims[0] * geometry.dims[1];
+    let mut unrepresentable = None;
+    let gz = path.to_string_lossy().to_ascii_lowercase().ends_with(".gz");
+    let mut body = |w: &mut dyn Write| -> std::io::Result<()> {
+        w.write_all(&header)?;
+        for z in slabs {
+            let data = slab(z.clone())?;
+            if let Some((index, value)) = first_unrepresentable(&data, ty) {
+                unrepresentable = Some((z.start * plane + index, value));
+                return Err(std::io::Error::other("a sample is not representable"));
+            }
+            write_fields(w, &[&data], FieldAxis::Slowest, ty)?;
+        }
+        Ok(())
+    };
+    let written = write_file_atomically(path, |w| {
+        if gz {
+            let mut enc = flate2::write::GzEncoder::new(w, flate2::Compression::fast());
+            body(&mut enc)?;
+            enc.finish()?;
+            Ok(())
+        } else {
+            body(w)
+        }
+    });
+    if let Some((index, value)) = unrepresentable {
+        return Err(VolumeError::NotRepresentable { path: path.to_path_buf(), value, index, target: ty.name() });
+    }
+    written
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -37,13 +37,29 @@ pub fn finite_sample_range(data: &[f32]) -> Option<(f32, f32)> {
 /// reads `data` twice and allocates two 2^16-bin histograms per worker,
 /// never a copy of the data, and the counts do not depend on the order.
 pub fn order_statistic(data: &[f32], k: u64) -> Option<f32> {
+    let none: Result<Option<f32>, std::convert::Infallible> = order_statistic_of_pieces(k, |visit| {
+        visit(data);
+        Ok(())
+    });
+    none.unwrap_or_else(|e| match e {})
+}
+
+/// [`order_statistic`] of samples that come in pieces (the blocks of a
+/// slab-by-slab run): `pass(visit)` hands every piece to `visit`, in any
+/// order; it is called twice (the two passes of the radix select). Its
+/// first error stops the select.
+pub fn order_statistic_of_pieces<E>(
+    k: u64,
+    mut pass: impl FnMut(&mut dyn FnMut(&[f32])) -> Result<(), E>,
+) -> Result<Option<f32>, E> {
     const BUCKETS: usize = 1 << 16;
     fn key(v: f32) -> u32 {
         let b = v.to_bits();
         if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
     }
-    let count = |select: &(dyn Fn(u32) -> Option<usize> + Sync)| -> Vec<u64> {
-        data.par_chunks(1 << 18)
+    let count_piece = |data: &[f32], select: &(dyn Fn(u32) -> Option<usize> + Sync), into: &mut Vec<u64>| {
+        let h = data
+            .par_chunks(1 << 18)
             .map(|c| {
                 let mut h = vec![0u64; BUCKETS];
                 for &v in c.iter().filter(|v| v.is_finite()) {
@@ -59,7 +75,8 @@ pub fn order_statistic(data: &[f32], k: u64) -> Option<f32> {
                     a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
                     a
                 },
-            )
+            );
+        into.iter_mut().zip(&h).for_each(|(x, y)| *x += y);
     };
     // the bucket holding the k-th key, and how many keys lie in lower buckets
     let find = |h: &[u64], k: u64| -> Option<(usize, u64)> {
@@ -72,12 +89,15 @@ pub fn order_statistic(data: &[f32], k: u64) -> Option<f32> {
         }
         None
     };
-    let (hi, below) = find(&count(&|key| Some((key >> 16) as usize)), k)?;
-    let low = count(&|key| ((key >> 16) as usize == hi).then_some((key & 0xffff) as usize));
-    let (lo, _) = find(&low, k - below)?;
+    let mut upper = vec![0u64; BUCKETS];
+    pass(&mut |d| count_piece(d, &|key| Some((key >> 16) as usize), &mut upper))?;
+    let Some((hi, below)) = find(&upper, k) else { return Ok(None) };
+    let mut low = vec![0u64; BUCKETS];
+    pass(&mut |d| count_piece(d, &|key| ((key >> 16) as usize == hi).then_some((key & 0xffff) as usize), &mut low))?;
+    let Some((lo, _)) = find(&low, k - below) else { return Ok(None) };
     let key = ((hi as u32) << 16) | lo as u32;
     let bits = if key >> 31 == 1 { key & 0x7fff_ffff } else { !key };
-    Some(f32::from_bits(bits))
+    Ok(Some(f32::from_bits(bits)))
 }
 
 /// The median of the finite samples of `data` (the lower one of an even
@@ -119,6 +139,31 @@ fn block_range(data: &[f32]) -> Option<(f32, f32)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn order_statistics_of_pieces_equal_those_of_a_sorted_copy_and_pass_errors_on() {
+        let data: Vec<f32> = (0..5000u32).map(|i| ((i * 7919) % 5003) as f32 * 0.37 - 300.0).collect();
+        let mut sorted = data.clone();
+        sorted.sort_by(f32::total_cmp);
+        for k in [0u64, 1, 2499, 4998, 4999] {
+            let pieces = |visit: &mut dyn FnMut(&[f32])| -> Result<(), ()> {
+                // uneven pieces, out of order
+                for r in [3000..5000, 0..1, 1..3000] {
+                    visit(&data[r]);
+                }
+                Ok(())
+            };
+            assert_eq!(order_statistic_of_pieces(k, pieces), Ok(Some(sorted[k as usize])), "k = {k}");
+        }
+        assert_eq!(
+            order_statistic_of_pieces(5000, |v: &mut dyn FnMut(&[f32])| -> Result<(), ()> {
+                v(&data);
+                Ok(())
+            }),
+            Ok(None)
+        );
+        assert_eq!(order_statistic_of_pieces(3, |_: &mut dyn FnMut(&[f32])| Err("disk")), Err("disk"));
+    }
 
     #[test]
     fn order_statistics_equal_those_of_a_sorted_copy() {

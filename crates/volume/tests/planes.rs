@@ -60,3 +60,32 @@ fn files_read_only_whole_are_declined_and_truncation_is_reported() {
     let e = r.read(6..11).unwrap_err().to_string();
     assert!(e.contains("truncated") || e.contains("short") || e.contains("expected"), "{e}");
 }
+
+#[test]
+fn a_nifti_written_slab_by_slab_has_the_whole_writes_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let v = volume();
+    for name in ["w.nii", "w.nii.gz"] {
+        let whole = dir.path().join(format!("whole-{name}"));
+        mdtf_volume::write_nifti(&whole, &mdtf_volume::MultiField::from(v.clone()), SampleType::F32).unwrap();
+        let slabs = [0..1, 1..8, 8..11];
+        let path = dir.path().join(name);
+        mdtf_volume::write_nifti_slabs(&path, &v.geometry, SampleType::F32, &slabs, &mut |z| {
+            Ok(v.z_slab(z).data.iter().copied().collect())
+        })
+        .unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), std::fs::read(&whole).unwrap(), "{name}");
+    }
+    // a slab gap, and a value u8 cannot hold, are refused, leaving no file
+    let path = dir.path().join("bad.nii");
+    let gap = [0..3, 4..11];
+    let e = mdtf_volume::write_nifti_slabs(&path, &v.geometry, SampleType::F32, &gap, &mut |z| {
+        Ok(v.z_slab(z).data.iter().copied().collect())
+    });
+    assert!(e.unwrap_err().to_string().contains("do not cover"));
+    let all = [0..11];
+    let e = mdtf_volume::write_nifti_slabs(&path, &v.geometry, SampleType::U8, &all, &mut |z| {
+        Ok(v.z_slab(z).data.iter().copied().collect())
+    });
+    assert!(e.is_err() && !path.exists());
+}
