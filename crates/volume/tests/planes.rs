@@ -83,7 +83,7 @@ fn a_nifti_written_slab_by_slab_has_the_whole_writes_bytes() {
         Ok(v.z_slab(z).data.iter().copied().collect())
     });
     assert!(e.unwrap_err().to_string().contains("do not cover"));
-    let all = [0..11];
+    let all = [std::ops::Range { start: 0, end: 11 }];
     let e = mdtf_volume::write_nifti_slabs(&path, &v.geometry, SampleType::U8, &all, &mut |z| {
         Ok(v.z_slab(z).data.iter().copied().collect())
     });
