@@ -621,6 +621,16 @@ pub struct RunArgs {
     /// (to learn its fields and grid) and writes nothing.
     #[arg(long)]
     pub plan: bool,
+    /// Run slab by slab within this much memory (e.g. 2GiB, 512MiB): the input is read by planes,
+    /// each stage works on z-slabs grown by its halo, and the channels wait between stages in
+    /// files inside the output's staging folder (disk: about 40 bytes a voxel). The outputs are
+    /// byte-identical to a whole-volume run. One-field inputs, slicer-3dtf and distance-tf.
+    #[arg(long, value_name = "SIZE", value_parser = mdtf_volume::parse_size)]
+    pub memory_budget: Option<u64>,
+    /// Run slab by slab with slabs of this many z-planes (for checks and benchmarks; see
+    /// --memory-budget).
+    #[arg(long, value_name = "N", conflicts_with = "memory_budget")]
+    pub slab_planes: Option<usize>,
 }
 
 /// `mdtf validate`.

@@ -52,6 +52,14 @@ impl Default for DeriveParams {
     }
 }
 
+/// The default [`DeriveParams::epsilon`] of data whose finite values span
+/// `span` (1 for fields normalised to [0, 1]) on a grid of smallest spacing
+/// `min_spacing`: 1e-6 x span / min_spacing. A slab-by-slab run passes the
+/// whole volume's, so every slab uses the same.
+pub fn default_epsilon(span: f32, min_spacing: f64) -> f32 {
+    1e-6 * span / min_spacing as f32
+}
+
 /// Errors of the derive stage.
 #[derive(Debug, thiserror::Error)]
 pub enum DeriveError {
@@ -283,7 +291,7 @@ fn prepare<'a>(input: &'a MultiField, params: &DeriveParams) -> Result<Prepared<
         .collect();
     let epsilon = params.epsilon.unwrap_or_else(|| {
         let span = ranges.iter().map(|(l, h)| h - l).fold(0.0f32, f32::max);
-        if normalise { 1e-6 / g.min_spacing() as f32 } else { 1e-6 * span / g.min_spacing() as f32 }
+        default_epsilon(if normalise { 1.0 } else { span }, g.min_spacing())
     });
 
     let fused = measures::fusable_items(&items) && Engine::fusable(&fields);

@@ -146,6 +146,11 @@ impl ChannelStats {
             .reduce(|| ChannelStats::new(clip, n), ChannelStats::merge)
     }
 
+    /// How many finite samples were added.
+    pub fn finite_count(&self) -> u64 {
+        self.finite
+    }
+
     /// Smallest and largest finite sample, if any.
     pub fn finite_range(&self) -> Option<(f32, f32)> {
         (self.finite > 0).then_some((self.lo, self.hi))

@@ -9,12 +9,14 @@
 //! [`channel::Channel`] variant and its row, the derive item or stage that
 //! produces it, and its meaning in `mdtf_pack::describe` if it is packed.
 
+pub mod blocks;
 pub mod boundary_chain;
 pub mod channel;
 pub mod channels;
 pub mod figures;
 pub mod file;
 pub mod gaussians;
+pub mod hist_files;
 pub mod pack_inputs;
 pub mod plan;
 pub mod report_page;

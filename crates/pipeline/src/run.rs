@@ -9,10 +9,7 @@ use crate::plan::{Plan, Step};
 use mdtf_boundary::{AlphaMap, BoundaryInput};
 use mdtf_datagen::{MultiFieldPhantom, RadialPhantom, add_gaussian_noise, erf_sphere, min_extent};
 use mdtf_derive::{DeriveParams, Item, Kernel};
-use mdtf_histogram::{
-    Axis, AxisSpec, HvolParams, Scale, count, histogram_volume, hit_mask, write_histogram, write_histogram_marked,
-    write_hvol, write_stretched,
-};
+use mdtf_histogram::{Axis, AxisSpec, HvolParams, count, histogram_volume, hit_mask};
 use mdtf_pack::{PackParams, PackWriter, Profile, Provenance, parse_tf};
 use mdtf_volume::dicom::DicomOptions;
 use mdtf_volume::{
@@ -33,7 +30,7 @@ pub struct RunError {
     pub message: String,
 }
 
-fn fail(stage: &str) -> impl Fn(String) -> RunError + '_ {
+pub(crate) fn fail(stage: &str) -> impl Fn(String) -> RunError + '_ {
     move |message| RunError { stage: stage.into(), message }
 }
 
@@ -101,7 +98,7 @@ pub struct BoundarySummary {
 }
 
 /// Peak resident set size of this process in MiB (VmHWM), 0 where unknown.
-fn peak_mib() -> f64 {
+pub(crate) fn peak_mib() -> f64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
         .and_then(|s| {
@@ -128,17 +125,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let inputs = run_inputs(p, opts, &base);
     let out = OutputFolder::begin(&opts.output, &inputs).map_err(|e| fail("output")(e.to_string()))?;
     let dir = out.path();
-    let mut stages = Vec::new();
-    let mut stage = |name: &str, t: Instant, voxels: usize, outputs: Vec<String>| {
-        let seconds = t.elapsed().as_secs_f64();
-        stages.push(StageReport {
-            stage: name.into(),
-            seconds,
-            mvoxel_per_s: voxels as f64 / seconds.max(1e-9) / 1e6,
-            peak_mib: peak_mib(),
-            outputs,
-        });
-    };
+    let mut stages = Stages::default();
 
     // input
     on_stage("input");
@@ -148,7 +135,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let mut d_max = None;
     let geo = input.geometry.clone();
     let n = geo.voxel_count();
-    stage("input", t, n, vec![]);
+    stages.done("input", t, n, vec![]);
 
     // what the outputs need: derive items, tracing, when each channel is freed
     let profile = p.pack.profile;
@@ -190,7 +177,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
                 }
             }
         }
-        stage("derive", t, n, vec![]);
+        stages.done("derive", t, n, vec![]);
     }
     let multi_items = plan.derive_fields.clone();
     if let Some(mf) = &input
@@ -203,7 +190,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         for (item, m) in out.items {
             chans.insert(item.name().into(), m.into_scalar().map_err(|e| fail("derive")(e.to_string()))?);
         }
-        stage("derive (multi-field)", t, n, vec![]);
+        stages.done("derive (multi-field)", t, n, vec![]);
     }
     // the input's fields move into the channels once the multi-field derive is done with them
     if let Some(mf) = input {
@@ -234,7 +221,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
                 let filter =
                     |v: &Volume| crate::boundary_chain::prefilter(v, &pf).map_err(|e| fail("prefilter")(e.to_string()));
                 let pair = (filter(g0)?, filter(f20)?);
-                stage("prefilter", t, n, vec![]);
+                stages.done("prefilter", t, n, vec![]);
                 Some(pair)
             }
             None => None,
@@ -264,7 +251,12 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         for c in plan.freed_after(Step::Trace) {
             chans.remove(&c.name(&fields));
         }
-        stage("boundary", t, n, vec!["boundary/boundary_report.csv".into(), "boundary/boundary_report.png".into()]);
+        stages.done(
+            "boundary",
+            t,
+            n,
+            vec!["boundary/boundary_report.csv".into(), "boundary/boundary_report.png".into()],
+        );
     }
     for (c, v) in normal.map(MultiField::into_volumes).unwrap_or_default() {
         if needs(&c) {
@@ -287,16 +279,12 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
                 .map_err(|e| fail("keep")(e.to_string()))?;
             written.push(format!("volumes/{c}.nii.gz"));
         }
-        stage("keep", t, n, written);
+        stages.done("keep", t, n, written);
     }
 
     // histograms (the histogram volume is kept for the pack's default opacity;
     // it comes first so that the boundaries it shows are drawn on the others)
-    let mut hvol_kept = None;
-    let mut boundaries = Vec::new();
-    let mut arches = Vec::new();
-    // the 2D histograms the pack's TFs are drawn over, after the pack
-    let mut figure_hists: Vec<mdtf_histogram::Histogram> = Vec::new();
+    let mut hists = crate::hist_files::Written::default();
     if let Some(h) = &p.histogram {
         on_stage("histogram");
         let t = Instant::now();
@@ -308,38 +296,18 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             AxisSpec::qbert(name).resolve(name, data.samples()).map_err(|e| err(e.to_string()))
         };
         let axes: Vec<Axis> = vec![axis("v", v)?, axis("g", g)?];
-        let g_clip = AxisSpec::qbert("g").clip_percent.1;
-        let mut outputs = Vec::new();
+        let mut counted = crate::hist_files::Counted { voxels: n, ..Default::default() };
         if h.hvol
             && let Some(f2) = get("f2")
         {
-            let hv = histogram_volume(v.samples(), g.samples(), f2.samples(), v.plane_len(), &HvolParams::default())
-                .map_err(|e| err(e.to_string()))?;
-            boundaries = mdtf_histogram::detect_boundaries(&hv);
-            arches = crate::figures::boundary_arches(&boundaries);
-            write_hvol(&hdir, &hv, &input_name, &arches).map_err(|e| err(e.to_string()))?;
-            outputs.push("histogram/opacity.png".into());
-            // the pack needs only the 2D opacity: free the 3D counts (64 MiB at 256^3) now
-            let mut hv = hv;
-            hv.hist.counts = Vec::new();
-            hvol_kept = Some(hv);
+            counted.hvol = Some(
+                histogram_volume(v.samples(), g.samples(), f2.samples(), v.plane_len(), &HvolParams::default())
+                    .map_err(|e| err(e.to_string()))?,
+            );
         }
         if h.joint {
-            let hist = count(&[v.samples(), g.samples()], axes.clone(), None).map_err(|e| err(e.to_string()))?;
-            let outside = n as u64 - hist.total();
-            let note = crate::figures::clip_note(&axes[1], g_clip, outside);
-            write_histogram_marked(&hdir, &hist, Scale::Log, &input_name, Some(&note), &arches)
-                .map_err(|e| err(e.to_string()))?;
-            outputs.push("histogram/hist_v_g.png".into());
-            if outside > 0 {
-                warnings.push(format!(
-                    "histogram: {outside} of {n} voxels lie outside the (v, g) histogram and are not counted \
-                     (its g axis stops at {:.4}, the top {g_clip} % of g clipped as Teem's qbert does; NaN values \
-                     are never counted)",
-                    axes[1].max
-                ));
-            }
-            figure_hists.push(hist);
+            counted.joint =
+                Some(count(&[v.samples(), g.samples()], axes.clone(), None).map_err(|e| err(e.to_string()))?);
             // peak finding's TF domain: (v, 1/g); for several fields 1/g is of
             // their normalised ||G||, so its axis comes from the gradient it inverts
             let inverted: Option<Vec<f32>> = (!fields.is_empty())
@@ -353,17 +321,9 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
                 if let Some(first) = fields.first() {
                     va.name = first.clone();
                 }
-                let name = format!("histogram/hist_{}_inv_g.png", va.name);
-                let hist =
-                    count(&[v.samples(), inv_g.samples()], vec![va, ia], None).map_err(|e| err(e.to_string()))?;
-                write_histogram(&hdir, &hist, Scale::Log, &input_name).map_err(|e| err(e.to_string()))?;
-                outputs.push(name);
-                figure_hists.push(hist);
+                counted.inv_g =
+                    Some(count(&[v.samples(), inv_g.samples()], vec![va, ia], None).map_err(|e| err(e.to_string()))?);
             }
-        }
-        if h.joint && !fields.is_empty() {
-            outputs
-                .extend(crate::figures::write_field_pair_histograms(&fields, &chans, &hdir, &input_name).map_err(err)?);
         }
         if h.stretched
             && let (Some(g_hit), Some(hit)) = (get("g_hit"), get("hit"))
@@ -375,34 +335,27 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             sa[1].name = "g_hit".into();
             let stretched =
                 count(&[v.samples(), g_hit.samples()], sa, Some(&traced)).map_err(|e| err(e.to_string()))?;
-            write_stretched(&hdir, &normal, &stretched, Scale::Log, &input_name).map_err(|e| err(e.to_string()))?;
-            outputs.push("histogram/normal_vs_stretched.png".into());
-            figure_hists.push(stretched);
+            counted.stretched = Some((normal, stretched));
         }
-        stage("histogram", t, n, outputs);
+        hists = crate::hist_files::write(&hdir, counted, &input_name, &mut warnings).map_err(err)?;
+        if h.joint && !fields.is_empty() {
+            hists
+                .outputs
+                .extend(crate::figures::write_field_pair_histograms(&fields, &chans, &hdir, &input_name).map_err(err)?);
+        }
+        stages.done("histogram", t, n, hists.outputs.clone());
     }
+    let crate::hist_files::Written { boundaries, arches, figure_hists, hvol: hvol_kept, .. } = hists;
 
     // pack (for meshes: the tetra stage, which writes the pack itself)
     let pack_stage = if profile == Profile::ProjectedTetrahedra { "tetra + pack" } else { "pack" };
     on_stage(pack_stage);
     let t = Instant::now();
     let err = |e: String| fail("pack")(e);
-    let tf = match &p.pack.tf {
-        Some(f) => {
-            let path = base.join(f);
-            let text = std::fs::read_to_string(&path).map_err(|e| err(format!("{}: {e}", path.display())))?;
-            Some(parse_tf(&text).map_err(|e| err(format!("{}: {e}", path.display())))?)
-        }
-        None => None,
-    };
+    let tf = read_tf(p, &base)?;
     let pdir = dir.join("pack");
     std::fs::create_dir_all(&pdir).map_err(|e| err(e.to_string()))?;
-    let provenance = Provenance {
-        mdtf_version: env!("CARGO_PKG_VERSION").into(),
-        input: Some(input_name.clone()),
-        input_sha256: input_file(p, opts, &base).and_then(|f| mdtf_pack::sha256_file(&f).ok()),
-        stages: serde_json::to_value(p).unwrap_or(serde_json::Value::Null),
-    };
+    let provenance = provenance(p, opts, &base, &input_name);
     let mut table_names: Vec<String> = Vec::new();
     let mut pack_outputs: Vec<String> = vec!["pack/manifest.json".into()];
     if profile == Profile::ProjectedTetrahedra {
@@ -501,9 +454,42 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
                 .map_err(|e| err(e.to_string()))?;
         }
     }
-    stage(pack_stage, t, n, pack_outputs);
+    stages.done(pack_stage, t, n, pack_outputs);
 
-    let previewable = match profile {
+    let report = RunReport {
+        pipeline: opts.pipeline_path.display().to_string(),
+        output: opts.output.display().to_string(),
+        input: input_name,
+        dims: geo.dims,
+        spacing: geo.spacing,
+        fields,
+        value_range: finite_range,
+        warnings,
+        boundary,
+        boundaries,
+        hvol_built: hvol_kept.is_some(),
+        stages: stages.0,
+        total_seconds: 0.0,
+    };
+    finish(p, opts, out, report, &table_names, start, on_stage)
+}
+
+/// The end of every run: the preview and the contact sheet (when asked for
+/// and the pack can be previewed: `table_names` are its lookup tables),
+/// run_report.json (`report` gets the preview's stage and the total time
+/// since `start`), report.html, and the output folder published.
+pub(crate) fn finish(
+    p: &Pipeline,
+    opts: &RunOptions,
+    out: OutputFolder,
+    mut report: RunReport,
+    table_names: &[String],
+    start: Instant,
+    on_stage: &dyn Fn(&str),
+) -> Result<RunReport, RunError> {
+    let dir = out.path();
+    let pdir = dir.join("pack");
+    let previewable = match p.pack.profile {
         Profile::Slicer3dtf | Profile::DistanceTf => true,
         Profile::GaussianTf => true,
         // with a TF, or the default one from the boundaries found
@@ -523,30 +509,36 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         let refs: Vec<(&Path, &str)> = pictures.iter().map(|(p, c)| (p.as_path(), c.as_str())).collect();
         mdtf_preview::contact_sheet(&refs, 3, 384, &dir.join("contact_sheet.png"))
             .map_err(|e| fail("preview")(e.to_string()))?;
-        stage("preview", t, 512 * 512, vec!["preview.png".into(), "contact_sheet.png".into()]);
+        let mut stages = Stages(std::mem::take(&mut report.stages));
+        stages.done("preview", t, 512 * 512, vec!["preview.png".into(), "contact_sheet.png".into()]);
+        report.stages = stages.0;
     }
-
-    let report = RunReport {
-        pipeline: opts.pipeline_path.display().to_string(),
-        output: opts.output.display().to_string(),
-        input: input_name,
-        dims: geo.dims,
-        spacing: geo.spacing,
-        fields,
-        value_range: finite_range,
-        warnings,
-        boundary,
-        boundaries,
-        hvol_built: hvol_kept.is_some(),
-        stages,
-        total_seconds: start.elapsed().as_secs_f64(),
-    };
+    report.total_seconds = start.elapsed().as_secs_f64();
     let json = serde_json::to_string_pretty(&report).map_err(|e| fail("report")(e.to_string()))?;
     write_file_atomically(&dir.join("run_report.json"), |w| w.write_all(json.as_bytes()))
         .map_err(|e| fail("report")(e.to_string()))?;
     write_report_page(p, opts, &report, dir).map_err(|e| fail("report")(e.to_string()))?;
-    out.publish(&inputs).map_err(|e| fail("output")(e.to_string()))?;
+    let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
+    out.publish(&run_inputs(p, opts, &base)).map_err(|e| fail("output")(e.to_string()))?;
     Ok(report)
+}
+
+/// The stage lines of a run report, as the stages finish.
+#[derive(Default)]
+pub(crate) struct Stages(pub Vec<StageReport>);
+
+impl Stages {
+    /// Records stage `name`, started at `t`, over `voxels` voxels, that wrote `outputs`.
+    pub(crate) fn done(&mut self, name: &str, t: Instant, voxels: usize, outputs: Vec<String>) {
+        let seconds = t.elapsed().as_secs_f64();
+        self.0.push(StageReport {
+            stage: name.into(),
+            seconds,
+            mvoxel_per_s: voxels as f64 / seconds.max(1e-9) / 1e6,
+            peak_mib: peak_mib(),
+            outputs,
+        });
+    }
 }
 
 /// The plan [`run`] follows for `p`, with the input's name and grid. It reads
@@ -589,8 +581,31 @@ fn write_report_page(p: &Pipeline, opts: &RunOptions, report: &RunReport, dir: &
     crate::report_page::write(dir, &page).map_err(|e| e.to_string())
 }
 
+/// The pack's provenance: mdtf's version, the input and its digest, the settings.
+pub(crate) fn provenance(p: &Pipeline, opts: &RunOptions, base: &Path, input_name: &str) -> Provenance {
+    Provenance {
+        mdtf_version: env!("CARGO_PKG_VERSION").into(),
+        input: Some(input_name.to_string()),
+        input_sha256: input_file(p, opts, base).and_then(|f| mdtf_pack::sha256_file(&f).ok()),
+        stages: serde_json::to_value(p).unwrap_or(serde_json::Value::Null),
+    }
+}
+
+/// The pack's TF file, read and parsed, when the pipeline names one.
+pub(crate) fn read_tf(p: &Pipeline, base: &Path) -> Result<Option<mdtf_pack::TfFile>, RunError> {
+    let err = |e: String| fail("pack")(e);
+    match &p.pack.tf {
+        Some(f) => {
+            let path = base.join(f);
+            let text = std::fs::read_to_string(&path).map_err(|e| err(format!("{}: {e}", path.display())))?;
+            Ok(Some(parse_tf(&text).map_err(|e| err(format!("{}: {e}", path.display())))?))
+        }
+        None => Ok(None),
+    }
+}
+
 /// Every file a run reads: the pipeline file, the input and the TF file.
-fn run_inputs(p: &Pipeline, opts: &RunOptions, base: &Path) -> Inputs {
+pub(crate) fn run_inputs(p: &Pipeline, opts: &RunOptions, base: &Path) -> Inputs {
     let mut inputs = Inputs::of(&[&opts.pipeline_path]);
     if let Some(f) = input_file(p, opts, base) {
         inputs.add(&f);
@@ -612,12 +627,16 @@ fn derive_normals(value: &MultiField, kernel: Kernel) -> Result<Vec<(String, Vol
 }
 
 /// The input file of a run: `--input` as given, else the pipeline's, relative to its folder.
-fn input_file(p: &Pipeline, opts: &RunOptions, base: &Path) -> Option<PathBuf> {
+pub(crate) fn input_file(p: &Pipeline, opts: &RunOptions, base: &Path) -> Option<PathBuf> {
     opts.input.clone().or_else(|| p.input.file.as_ref().map(|f| base.join(f)))
 }
 
 /// The input volume, its name for the report, and what its reader warned of.
-fn load_input(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(MultiField, String, Vec<String>), RunError> {
+pub(crate) fn load_input(
+    p: &Pipeline,
+    opts: &RunOptions,
+    base: &Path,
+) -> Result<(MultiField, String, Vec<String>), RunError> {
     if let Some(f) = input_file(p, opts, base) {
         let read = ReadOptions {
             dicom: DicomOptions { series: p.input.series.clone(), resample: p.input.resample },

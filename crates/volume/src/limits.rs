@@ -28,6 +28,37 @@ pub fn human_bytes(bytes: u128) -> String {
     if u == 0 { format!("{bytes} B") } else { format!("{v:.1} {}", units[u]) }
 }
 
+/// Parses a size in bytes as people write it: a number with an optional
+/// unit, binary (KiB, MiB, GiB, TiB; K, M, G, T mean the same) or decimal
+/// (kB, MB, GB, TB), case-insensitive for the binary ones; e.g. "2GiB",
+/// "512M", "1.5 GB", "1000000".
+pub fn parse_size(text: &str) -> std::result::Result<u64, String> {
+    let t = text.trim();
+    let split = t.find(|c: char| !(c.is_ascii_digit() || c == '.')).unwrap_or(t.len());
+    let (number, unit) = (t[..split].trim(), t[split..].trim());
+    let value: f64 =
+        number.parse().map_err(|_| format!("'{text}' is not a size: give a number and a unit, e.g. 2GiB or 512MiB"))?;
+    let scale: f64 = match unit {
+        "" | "B" | "b" => 1.0,
+        "kB" | "KB" => 1e3,
+        "MB" => 1e6,
+        "GB" => 1e9,
+        "TB" => 1e12,
+        u => match u.to_ascii_lowercase().as_str() {
+            "k" | "kib" => 1024.0,
+            "m" | "mib" => 1024f64.powi(2),
+            "g" | "gib" => 1024f64.powi(3),
+            "t" | "tib" => 1024f64.powi(4),
+            _ => return Err(format!("'{text}': unknown unit '{u}' (use B, KiB, MiB, GiB, TiB, or kB, MB, GB, TB)")),
+        },
+    };
+    let bytes = value * scale;
+    if !(bytes.is_finite() && bytes >= 1.0 && bytes < 2f64.powi(63)) {
+        return Err(format!("'{text}' is not a usable size"));
+    }
+    Ok(bytes as u64)
+}
+
 /// Validates a grid of `dims` (any rank) holding `fields` fields: every dim at
 /// least 1 and the f32 samples within available memory. Returns the number of
 /// samples per field.
@@ -57,6 +88,18 @@ pub fn check_dims(path: &Path, dims: &[u64], fields: u64) -> Result<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sizes_parse_in_binary_and_decimal_units() {
+        assert_eq!(parse_size("2GiB"), Ok(2 << 30));
+        assert_eq!(parse_size("512M"), Ok(512 << 20));
+        assert_eq!(parse_size(" 1.5 GB "), Ok(1_500_000_000));
+        assert_eq!(parse_size("1000000"), Ok(1_000_000));
+        assert_eq!(parse_size("64kib"), Ok(64 << 10));
+        assert!(parse_size("2 parsecs").unwrap_err().contains("unknown unit"));
+        assert!(parse_size("GiB").unwrap_err().contains("not a size"));
+        assert!(parse_size("0").is_err());
+    }
 
     #[test]
     fn zero_and_absurd_dims_are_refused_with_the_memory_needed() {

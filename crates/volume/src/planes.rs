@@ -10,7 +10,6 @@ use crate::geometry::Geometry;
 use crate::io::Format;
 use crate::samples::{NanPolicy, ReadOptions, SampleStream};
 use crate::volume::Volume;
-use ndarray::Array3;
 use std::io::Read as _;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -86,10 +85,7 @@ impl PlaneReader {
             self.read_plane(plane)?;
         }
         let data = self.kept[(z0 - self.first) * plane..(z1 - self.first) * plane].to_vec();
-        let [nx, ny, _] = self.geometry.dims;
-        let data = Array3::from_shape_vec((z1 - z0, ny, nx), data)
-            .map_err(|e| VolumeError::header(&self.path, e.to_string()))?;
-        Ok(Volume { geometry: self.geometry.z_slab(z0..z1), data })
+        Volume::from_samples(self.geometry.z_slab(z0..z1), data)
     }
 
     /// Decodes the next plane onto the end of `kept`, with the file's

@@ -29,6 +29,16 @@ impl Volume {
         Ok(Volume { geometry, data })
     }
 
+    /// Wraps x-fastest samples with their geometry; their count must be the grid's.
+    pub fn from_samples(geometry: Geometry, samples: Vec<f32>) -> Result<Volume> {
+        let (nz, ny, nx) = geometry.shape();
+        let len = samples.len();
+        let data = Array3::from_shape_vec((nz, ny, nx), samples).map_err(|_| {
+            VolumeError::Fields(format!("{len} samples do not fill the grid of {}", geometry.dims_string()))
+        })?;
+        Ok(Volume { geometry, data })
+    }
+
     /// A volume of zeros on the given grid.
     pub fn zeros(geometry: Geometry) -> Volume {
         let data = Array3::zeros(geometry.shape());

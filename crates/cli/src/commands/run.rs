@@ -3,6 +3,7 @@
 use crate::args::RunArgs;
 use crate::progress::Progress;
 use anyhow::{Context, Result};
+use mdtf_pipeline::blocks::SlabSize;
 use mdtf_pipeline::file::parse;
 use mdtf_pipeline::run::{RunOptions, plan as plan_pipeline, run as run_pipeline};
 
@@ -34,7 +35,16 @@ pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
             *cur = Some((n.to_string(), std::time::Instant::now()));
         }
     };
-    let report = run_pipeline(&pipeline, &opts, &|stage| finish(Some(stage)));
+    let on_stage = |stage: &str| finish(Some(stage));
+    let slabs = match (args.memory_budget, args.slab_planes) {
+        (Some(b), _) => Some(SlabSize::Budget(b)),
+        (None, Some(h)) => Some(SlabSize::Planes(h.max(1))),
+        (None, None) => None,
+    };
+    let report = match slabs {
+        Some(size) => mdtf_pipeline::blocks::run(&pipeline, &opts, size, &on_stage),
+        None => run_pipeline(&pipeline, &opts, &on_stage),
+    };
     finish(None);
     let report = report?;
     for w in &report.warnings {

@@ -1,0 +1,84 @@
+//! How many z-planes a slab of a slab-by-slab run may hold under a memory
+//! budget: the largest height whose costliest pass (derive, pre-filter,
+//! tracing, pack), with its halo, fits beside the fixed costs.
+
+use crate::plan::Plan;
+use mdtf_volume::{Geometry, human_bytes};
+
+/// What the process holds whatever the slab: code, thread stacks, figures (bytes).
+const BASE_BYTES: u64 = 48 << 20;
+/// The histogram volume's counts (256^3 u32, at most; the untouched pages cost nothing).
+const HVOL_BYTES: u64 = 64 << 20;
+
+/// f32 planes each pass holds per plane of its slab (`h`) and of its halo
+/// read on both sides (`halo`), counted from what it reads, makes and copies.
+fn pass_planes(h: u64, plan: &Plan) -> u64 {
+    let k = plan.reach.kernel[2] as u64;
+    // derive reads at least a kernel's width of planes
+    let read = (h + 2 * k).max(2 * k + 1);
+    // the value, five outputs (g, f'', three normals), the derive's own scratch; the interiors copied out
+    let derive = 8 * read + 5 * h;
+    let pf = plan.reach.prefilter[2] as u64;
+    let prefilter = if plan.prefilter { 4 * (h + 2 * pf) + 2 * h } else { 0 };
+    let t = plan.reach.trace[2] as u64;
+    // g, f'', normal over the block; distance, g_hit, hit, dot and the report's g over the slab
+    let trace = if plan.trace { 5 * (h + 2 * t) + 5 * h } else { 0 };
+    // a texture's four channels and its bytes, or the histograms' channels
+    let pack = 5 * h;
+    derive.max(prefilter).max(trace).max(pack)
+}
+
+/// The tallest slab (planes, at most the volume's) whose passes fit in
+/// `budget` bytes with the plan's halos, or why none does.
+pub fn slab_height(budget: u64, geometry: &Geometry, plan: &Plan, hvol: bool) -> Result<usize, String> {
+    let plane_bytes = (geometry.dims[0] * geometry.dims[1] * 4) as u64;
+    let fixed = BASE_BYTES + if hvol { HVOL_BYTES } else { 0 };
+    let cost = |h: u64| fixed + pass_planes(h, plan) * plane_bytes;
+    let nz = geometry.dims[2] as u64;
+    if cost(1) > budget {
+        return Err(format!(
+            "a memory budget of {} is too small for planes of {} x {}: a slab of one plane with its halo needs {}",
+            human_bytes(budget as u128),
+            geometry.dims[0],
+            geometry.dims[1],
+            human_bytes(cost(1) as u128)
+        ));
+    }
+    // cost grows with h: the tallest that fits, by bisection
+    let (mut lo, mut hi) = (1u64, nz.max(1));
+    while lo < hi {
+        let mid = (lo + hi).div_ceil(2);
+        if cost(mid) <= budget { lo = mid } else { hi = mid - 1 }
+    }
+    Ok(lo as usize)
+}
+
+/// The slabs of height `h` covering `nz` planes, in order.
+pub fn slabs(nz: usize, h: usize) -> Vec<std::ops::Range<usize>> {
+    (0..nz).step_by(h.max(1)).map(|z| z..(z + h.max(1)).min(nz)).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::file::parse;
+
+    #[test]
+    fn the_slab_fits_the_budget_and_one_more_plane_would_not() {
+        let geo = Geometry::new([256; 3], [1.0; 3]);
+        let text = "[derive]\nkernel = \"central4\"\n[pack]\nprofile = \"distance-tf\"\n";
+        let plan = Plan::resolve(&parse(text, &[]).unwrap(), &[], &geo).unwrap();
+        let plane = 256 * 256 * 4;
+        let budget = 256u64 << 20;
+        let h = slab_height(budget, &geo, &plan, false).unwrap() as u64;
+        assert!(BASE_BYTES + pass_planes(h, &plan) * plane <= budget);
+        assert!(BASE_BYTES + pass_planes(h + 1, &plan) * plane > budget);
+        // tracing dominates: 5 planes of halo-grown input and 5 of output per slab plane
+        let t = plan.reach.trace[2] as u64;
+        assert_eq!(pass_planes(h, &plan), 5 * (h + 2 * t) + 5 * h);
+        assert_eq!(slabs(10, 4), vec![0..4, 4..8, 8..10]);
+        let e = slab_height(1 << 20, &geo, &plan, false).unwrap_err();
+        assert!(e.contains("too small") && e.contains("1.0 MiB"), "{e}");
+        assert_eq!(slab_height(1 << 40, &geo, &plan, true).unwrap(), 256, "a large budget: one slab");
+    }
+}

@@ -1,0 +1,531 @@
+//! Block execution: a pipeline run slab by slab under a memory budget, with
+//! outputs byte-identical to the whole-volume [`run`](crate::run::run).
+//!
+//! The input is read once, by planes (uncompressed or gzip NIfTI/NRRD;
+//! other formats and phantoms are read whole first). Each pass works on
+//! z-slabs grown by its own halo from the plan ([`Plan::reach`]): derive
+//! (the kernel's support), the pre-filter (its box), the tracing (d_max plus
+//! the tricubic support at the hit); it writes each slab's own planes into a
+//! [`ChannelStore`] on disk in the staging folder, so a later pass reads the
+//! exact whole-volume channels with any halo it needs, and nothing is
+//! computed twice. The whole-volume quantities are reductions that merge
+//! exactly: finite ranges and the percentile tails ([`ChannelStats`]), the
+//! median of g (a two-pass radix select over the store), histogram counts,
+//! the histogram volume's sums (fed slice by slice, as the whole run sums
+//! them), the Fig. 2 report's sums (fed in voxel order) and the crossings.
+//! Histograms are counted, textures quantised and kept volumes written slab
+//! by slab from the store.
+//!
+//! Scope: one-field inputs, the slicer-3dtf and distance-tf profiles (with
+//! or without a TF file, pre-filter, kept channels and histograms). Others
+//! are refused with the reason, before any work.
+
+mod budget;
+mod store;
+
+pub use budget::{slab_height, slabs};
+pub use store::ChannelStore;
+
+use crate::file::Pipeline;
+use crate::hist_files::Counted;
+use crate::plan::{Plan, Step};
+use crate::run::{RunError, RunOptions, RunReport, Stages, fail};
+use mdtf_boundary::{BoundaryInput, ReportAccumulator, VolumeStats};
+use mdtf_derive::DeriveParams;
+use mdtf_histogram::{AxisSpec, ChannelStats, Histogram, HvolAccumulator, HvolAxes, HvolParams, count, hit_mask};
+use mdtf_pack::{PackParams, PackWriter, Profile};
+use mdtf_volume::{Geometry, MultiField, OutputFolder, PlaneReader, ReadOptions, Volume};
+use std::collections::BTreeMap;
+use std::ops::Range;
+use std::path::Path;
+use std::time::Instant;
+
+/// Why `p` cannot run slab by slab on an input with `fields`, if it cannot.
+pub fn unsupported(p: &Pipeline, fields: usize) -> Option<String> {
+    if fields > 1 {
+        return Some(format!("the input has {fields} fields; slab-by-slab runs take one-field inputs"));
+    }
+    if !matches!(p.pack.profile, Profile::Slicer3dtf | Profile::DistanceTf) {
+        return Some(format!(
+            "the {} profile does not run slab by slab yet (slicer-3dtf and distance-tf do)",
+            p.pack.profile
+        ));
+    }
+    if p.pack.nifti {
+        return Some("NIfTI copies of the textures (pack.nifti) need each whole texture".into());
+    }
+    None
+}
+
+/// The input, read by planes where its format allows, else whole.
+enum Source {
+    Planes(PlaneReader),
+    Whole(Volume),
+}
+
+impl Source {
+    fn geometry(&self) -> &Geometry {
+        match self {
+            Source::Planes(r) => r.geometry(),
+            Source::Whole(v) => &v.geometry,
+        }
+    }
+
+    fn read(&mut self, z: Range<usize>) -> Result<Volume, RunError> {
+        match self {
+            Source::Planes(r) => r.read(z).map_err(|e| fail("input")(e.to_string())),
+            Source::Whole(v) => Ok(v.z_slab(z)),
+        }
+    }
+}
+
+/// The input of `p` as a [`Source`], its name for the report and its reader's warnings.
+fn open_source(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(Source, String, Vec<String>), RunError> {
+    if let Some(f) = crate::run::input_file(p, opts, base)
+        && p.input.series.is_none()
+        && let Some(r) = PlaneReader::open(&f, &ReadOptions::default()).map_err(|e| fail("input")(e.to_string()))?
+    {
+        return Ok((Source::Planes(r), f.display().to_string(), Vec::new()));
+    }
+    let (mf, name, warnings) = crate::run::load_input(p, opts, base)?;
+    if let Some(why) = unsupported(p, mf.fields.len()) {
+        return Err(fail("plan")(why));
+    }
+    let v = mf.into_scalar().map_err(|e| fail("input")(e.to_string()))?;
+    Ok((Source::Whole(v), name, warnings))
+}
+
+/// The z-range a pass reads for slab `z` with `halo` planes each side,
+/// grown to at least `min` planes where the volume allows (derive needs a
+/// kernel's width), clamped to `nz`.
+fn grown(z: &Range<usize>, halo: usize, min: usize, nz: usize) -> Range<usize> {
+    let (mut lo, mut hi) = (z.start.saturating_sub(halo), (z.end + halo).min(nz));
+    while hi - lo < min.min(nz) {
+        if hi < nz {
+            hi += 1;
+        } else {
+            lo -= 1;
+        }
+    }
+    lo..hi
+}
+
+/// Percentile statistics of the channels that need them, with qbert's clips.
+struct Stats(BTreeMap<&'static str, ChannelStats>);
+
+impl Stats {
+    fn new(names: &[&'static str], n: usize) -> Stats {
+        Stats(names.iter().map(|&c| (c, ChannelStats::new(AxisSpec::qbert(c).clip_percent, n))).collect())
+    }
+
+    fn add(&mut self, name: &str, data: &[f32]) {
+        if let Some(s) = self.0.get_mut(name) {
+            s.add(data);
+        }
+    }
+
+    fn axis(&self, spec: &AxisSpec, name: &str) -> Result<mdtf_histogram::Axis, RunError> {
+        let s = self.0.get(name).ok_or_else(|| fail("histogram")(format!("no statistics of {name}")))?;
+        s.axis(spec, name).map_err(|e| fail("histogram")(e.to_string()))
+    }
+
+    fn range(&self, name: &str) -> Option<(f32, f32)> {
+        self.0.get(name).and_then(ChannelStats::finite_range)
+    }
+}
+
+/// How tall the slabs of a run are.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SlabSize {
+    /// The tallest whose passes fit in this many bytes ([`slab_height`]).
+    Budget(u64),
+    /// This many z-planes (at least 1; for tests and benchmarks).
+    Planes(usize),
+}
+
+/// Runs `p` slab by slab, slabs of `size`; `on_stage(name)` is called as
+/// each pass starts. The outputs equal [`run`](crate::run::run)'s.
+pub fn run(p: &Pipeline, opts: &RunOptions, size: SlabSize, on_stage: &dyn Fn(&str)) -> Result<RunReport, RunError> {
+    let start = Instant::now();
+    let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
+    if let Some(why) = unsupported(p, 1) {
+        return Err(fail("plan")(why));
+    }
+    let inputs = crate::run::run_inputs(p, opts, &base);
+    let out = OutputFolder::begin(&opts.output, &inputs).map_err(|e| fail("output")(e.to_string()))?;
+    let dir = out.path().to_path_buf();
+    let mut stages = Stages::default();
+
+    on_stage("input");
+    let t = Instant::now();
+    let (mut source, input_name, mut warnings) = open_source(p, opts, &base)?;
+    let geo = source.geometry().clone();
+    let n = geo.voxel_count();
+    let nz = geo.dims[2];
+    let plan = Plan::resolve(p, &[], &geo).map_err(|e| fail("plan")(e.to_string()))?;
+    let tf = crate::run::read_tf(p, &base)?;
+    let profile = p.pack.profile;
+    // the histogram volume: asked for, or the default TF's source
+    let hvol_asked = p.histogram.as_ref().is_some_and(|h| h.hvol);
+    let hvol_needed = hvol_asked || tf.is_none();
+    let height = match size {
+        SlabSize::Budget(b) => slab_height(b, &geo, &plan, hvol_needed).map_err(fail("plan"))?,
+        SlabSize::Planes(h) => h.clamp(1, nz.max(1)),
+    };
+    let slabs = slabs(nz, height);
+    on_stage(&format!("input: {} slabs of {height} planes", slabs.len()));
+    let mut store = ChannelStore::create(dir.join(".slabs"), geo.clone()).map_err(|e| fail("input")(e.to_string()))?;
+    let io = |stage: &'static str| move |e: std::io::Error| fail(stage)(e.to_string());
+    let mut stats = Stats::new(&["v", "g", "f2", "g_hit", "g_prefiltered"], n);
+    for z in &slabs {
+        let v = source.read(z.clone())?;
+        stats.add("v", v.samples());
+        store.put_volume("v", z.start, &v).map_err(io("input"))?;
+    }
+    drop(source);
+    stages.done("input", t, n, vec![]);
+    let finite_range = stats.range("v").map(|(lo, hi)| [lo as f64, hi as f64]);
+    let value_range = finite_range.map_or(0.0, |[lo, hi]| hi - lo);
+    let kernel = p.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL);
+
+    // derive: each slab's planes from the value grown by the kernel's support
+    // (the normals too: the store keeps them for the pack, so nothing is deferred)
+    let mut items = plan.derive.clone();
+    if plan.defer_normals {
+        items.push(mdtf_derive::Item::Normal);
+    }
+    if !items.is_empty() {
+        on_stage("derive");
+        let t = Instant::now();
+        let span = stats.range("v").map_or(0.0, |(lo, hi)| hi - lo);
+        let d = DeriveParams {
+            items,
+            kernel,
+            epsilon: Some(mdtf_derive::default_epsilon(span, geo.min_spacing())),
+            ..Default::default()
+        };
+        let k = plan.reach.kernel[2];
+        for z in &slabs {
+            let read = grown(z, k, 2 * k + 1, nz);
+            let v = store.volume("v", read.clone()).map_err(io("derive"))?;
+            let out = mdtf_derive::run(&MultiField::from(v), &d).map_err(|e| fail("derive")(e.to_string()))?;
+            let own = z.start - read.start..z.end - read.start;
+            for (_, mf) in out.items {
+                for (name, vol) in mf.into_volumes() {
+                    let planes = vol.z_slab(own.clone());
+                    stats.add(&name, planes.samples());
+                    store.put_volume(&name, z.start, &planes).map_err(io("derive"))?;
+                }
+            }
+        }
+        stages.done("derive", t, n, vec![]);
+    }
+
+    // pre-filter and tracing
+    let mut boundary = None;
+    let mut d_max = None;
+    if plan.trace {
+        let (mut g_name, mut f2_name) = ("g", "f2");
+        if plan.prefilter
+            && let Some(pf) = &p.prefilter
+        {
+            on_stage("prefilter");
+            let t = Instant::now();
+            let halo = plan.reach.prefilter[2];
+            for (c, out_name) in [("g", "g_prefiltered"), ("f2", "f2_prefiltered")] {
+                let range = stats.range(c).map_or(0.0, |(lo, hi)| (hi - lo) as f64);
+                let params = crate::boundary_chain::prefilter_params(pf, range);
+                for z in &slabs {
+                    let read = grown(z, halo, 1, nz);
+                    let v = store.volume(c, read.clone()).map_err(io("prefilter"))?;
+                    let filtered = mdtf_bilateral::run(&v, &params).map_err(|e| fail("prefilter")(e.to_string()))?;
+                    let own = filtered.z_slab(z.start - read.start..z.end - read.start);
+                    stats.add(out_name, own.samples());
+                    store.put_volume(out_name, z.start, &own).map_err(io("prefilter"))?;
+                }
+            }
+            (g_name, f2_name) = ("g_prefiltered", "f2_prefiltered");
+            stages.done("prefilter", t, n, vec![]);
+        }
+        on_stage("boundary");
+        let t = Instant::now();
+        let g_stats = g_stats(&mut store, g_name, nz, value_range, geo.min_spacing(), &stats)?;
+        let halo = plan.reach.trace[2];
+        let mut report: Option<ReportAccumulator> = None;
+        let mut crossings: Option<mdtf_boundary::Crossings> = None;
+        let mut counts = mdtf_boundary::TraceCounts::default();
+        let mut resolved = None;
+        for z in &slabs {
+            let read = grown(z, halo, 1, nz);
+            let vol = |s: &mut ChannelStore, c: &str| s.volume(c, read.clone()).map_err(io("boundary"));
+            let (g, f2) = (vol(&mut store, g_name)?, vol(&mut store, f2_name)?);
+            let normal = MultiField::from_volumes(vec![
+                ("nx".into(), vol(&mut store, "nx")?),
+                ("ny".into(), vol(&mut store, "ny")?),
+                ("nz".into(), vol(&mut store, "nz")?),
+            ])
+            .map_err(|e| fail("boundary")(e.to_string()))?;
+            let own = z.start - read.start..z.end - read.start;
+            let input = BoundaryInput { g: &g, f2: &f2, normal: &normal, value_range };
+            let b = mdtf_boundary::trace_block(&input, &p.boundary, read.start, own.clone(), &g_stats)
+                .map_err(|e| fail("boundary")(e.to_string()))?;
+            let g_own = g.z_slab(own);
+            report.get_or_insert_with(|| ReportAccumulator::new(b.resolved.report_thresholds())).add(
+                mdtf_boundary::ReportInput {
+                    hit: b.hit.samples(),
+                    dot: b.dot.samples(),
+                    distance: b.distance.samples(),
+                    g: g_own.samples(),
+                    g_hit: b.g_hit.samples(),
+                },
+            );
+            match &mut crossings {
+                Some(c) => c.merge(&b.crossings),
+                None => crossings = Some(b.crossings.clone()),
+            }
+            counts += b.counts;
+            resolved = Some(b.resolved);
+            stats.add("g_hit", b.g_hit.samples());
+            for (c, v) in [("g_hit", &b.g_hit), ("hit", &b.hit), ("distance", &b.distance)] {
+                store.put_volume(c, z.start, v).map_err(io("boundary"))?;
+            }
+        }
+        let (Some(r), Some(report), Some(crossings)) = (resolved, report, crossings) else {
+            return Err(fail("boundary")("the volume has no planes".into()));
+        };
+        let (lost, lost_warnings) = crossings.lost(&r);
+        warnings.extend(lost_warnings.iter().map(|w| format!("boundary: {w}")));
+        d_max = Some(r.d_max);
+        boundary = Some(crate::run::BoundarySummary { resolved: r, counts, lost });
+        let rdir = dir.join("boundary");
+        std::fs::create_dir_all(&rdir).map_err(io("boundary"))?;
+        report.finish().write(&rdir).map_err(|e| fail("boundary")(e.to_string()))?;
+        for c in ["g_prefiltered", "f2_prefiltered"] {
+            store.remove(c);
+        }
+        // what only the tracing read, unless the default TF's histogram volume still counts it
+        for c in plan.freed_after(Step::Trace) {
+            let name = c.name(&[]);
+            if !(hvol_needed && ["v", "g", "f2"].contains(&name.as_str())) {
+                store.remove(&name);
+            }
+        }
+        stages.done(
+            "boundary",
+            t,
+            n,
+            vec!["boundary/boundary_report.csv".into(), "boundary/boundary_report.png".into()],
+        );
+    }
+
+    // kept channels
+    if !p.keep.is_empty() {
+        on_stage("keep");
+        let t = Instant::now();
+        let kdir = dir.join("volumes");
+        std::fs::create_dir_all(&kdir).map_err(io("keep"))?;
+        let mut written = Vec::new();
+        for c in &p.keep {
+            if !store.has(c) {
+                return Err(fail("keep")(format!("no channel '{c}' was computed")));
+            }
+            let path = kdir.join(format!("{c}.nii.gz"));
+            mdtf_volume::write_nifti_slabs(&path, &geo, mdtf_volume::SampleType::F32, &slabs, &mut |z| {
+                store.samples(c, z)
+            })
+            .map_err(|e| fail("keep")(e.to_string()))?;
+            written.push(format!("volumes/{c}.nii.gz"));
+        }
+        stages.done("keep", t, n, written);
+    }
+
+    // histograms, counted slab by slab
+    let mut hists = crate::hist_files::Written::default();
+    let hvol_only = p.histogram.is_none() && hvol_needed;
+    if p.histogram.is_some() || hvol_needed {
+        if !hvol_only {
+            on_stage("histogram");
+        }
+        let t = Instant::now();
+        let mut counted = count_histograms(p, &mut store, &stats, &slabs, n, hvol_needed)?;
+        // the default TF's histogram volume is an output only when the histograms ask for it
+        let default_hvol = if hvol_asked { None } else { counted.hvol.take() };
+        if !hvol_only {
+            let hdir = dir.join("histogram");
+            std::fs::create_dir_all(&hdir).map_err(io("histogram"))?;
+            hists = crate::hist_files::write(&hdir, counted, &input_name, &mut warnings).map_err(fail("histogram"))?;
+            stages.done("histogram", t, n, hists.outputs.clone());
+        }
+        if default_hvol.is_some() {
+            hists.hvol = default_hvol;
+        }
+    }
+    let crate::hist_files::Written { boundaries, arches, figure_hists, hvol, .. } = hists;
+
+    // pack, a texture at a time, slab by slab
+    on_stage("pack");
+    let t = Instant::now();
+    let err = |e: String| fail("pack")(e);
+    let pdir = dir.join("pack");
+    std::fs::create_dir_all(&pdir).map_err(io("pack"))?;
+    let names = profile.channels(&[]);
+    let mut ranges = BTreeMap::new();
+    for c in &names {
+        let r = match c.as_str() {
+            "g" | "f2" | "g_hit" => {
+                let a = stats.axis(&AxisSpec { bins: Some(256), ..AxisSpec::qbert(c) }, c)?;
+                Some([a.min, a.max])
+            }
+            "distance" => d_max.map(|d| [mdtf_boundary::NO_BOUNDARY as f64, d]),
+            "nx" | "ny" | "nz" => None,
+            _ => stats.range(c).map(|(lo, hi)| [lo as f64, hi as f64]),
+        };
+        if let Some(r) = r {
+            ranges.insert(c.clone(), r);
+        }
+    }
+    // the tables read the channels' names and grid (their data only without a histogram volume)
+    let stubs: Vec<(String, Volume)> = names.iter().map(|c| (c.clone(), Volume::zeros(geo.z_slab(0..1)))).collect();
+    let alpha = p.pack.alpha.unwrap_or(mdtf_boundary::AlphaMap::Linear { a: 1.0, dc: None });
+    let luts = crate::pack_inputs::luts(profile, tf.as_ref(), &alpha, &stubs, &ranges, hvol.as_ref(), kernel)
+        .map_err(|e| err(e.to_string()))?;
+    let table_names: Vec<String> = luts.iter().map(|l| l.name.clone()).collect();
+    let params = PackParams { profile, ranges, fields: vec![], dtype: None, nifti: false };
+    let sources = BTreeMap::new();
+    let mut writer = PackWriter::new(&pdir, &params, geo.clone(), &sources);
+    for layout in mdtf_pack::texture_layouts(&params) {
+        writer
+            .add_slabs(&layout, &slabs, &mut |z| {
+                layout
+                    .components
+                    .iter()
+                    .flatten()
+                    .map(|c| Ok((c.clone(), store.volume(c, z.clone())?)))
+                    .collect::<std::io::Result<Vec<_>>>()
+                    .map_err(|e| mdtf_pack::PackError::Io(mdtf_volume::VolumeError::Fields(e.to_string())))
+            })
+            .map_err(|e| err(e.to_string()))?;
+    }
+    let provenance = crate::run::provenance(p, opts, &base, &input_name);
+    writer.finish(&luts, provenance).map_err(|e| err(e.to_string()))?;
+    let mut pack_outputs: Vec<String> = vec!["pack/manifest.json".into()];
+    if !figure_hists.is_empty() {
+        let hists: Vec<&Histogram> = figure_hists.iter().collect();
+        let written = crate::figures::write_tf_figures(&dir.join("histogram"), &luts, &hists, &input_name, &arches)
+            .map_err(|e| err(e.to_string()))?;
+        pack_outputs.extend(written.into_iter().map(|f| format!("histogram/{f}")));
+    }
+    stages.done("pack", t, n, pack_outputs);
+    store.clear();
+
+    let report = RunReport {
+        pipeline: opts.pipeline_path.display().to_string(),
+        output: opts.output.display().to_string(),
+        input: input_name,
+        dims: geo.dims,
+        spacing: geo.spacing,
+        fields: vec![],
+        value_range: finite_range,
+        warnings,
+        boundary,
+        boundaries,
+        hvol_built: hvol_asked,
+        stages: stages.0,
+        total_seconds: 0.0,
+    };
+    crate::run::finish(p, opts, out, report, &table_names, start, on_stage)
+}
+
+/// The tracing's whole-volume statistics of the g it traces (`g_name`, of
+/// `nz` planes in the store): the noise floor from its median (a two-pass
+/// select over the store) and its largest value.
+fn g_stats(
+    store: &mut ChannelStore,
+    g_name: &str,
+    nz: usize,
+    value_range: f64,
+    l_min: f64,
+    stats: &Stats,
+) -> Result<VolumeStats, RunError> {
+    let s = stats.0.get(g_name).ok_or_else(|| fail("boundary")(format!("no statistics of {g_name}")))?;
+    let g_max = s.finite_range().map_or(0.0, |r| r.1);
+    let median = match s.finite_count().checked_sub(1) {
+        None => None,
+        Some(last) => mdtf_volume::order_statistic_of_pieces(last / 2, |visit| {
+            for z in 0..nz {
+                visit(&store.samples(g_name, z..z + 1)?);
+            }
+            Ok::<(), std::io::Error>(())
+        })
+        .map_err(|e| fail("boundary")(e.to_string()))?,
+    };
+    let noise_floor = mdtf_boundary::noise_floor_of_median(median, value_range, l_min);
+    Ok(VolumeStats { value_range, noise_floor, g_max })
+}
+
+/// The histograms of the pipeline (and the histogram volume when
+/// `hvol_needed`), counted slab by slab from the store with the axes the
+/// whole volume's statistics give.
+fn count_histograms(
+    p: &Pipeline,
+    store: &mut ChannelStore,
+    stats: &Stats,
+    slabs: &[Range<usize>],
+    n: usize,
+    hvol_needed: bool,
+) -> Result<Counted, RunError> {
+    let err = |e: mdtf_histogram::HistogramError| fail("histogram")(e.to_string());
+    let io = |e: std::io::Error| fail("histogram")(e.to_string());
+    let joint = p.histogram.as_ref().is_some_and(|h| h.joint);
+    let stretched = p.histogram.as_ref().is_some_and(|h| h.stretched) && store.has("g_hit") && store.has("hit");
+    let axes = vec![stats.axis(&AxisSpec::qbert("v"), "v")?, stats.axis(&AxisSpec::qbert("g"), "g")?];
+    let mut sa = axes.clone();
+    sa[1].name = "g_hit".into();
+    let bins = HvolParams::default().bins;
+    let mut hvol = match hvol_needed {
+        true => {
+            let axes = HvolAxes {
+                v: stats.axis(&HvolAxes::spec("v", bins[0]), "v")?,
+                g: stats.axis(&HvolAxes::spec("g", bins[1]), "g")?,
+                h: stats.axis(&HvolAxes::spec("f2", bins[2]), "f2")?,
+            };
+            Some(HvolAccumulator::new(&axes, n).map_err(err)?)
+        }
+        false => None,
+    };
+    let nz = slabs.last().map_or(0, |z| z.end);
+    let mut counted = Counted { voxels: n, ..Default::default() };
+    let add = |into: &mut Option<Histogram>, h: Histogram| match into {
+        Some(a) => a.counts.iter_mut().zip(&h.counts).for_each(|(x, y)| *x += y),
+        None => *into = Some(h),
+    };
+    let mut stretched_pair: (Option<Histogram>, Option<Histogram>) = (None, None);
+    for z in slabs {
+        let v = store.samples("v", z.clone()).map_err(io)?;
+        let g = store.samples("g", z.clone()).map_err(io)?;
+        if let Some(acc) = &mut hvol {
+            let f2 = store.samples("f2", z.clone()).map_err(io)?;
+            let plane = v.len() / z.len();
+            for (i, k) in z.clone().enumerate() {
+                let at = i * plane..(i + 1) * plane;
+                acc.add_slice(k, nz, &v[at.clone()], &g[at.clone()], &f2[at]);
+            }
+        }
+        if joint {
+            add(&mut counted.joint, count(&[&v, &g], axes.clone(), None).map_err(err)?);
+        }
+        if stretched {
+            let g_hit = store.samples("g_hit", z.clone()).map_err(io)?;
+            let traced = hit_mask(&store.samples("hit", z.clone()).map_err(io)?);
+            add(&mut stretched_pair.0, count(&[&v, &g], axes.clone(), Some(&traced)).map_err(err)?);
+            add(&mut stretched_pair.1, count(&[&v, &g_hit], sa.clone(), Some(&traced)).map_err(err)?);
+        }
+    }
+    if let Some(acc) = hvol {
+        counted.hvol = Some(HvolAccumulator::finish(vec![acc], &HvolParams::default()).map_err(err)?);
+    }
+    if let (Some(a), Some(b)) = stretched_pair {
+        counted.stretched = Some((a, b));
+    }
+    Ok(counted)
+}

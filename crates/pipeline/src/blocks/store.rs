@@ -1,0 +1,118 @@
+//! Where a slab-by-slab run keeps its channels between passes: each channel
+//! a file of f32 samples (x-fastest, little-endian) in a folder inside the
+//! run's staging folder, written and read by z-planes. Only the planes a
+//! pass asks for are ever in memory; the files go with the staging folder.
+
+use mdtf_volume::{Geometry, Volume};
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom, Write};
+use std::ops::Range;
+use std::path::PathBuf;
+
+/// The channels of a run, on disk (see the module docs).
+pub struct ChannelStore {
+    dir: PathBuf,
+    geometry: Geometry,
+    files: BTreeMap<String, File>,
+    bytes: Vec<u8>,
+}
+
+impl ChannelStore {
+    /// A store for channels on `geometry`, in the (new) folder `dir`.
+    pub fn create(dir: PathBuf, geometry: Geometry) -> std::io::Result<ChannelStore> {
+        std::fs::create_dir_all(&dir)?;
+        Ok(ChannelStore { dir, geometry, files: BTreeMap::new(), bytes: Vec::new() })
+    }
+
+    fn plane_len(&self) -> usize {
+        self.geometry.dims[0] * self.geometry.dims[1]
+    }
+
+    /// Whether the store holds channel `name`.
+    pub fn has(&self, name: &str) -> bool {
+        self.files.contains_key(name)
+    }
+
+    /// Writes the samples of planes `first..` of channel `name` (whole
+    /// planes), creating the channel on its first write.
+    pub fn put(&mut self, name: &str, first: usize, samples: &[f32]) -> std::io::Result<()> {
+        let offset = (first * self.plane_len() * 4) as u64;
+        if !self.files.contains_key(name) {
+            let path = self.dir.join(format!("{name}.f32"));
+            let file = File::options().read(true).write(true).create_new(true).open(path)?;
+            self.files.insert(name.to_string(), file);
+        }
+        self.bytes.clear();
+        self.bytes.extend(samples.iter().flat_map(|v| v.to_le_bytes()));
+        let Some(file) = self.files.get_mut(name) else { return Err(missing(name)) };
+        file.seek(SeekFrom::Start(offset))?;
+        file.write_all(&self.bytes)
+    }
+
+    /// Writes a volume of planes `first..` of channel `name`.
+    pub fn put_volume(&mut self, name: &str, first: usize, v: &Volume) -> std::io::Result<()> {
+        self.put(name, first, v.samples())
+    }
+
+    /// The samples of planes `z` (clamped to the grid) of channel `name`.
+    pub fn samples(&mut self, name: &str, z: Range<usize>) -> std::io::Result<Vec<f32>> {
+        let nz = self.geometry.dims[2];
+        let (z0, z1) = (z.start.min(nz), z.end.min(nz).max(z.start.min(nz)));
+        let plane = self.plane_len();
+        self.bytes.resize((z1 - z0) * plane * 4, 0);
+        let Some(file) = self.files.get_mut(name) else { return Err(missing(name)) };
+        file.seek(SeekFrom::Start((z0 * plane * 4) as u64))?;
+        file.read_exact(&mut self.bytes)?;
+        Ok(self.bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect())
+    }
+
+    /// Planes `z` (clamped to the grid) of channel `name` as a volume placed where they lie.
+    pub fn volume(&mut self, name: &str, z: Range<usize>) -> std::io::Result<Volume> {
+        let nz = self.geometry.dims[2];
+        let (z0, z1) = (z.start.min(nz), z.end.min(nz).max(z.start.min(nz)));
+        let data = self.samples(name, z0..z1)?;
+        Volume::from_samples(self.geometry.z_slab(z0..z1), data).map_err(std::io::Error::other)
+    }
+
+    /// Drops channel `name` and its file.
+    pub fn remove(&mut self, name: &str) {
+        if self.files.remove(name).is_some() {
+            let _ = std::fs::remove_file(self.dir.join(format!("{name}.f32")));
+        }
+    }
+
+    /// Removes every channel and the folder.
+    pub fn clear(mut self) {
+        self.files.clear();
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+fn missing(name: &str) -> std::io::Error {
+    std::io::Error::new(std::io::ErrorKind::NotFound, format!("channel {name} is not in the store"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn planes_come_back_as_written_in_any_order_of_writes() {
+        let dir = tempfile::tempdir().unwrap();
+        let geo = Geometry::new([3, 2, 5], [1.0, 1.0, 2.0]);
+        let mut s = ChannelStore::create(dir.path().join("store"), geo.clone()).unwrap();
+        let all: Vec<f32> = (0..30).map(|i| i as f32 * 0.5 - 3.0).collect();
+        s.put("g", 3, &all[18..]).unwrap();
+        s.put("g", 0, &all[..18]).unwrap();
+        assert_eq!(s.samples("g", 0..5).unwrap(), all);
+        let v = s.volume("g", 1..3).unwrap();
+        assert_eq!(v.samples(), &all[6..18]);
+        assert_eq!(v.geometry, geo.z_slab(1..3));
+        assert!(s.samples("f2", 0..1).is_err());
+        s.remove("g");
+        assert!(!s.has("g") && !dir.path().join("store/g.f32").exists());
+        s.clear();
+        assert!(!dir.path().join("store").exists());
+    }
+}
