@@ -1,0 +1,159 @@
+//! Block execution gives the whole-volume run's outputs byte for byte: every
+//! shipped pipeline it takes, run slab by slab with slabs of 1, 7 and 33
+//! planes and under a budget that forces at least 8 slabs, writes the same
+//! files (pack textures and tables, manifest, kept volumes, histogram counts
+//! and figures, the boundary report, the preview) as the whole-volume run,
+//! on the 64^3 phantom and on a noisy anisotropic file read by planes with
+//! the pre-filter on. The run report differs only in its timings.
+
+use mdtf_pipeline::blocks::{SlabSize, run as run_blocks};
+use mdtf_pipeline::file::{Pipeline, parse};
+use mdtf_pipeline::run::{RunOptions, run as run_whole};
+use mdtf_volume::{Geometry, SampleType, Volume, WriteOptions, write_volume};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+fn pipelines_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines")
+}
+
+/// Every file under `dir` (relative path -> bytes), with the run report's
+/// timings and the report page (which prints them) left out.
+fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    fn walk(root: &Path, dir: &Path, out: &mut BTreeMap<String, Vec<u8>>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let path = e.unwrap().path();
+            let rel = path.strip_prefix(root).unwrap().to_string_lossy().into_owned();
+            if path.is_dir() {
+                walk(root, &path, out);
+            } else if rel == "run_report.json" {
+                let mut r: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+                for s in r["stages"].as_array_mut().unwrap() {
+                    for k in ["seconds", "mvoxel_per_s", "peak_mib"] {
+                        s.as_object_mut().unwrap().remove(k);
+                    }
+                }
+                r.as_object_mut().unwrap().remove("total_seconds");
+                out.insert(rel, serde_json::to_vec_pretty(&r).unwrap());
+            } else if rel != "report.html" && rel != ".mdtf-output" {
+                out.insert(rel, std::fs::read(&path).unwrap());
+            }
+        }
+    }
+    let mut out = BTreeMap::new();
+    walk(dir, dir, &mut out);
+    out
+}
+
+/// The names of the files that differ between two runs (or exist in one only).
+fn differing(a: &BTreeMap<String, Vec<u8>>, b: &BTreeMap<String, Vec<u8>>) -> Vec<String> {
+    let names: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+    names.into_iter().filter(|n| a.get(*n) != b.get(*n)).cloned().collect()
+}
+
+/// Runs `p` whole, then slab by slab with each of `sizes`, into the same
+/// output path (the preview names it); asserts every run's files equal the
+/// whole run's and returns how many files were compared.
+fn assert_slab_runs_equal_the_whole(name: &str, p: &Pipeline, input: Option<PathBuf>, sizes: &[SlabSize]) -> usize {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = RunOptions {
+        pipeline_path: pipelines_dir().join(format!("{name}.toml")),
+        input,
+        output: dir.path().join("out"),
+    };
+    run_whole(p, &opts, &|_| {}).unwrap();
+    let whole = files(&opts.output);
+    std::fs::remove_dir_all(&opts.output).unwrap();
+    for &size in sizes {
+        run_blocks(p, &opts, size, &|_| {}).unwrap_or_else(|e| panic!("{name} {size:?}: {e}"));
+        let slabbed = files(&opts.output);
+        assert_eq!(differing(&whole, &slabbed), Vec::<String>::new(), "{name}, {size:?}");
+        assert!(!opts.output.join(".slabs").exists(), "the channel store is gone");
+        std::fs::remove_dir_all(&opts.output).unwrap();
+    }
+    whole.len()
+}
+
+fn shipped(name: &str, sets: &[&str]) -> Pipeline {
+    let text = std::fs::read_to_string(pipelines_dir().join(format!("{name}.toml"))).unwrap();
+    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+    parse(&text, &sets).unwrap()
+}
+
+/// A budget that gives distance-tf on 64 x 64 planes slabs of 8 planes (8 slabs of 64): the fixed
+/// costs (48 MiB, 64 MiB for the histogram volume) and 250 planes, of which the tracing needs
+/// 10 per slab plane and 170 for its halo.
+const EIGHT_SLAB_BUDGET: u64 = 48 * 1024 * 1024 + 64 * 1024 * 1024 + 250 * 64 * 64 * 4;
+
+#[test]
+fn the_shipped_pipelines_give_the_same_files_slab_by_slab() {
+    for name in ["slicer-3dtf", "distance-tf"] {
+        let p = shipped(name, &["input.size=64"]);
+        let sizes =
+            [SlabSize::Planes(1), SlabSize::Planes(7), SlabSize::Planes(33), SlabSize::Budget(EIGHT_SLAB_BUDGET)];
+        let compared = assert_slab_runs_equal_the_whole(name, &p, None, &sizes);
+        assert!(compared >= 15, "{name}: {compared} files compared");
+    }
+}
+
+#[test]
+fn the_budget_sets_the_slab_height_and_a_budget_too_small_is_refused_before_any_output() {
+    let p = shipped("distance-tf", &["input.size=64"]);
+    let geo = Geometry::new([64; 3], [1.0; 3]);
+    let plan = mdtf_pipeline::plan::Plan::resolve(&p, &[], &geo).unwrap();
+    let h = mdtf_pipeline::blocks::slab_height(EIGHT_SLAB_BUDGET, &geo, &plan, true).unwrap();
+    assert_eq!(h, 8, "8 slabs of 64 planes");
+    let dir = tempfile::tempdir().unwrap();
+    let opts = RunOptions {
+        pipeline_path: pipelines_dir().join("distance-tf.toml"),
+        input: None,
+        output: dir.path().join("out"),
+    };
+    let e = run_blocks(&p, &opts, SlabSize::Budget(64 << 20), &|_| {}).unwrap_err().to_string();
+    assert!(e.contains("too small") && e.contains("needs"), "{e}");
+    assert!(!opts.output.exists(), "nothing is published");
+}
+
+#[test]
+fn an_anisotropic_noisy_file_read_by_planes_gives_the_same_files_with_the_prefilter_on() {
+    // the tooth phantom on 1 x 0.8 x 1.3 mm voxels, noisy, stored as u16 NRRD (read by planes)
+    let geo = Geometry::new([44, 40, 50], [1.0, 0.8, 1.3]);
+    let mut v = mdtf_datagen::RadialPhantom::tooth(geo, 1.5).volume();
+    mdtf_datagen::add_gaussian_noise(&mut v, 3.0, 5);
+    let v = Volume { geometry: v.geometry.clone(), data: v.data.mapv(|x| x.round().clamp(0.0, 65535.0)) };
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("tooth.nrrd");
+    write_volume(&input, &v, &WriteOptions { ty: SampleType::U16, gzip: false }, &[]).unwrap();
+    let text = "keep = [\"distance\", \"g_hit\", \"hit\", \"g\"]\n[derive]\nkernel = \"gauss:1\"\n\
+                [prefilter]\nsigma_d = 1.0\nsigma_r = 0.1\n[histogram]\njoint = true\nstretched = true\nhvol = true\n\
+                [pack]\nprofile = \"distance-tf\"\nalpha = { kind = \"linear\", a = 1.0, dc = 3.0 }\n";
+    let p = parse(text, &[]).unwrap();
+    let sizes = [SlabSize::Planes(1), SlabSize::Planes(7), SlabSize::Planes(33)];
+    let compared = assert_slab_runs_equal_the_whole("distance-tf", &p, Some(input.clone()), &sizes);
+    assert!(compared >= 20, "{compared} files compared");
+    // gzip NRRD input, streamed
+    let gz = dir.path().join("tooth-gz.nrrd");
+    write_volume(&gz, &v, &WriteOptions { ty: SampleType::U16, gzip: true }, &[]).unwrap();
+    let slicer = parse("[histogram]\njoint = true\nhvol = true\n[pack]\nprofile = \"slicer-3dtf\"\n", &[]).unwrap();
+    assert_slab_runs_equal_the_whole("slicer-3dtf", &slicer, Some(gz), &[SlabSize::Planes(7)]);
+}
+
+#[test]
+fn pipelines_it_cannot_run_by_slabs_are_refused_with_the_reason_and_no_output() {
+    for (name, why) in [
+        ("gaussian-tf", "does not run slab by slab"),
+        ("peak-finding", "does not run slab by slab"),
+        ("projected-tetrahedra", "does not run slab by slab"),
+    ] {
+        let p = shipped(name, &["input.size=32"]);
+        let dir = tempfile::tempdir().unwrap();
+        let opts = RunOptions {
+            pipeline_path: pipelines_dir().join(format!("{name}.toml")),
+            input: None,
+            output: dir.path().join("out"),
+        };
+        let e = run_blocks(&p, &opts, SlabSize::Planes(4), &|_| {}).unwrap_err().to_string();
+        assert!(e.contains(why), "{name}: {e}");
+        assert!(!opts.output.exists(), "{name}: nothing is written");
+    }
+}
