@@ -1392,3 +1392,57 @@ fn run_plan_prints_the_steps_and_the_halo_and_writes_nothing() {
     let slicer = mdtf_ok(&["run", shipped_pipeline("slicer-3dtf").to_str().unwrap(), "--plan"]);
     assert!(slicer.contains("pack             reads v g f2 -> nx ny nz") && !slicer.contains("boundary"), "{slicer}");
 }
+
+#[test]
+fn run_under_a_memory_budget_matches_the_whole_run_and_explains_a_budget_it_cannot_use() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("sphere.nii");
+    mdtf_ok(&[
+        "synth",
+        "erf-sphere",
+        "--size",
+        "48",
+        "--sigma",
+        "2",
+        "--type",
+        "u16",
+        "-o",
+        input.to_str().unwrap(),
+        "-q",
+    ]);
+    let pipeline = shipped_pipeline("distance-tf");
+    let (p, i) = (pipeline.to_str().unwrap(), input.to_str().unwrap());
+    let out = dir.path().join("out");
+    let o = out.to_str().unwrap();
+    mdtf_ok(&["run", p, "--input", i, "-o", o, "--set", "preview=false", "-q"]);
+    let whole: Vec<(String, Vec<u8>)> = [
+        "pack/normal_v.raw",
+        "pack/ghit_d.raw",
+        "pack/alpha_u_u8.nrrd",
+        "pack/manifest.json",
+        "volumes/distance.nii.gz",
+    ]
+    .iter()
+    .map(|f| (f.to_string(), std::fs::read(out.join(f)).unwrap_or_default()))
+    .collect();
+    assert!(whole.iter().all(|(_, b)| !b.is_empty()), "the whole run wrote its pack and kept volumes");
+    std::fs::remove_dir_all(&out).unwrap();
+    // 48 x 48 planes: the fixed 112 MiB and 340 planes, a few slabs
+    let text = mdtf_ok(&["run", p, "--input", i, "-o", o, "--set", "preview=false", "--memory-budget", "115MiB"]);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("run_report.json")).unwrap()).unwrap();
+    let count = report["slabs"]["count"].as_u64().unwrap();
+    assert!(count >= 2, "several slabs: {report}");
+    assert_eq!(report["slabs"]["budget"].as_u64(), Some(115 << 20));
+    for (f, bytes) in &whole {
+        assert_eq!(&std::fs::read(out.join(f)).unwrap(), bytes, "{f} differs from the whole run's\n{text}");
+    }
+    assert!(!out.join(".slabs").exists());
+    let bad = mdtf_err(&["run", p, "--input", i, "-o", o, "--memory-budget", "2 parsecs"]);
+    assert!(bad.contains("unknown unit 'parsecs'"), "{bad}");
+    let small = mdtf_err(&["run", p, "--input", i, "-o", o, "--memory-budget", "1MiB"]);
+    assert!(small.contains("too small") && small.contains("needs"), "{small}");
+    let gaussian = shipped_pipeline("gaussian-tf");
+    let refused = mdtf_err(&["run", gaussian.to_str().unwrap(), "--input", i, "-o", o, "--slab-planes", "4"]);
+    assert!(refused.contains("does not run slab by slab yet"), "{refused}");
+}

@@ -134,7 +134,14 @@ impl ChannelStats {
 
     /// The statistics of `data`, in parallel over blocks.
     pub fn of(data: &[f32], clip: (f64, f64)) -> ChannelStats {
-        let n = data.len();
+        ChannelStats::of_part(data, clip, data.len())
+    }
+
+    /// The statistics of `data`, a part of a channel of `total` samples (a
+    /// slab of a slab-by-slab run), in parallel over blocks: to
+    /// [`merge`](ChannelStats::merge) with the other parts' statistics.
+    pub fn of_part(data: &[f32], clip: (f64, f64), total: usize) -> ChannelStats {
+        let n = total;
         data.par_chunks(1 << 16)
             .fold(
                 || ChannelStats::new(clip, n),

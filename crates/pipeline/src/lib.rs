@@ -8,6 +8,10 @@
 //! and halo); `mdtf run --plan` prints the plan. To add a channel: a
 //! [`channel::Channel`] variant and its row, the derive item or stage that
 //! produces it, and its meaning in `mdtf_pack::describe` if it is packed.
+//!
+//! The same plan runs on the whole volume ([`run::run`]) or slab by slab
+//! under a memory budget ([`blocks::run`]): z-slabs grown by each pass's
+//! halo, whole-volume reductions merged exactly, outputs byte-identical.
 
 pub mod blocks;
 pub mod boundary_chain;

@@ -80,10 +80,24 @@ pub struct RunReport {
     pub boundaries: Vec<mdtf_histogram::DetectedBoundary>,
     /// Whether the histogram volume was built (so `boundaries` says what was found).
     pub hvol_built: bool,
+    /// How the run was cut into z-slabs, when it ran slab by slab.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub slabs: Option<SlabRun>,
     /// The stages, in order.
     pub stages: Vec<StageReport>,
     /// Total wall time, seconds.
     pub total_seconds: f64,
+}
+
+/// The slabs of a slab-by-slab run.
+#[derive(Debug, Clone, Serialize)]
+pub struct SlabRun {
+    /// z-planes per slab (the last may hold fewer).
+    pub planes: usize,
+    /// Number of slabs.
+    pub count: usize,
+    /// The memory budget they were sized for, bytes (None: the height was given).
+    pub budget: Option<u64>,
 }
 
 /// What the boundary tracing used and found.
@@ -468,6 +482,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         boundary,
         boundaries,
         hvol_built: hvol_kept.is_some(),
+        slabs: None,
         stages: stages.0,
         total_seconds: 0.0,
     };

@@ -42,7 +42,15 @@ pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
         (None, None) => None,
     };
     let report = match slabs {
-        Some(size) => mdtf_pipeline::blocks::run(&pipeline, &opts, size, &on_stage),
+        Some(size) => {
+            let on_slab = |k: usize, slabs: usize| {
+                let cur = current.lock().unwrap_or_else(|e| e.into_inner());
+                if let Some((name, _)) = cur.as_ref() {
+                    progress.message(&format!("running: {name}, slab {k} of {slabs}"));
+                }
+            };
+            mdtf_pipeline::blocks::run(&pipeline, &opts, size, &on_stage, &on_slab)
+        }
         None => run_pipeline(&pipeline, &opts, &on_stage),
     };
     finish(None);

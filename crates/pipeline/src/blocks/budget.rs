@@ -21,8 +21,9 @@ fn pass_planes(h: u64, plan: &Plan) -> u64 {
     let pf = plan.reach.prefilter[2] as u64;
     let prefilter = if plan.prefilter { 4 * (h + 2 * pf) + 2 * h } else { 0 };
     let t = plan.reach.trace[2] as u64;
-    // g, f'', normal over the block; distance, g_hit, hit, dot and the report's g over the slab
-    let trace = if plan.trace { 5 * (h + 2 * t) + 5 * h } else { 0 };
+    // the value and its five derivatives over the block grown by the kernel; distance, g_hit,
+    // hit, dot and the report's g over the slab
+    let trace = if plan.trace { 6 * (h + 2 * t + 2 * k) + 5 * h } else { 0 };
     // a texture's four channels and its bytes, or the histograms' channels
     let pack = 5 * h;
     derive.max(prefilter).max(trace).max(pack)
@@ -73,9 +74,9 @@ mod tests {
         let h = slab_height(budget, &geo, &plan, false).unwrap() as u64;
         assert!(BASE_BYTES + pass_planes(h, &plan) * plane <= budget);
         assert!(BASE_BYTES + pass_planes(h + 1, &plan) * plane > budget);
-        // the tracing's five halo-grown inputs and five outputs are counted
-        let t = plan.reach.trace[2] as u64;
-        assert!(pass_planes(h, &plan) >= 5 * (h + 2 * t) + 5 * h);
+        // the tracing's value and derivatives over its halo-grown block, and its outputs, are counted
+        let (t, k) = (plan.reach.trace[2] as u64, plan.reach.kernel[2] as u64);
+        assert!(pass_planes(h, &plan) >= 6 * (h + 2 * t + 2 * k) + 5 * h);
         assert_eq!(slabs(10, 4), vec![0..4, 4..8, 8..10]);
         let e = slab_height(1 << 20, &geo, &plan, false).unwrap_err();
         assert!(e.contains("too small") && e.contains("1.0 MiB"), "{e}");

@@ -21,14 +21,16 @@
 //! are refused with the reason, before any work.
 
 mod budget;
+mod slab_channels;
 mod store;
 
 pub use budget::{slab_height, slabs};
+pub use slab_channels::SlabChannels;
 pub use store::ChannelStore;
 
 use crate::file::Pipeline;
 use crate::hist_files::Counted;
-use crate::plan::{Plan, Step};
+use crate::plan::Plan;
 use crate::run::{RunError, RunOptions, RunReport, Stages, fail};
 use mdtf_boundary::{BoundaryInput, ReportAccumulator, VolumeStats};
 use mdtf_derive::DeriveParams;
@@ -39,6 +41,9 @@ use std::collections::BTreeMap;
 use std::ops::Range;
 use std::path::Path;
 use std::time::Instant;
+
+/// f32 volumes the preview decodes from a pack at most (value, g, f'', three normals).
+const PREVIEW_CHANNELS: usize = 6;
 
 /// Why `p` cannot run slab by slab on an input with `fields`, if it cannot.
 pub fn unsupported(p: &Pipeline, fields: usize) -> Option<String> {
@@ -110,17 +115,22 @@ fn grown(z: &Range<usize>, halo: usize, min: usize, nz: usize) -> Range<usize> {
     lo..hi
 }
 
-/// Percentile statistics of the channels that need them, with qbert's clips.
-struct Stats(BTreeMap<&'static str, ChannelStats>);
+/// Percentile statistics of the channels that need them, with qbert's
+/// clips, and the voxels of the whole volume.
+struct Stats(BTreeMap<&'static str, ChannelStats>, usize);
 
 impl Stats {
     fn new(names: &[&'static str], n: usize) -> Stats {
-        Stats(names.iter().map(|&c| (c, ChannelStats::new(AxisSpec::qbert(c).clip_percent, n))).collect())
+        Stats(names.iter().map(|&c| (c, ChannelStats::new(AxisSpec::qbert(c).clip_percent, n))).collect(), n)
     }
 
     fn add(&mut self, name: &str, data: &[f32]) {
-        if let Some(s) = self.0.get_mut(name) {
-            s.add(data);
+        if let Some(s) = self.0.remove_entry(name) {
+            let (key, stats) = s;
+            let clip = AxisSpec::qbert(key).clip_percent;
+            // in parallel over the slab; the candidates merge exactly
+            let slab = ChannelStats::of_part(data, clip, self.1);
+            self.0.insert(key, stats.merge(slab));
         }
     }
 
@@ -144,8 +154,15 @@ pub enum SlabSize {
 }
 
 /// Runs `p` slab by slab, slabs of `size`; `on_stage(name)` is called as
-/// each pass starts. The outputs equal [`run`](crate::run::run)'s.
-pub fn run(p: &Pipeline, opts: &RunOptions, size: SlabSize, on_stage: &dyn Fn(&str)) -> Result<RunReport, RunError> {
+/// each pass starts, `on_slab(k, slabs)` as it starts its slab k (from 1).
+/// The outputs equal [`run`](crate::run::run)'s.
+pub fn run(
+    p: &Pipeline,
+    opts: &RunOptions,
+    size: SlabSize,
+    on_stage: &dyn Fn(&str),
+    on_slab: &dyn Fn(usize, usize),
+) -> Result<RunReport, RunError> {
     let start = Instant::now();
     let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
     if let Some(why) = unsupported(p, 1) {
@@ -177,7 +194,8 @@ pub fn run(p: &Pipeline, opts: &RunOptions, size: SlabSize, on_stage: &dyn Fn(&s
     let mut store = ChannelStore::create(dir.join(".slabs"), geo.clone()).map_err(|e| fail("input")(e.to_string()))?;
     let io = |stage: &'static str| move |e: std::io::Error| fail(stage)(e.to_string());
     let mut stats = Stats::new(&["v", "g", "f2", "g_hit", "g_prefiltered"], n);
-    for z in &slabs {
+    for (k, z) in slabs.iter().enumerate() {
+        on_slab(k + 1, slabs.len());
         let v = source.read(z.clone())?;
         stats.add("v", v.samples());
         store.put_volume("v", z.start, &v).map_err(io("input"))?;
@@ -188,34 +206,29 @@ pub fn run(p: &Pipeline, opts: &RunOptions, size: SlabSize, on_stage: &dyn Fn(&s
     let value_range = finite_range.map_or(0.0, |[lo, hi]| hi - lo);
     let kernel = p.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL);
 
-    // derive: each slab's planes from the value grown by the kernel's support
-    // (the normals too: the store keeps them for the pack, so nothing is deferred)
-    let mut items = plan.derive.clone();
+    // derive: the derivatives are recomputed from the stored value by every
+    // pass that reads them, in the whole run's groups (the normals on their
+    // own when it defers them); this pass takes their statistics
+    let span = stats.range("v").map_or(0.0, |(lo, hi)| hi - lo);
+    let derive = |items: Vec<mdtf_derive::Item>| DeriveParams {
+        items,
+        kernel,
+        epsilon: Some(mdtf_derive::default_epsilon(span, geo.min_spacing())),
+        ..Default::default()
+    };
+    let mut groups = vec![derive(plan.derive.clone())];
     if plan.defer_normals {
-        items.push(mdtf_derive::Item::Normal);
+        groups.push(derive(vec![mdtf_derive::Item::Normal]));
     }
-    if !items.is_empty() {
+    let mut chans = SlabChannels::new(store, groups, plan.reach.kernel[2], nz);
+    let summarised: Vec<&str> = ["g", "f2"].into_iter().filter(|c| chans.has(c)).collect();
+    if !summarised.is_empty() {
         on_stage("derive");
         let t = Instant::now();
-        let span = stats.range("v").map_or(0.0, |(lo, hi)| hi - lo);
-        let d = DeriveParams {
-            items,
-            kernel,
-            epsilon: Some(mdtf_derive::default_epsilon(span, geo.min_spacing())),
-            ..Default::default()
-        };
-        let k = plan.reach.kernel[2];
-        for z in &slabs {
-            let read = grown(z, k, 2 * k + 1, nz);
-            let v = store.volume("v", read.clone()).map_err(io("derive"))?;
-            let out = mdtf_derive::run(&MultiField::from(v), &d).map_err(|e| fail("derive")(e.to_string()))?;
-            let own = z.start - read.start..z.end - read.start;
-            for (_, mf) in out.items {
-                for (name, vol) in mf.into_volumes() {
-                    let planes = vol.z_slab(own.clone());
-                    stats.add(&name, planes.samples());
-                    store.put_volume(&name, z.start, &planes).map_err(io("derive"))?;
-                }
+        for (k, z) in slabs.iter().enumerate() {
+            on_slab(k + 1, slabs.len());
+            for (name, v) in chans.volumes(z.clone(), &summarised).map_err(fail("derive"))? {
+                stats.add(&name, v.samples());
             }
         }
         stages.done("derive", t, n, vec![]);
@@ -235,13 +248,14 @@ pub fn run(p: &Pipeline, opts: &RunOptions, size: SlabSize, on_stage: &dyn Fn(&s
             for (c, out_name) in [("g", "g_prefiltered"), ("f2", "f2_prefiltered")] {
                 let range = stats.range(c).map_or(0.0, |(lo, hi)| (hi - lo) as f64);
                 let params = crate::boundary_chain::prefilter_params(pf, range);
-                for z in &slabs {
+                for (k, z) in slabs.iter().enumerate() {
+                    on_slab(k + 1, slabs.len());
                     let read = grown(z, halo, 1, nz);
-                    let v = store.volume(c, read.clone()).map_err(io("prefilter"))?;
+                    let v = chans.volumes(read.clone(), &[c]).map_err(fail("prefilter"))?.remove(0).1;
                     let filtered = mdtf_bilateral::run(&v, &params).map_err(|e| fail("prefilter")(e.to_string()))?;
                     let own = filtered.z_slab(z.start - read.start..z.end - read.start);
                     stats.add(out_name, own.samples());
-                    store.put_volume(out_name, z.start, &own).map_err(io("prefilter"))?;
+                    chans.store.put_volume(out_name, z.start, &own).map_err(io("prefilter"))?;
                 }
             }
             (g_name, f2_name) = ("g_prefiltered", "f2_prefiltered");
@@ -249,27 +263,34 @@ pub fn run(p: &Pipeline, opts: &RunOptions, size: SlabSize, on_stage: &dyn Fn(&s
         }
         on_stage("boundary");
         let t = Instant::now();
-        let g_stats = g_stats(&mut store, g_name, nz, value_range, geo.min_spacing(), &stats)?;
+        let g_stats = g_stats(&mut chans, g_name, &slabs, value_range, geo.min_spacing(), &stats)?;
         let halo = plan.reach.trace[2];
         let mut report: Option<ReportAccumulator> = None;
         let mut crossings: Option<mdtf_boundary::Crossings> = None;
         let mut counts = mdtf_boundary::TraceCounts::default();
         let mut resolved = None;
-        for z in &slabs {
+        for (k, z) in slabs.iter().enumerate() {
+            on_slab(k + 1, slabs.len());
             let read = grown(z, halo, 1, nz);
-            let vol = |s: &mut ChannelStore, c: &str| s.volume(c, read.clone()).map_err(io("boundary"));
-            let (g, f2) = (vol(&mut store, g_name)?, vol(&mut store, f2_name)?);
-            let normal = MultiField::from_volumes(vec![
-                ("nx".into(), vol(&mut store, "nx")?),
-                ("ny".into(), vol(&mut store, "ny")?),
-                ("nz".into(), vol(&mut store, "nz")?),
-            ])
-            .map_err(|e| fail("boundary")(e.to_string()))?;
-            let own = z.start - read.start..z.end - read.start;
-            let input = BoundaryInput { g: &g, f2: &f2, normal: &normal, value_range };
-            let b = mdtf_boundary::trace_block(&input, &p.boundary, read.start, own.clone(), &g_stats)
+            let block = if plan.prefilter {
+                let mut c =
+                    chans.volumes(read.clone(), &[g_name, f2_name, "nx", "ny", "nz"]).map_err(fail("boundary"))?;
+                let normal = MultiField::from_volumes(c.split_off(2)).map_err(|e| fail("boundary")(e.to_string()))?;
+                let (f2, g) = (c.remove(1).1, c.remove(0).1);
+                TraceBlock { planes: read.clone(), g, f2, normal, order: None }
+            } else {
+                // the derivatives over the block as derived (its planes beyond `read` are never reached)
+                let (planes, out) = chans.derive_block(read.clone()).map_err(fail("boundary"))?;
+                TraceBlock::of(planes, out).map_err(fail("boundary"))?
+            };
+            let own = z.start - block.planes.start..z.end - block.planes.start;
+            let input = BoundaryInput { g: &block.g, f2: &block.f2, normal: &block.normal, value_range };
+            let b = mdtf_boundary::trace_block(&input, &p.boundary, block.planes.start, own.clone(), &g_stats)
                 .map_err(|e| fail("boundary")(e.to_string()))?;
-            let g_own = g.z_slab(own);
+            let g_own = block.g.z_slab(own);
+            if let Some(out) = block.into_output() {
+                chans.recycle(out);
+            }
             report.get_or_insert_with(|| ReportAccumulator::new(b.resolved.report_thresholds())).add(
                 mdtf_boundary::ReportInput {
                     hit: b.hit.samples(),
@@ -287,7 +308,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, size: SlabSize, on_stage: &dyn Fn(&s
             resolved = Some(b.resolved);
             stats.add("g_hit", b.g_hit.samples());
             for (c, v) in [("g_hit", &b.g_hit), ("hit", &b.hit), ("distance", &b.distance)] {
-                store.put_volume(c, z.start, v).map_err(io("boundary"))?;
+                chans.store.put_volume(c, z.start, v).map_err(io("boundary"))?;
             }
         }
         let (Some(r), Some(report), Some(crossings)) = (resolved, report, crossings) else {
@@ -301,14 +322,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, size: SlabSize, on_stage: &dyn Fn(&s
         std::fs::create_dir_all(&rdir).map_err(io("boundary"))?;
         report.finish().write(&rdir).map_err(|e| fail("boundary")(e.to_string()))?;
         for c in ["g_prefiltered", "f2_prefiltered"] {
-            store.remove(c);
-        }
-        // what only the tracing read, unless the default TF's histogram volume still counts it
-        for c in plan.freed_after(Step::Trace) {
-            let name = c.name(&[]);
-            if !(hvol_needed && ["v", "g", "f2"].contains(&name.as_str())) {
-                store.remove(&name);
-            }
+            chans.store.remove(c);
         }
         stages.done(
             "boundary",
@@ -326,12 +340,12 @@ pub fn run(p: &Pipeline, opts: &RunOptions, size: SlabSize, on_stage: &dyn Fn(&s
         std::fs::create_dir_all(&kdir).map_err(io("keep"))?;
         let mut written = Vec::new();
         for c in &p.keep {
-            if !store.has(c) {
+            if !chans.has(c) {
                 return Err(fail("keep")(format!("no channel '{c}' was computed")));
             }
             let path = kdir.join(format!("{c}.nii.gz"));
             mdtf_volume::write_nifti_slabs(&path, &geo, mdtf_volume::SampleType::F32, &slabs, &mut |z| {
-                store.samples(c, z)
+                chans.samples(c, z).map_err(std::io::Error::other)
             })
             .map_err(|e| fail("keep")(e.to_string()))?;
             written.push(format!("volumes/{c}.nii.gz"));
@@ -347,7 +361,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, size: SlabSize, on_stage: &dyn Fn(&s
             on_stage("histogram");
         }
         let t = Instant::now();
-        let mut counted = count_histograms(p, &mut store, &stats, &slabs, n, hvol_needed)?;
+        let mut counted = count_histograms(p, &mut chans, &stats, &slabs, n, hvol_needed)?;
         // the default TF's histogram volume is an output only when the histograms ask for it
         let default_hvol = if hvol_asked { None } else { counted.hvol.take() };
         if !hvol_only {
@@ -396,13 +410,9 @@ pub fn run(p: &Pipeline, opts: &RunOptions, size: SlabSize, on_stage: &dyn Fn(&s
     for layout in mdtf_pack::texture_layouts(&params) {
         writer
             .add_slabs(&layout, &slabs, &mut |z| {
-                layout
-                    .components
-                    .iter()
-                    .flatten()
-                    .map(|c| Ok((c.clone(), store.volume(c, z.clone())?)))
-                    .collect::<std::io::Result<Vec<_>>>()
-                    .map_err(|e| mdtf_pack::PackError::Io(mdtf_volume::VolumeError::Fields(e.to_string())))
+                on_slab(z.end.div_ceil(height), slabs.len());
+                let names: Vec<&str> = layout.components.iter().flatten().map(String::as_str).collect();
+                chans.volumes(z, &names).map_err(|e| mdtf_pack::PackError::Io(mdtf_volume::VolumeError::Fields(e)))
             })
             .map_err(|e| err(e.to_string()))?;
     }
@@ -416,8 +426,24 @@ pub fn run(p: &Pipeline, opts: &RunOptions, size: SlabSize, on_stage: &dyn Fn(&s
         pack_outputs.extend(written.into_iter().map(|f| format!("histogram/{f}")));
     }
     stages.done("pack", t, n, pack_outputs);
-    store.clear();
+    chans.store.clear();
 
+    // the preview decodes the pack whole: under a budget it cannot keep, it is left to `mdtf preview`
+    let mut finishing = p.clone();
+    let preview_bytes = (PREVIEW_CHANNELS * n * 4) as u64;
+    if let SlabSize::Budget(b) = size
+        && p.preview
+        && preview_bytes > b
+    {
+        finishing.preview = false;
+        warnings.push(format!(
+            "preview: not rendered: it decodes the pack at full resolution (about {}), more than the memory budget \
+             of {}; `mdtf preview {}` renders it where there is the memory",
+            mdtf_volume::human_bytes(preview_bytes as u128),
+            mdtf_volume::human_bytes(b as u128),
+            opts.output.join("pack").display()
+        ));
+    }
     let report = RunReport {
         pipeline: opts.pipeline_path.display().to_string(),
         output: opts.output.display().to_string(),
@@ -430,19 +456,75 @@ pub fn run(p: &Pipeline, opts: &RunOptions, size: SlabSize, on_stage: &dyn Fn(&s
         boundary,
         boundaries,
         hvol_built: hvol_asked,
+        slabs: Some(crate::run::SlabRun {
+            planes: height,
+            count: slabs.len(),
+            budget: match size {
+                SlabSize::Budget(b) => Some(b),
+                SlabSize::Planes(_) => None,
+            },
+        }),
         stages: stages.0,
         total_seconds: 0.0,
     };
-    crate::run::finish(p, opts, out, report, &table_names, start, on_stage)
+    crate::run::finish(&finishing, opts, out, report, &table_names, start, on_stage)
 }
 
-/// The tracing's whole-volume statistics of the g it traces (`g_name`, of
-/// `nz` planes in the store): the noise floor from its median (a two-pass
-/// select over the store) and its largest value.
+/// What a block's tracing reads: g, f'' and the normal on `planes`.
+struct TraceBlock {
+    planes: Range<usize>,
+    g: Volume,
+    f2: Volume,
+    normal: MultiField,
+    /// The derive output's item order, when they came from one (to give its memory back).
+    order: Option<Vec<mdtf_derive::Item>>,
+}
+
+impl TraceBlock {
+    /// The block of a derive output over `planes` holding g, f'' and the normal.
+    fn of(planes: Range<usize>, out: mdtf_derive::DeriveOutput) -> Result<TraceBlock, String> {
+        use mdtf_derive::Item;
+        let order: Vec<Item> = out.items.iter().map(|(i, _)| *i).collect();
+        let (mut g, mut f2, mut normal) = (None, None, None);
+        for (item, mf) in out.items {
+            match item {
+                Item::G => g = Some(mf.into_scalar().map_err(|e| e.to_string())?),
+                Item::F2 => f2 = Some(mf.into_scalar().map_err(|e| e.to_string())?),
+                Item::Normal => normal = Some(mf),
+                _ => {}
+            }
+        }
+        let (Some(g), Some(f2), Some(normal)) = (g, f2, normal) else {
+            return Err("the tracing needs g, f2 and the normal from one derive pass".into());
+        };
+        Ok(TraceBlock { planes, g, f2, normal, order: Some(order) })
+    }
+
+    /// The derive output it came from, for its memory.
+    fn into_output(self) -> Option<mdtf_derive::DeriveOutput> {
+        use mdtf_derive::Item;
+        let order = self.order?;
+        let (mut g, mut f2, mut normal) = (Some(self.g), Some(self.f2), Some(self.normal));
+        let items = order
+            .into_iter()
+            .filter_map(|i| match i {
+                Item::G => g.take().map(|v| (i, MultiField::from(v))),
+                Item::F2 => f2.take().map(|v| (i, MultiField::from(v))),
+                Item::Normal => normal.take().map(|n| (i, n)),
+                _ => None,
+            })
+            .collect();
+        Some(mdtf_derive::DeriveOutput { items })
+    }
+}
+
+/// The tracing's whole-volume statistics of the g it traces (`g_name`):
+/// the noise floor from its median (a two-pass select over the slabs) and
+/// its largest value.
 fn g_stats(
-    store: &mut ChannelStore,
+    chans: &mut SlabChannels,
     g_name: &str,
-    nz: usize,
+    slabs: &[Range<usize>],
     value_range: f64,
     l_min: f64,
     stats: &Stats,
@@ -452,12 +534,12 @@ fn g_stats(
     let median = match s.finite_count().checked_sub(1) {
         None => None,
         Some(last) => mdtf_volume::order_statistic_of_pieces(last / 2, |visit| {
-            for z in 0..nz {
-                visit(&store.samples(g_name, z..z + 1)?);
+            for z in slabs {
+                visit(&chans.samples(g_name, z.clone())?);
             }
-            Ok::<(), std::io::Error>(())
+            Ok::<(), String>(())
         })
-        .map_err(|e| fail("boundary")(e.to_string()))?,
+        .map_err(fail("boundary"))?,
     };
     let noise_floor = mdtf_boundary::noise_floor_of_median(median, value_range, l_min);
     Ok(VolumeStats { value_range, noise_floor, g_max })
@@ -468,16 +550,16 @@ fn g_stats(
 /// whole volume's statistics give.
 fn count_histograms(
     p: &Pipeline,
-    store: &mut ChannelStore,
+    chans: &mut SlabChannels,
     stats: &Stats,
     slabs: &[Range<usize>],
     n: usize,
     hvol_needed: bool,
 ) -> Result<Counted, RunError> {
     let err = |e: mdtf_histogram::HistogramError| fail("histogram")(e.to_string());
-    let io = |e: std::io::Error| fail("histogram")(e.to_string());
+    let io = fail("histogram");
     let joint = p.histogram.as_ref().is_some_and(|h| h.joint);
-    let stretched = p.histogram.as_ref().is_some_and(|h| h.stretched) && store.has("g_hit") && store.has("hit");
+    let stretched = p.histogram.as_ref().is_some_and(|h| h.stretched) && chans.has("g_hit") && chans.has("hit");
     let axes = vec![stats.axis(&AxisSpec::qbert("v"), "v")?, stats.axis(&AxisSpec::qbert("g"), "g")?];
     let mut sa = axes.clone();
     sa[1].name = "g_hit".into();
@@ -501,10 +583,23 @@ fn count_histograms(
     };
     let mut stretched_pair: (Option<Histogram>, Option<Histogram>) = (None, None);
     for z in slabs {
-        let v = store.samples("v", z.clone()).map_err(io)?;
-        let g = store.samples("g", z.clone()).map_err(io)?;
+        let mut names = vec!["v", "g"];
+        if hvol.is_some() {
+            names.push("f2");
+        }
+        if stretched {
+            names.extend(["g_hit", "hit"]);
+        }
+        let mut slab: BTreeMap<String, Vec<f32>> = chans
+            .volumes(z.clone(), &names)
+            .map_err(&io)?
+            .into_iter()
+            .map(|(c, v)| (c, v.data.into_raw_vec_and_offset().0))
+            .collect();
+        let mut take = |c: &str| slab.remove(c).ok_or_else(|| fail("histogram")(format!("{c} missing")));
+        let (v, g) = (take("v")?, take("g")?);
         if let Some(acc) = &mut hvol {
-            let f2 = store.samples("f2", z.clone()).map_err(io)?;
+            let f2 = take("f2")?;
             let plane = v.len() / z.len();
             for (i, k) in z.clone().enumerate() {
                 let at = i * plane..(i + 1) * plane;
@@ -515,8 +610,8 @@ fn count_histograms(
             add(&mut counted.joint, count(&[&v, &g], axes.clone(), None).map_err(err)?);
         }
         if stretched {
-            let g_hit = store.samples("g_hit", z.clone()).map_err(io)?;
-            let traced = hit_mask(&store.samples("hit", z.clone()).map_err(io)?);
+            let g_hit = take("g_hit")?;
+            let traced = hit_mask(&take("hit")?);
             add(&mut stretched_pair.0, count(&[&v, &g], axes.clone(), Some(&traced)).map_err(err)?);
             add(&mut stretched_pair.1, count(&[&v, &g_hit], sa.clone(), Some(&traced)).map_err(err)?);
         }

@@ -1,5 +1,6 @@
 //! Where a slab-by-slab run keeps its channels between passes: each channel
-//! a file of f32 samples (x-fastest, little-endian) in a folder inside the
+//! a file of f32 samples (x-fastest, this machine's byte order: only this
+//! process reads them) in a folder inside the
 //! run's staging folder, written and read by z-planes. Only the planes a
 //! pass asks for are ever in memory; the files go with the staging folder.
 
@@ -15,17 +16,22 @@ pub struct ChannelStore {
     dir: PathBuf,
     geometry: Geometry,
     files: BTreeMap<String, File>,
-    bytes: Vec<u8>,
 }
 
 impl ChannelStore {
     /// A store for channels on `geometry`, in the (new) folder `dir`.
     pub fn create(dir: PathBuf, geometry: Geometry) -> std::io::Result<ChannelStore> {
         std::fs::create_dir_all(&dir)?;
-        Ok(ChannelStore { dir, geometry, files: BTreeMap::new(), bytes: Vec::new() })
+        Ok(ChannelStore { dir, geometry, files: BTreeMap::new() })
     }
 
-    fn plane_len(&self) -> usize {
+    /// The grid of the channels.
+    pub fn geometry(&self) -> &Geometry {
+        &self.geometry
+    }
+
+    /// Voxels per z-plane.
+    pub fn plane_len(&self) -> usize {
         self.geometry.dims[0] * self.geometry.dims[1]
     }
 
@@ -43,11 +49,9 @@ impl ChannelStore {
             let file = File::options().read(true).write(true).create_new(true).open(path)?;
             self.files.insert(name.to_string(), file);
         }
-        self.bytes.clear();
-        self.bytes.extend(samples.iter().flat_map(|v| v.to_le_bytes()));
         let Some(file) = self.files.get_mut(name) else { return Err(missing(name)) };
         file.seek(SeekFrom::Start(offset))?;
-        file.write_all(&self.bytes)
+        file.write_all(bytemuck::cast_slice(samples))
     }
 
     /// Writes a volume of planes `first..` of channel `name`.
@@ -57,14 +61,20 @@ impl ChannelStore {
 
     /// The samples of planes `z` (clamped to the grid) of channel `name`.
     pub fn samples(&mut self, name: &str, z: Range<usize>) -> std::io::Result<Vec<f32>> {
+        let mut samples = Vec::new();
+        self.samples_into(name, z, &mut samples)?;
+        Ok(samples)
+    }
+
+    /// [`ChannelStore::samples`] into `samples` (resized; its memory reused).
+    pub fn samples_into(&mut self, name: &str, z: Range<usize>, samples: &mut Vec<f32>) -> std::io::Result<()> {
         let nz = self.geometry.dims[2];
         let (z0, z1) = (z.start.min(nz), z.end.min(nz).max(z.start.min(nz)));
         let plane = self.plane_len();
-        self.bytes.resize((z1 - z0) * plane * 4, 0);
+        samples.resize((z1 - z0) * plane, 0.0);
         let Some(file) = self.files.get_mut(name) else { return Err(missing(name)) };
         file.seek(SeekFrom::Start((z0 * plane * 4) as u64))?;
-        file.read_exact(&mut self.bytes)?;
-        Ok(self.bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect())
+        file.read_exact(bytemuck::cast_slice_mut(samples.as_mut_slice()))
     }
 
     /// Planes `z` (clamped to the grid) of channel `name` as a volume placed where they lie.
