@@ -1438,8 +1438,10 @@ fn run_under_a_memory_budget_matches_the_whole_run_and_explains_a_budget_it_cann
         assert_eq!(&std::fs::read(out.join(f)).unwrap(), bytes, "{f} differs from the whole run's\n{text}");
     }
     assert!(!out.join(".slabs").exists());
-    let bad = mdtf_err(&["run", p, "--input", i, "-o", o, "--memory-budget", "2 parsecs"]);
-    assert!(bad.contains("unknown unit 'parsecs'"), "{bad}");
+    // a size that does not parse is a usage error (exit 2), said before anything is read
+    let bad = mdtf(&["run", p, "--input", i, "-o", o, "--memory-budget", "2 parsecs"]);
+    let said = String::from_utf8_lossy(&bad.stderr);
+    assert!(bad.status.code() == Some(2) && said.contains("unknown unit 'parsecs'"), "{said}");
     let small = mdtf_err(&["run", p, "--input", i, "-o", o, "--memory-budget", "1MiB"]);
     assert!(small.contains("too small") && small.contains("needs"), "{small}");
     let gaussian = shipped_pipeline("gaussian-tf");

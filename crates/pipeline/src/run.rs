@@ -100,6 +100,28 @@ pub struct SlabRun {
     pub budget: Option<u64>,
 }
 
+impl RunReport {
+    /// The report of a run of `opts` on `input` (its grid `geo`), with nothing done yet.
+    pub(crate) fn of(opts: &RunOptions, input: String, geo: &Geometry) -> RunReport {
+        RunReport {
+            pipeline: opts.pipeline_path.display().to_string(),
+            output: opts.output.display().to_string(),
+            input,
+            dims: geo.dims,
+            spacing: geo.spacing,
+            fields: Vec::new(),
+            value_range: None,
+            warnings: Vec::new(),
+            boundary: None,
+            boundaries: Vec::new(),
+            hvol_built: false,
+            slabs: None,
+            stages: Vec::new(),
+            total_seconds: 0.0,
+        }
+    }
+}
+
 /// What the boundary tracing used and found.
 #[derive(Debug, Clone, Serialize)]
 pub struct BoundarySummary {
@@ -471,20 +493,14 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     stages.done(pack_stage, t, n, pack_outputs);
 
     let report = RunReport {
-        pipeline: opts.pipeline_path.display().to_string(),
-        output: opts.output.display().to_string(),
-        input: input_name,
-        dims: geo.dims,
-        spacing: geo.spacing,
         fields,
         value_range: finite_range,
         warnings,
         boundary,
         boundaries,
         hvol_built: hvol_kept.is_some(),
-        slabs: None,
         stages: stages.0,
-        total_seconds: 0.0,
+        ..RunReport::of(opts, input_name, &geo)
     };
     finish(p, opts, out, report, &table_names, start, on_stage)
 }

@@ -445,12 +445,6 @@ pub fn run(
         ));
     }
     let report = RunReport {
-        pipeline: opts.pipeline_path.display().to_string(),
-        output: opts.output.display().to_string(),
-        input: input_name,
-        dims: geo.dims,
-        spacing: geo.spacing,
-        fields: vec![],
         value_range: finite_range,
         warnings,
         boundary,
@@ -465,7 +459,7 @@ pub fn run(
             },
         }),
         stages: stages.0,
-        total_seconds: 0.0,
+        ..RunReport::of(opts, input_name, &geo)
     };
     crate::run::finish(&finishing, opts, out, report, &table_names, start, on_stage)
 }
