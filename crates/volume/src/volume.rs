@@ -164,6 +164,16 @@ impl MultiField {
     pub fn field_volume(&self, index: usize) -> Option<Volume> {
         self.fields.get(index).map(|f| Volume { geometry: self.geometry.clone(), data: f.data.clone() })
     }
+
+    /// A copy of planes `z` (clamped to the grid) of field `index`, placed
+    /// where they lie: [`Volume::z_slab`] without copying the whole field first.
+    pub fn field_z_slab(&self, index: usize, z: std::ops::Range<usize>) -> Option<Volume> {
+        let nz = self.geometry.dims[2];
+        let (z0, z1) = (z.start.min(nz), z.end.min(nz).max(z.start.min(nz)));
+        let f = self.fields.get(index)?;
+        let data = f.data.slice_axis(ndarray::Axis(0), ndarray::Slice::from(z0..z1)).to_owned();
+        Some(Volume { geometry: self.geometry.z_slab(z0..z1), data })
+    }
 }
 
 impl From<Volume> for MultiField {

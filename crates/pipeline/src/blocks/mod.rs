@@ -231,6 +231,7 @@ pub fn run(
                 stats.add(&name, v.samples());
             }
         }
+        chans.release();
         stages.done("derive", t, n, vec![]);
     }
 
@@ -259,6 +260,7 @@ pub fn run(
                 }
             }
             (g_name, f2_name) = ("g_prefiltered", "f2_prefiltered");
+            chans.release();
             stages.done("prefilter", t, n, vec![]);
         }
         on_stage("boundary");
@@ -324,6 +326,7 @@ pub fn run(
         for c in ["g_prefiltered", "f2_prefiltered"] {
             chans.store.remove(c);
         }
+        chans.release();
         stages.done(
             "boundary",
             t,
@@ -362,6 +365,7 @@ pub fn run(
         }
         let t = Instant::now();
         let mut counted = count_histograms(p, &mut chans, &stats, &slabs, n, hvol_needed)?;
+        chans.release();
         // the default TF's histogram volume is an output only when the histograms ask for it
         let default_hvol = if hvol_asked { None } else { counted.hvol.take() };
         if !hvol_only {

@@ -22,6 +22,8 @@ pub struct SlabChannels {
     nz: usize,
     /// Memory of the last block derived whole, for the next (see [`SlabChannels::derive_block`]).
     recycled: Option<DeriveOutput>,
+    /// Each group's last output, whose memory its next derivation reuses.
+    previous: Vec<Option<DeriveOutput>>,
     /// Memory of the last value block read for it.
     value_buffer: Vec<f32>,
 }
@@ -39,7 +41,7 @@ impl SlabChannels {
     /// `groups` (each its items, kernel and epsilon); the kernel reads
     /// `kernel_reach` planes each side; the volume has `nz` planes.
     pub fn new(store: ChannelStore, groups: Vec<DeriveParams>, kernel_reach: usize, nz: usize) -> SlabChannels {
-        let groups = groups
+        let groups: Vec<(DeriveParams, Vec<String>)> = groups
             .into_iter()
             .filter(|d| !d.items.is_empty())
             .map(|d| {
@@ -47,7 +49,8 @@ impl SlabChannels {
                 (d, names)
             })
             .collect();
-        SlabChannels { store, groups, kernel_reach, nz, recycled: None, value_buffer: Vec::new() }
+        let previous = groups.iter().map(|_| None).collect();
+        SlabChannels { store, groups, kernel_reach, nz, recycled: None, previous, value_buffer: Vec::new() }
     }
 
     /// Whether channel `name` is stored or derivable.
@@ -58,22 +61,28 @@ impl SlabChannels {
     /// Channels `names` on planes `z`, in that order.
     pub fn volumes(&mut self, z: Range<usize>, names: &[&str]) -> Result<Vec<(String, Volume)>, String> {
         let mut derived: Vec<(String, Volume)> = Vec::new();
-        for (d, made) in &self.groups {
+        for g in 0..self.groups.len() {
+            let (d, made) = &self.groups[g];
             if !names.iter().any(|n| !self.store.has(n) && made.iter().any(|m| m == n)) {
                 continue;
             }
+            let d = d.clone();
             let k = self.kernel_reach;
             let read = grown(&z, k, 2 * k + 1, self.nz);
-            let v = self.store.volume("v", read.clone()).map_err(|e| e.to_string())?;
-            let out = mdtf_derive::run(&MultiField::from(v), d).map_err(|e| format!("derive: {e}"))?;
+            let value = self.value(read.clone())?;
+            let out = mdtf_derive::run_with_progress(&value, &d, self.previous[g].take(), &|_, _| {})
+                .map_err(|e| format!("derive: {e}"))?;
+            self.keep_value(value);
             let own = z.start - read.start..z.end - read.start;
-            for (_, mf) in out.items {
-                for (name, vol) in mf.into_volumes() {
-                    if names.contains(&name.as_str()) {
-                        derived.push((name, vol.z_slab(own.clone())));
+            for (_, mf) in &out.items {
+                for (i, f) in mf.fields.iter().enumerate() {
+                    if names.contains(&f.name.as_str()) {
+                        let planes = mf.field_z_slab(i, own.clone()).ok_or("a derived field is missing")?;
+                        derived.push((f.name.clone(), planes));
                     }
                 }
             }
+            self.previous[g] = Some(out);
         }
         names
             .iter()
@@ -96,17 +105,33 @@ impl SlabChannels {
         let Some((d, _)) = self.groups.first() else { return Err("nothing is derived".into()) };
         let k = self.kernel_reach;
         let read = grown(&z, k, 2 * k + 1, self.nz);
-        let plane = self.store.plane_len();
-        let mut buffer = std::mem::take(&mut self.value_buffer);
-        buffer.resize(read.len() * plane, 0.0);
-        self.store.samples_into("v", read.clone(), &mut buffer).map_err(|e| e.to_string())?;
-        let geometry = self.store.geometry().z_slab(read.clone());
-        let value = MultiField::from(Volume::from_samples(geometry, buffer).map_err(|e| e.to_string())?);
-        let out = mdtf_derive::run_with_progress(&value, d, self.recycled.take(), &|_, _| {})
+        let d = d.clone();
+        let value = self.value(read.clone())?;
+        let out = mdtf_derive::run_with_progress(&value, &d, self.recycled.take(), &|_, _| {})
             .map_err(|e| format!("derive: {e}"))?;
+        self.keep_value(value);
+        Ok((read, out))
+    }
+
+    /// The stored value on planes `z`, read into the memory of the last one.
+    fn value(&mut self, z: Range<usize>) -> Result<MultiField, String> {
+        let mut buffer = std::mem::take(&mut self.value_buffer);
+        self.store.samples_into("v", z.clone(), &mut buffer).map_err(|e| e.to_string())?;
+        let geometry = self.store.geometry().z_slab(z);
+        Ok(MultiField::from(Volume::from_samples(geometry, buffer).map_err(|e| e.to_string())?))
+    }
+
+    /// Keeps the memory of a value read by [`SlabChannels::value`] for the next read.
+    fn keep_value(&mut self, value: MultiField) {
         self.value_buffer =
             value.fields.into_iter().next().map(|f| f.data.into_raw_vec_and_offset().0).unwrap_or_default();
-        Ok((read, out))
+    }
+
+    /// Frees the memory kept for reuse (between passes, whose blocks differ in size).
+    pub fn release(&mut self) {
+        self.recycled = None;
+        self.previous.iter_mut().for_each(|p| *p = None);
+        self.value_buffer = Vec::new();
     }
 
     /// Gives back the output of [`SlabChannels::derive_block`] for reuse.
