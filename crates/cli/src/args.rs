@@ -625,6 +625,8 @@ pub struct RunArgs {
     /// each stage works on z-slabs grown by its halo, and the channels wait between stages in
     /// files inside the output's staging folder (disk: about 40 bytes a voxel). The outputs are
     /// byte-identical to a whole-volume run. One-field inputs, slicer-3dtf and distance-tf.
+    /// Without it, a volume whose whole run would not fit in three quarters of the available
+    /// memory runs this way within that.
     #[arg(long, value_name = "SIZE", value_parser = mdtf_volume::parse_size)]
     pub memory_budget: Option<u64>,
     /// Run slab by slab with slabs of this many z-planes (for checks and benchmarks; see

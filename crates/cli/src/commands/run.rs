@@ -39,7 +39,18 @@ pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
     let slabs = match (args.memory_budget, args.slab_planes) {
         (Some(b), _) => Some(SlabSize::Budget(b)),
         (None, Some(h)) => Some(SlabSize::Planes(h.max(1))),
-        (None, None) => None,
+        // a volume whose whole run would not fit goes by slabs on its own
+        (None, None) => mdtf_pipeline::blocks::automatic(&pipeline, &opts).map(|(budget, geo)| {
+            progress.note(&format!(
+                "{} x {} x {} voxels do not fit in memory at once: running slab by slab within {} \
+                 (--memory-budget sets it)",
+                geo.dims[0],
+                geo.dims[1],
+                geo.dims[2],
+                mdtf_volume::human_bytes(budget as u128)
+            ));
+            SlabSize::Budget(budget)
+        }),
     };
     let report = match slabs {
         Some(size) => {

@@ -54,6 +54,25 @@ pub fn slab_height(budget: u64, geometry: &Geometry, plan: &Plan, hvol: bool) ->
     Ok(lo as usize)
 }
 
+/// Peak memory of a whole-volume run per voxel, bytes, as measured at 256^3
+/// (`run_report.json`'s peak, preview left out): slicer-3dtf 21, distance-tf
+/// 46; rounded up.
+fn whole_run_bytes_per_voxel(profile: mdtf_pack::Profile) -> u64 {
+    match profile {
+        mdtf_pack::Profile::Slicer3dtf => 24,
+        _ => 48,
+    }
+}
+
+/// The budget a run without `--memory-budget` takes: None (the whole
+/// volume at once) when the whole run of `voxels` voxels with `profile`
+/// fits in three quarters of `available` bytes, else those three quarters
+/// (slab by slab).
+pub fn automatic_budget(profile: mdtf_pack::Profile, voxels: u64, available: u64) -> Option<u64> {
+    let usable = available / 4 * 3;
+    (whole_run_bytes_per_voxel(profile).saturating_mul(voxels) > usable).then_some(usable)
+}
+
 /// The slabs of height `h` covering `nz` planes, in order.
 pub fn slabs(nz: usize, h: usize) -> Vec<std::ops::Range<usize>> {
     (0..nz).step_by(h.max(1)).map(|z| z..(z + h.max(1)).min(nz)).collect()
@@ -81,5 +100,18 @@ mod tests {
         let e = slab_height(1 << 20, &geo, &plan, false).unwrap_err();
         assert!(e.contains("too small") && e.contains("1.0 MiB"), "{e}");
         assert_eq!(slab_height(1 << 40, &geo, &plan, true).unwrap(), 256, "a large budget: one slab");
+    }
+
+    #[test]
+    fn runs_go_by_slabs_on_their_own_only_when_the_whole_run_would_not_fit() {
+        use mdtf_pack::Profile;
+        let gib = 1u64 << 30;
+        // 256^3 distance-tf needs about 0.75 GiB: whole on a 24 GiB machine
+        assert_eq!(automatic_budget(Profile::DistanceTf, 1 << 24, 24 * gib), None);
+        // 1024^3 needs about 48 GiB: slab by slab within three quarters of what is available
+        assert_eq!(automatic_budget(Profile::DistanceTf, 1 << 30, 24 * gib), Some(18 * gib));
+        // slicer-3dtf at 1024^3 needs about 24 GiB: more than 18 GiB
+        assert_eq!(automatic_budget(Profile::Slicer3dtf, 1 << 30, 24 * gib), Some(18 * gib));
+        assert_eq!(automatic_budget(Profile::Slicer3dtf, 1 << 30, 64 * gib), None);
     }
 }

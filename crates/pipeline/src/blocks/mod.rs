@@ -24,7 +24,7 @@ mod budget;
 mod slab_channels;
 mod store;
 
-pub use budget::{slab_height, slabs};
+pub use budget::{automatic_budget, slab_height, slabs};
 pub use slab_channels::SlabChannels;
 pub use store::ChannelStore;
 
@@ -60,6 +60,23 @@ pub fn unsupported(p: &Pipeline, fields: usize) -> Option<String> {
         return Some("NIfTI copies of the textures (pack.nifti) need each whole texture".into());
     }
     None
+}
+
+/// The budget a run of `p` without `--memory-budget` takes (see
+/// [`automatic_budget`]) and the whole run's grid, when the run would not
+/// fit in memory as a whole and can go by slabs: its input is a one-field
+/// file read by planes (its header tells the grid without reading the
+/// samples) and its profile runs by slabs. None otherwise.
+pub fn automatic(p: &Pipeline, opts: &RunOptions) -> Option<(u64, Geometry)> {
+    let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let file = crate::run::input_file(p, opts, &base)?;
+    let reader = PlaneReader::open(&file, &ReadOptions::default()).ok()??;
+    let geo = reader.geometry().clone();
+    if unsupported(p, 1).is_some() {
+        return None;
+    }
+    let budget = automatic_budget(p.pack.profile, geo.voxel_count() as u64, mdtf_volume::available_memory())?;
+    Some((budget, geo))
 }
 
 /// The input, read by planes where its format allows, else whole.
