@@ -4,7 +4,7 @@
 
 use mdtf_boundary::AlphaMap;
 use mdtf_histogram::{
-    AxisSpec, HistogramError, HistogramVolume, HvolParams, detect_boundaries, histogram_volume,
+    AxisSpec, ChannelStats, HistogramError, HistogramVolume, HvolParams, detect_boundaries, histogram_volume,
     histogram_volume_derived,
 };
 use mdtf_pack::{
@@ -75,17 +75,14 @@ pub fn ranges(
 ) -> Result<BTreeMap<String, [f64; 2]>, HistogramError> {
     let mut out = explicit.clone();
     for (name, v) in chans {
-        if !out.contains_key(name)
-            && name == "distance"
-            && let Some(d) = d_max
-        {
-            out.insert(name.clone(), [mdtf_boundary::NO_BOUNDARY as f64, d]);
+        if out.contains_key(name) {
+            continue;
         }
-        if !out.contains_key(name) && matches!(name.as_str(), "g" | "f2" | "g_hit") {
-            let axis = AxisSpec { bins: Some(256), ..AxisSpec::qbert(name) }.resolve(name, v.samples())?;
-            out.insert(name.clone(), [axis.min, axis.max]);
+        let stats = || ChannelStats::of(v.samples(), AxisSpec::qbert(name).clip_percent);
+        if let Some(r) = range_of(name, stats, d_max)? {
+            out.insert(name.clone(), r);
         }
-        if !out.contains_key(name) && name == "inv_g" {
+        if name == "inv_g" {
             let smallest =
                 v.samples().iter().copied().filter(|&x| x > 0.0 && x.is_finite()).fold(f32::INFINITY, f32::min);
             if smallest.is_finite() {
@@ -94,6 +91,25 @@ pub fn ranges(
         }
     }
     Ok(out)
+}
+
+/// [`ranges`]' rule for channel `name` from its statistics (`stats()`,
+/// gathered with qbert's clip for the channel, asked for only when the rule
+/// reads them): g, f2 and g_hit clipped, distance [-1, d_max]; None for the
+/// channels whose range needs their samples (inv_g) or is the pack's.
+pub fn range_of(
+    name: &str,
+    stats: impl FnOnce() -> ChannelStats,
+    d_max: Option<f64>,
+) -> Result<Option<[f64; 2]>, HistogramError> {
+    Ok(match name {
+        "distance" => d_max.map(|d| [mdtf_boundary::NO_BOUNDARY as f64, d]),
+        "g" | "f2" | "g_hit" => {
+            let axis = stats().axis(&AxisSpec { bins: Some(256), ..AxisSpec::qbert(name) }, name)?;
+            Some([axis.min, axis.max])
+        }
+        _ => None,
+    })
 }
 
 /// The lookup tables of `profile`: from `tf` when given; otherwise for

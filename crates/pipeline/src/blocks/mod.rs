@@ -69,12 +69,12 @@ pub fn unsupported(p: &Pipeline, fields: usize) -> Option<String> {
 /// samples) and its profile runs by slabs. None otherwise.
 pub fn automatic(p: &Pipeline, opts: &RunOptions) -> Option<(u64, Geometry)> {
     let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
-    let file = crate::run::input_file(p, opts, &base)?;
-    let reader = PlaneReader::open(&file, &ReadOptions::default()).ok()??;
-    let geo = reader.geometry().clone();
     if unsupported(p, 1).is_some() {
         return None;
     }
+    let file = crate::run::input_file(p, opts, &base)?;
+    let reader = PlaneReader::open(&file, &ReadOptions::default()).ok()??;
+    let geo = reader.geometry().clone();
     let budget = automatic_budget(p.pack.profile, geo.voxel_count() as u64, mdtf_volume::available_memory())?;
     Some((budget, geo))
 }
@@ -142,12 +142,11 @@ impl Stats {
     }
 
     fn add(&mut self, name: &str, data: &[f32]) {
-        if let Some(s) = self.0.remove_entry(name) {
-            let (key, stats) = s;
-            let clip = AxisSpec::qbert(key).clip_percent;
+        if let Some(s) = self.0.get_mut(name) {
             // in parallel over the slab; the candidates merge exactly
-            let slab = ChannelStats::of_part(data, clip, self.1);
-            self.0.insert(key, stats.merge(slab));
+            let slab = ChannelStats::of_part(data, AxisSpec::qbert(name).clip_percent, self.1);
+            let whole = std::mem::replace(s, ChannelStats::new((0.0, 0.0), 0));
+            *s = whole.merge(slab);
         }
     }
 
@@ -406,14 +405,13 @@ pub fn run(
     let names = profile.channels(&[]);
     let mut ranges = BTreeMap::new();
     for c in &names {
-        let r = match c.as_str() {
-            "g" | "f2" | "g_hit" => {
-                let a = stats.axis(&AxisSpec { bins: Some(256), ..AxisSpec::qbert(c) }, c)?;
-                Some([a.min, a.max])
-            }
-            "distance" => d_max.map(|d| [mdtf_boundary::NO_BOUNDARY as f64, d]),
-            "nx" | "ny" | "nz" => None,
-            _ => stats.range(c).map(|(lo, hi)| [lo as f64, hi as f64]),
+        // the whole run's rule; the channels it leaves to the pack's own measure (the value) get
+        // their finite range here, since no slab sees the whole channel
+        let whole = || stats.0.get(c.as_str()).cloned().unwrap_or_else(|| ChannelStats::new((0.0, 0.0), 0));
+        let r = match crate::pack_inputs::range_of(c, whole, d_max).map_err(|e| err(e.to_string()))? {
+            Some(r) => Some(r),
+            None if matches!(c.as_str(), "nx" | "ny" | "nz") => None,
+            None => stats.range(c).map(|(lo, hi)| [lo as f64, hi as f64]),
         };
         if let Some(r) = r {
             ranges.insert(c.clone(), r);

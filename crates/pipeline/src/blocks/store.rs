@@ -19,9 +19,11 @@ pub struct ChannelStore {
 }
 
 impl ChannelStore {
-    /// A store for channels on `geometry`, in the (new) folder `dir`.
+    /// A store for channels on `geometry`, in the folder `dir`, which must
+    /// not exist yet (it is the store's alone: [`ChannelStore::clear`]
+    /// removes it whole).
     pub fn create(dir: PathBuf, geometry: Geometry) -> std::io::Result<ChannelStore> {
-        std::fs::create_dir_all(&dir)?;
+        std::fs::create_dir(&dir)?;
         Ok(ChannelStore { dir, geometry, files: BTreeMap::new() })
     }
 
