@@ -1093,6 +1093,38 @@ fn a_pipeline_files_typos_are_reported_at_their_line_before_the_input_is_read() 
 }
 
 #[test]
+fn a_bad_parameter_is_named_as_the_user_set_it_in_a_file_or_by_a_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let pipeline = |section: &str| {
+        let file = dir.path().join("bad.toml");
+        let text = format!("[input]\nsize = 24\n\n[pack]\nprofile = \"distance-tf\"\n\n{section}");
+        std::fs::write(&file, text).unwrap();
+        mdtf_err(&["run", file.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q"])
+    };
+    // a pipeline file's user sees the file's names, never a flag of another subcommand
+    let e = pipeline("[boundary]\ntolerance = -1\n");
+    assert!(e.contains("boundary: boundary.tolerance must be positive (voxels), got -1"), "{e}");
+    assert!(!e.contains("--"), "{e}");
+    let e = pipeline("[prefilter]\nsigma_d = 0.0\nsigma_r = 0.1\n");
+    assert!(e.contains("prefilter: prefilter.sigma_d must be a positive number, got 0"), "{e}");
+    assert!(!e.contains("--") && !e.contains("bilateral."), "{e}");
+    assert!(!out.exists());
+
+    // a stage subcommand's user sees the flag they typed
+    let s = dir.path().join("s.nii");
+    mdtf_ok(&["synth", "erf-sphere", "-o", s.to_str().unwrap(), "--size", "24", "-q"]);
+    let o = dir.path().join("b");
+    let e = mdtf_err(&["boundary", s.to_str().unwrap(), "-o", o.to_str().unwrap(), "--tolerance=-1"]);
+    assert!(e.contains("--tolerance must be positive (voxels), got -1") && !e.contains("boundary."), "{e}");
+    let e = mdtf_err(&["boundary", s.to_str().unwrap(), "-o", o.to_str().unwrap(), "--step", "30", "--d-max", "20"]);
+    assert!(e.contains("--step 30 is larger than --d-max 20"), "{e}");
+    let e = mdtf_err(&["bilateral", s.to_str().unwrap(), "-o", o.to_str().unwrap(), "--sigma-r", "0"]);
+    assert!(e.contains("--sigma-r must be a positive number, got 0"), "{e}");
+    assert!(!o.exists());
+}
+
+#[test]
 fn kept_normals_are_derived_before_the_keep_stage() {
     // the slicer run derives normals late, just before their texture, unless a kept volume needs them
     let dir = tempfile::tempdir().unwrap();
@@ -1447,4 +1479,40 @@ fn run_under_a_memory_budget_matches_the_whole_run_and_explains_a_budget_it_cann
     let gaussian = shipped_pipeline("gaussian-tf");
     let refused = mdtf_err(&["run", gaussian.to_str().unwrap(), "--input", i, "-o", o, "--slab-planes", "4"]);
     assert!(refused.contains("does not run slab by slab yet"), "{refused}");
+}
+
+#[test]
+fn print_settings_shows_every_default_and_is_itself_a_pipeline_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let missing = dir.path().join("missing.nii.gz");
+    let pipeline = shipped_pipeline("distance-tf");
+    let printed = mdtf_ok(&[
+        "run",
+        pipeline.to_str().unwrap(),
+        "--input",
+        missing.to_str().unwrap(),
+        "--set",
+        "boundary.tolerance=0.25",
+        "-o",
+        out.to_str().unwrap(),
+        "--print-settings",
+    ]);
+    // nothing read, nothing written
+    assert!(!out.exists());
+    let table: toml::Table = toml::from_str(&printed).unwrap();
+    assert_eq!(table["boundary"]["tolerance"].as_float(), Some(0.25));
+    assert_eq!(table["derive"]["kernel"].as_str(), Some("central4"));
+    assert_eq!(table["input"]["file"].as_str(), missing.to_str());
+    assert_eq!(table["pack"]["profile"].as_str(), Some("distance-tf"));
+    assert!(table.get("tetra").is_none() && table["input"].get("phantom").is_none(), "{printed}");
+    // the printed settings run as a pipeline file, and the run report records the same
+    let again = dir.path().join("again.toml");
+    let small = printed.replace(&format!("file = {:?}", missing.to_str().unwrap()), "size = 24");
+    std::fs::write(&again, small).unwrap();
+    mdtf_ok(&["run", again.to_str().unwrap(), "-o", out.to_str().unwrap(), "--set", "preview=false", "-q"]);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("run_report.json")).unwrap()).unwrap();
+    assert_eq!(report["settings"]["boundary"]["tolerance"].as_f64(), Some(0.25));
+    assert_eq!(report["settings"]["input"]["size"].as_i64(), Some(24));
 }

@@ -83,14 +83,14 @@ pub enum BilateralError {
     /// A parameter is zero, negative or not a number.
     #[error("{name} must be a positive number, got {value}")]
     BadParameter {
-        /// Parameter name as on the command line.
+        /// The parameter's name (`bilateral.sigma_d`: section and key as in a settings file).
         name: &'static str,
         /// The value given.
         value: f64,
     },
     /// The neighbourhood is larger than the volume.
     #[error(
-        "--sigma-d {sigma_d} gives a radius of {radius} voxels along {axis}, larger than the volume ({size} voxels)"
+        "bilateral.sigma_d {sigma_d} gives a radius of {radius} voxels along {axis}, larger than the volume ({size} voxels)"
     )]
     RadiusTooLarge {
         /// The spatial sigma.
@@ -104,8 +104,8 @@ pub enum BilateralError {
     },
     /// The neighbourhood holds more voxels than a filter may have.
     #[error(
-        "--sigma-d {sigma_d} gives a neighbourhood box of {radius:?} voxels' radius, more than {max} neighbours; \
-         a smaller --sigma-d (in world units) is needed"
+        "bilateral.sigma_d {sigma_d} gives a neighbourhood box of {radius:?} voxels' radius, more than {max} neighbours; \
+         a smaller bilateral.sigma_d (in world units) is needed"
     )]
     TooManyNeighbours {
         /// The spatial sigma.
@@ -183,7 +183,9 @@ pub fn range_sigma(input: &Volume, params: &BilateralParams) -> f64 {
 
 /// Filters `input`; the output has the input's geometry.
 pub fn run(input: &Volume, params: &BilateralParams) -> Result<Volume, BilateralError> {
-    for (name, value) in [("--sigma-d", params.sigma_d), ("--sigma-r", params.sigma_r), ("k", params.k)] {
+    for (name, value) in
+        [("bilateral.sigma_d", params.sigma_d), ("bilateral.sigma_r", params.sigma_r), ("bilateral.k", params.k)]
+    {
         if !(value.is_finite() && value > 0.0) {
             return Err(BilateralError::BadParameter { name, value });
         }

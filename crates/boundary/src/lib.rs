@@ -268,25 +268,25 @@ pub fn resolve(
     };
     let bad = |m: String| Err(BoundaryError::BadParameter(m));
     if !(r.step.is_finite() && r.step > 0.0) {
-        return bad(format!("--step must be positive (world units), got {}", r.step));
+        return bad(format!("boundary.step must be positive (world units), got {}", r.step));
     }
     if !(r.d_max.is_finite() && r.d_max > 0.0) {
-        return bad(format!("--d-max must be positive (world units), got {}", r.d_max));
+        return bad(format!("boundary.d_max must be positive (world units), got {}", r.d_max));
     }
     let extent = (0..3).map(|a| (geometry.dims[a] as f64 - 1.0) * geometry.spacing[a]).fold(0.0, f64::max);
     if r.d_max > extent {
         return bad(format!(
-            "--d-max {} is larger than the volume (its longest extent is {extent} world units)",
+            "boundary.d_max {} is larger than the volume (its longest extent is {extent} world units)",
             r.d_max
         ));
     }
     if r.step > r.d_max {
-        return bad(format!("--step {} is larger than --d-max {}", r.step, r.d_max));
+        return bad(format!("boundary.step {} is larger than boundary.d_max {}", r.step, r.d_max));
     }
     if !(params.tolerance.is_finite() && params.tolerance > 0.0) {
-        return bad(format!("--tolerance must be positive (voxels), got {}", params.tolerance));
+        return bad(format!("boundary.tolerance must be positive (voxels), got {}", params.tolerance));
     }
-    for (name, v) in [("--g-min", r.g_min), ("--g-hit-min", r.g_hit_min)] {
+    for (name, v) in [("boundary.g_min", r.g_min), ("boundary.g_hit_min", r.g_hit_min)] {
         if !(v.is_finite() && v >= 0.0) {
             return bad(format!("{name} must be a non-negative number, got {v}"));
         }

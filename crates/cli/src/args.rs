@@ -621,6 +621,11 @@ pub struct RunArgs {
     /// (to learn its fields and grid) and writes nothing.
     #[arg(long)]
     pub plan: bool,
+    /// Print the settings the run would use, as a pipeline file with every default filled in
+    /// (after --set and --input), and stop. Reads neither the input nor writes anything; the
+    /// output is itself a valid pipeline file.
+    #[arg(long, conflicts_with = "plan")]
+    pub print_settings: bool,
     /// Run slab by slab within this much memory (e.g. 2GiB, 512MiB): the input is read by planes,
     /// each stage works on z-slabs grown by its halo, and the channels wait between stages in
     /// files inside the output's staging folder (disk: about 40 bytes a voxel). The outputs are

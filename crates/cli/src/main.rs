@@ -4,6 +4,7 @@
 
 mod args;
 mod commands;
+mod flags;
 mod input;
 mod progress;
 
@@ -20,11 +21,12 @@ fn main() -> ExitCode {
         return ExitCode::FAILURE;
     }
     let progress = progress::Progress::new(cli.global.quiet);
+    let flags = flags::of(&cli.command);
     match commands::run(cli.command, &progress) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             progress.clear();
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", flags::with_flags(&format!("{e:#}"), &flags));
             ExitCode::FAILURE
         }
     }

@@ -7,24 +7,15 @@ use mdtf_derive::{DeriveError, DeriveParams, Item, Kernel};
 use mdtf_volume::{MultiField, Volume};
 use serde::{Deserialize, Serialize};
 
-/// The bilateral pre-filter applied to g and f''.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Prefilter {
-    /// Spatial sigma, world units.
-    pub sigma_d: f64,
-    /// Range sigma as a fraction of each channel's own range (g's, f'''s).
-    pub sigma_r: f64,
-}
-
 /// Parameters of the chain.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields, default)]
 pub struct BoundaryChainParams {
     /// Derivative kernel (default: derive's default; use gauss:1 or bspline3 on noisy data).
     pub kernel: Option<Kernel>,
-    /// Optional pre-filter of g and f''.
-    pub prefilter: Option<Prefilter>,
+    /// Optional bilateral pre-filter of g and f'' (a fraction `sigma_r` is
+    /// of each channel's own finite range).
+    pub prefilter: Option<BilateralParams>,
     /// Tracing parameters.
     pub boundary: BoundaryParams,
 }
@@ -100,19 +91,23 @@ pub fn run(value: &Volume, params: &BoundaryChainParams) -> Result<BoundaryChain
     trace_derived(g, f2, normal, value_range, params)
 }
 
-/// The bilateral pre-filter of one channel: sigma_r is a fraction of the channel's own range.
-pub fn prefilter(v: &Volume, p: &Prefilter) -> Result<Volume, BilateralError> {
+/// The bilateral pre-filter of one channel (a fraction `sigma_r` is of the channel's own range).
+pub fn prefilter(v: &Volume, p: &BilateralParams) -> Result<Volume, BilateralError> {
     let range = v.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
     mdtf_bilateral::run(v, &prefilter_params(p, range))
 }
 
-/// The bilateral parameters of the pre-filter of a channel whose finite range spans `range`.
-pub fn prefilter_params(p: &Prefilter, range: f64) -> BilateralParams {
-    BilateralParams {
-        sigma_d: p.sigma_d,
-        sigma_r: p.sigma_r * range.max(f64::MIN_POSITIVE),
-        range_units: RangeUnits::Value,
-        ..BilateralParams::default()
+/// The pre-filter's parameters with `sigma_r` in value units, for a channel
+/// whose finite range spans `range` (a block of the volume filters with the
+/// whole volume's range, so it must not measure its own).
+pub fn prefilter_params(p: &BilateralParams, range: f64) -> BilateralParams {
+    match p.range_units {
+        RangeUnits::Fraction => BilateralParams {
+            sigma_r: p.sigma_r * range.max(f64::MIN_POSITIVE),
+            range_units: RangeUnits::Value,
+            ..p.clone()
+        },
+        RangeUnits::Value => p.clone(),
     }
 }
 

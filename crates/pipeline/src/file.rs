@@ -33,6 +33,9 @@ pub struct InputSection {
     /// DICOM: interpolate a stack with unequal slice gaps or a gantry tilt
     /// onto a regular grid instead of refusing it (reported in the run report).
     pub resample: bool,
+    /// NaN or infinite samples: "refuse" the file (default), "zero" them, or
+    /// "keep" them (the stages then refuse them).
+    pub nan: mdtf_volume::NanPolicy,
     /// Phantom to synthesise when there is no file.
     pub phantom: PhantomKind,
     /// Phantom grid size (cube).
@@ -63,6 +66,7 @@ impl Default for InputSection {
             file: None,
             series: None,
             resample: false,
+            nan: mdtf_volume::NanPolicy::Refuse,
             phantom: PhantomKind::ErfSphere,
             size: 128,
             sigma: 3.0,
@@ -132,9 +136,11 @@ pub struct Pipeline {
     /// Derivatives.
     #[serde(default)]
     pub derive: DeriveSection,
-    /// `[prefilter]`: optional bilateral pre-filter of g and f'' before tracing.
+    /// `[prefilter]`: optional bilateral pre-filter of g and f'' before
+    /// tracing, with the bilateral stage's parameters (sigma_d in world
+    /// units; sigma_r by default a fraction of each channel's own range).
     #[serde(default)]
-    pub prefilter: Option<crate::boundary_chain::Prefilter>,
+    pub prefilter: Option<mdtf_bilateral::BilateralParams>,
     /// Boundary tracing (runs when a later stage needs its channels).
     #[serde(default)]
     pub boundary: BoundaryParams,
@@ -171,6 +177,11 @@ pub fn parse(text: &str, overrides: &[String]) -> Result<Pipeline, String> {
         let message = e.to_string().split_whitespace().collect::<Vec<_>>().join(" ");
         format!("{message} (with the --set overrides applied)")
     })
+}
+
+/// A settings table as TOML text (a pipeline file).
+pub fn to_toml(table: &toml::Table) -> Result<String, String> {
+    toml::to_string_pretty(table).map_err(|e| e.to_string())
 }
 
 /// Sets "section.key=value" overrides (any depth; the value parsed as TOML,
@@ -211,6 +222,18 @@ mod tests {
         assert_eq!(p.derive.kernel, Some(mdtf_derive::Kernel::Central));
         let e = parse(text, &["input.sise=3".into()]).unwrap_err();
         assert!(e.contains("sise") && e.contains("--set"), "{e}");
+    }
+
+    #[test]
+    fn the_prefilter_and_the_nan_policy_take_the_stages_own_parameters() {
+        let text =
+            "[pack]\nprofile = \"distance-tf\"\n[input]\nnan = \"zero\"\n[prefilter]\nsigma_d = 2.0\nmode = \"fast\"\n";
+        let p = parse(text, &[]).unwrap();
+        assert_eq!(p.input.nan, mdtf_volume::NanPolicy::Zero);
+        let pf = p.prefilter.unwrap();
+        assert_eq!((pf.sigma_d, pf.sigma_r, pf.mode), (2.0, 0.05, mdtf_bilateral::Mode::Fast));
+        let e = parse("[pack]\nprofile = \"distance-tf\"\n[input]\nnan = \"drop\"\n", &[]).unwrap_err();
+        assert!(e.contains("line 4") && e.contains("drop"), "{e}");
     }
 
     #[test]

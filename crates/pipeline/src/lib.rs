@@ -17,6 +17,7 @@ pub mod blocks;
 pub mod boundary_chain;
 pub mod channel;
 pub mod channels;
+pub mod error;
 pub mod figures;
 pub mod file;
 pub mod gaussians;

@@ -20,19 +20,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// Errors of a run, with the stage that failed.
-#[derive(Debug, thiserror::Error)]
-#[error("{stage}: {message}")]
-pub struct RunError {
-    /// Stage name.
-    pub stage: String,
-    /// What went wrong.
-    pub message: String,
-}
-
-pub(crate) fn fail(stage: &str) -> impl Fn(String) -> RunError + '_ {
-    move |message| RunError { stage: stage.into(), message }
-}
+pub use crate::error::RunError;
+pub(crate) use crate::error::{at, fail};
 
 /// One stage's line of the run report.
 #[derive(Debug, Clone, Serialize)]
@@ -87,6 +76,8 @@ pub struct RunReport {
     pub stages: Vec<StageReport>,
     /// Total wall time, seconds.
     pub total_seconds: f64,
+    /// The settings the run used, every default filled in ([`resolved_settings`]).
+    pub settings: toml::Table,
 }
 
 /// The slabs of a slab-by-slab run.
@@ -118,6 +109,7 @@ impl RunReport {
             slabs: None,
             stages: Vec::new(),
             total_seconds: 0.0,
+            settings: toml::Table::new(),
         }
     }
 }
@@ -159,7 +151,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let start = Instant::now();
     let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
     let inputs = run_inputs(p, opts, &base);
-    let out = OutputFolder::begin(&opts.output, &inputs).map_err(|e| fail("output")(e.to_string()))?;
+    let out = OutputFolder::begin(&opts.output, &inputs).map_err(at("output"))?;
     let dir = out.path();
     let mut stages = Stages::default();
 
@@ -176,7 +168,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     // what the outputs need: derive items, tracing, when each channel is freed
     let profile = p.pack.profile;
     let field_names: Vec<String> = input.fields.iter().map(|f| f.name.clone()).collect();
-    let plan = Plan::resolve(p, &field_names, &geo).map_err(|e| fail("plan")(e.to_string()))?;
+    let plan = Plan::resolve(p, &field_names, &geo).map_err(at("plan"))?;
     let fields = plan.fields.clone();
     let needs = |c: &str| plan.wants(c);
     let tracing = plan.trace;
@@ -188,7 +180,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         let value = input.field_volume(0).ok_or_else(|| fail("input")("no fields".into()))?;
         (value, Some(input))
     } else {
-        (input.into_scalar().map_err(|e| fail("input")(e.to_string()))?, None)
+        (input.into_scalar().map_err(at("input"))?, None)
     };
     let finite_range = value.finite_range().map(|(lo, hi)| [lo as f64, hi as f64]);
     let value_range = finite_range.map_or(0.0, |[lo, hi]| hi - lo);
@@ -203,12 +195,12 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         on_stage("derive");
         let t = Instant::now();
         let d = DeriveParams { items, kernel, ..Default::default() };
-        let out = mdtf_derive::run(&value_mf, &d).map_err(|e| fail("derive")(e.to_string()))?;
+        let out = mdtf_derive::run(&value_mf, &d).map_err(at("derive"))?;
         for (item, mf) in out.items {
             match item {
                 Item::Normal => normal = Some(mf),
                 other => {
-                    let v = mf.into_scalar().map_err(|e| fail("derive")(e.to_string()))?;
+                    let v = mf.into_scalar().map_err(at("derive"))?;
                     chans.insert(other.name().to_string(), v);
                 }
             }
@@ -222,9 +214,9 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         on_stage("derive (multi-field)");
         let t = Instant::now();
         let d = DeriveParams { items: multi_items, kernel, ..Default::default() };
-        let out = mdtf_derive::run(mf, &d).map_err(|e| fail("derive")(e.to_string()))?;
+        let out = mdtf_derive::run(mf, &d).map_err(at("derive"))?;
         for (item, m) in out.items {
-            chans.insert(item.name().into(), m.into_scalar().map_err(|e| fail("derive")(e.to_string()))?);
+            chans.insert(item.name().into(), m.into_scalar().map_err(at("derive"))?);
         }
         stages.done("derive (multi-field)", t, n, vec![]);
     }
@@ -250,12 +242,11 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         let (Some(g0), Some(f20), Some(nm)) = (chans.get("g"), chans.get("f2"), normal.as_ref()) else {
             return Err(fail("boundary")("derivatives missing".into()));
         };
-        let filtered = match p.prefilter {
+        let filtered = match &p.prefilter {
             Some(pf) => {
                 on_stage("prefilter");
                 let t = Instant::now();
-                let filter =
-                    |v: &Volume| crate::boundary_chain::prefilter(v, &pf).map_err(|e| fail("prefilter")(e.to_string()));
+                let filter = |v: &Volume| crate::boundary_chain::prefilter(v, pf).map_err(at("prefilter"));
                 let pair = (filter(g0)?, filter(f20)?);
                 stages.done("prefilter", t, n, vec![]);
                 Some(pair)
@@ -269,14 +260,14 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         on_stage("boundary");
         let t = Instant::now();
         let out = mdtf_boundary::run(&BoundaryInput { g, f2, normal: nm, value_range }, &p.boundary)
-            .map_err(|e| fail("boundary")(e.to_string()))?;
+            .map_err(at("boundary"))?;
         warnings.extend(out.warnings.iter().map(|w| format!("boundary: {w}")));
         d_max = Some(out.resolved.d_max);
         boundary = Some(BoundarySummary { resolved: out.resolved, counts: out.counts, lost: out.lost.clone() });
         let report = out.report(g);
         let rdir = dir.join("boundary");
-        std::fs::create_dir_all(&rdir).map_err(|e| fail("boundary")(e.to_string()))?;
-        report.write(&rdir).map_err(|e| fail("boundary")(e.to_string()))?;
+        std::fs::create_dir_all(&rdir).map_err(at("boundary"))?;
+        report.write(&rdir).map_err(at("boundary"))?;
         drop(filtered);
         for (c, v) in [("g_hit", out.g_hit), ("hit", out.hit), ("distance", out.distance)] {
             if needs(c) {
@@ -306,13 +297,12 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         on_stage("keep");
         let t = Instant::now();
         let kdir = dir.join("volumes");
-        std::fs::create_dir_all(&kdir).map_err(|e| fail("keep")(e.to_string()))?;
+        std::fs::create_dir_all(&kdir).map_err(at("keep"))?;
         let mut written = Vec::new();
         for c in &p.keep {
             let v = get(c).ok_or_else(|| fail("keep")(format!("no channel '{c}' was computed")))?;
             let path = kdir.join(format!("{c}.nii.gz"));
-            mdtf_volume::write_volume(&path, v, &WriteOptions::default(), &[])
-                .map_err(|e| fail("keep")(e.to_string()))?;
+            mdtf_volume::write_volume(&path, v, &WriteOptions::default(), &[]).map_err(at("keep"))?;
             written.push(format!("volumes/{c}.nii.gz"));
         }
         stages.done("keep", t, n, written);
@@ -325,12 +315,11 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         on_stage("histogram");
         let t = Instant::now();
         let hdir = dir.join("histogram");
-        std::fs::create_dir_all(&hdir).map_err(|e| fail("histogram")(e.to_string()))?;
+        std::fs::create_dir_all(&hdir).map_err(at("histogram"))?;
         let err = |e: String| fail("histogram")(e);
         let (Some(v), Some(g)) = (get("v"), get("g")) else { return Err(err("v and g missing".into())) };
-        let axis = |name: &str, data: &Volume| {
-            AxisSpec::qbert(name).resolve(name, data.samples()).map_err(|e| err(e.to_string()))
-        };
+        let axis =
+            |name: &str, data: &Volume| AxisSpec::qbert(name).resolve(name, data.samples()).map_err(at("histogram"));
         let axes: Vec<Axis> = vec![axis("v", v)?, axis("g", g)?];
         let mut counted = crate::hist_files::Counted { voxels: n, ..Default::default() };
         if h.hvol
@@ -338,12 +327,11 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         {
             counted.hvol = Some(
                 histogram_volume(v.samples(), g.samples(), f2.samples(), v.plane_len(), &HvolParams::default())
-                    .map_err(|e| err(e.to_string()))?,
+                    .map_err(at("histogram"))?,
             );
         }
         if h.joint {
-            counted.joint =
-                Some(count(&[v.samples(), g.samples()], axes.clone(), None).map_err(|e| err(e.to_string()))?);
+            counted.joint = Some(count(&[v.samples(), g.samples()], axes.clone(), None).map_err(at("histogram"))?);
             // peak finding's TF domain: (v, 1/g); for several fields 1/g is of
             // their normalised ||G||, so its axis comes from the gradient it inverts
             let inverted: Option<Vec<f32>> = (!fields.is_empty())
@@ -358,19 +346,17 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
                     va.name = first.clone();
                 }
                 counted.inv_g =
-                    Some(count(&[v.samples(), inv_g.samples()], vec![va, ia], None).map_err(|e| err(e.to_string()))?);
+                    Some(count(&[v.samples(), inv_g.samples()], vec![va, ia], None).map_err(at("histogram"))?);
             }
         }
         if h.stretched
             && let (Some(g_hit), Some(hit)) = (get("g_hit"), get("hit"))
         {
             let traced = hit_mask(hit.samples());
-            let normal =
-                count(&[v.samples(), g.samples()], axes.clone(), Some(&traced)).map_err(|e| err(e.to_string()))?;
+            let normal = count(&[v.samples(), g.samples()], axes.clone(), Some(&traced)).map_err(at("histogram"))?;
             let mut sa = axes.clone();
             sa[1].name = "g_hit".into();
-            let stretched =
-                count(&[v.samples(), g_hit.samples()], sa, Some(&traced)).map_err(|e| err(e.to_string()))?;
+            let stretched = count(&[v.samples(), g_hit.samples()], sa, Some(&traced)).map_err(at("histogram"))?;
             counted.stretched = Some((normal, stretched));
         }
         hists = crate::hist_files::write(&hdir, counted, &input_name, &mut warnings).map_err(err)?;
@@ -390,17 +376,17 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let err = |e: String| fail("pack")(e);
     let tf = read_tf(p, &base)?;
     let pdir = dir.join("pack");
-    std::fs::create_dir_all(&pdir).map_err(|e| err(e.to_string()))?;
+    std::fs::create_dir_all(&pdir).map_err(at("pack"))?;
     let provenance = provenance(p, opts, &base, &input_name);
     let mut table_names: Vec<String> = Vec::new();
     let mut pack_outputs: Vec<String> = vec!["pack/manifest.json".into()];
     if profile == Profile::ProjectedTetrahedra {
         let value = get("v").ok_or_else(|| err("no value volume".into()))?;
-        let mesh = mdtf_tetra::tetrahedralise(value, p.tetra.tets, "v").map_err(|e| err(e.to_string()))?;
-        let out = mdtf_tetra::run(&mesh, &p.tetra, tf.as_ref()).map_err(|e| err(e.to_string()))?;
+        let mesh = mdtf_tetra::tetrahedralise(value, p.tetra.tets, "v").map_err(at("pack"))?;
+        let out = mdtf_tetra::run(&mesh, &p.tetra, tf.as_ref()).map_err(at("pack"))?;
         warnings.extend(out.notes.iter().map(|n| format!("tetra: {n}")));
         let report = mdtf_tetra::MeshReport::default();
-        mdtf_tetra::write_pack(&pdir, &mesh, &report, &out, Some(&geo), provenance).map_err(|e| err(e.to_string()))?;
+        mdtf_tetra::write_pack(&pdir, &mesh, &report, &out, Some(&geo), provenance).map_err(at("pack"))?;
         drop(mesh);
         // the (s, g) TF the preview draws and a renderer can start from: the TF
         // file's Gaussians, else a TGTF at each boundary found (as gaussian-tf's default)
@@ -416,20 +402,18 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             (hvol_kept.as_ref(), kernel),
         )
         .map_err(err)?;
-        let json = serde_json::to_string_pretty(&g).map_err(|e| err(e.to_string()))?;
-        write_file_atomically(&pdir.join("gaussians.json"), |w| w.write_all(json.as_bytes()))
-            .map_err(|e| err(e.to_string()))?;
+        let json = serde_json::to_string_pretty(&g).map_err(at("pack"))?;
+        write_file_atomically(&pdir.join("gaussians.json"), |w| w.write_all(json.as_bytes())).map_err(at("pack"))?;
         pack_outputs.push("pack/gaussians.json".into());
     } else {
         // the pack is the last stage to read the channels: they move into it
         let mut pack_chans: Vec<(String, Volume)> =
             profile.channels(&fields).into_iter().filter_map(|c| chans.remove(&c).map(|v| (c, v))).collect();
-        let ranges =
-            crate::pack_inputs::ranges(&pack_chans, &BTreeMap::new(), d_max).map_err(|e| err(e.to_string()))?;
+        let ranges = crate::pack_inputs::ranges(&pack_chans, &BTreeMap::new(), d_max).map_err(at("pack"))?;
         let alpha = p.pack.alpha.unwrap_or(AlphaMap::Linear { a: 1.0, dc: None });
         let luts =
             crate::pack_inputs::luts(profile, tf.as_ref(), &alpha, &pack_chans, &ranges, hvol_kept.as_ref(), kernel)
-                .map_err(|e| err(e.to_string()))?;
+                .map_err(at("pack"))?;
         table_names = luts.iter().map(|l| l.name.clone()).collect();
         let gaussians = if profile == Profile::GaussianTf {
             let mask = match &p.pack.gtf_from_mask {
@@ -467,27 +451,27 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
                 };
                 pack_chans.extend(derive_normals(&value, kernel)?);
                 if layouts[i..].iter().any(|l| uses(l, "v")) {
-                    pack_chans.push(("v".into(), value.into_scalar().map_err(|e| err(e.to_string()))?));
+                    pack_chans.push(("v".into(), value.into_scalar().map_err(at("pack"))?));
                 }
                 normals_pending = false;
             }
             writer
                 .add(layout, &|c: &str| pack_chans.iter().find(|(n, _)| n == c).map(|(_, v)| v))
-                .map_err(|e| err(e.to_string()))?;
+                .map_err(at("pack"))?;
             // free what no later texture reads (the value stays while the normals are still to make)
             pack_chans.retain(|(c, _)| layouts[i + 1..].iter().any(|l| uses(l, c)) || (normals_pending && c == "v"));
         }
-        writer.finish(&luts, provenance).map_err(|e| err(e.to_string()))?;
+        writer.finish(&luts, provenance).map_err(at("pack"))?;
         if !figure_hists.is_empty() {
             let hists: Vec<&mdtf_histogram::Histogram> = figure_hists.iter().collect();
             let written = crate::figures::write_tf_figures(&dir.join("histogram"), &luts, &hists, &input_name, &arches)
-                .map_err(|e| err(e.to_string()))?;
+                .map_err(at("pack"))?;
             pack_outputs.extend(written.into_iter().map(|f| format!("histogram/{f}")));
         }
         if let Some(g) = &gaussians {
-            let json = serde_json::to_string_pretty(g).map_err(|e| err(e.to_string()))?;
+            let json = serde_json::to_string_pretty(g).map_err(at("pack"))?;
             write_file_atomically(&pdir.join("gaussians.json"), |w| w.write_all(json.as_bytes()))
-                .map_err(|e| err(e.to_string()))?;
+                .map_err(at("pack"))?;
         }
     }
     stages.done(pack_stage, t, n, pack_outputs);
@@ -533,24 +517,23 @@ pub(crate) fn finish(
         let t = Instant::now();
         let cam = mdtf_preview::Camera { azimuth: 30.0, elevation: 20.0, size: 512, step: 0.5, shaded: true };
         mdtf_preview::preview_named(&pdir, &dir.join("preview.png"), &cam, true, &opts.output.join("pack"))
-            .map_err(|e| fail("preview")(e.to_string()))?;
+            .map_err(at("preview"))?;
         // the contact sheet: every picture of the run side by side, named
         let pictures: Vec<(PathBuf, String)> =
             crate::report_page::figures_in(dir).into_iter().map(|f| (dir.join(&f.file), f.file)).collect();
         let refs: Vec<(&Path, &str)> = pictures.iter().map(|(p, c)| (p.as_path(), c.as_str())).collect();
-        mdtf_preview::contact_sheet(&refs, 3, 384, &dir.join("contact_sheet.png"))
-            .map_err(|e| fail("preview")(e.to_string()))?;
+        mdtf_preview::contact_sheet(&refs, 3, 384, &dir.join("contact_sheet.png")).map_err(at("preview"))?;
         let mut stages = Stages(std::mem::take(&mut report.stages));
         stages.done("preview", t, 512 * 512, vec!["preview.png".into(), "contact_sheet.png".into()]);
         report.stages = stages.0;
     }
     report.total_seconds = start.elapsed().as_secs_f64();
-    let json = serde_json::to_string_pretty(&report).map_err(|e| fail("report")(e.to_string()))?;
-    write_file_atomically(&dir.join("run_report.json"), |w| w.write_all(json.as_bytes()))
-        .map_err(|e| fail("report")(e.to_string()))?;
-    write_report_page(p, opts, &report, dir).map_err(|e| fail("report")(e.to_string()))?;
+    report.settings = resolved_settings(p, opts).map_err(fail("report"))?;
+    let json = serde_json::to_string_pretty(&report).map_err(at("report"))?;
+    write_file_atomically(&dir.join("run_report.json"), |w| w.write_all(json.as_bytes())).map_err(at("report"))?;
+    write_report_page(p, opts, &report, dir).map_err(fail("report"))?;
     let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
-    out.publish(&run_inputs(p, opts, &base)).map_err(|e| fail("output")(e.to_string()))?;
+    out.publish(&run_inputs(p, opts, &base)).map_err(at("output"))?;
     Ok(report)
 }
 
@@ -579,18 +562,20 @@ pub fn plan(p: &Pipeline, opts: &RunOptions) -> Result<(Plan, String, Geometry),
     let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
     let (input, name, _) = load_input(p, opts, &base)?;
     let fields: Vec<String> = input.fields.iter().map(|f| f.name.clone()).collect();
-    let plan = Plan::resolve(p, &fields, &input.geometry).map_err(|e| fail("plan")(e.to_string()))?;
+    let plan = Plan::resolve(p, &fields, &input.geometry).map_err(at("plan"))?;
     Ok((plan, name, input.geometry))
 }
 
-/// Writes report.html into the staging folder `dir` from the report, the
-/// settings and the pack's manifest (absent for mesh packs).
-fn write_report_page(p: &Pipeline, opts: &RunOptions, report: &RunReport, dir: &Path) -> Result<(), String> {
-    // the settings as run: `--input` in place of the pipeline's input, and no meshing section unless meshing ran
+/// The settings of a run of `p` with every default filled in, as the run
+/// uses them: `--input` in place of the pipeline's input (and then no phantom
+/// keys), and no meshing section unless the profile meshes. `mdtf run
+/// --print-settings` prints them; the run report and report.html record them.
+pub fn resolved_settings(p: &Pipeline, opts: &RunOptions) -> Result<toml::Table, String> {
     let mut resolved = p.clone();
     if let Some(f) = &opts.input {
         resolved.input.file = Some(f.clone());
     }
+    resolved.derive.kernel.get_or_insert(mdtf_derive::DEFAULT_KERNEL);
     let mut table = toml::Table::try_from(&resolved).map_err(|e| e.to_string())?;
     if resolved.pack.profile != Profile::ProjectedTetrahedra {
         table.remove("tetra");
@@ -598,12 +583,17 @@ fn write_report_page(p: &Pipeline, opts: &RunOptions, report: &RunReport, dir: &
     if let Some(toml::Value::Table(input)) = table.get_mut("input")
         && input.contains_key("file")
     {
-        // a file replaces the phantom
         for k in ["phantom", "size", "sigma", "noise"] {
             input.remove(k);
         }
     }
-    let settings = toml::to_string_pretty(&table).map_err(|e| e.to_string())?;
+    Ok(table)
+}
+
+/// Writes report.html into the staging folder `dir` from the report, the
+/// settings and the pack's manifest (absent for mesh packs).
+fn write_report_page(p: &Pipeline, opts: &RunOptions, report: &RunReport, dir: &Path) -> Result<(), String> {
+    let settings = crate::file::to_toml(&resolved_settings(p, opts)?)?;
     let manifest: Option<mdtf_pack::Manifest> =
         std::fs::read_to_string(dir.join("pack/manifest.json")).ok().and_then(|t| serde_json::from_str(&t).ok());
     let figures = crate::report_page::figures_in(dir);
@@ -653,13 +643,18 @@ pub(crate) fn run_inputs(p: &Pipeline, opts: &RunOptions, base: &Path) -> Inputs
 /// The unit normals (nx, ny, nz) of a one-field `value`, named.
 fn derive_normals(value: &MultiField, kernel: Kernel) -> Result<Vec<(String, Volume)>, RunError> {
     let d = DeriveParams { items: vec![Item::Normal], kernel, ..Default::default() };
-    let out = mdtf_derive::run(value, &d).map_err(|e| fail("derive")(e.to_string()))?;
+    let out = mdtf_derive::run(value, &d).map_err(at("derive"))?;
     Ok(out.items.into_iter().flat_map(|(_, mf)| mf.into_volumes()).collect())
 }
 
 /// The input file of a run: `--input` as given, else the pipeline's, relative to its folder.
 pub(crate) fn input_file(p: &Pipeline, opts: &RunOptions, base: &Path) -> Option<PathBuf> {
     opts.input.clone().or_else(|| p.input.file.as_ref().map(|f| base.join(f)))
+}
+
+/// How the pipeline's `[input]` asks for its file to be read.
+pub(crate) fn read_options(p: &Pipeline) -> ReadOptions {
+    ReadOptions { nan: p.input.nan, dicom: DicomOptions { series: p.input.series.clone(), resample: p.input.resample } }
 }
 
 /// The input volume, its name for the report, and what its reader warned of.
@@ -669,11 +664,7 @@ pub(crate) fn load_input(
     base: &Path,
 ) -> Result<(MultiField, String, Vec<String>), RunError> {
     if let Some(f) = input_file(p, opts, base) {
-        let read = ReadOptions {
-            dicom: DicomOptions { series: p.input.series.clone(), resample: p.input.resample },
-            ..ReadOptions::default()
-        };
-        let (mf, info) = mdtf_volume::read_with_info(&f, &read).map_err(|e| fail("input")(e.to_string()))?;
+        let (mf, info) = mdtf_volume::read_with_info(&f, &read_options(p)).map_err(at("input"))?;
         return Ok((mf, f.display().to_string(), info.warnings));
     }
     let i = &p.input;

@@ -4,10 +4,11 @@
 //! and a thinner halo does not. The whole-volume reductions (value range,
 //! g's range, the noise floor) are passed in as pass 1 would give them.
 
+use mdtf_bilateral::BilateralParams;
 use mdtf_boundary::{BoundaryInput, BoundaryParams};
 use mdtf_datagen::erf_sphere;
 use mdtf_derive::{DeriveParams, Item};
-use mdtf_pipeline::boundary_chain::{Prefilter, prefilter_params};
+use mdtf_pipeline::boundary_chain::prefilter_params;
 use mdtf_pipeline::file::parse;
 use mdtf_pipeline::plan::Plan;
 use mdtf_volume::{Geometry, MultiField, Volume};
@@ -77,7 +78,7 @@ fn derivatives_on_a_slab_with_the_planned_halo_equal_the_whole_volumes() {
 fn traced(
     v: &Volume,
     first_plane: usize,
-    pf: &Prefilter,
+    pf: &BilateralParams,
     ranges: (f64, f64, f64),
     params: &BoundaryParams,
 ) -> Vec<Volume> {
@@ -111,7 +112,7 @@ fn trace_differences(v: &Volume, interior: std::ops::Range<usize>, halos: &[usiz
     let range = |x: &Volume| x.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
     let ranges = (range(v), range(&whole_d[0].1), range(&whole_d[1].1));
     let params = BoundaryParams { g_min: Some(0.2), g_hit_min: Some(1.0), ..Default::default() };
-    let pf = Prefilter { sigma_d: 1.0, sigma_r: 0.1 };
+    let pf = BilateralParams { sigma_d: 1.0, sigma_r: 0.1, ..BilateralParams::default() };
     let whole = traced(v, 0, &pf, ranges, &params);
     let hits = whole[2].z_slab(interior.clone()).data.iter().filter(|&&h| h == 1.0).count();
     assert!(hits >= 100, "the boundary is traced from the slab: {hits} hits");

@@ -33,14 +33,14 @@ impl Camera {
     pub fn check(&self) -> Result<(), String> {
         for (name, v) in [("azimuth", self.azimuth), ("elevation", self.elevation)] {
             if !v.is_finite() {
-                return Err(format!("--view: {name} must be a finite number of degrees, got {v}"));
+                return Err(format!("preview.{name} must be a finite number of degrees, got {v}"));
             }
         }
         if !(8..=4096).contains(&self.size) {
-            return Err(format!("--size {} must be 8 to 4096 pixels", self.size));
+            return Err(format!("preview.size {} must be 8 to 4096 pixels", self.size));
         }
         if !(self.step.is_finite() && (0.01..=16.0).contains(&self.step)) {
-            return Err(format!("--step must be 0.01 to 16 voxels, got {}", self.step));
+            return Err(format!("preview.step must be 0.01 to 16 voxels, got {}", self.step));
         }
         Ok(())
     }

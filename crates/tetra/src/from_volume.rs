@@ -63,7 +63,7 @@ pub fn tetrahedralise(volume: &Volume, scheme: TetScheme, scalar_name: &str) -> 
     if needed > available {
         return Err(crate::TetraError::Invalid(format!(
             "meshing {nx} x {ny} x {nz} voxels gives {} tetrahedra needing about {} of memory, more than the {} \
-             available; resample the volume first (or use --tets 5)",
+             available; resample the volume first (or set tetra.tets to 5)",
             cells * per_cell,
             mdtf_volume::human_bytes(needed),
             mdtf_volume::human_bytes(available)

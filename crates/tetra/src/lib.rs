@@ -216,7 +216,7 @@ pub fn run_with_progress(
                 }
                 None => notes.push(
                     "the classic 1D pre-integration table (preintegration-1d) is left out: it needs a TF file \
-                     with tf1d (--tf, or [pack] tf)"
+                     with tf1d (pack.tf)"
                         .into(),
                 ),
             },

@@ -192,7 +192,7 @@ fn piece_to_mesh(
                 }
                 _ => {
                     return Err(TetraError::Invalid(format!(
-                        "{}: several scalar point arrays; choose one with --scalar: {}",
+                        "{}: several scalar point arrays; choose one with tetra.scalar: {}",
                         path.display(),
                         present()
                     )));

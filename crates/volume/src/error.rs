@@ -92,7 +92,7 @@ pub enum VolumeError {
         available: String,
     },
     /// NaN or infinite samples, refused unless the caller asked to zero them.
-    #[error("{path}: {count} samples are NaN or infinite (pass --nan zero to replace them with 0)")]
+    #[error("{path}: {count} samples are NaN or infinite (set input.nan = \"zero\" to replace them with 0)")]
     NonFinite {
         /// The file concerned.
         path: PathBuf,

@@ -6,8 +6,10 @@ use ndarray::Array3;
 use std::io::Read;
 use std::path::Path;
 
-/// What to do with NaN or infinite samples on read.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// What to do with NaN or infinite samples on read (`nan = "zero"` in a
+/// pipeline's `[input]`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum NanPolicy {
     /// Refuse the file, reporting how many samples are not finite (the default).
     #[default]

@@ -4,8 +4,9 @@ use crate::args::BoundaryArgs;
 use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
+use mdtf_bilateral::BilateralParams;
 use mdtf_boundary::{AlphaMap, BoundaryInput, BoundaryOutput, BoundaryParams};
-use mdtf_pipeline::boundary_chain::{self, BoundaryChainParams, Prefilter};
+use mdtf_pipeline::boundary_chain::{self, BoundaryChainParams};
 use mdtf_volume::{Inputs, MultiField, OutputFolder, Volume, WriteOptions, write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -23,14 +24,16 @@ fn params(args: &BoundaryArgs) -> Result<BoundaryParams> {
     })
 }
 
-fn prefilter(text: &str) -> Result<Prefilter> {
+fn prefilter(text: &str) -> Result<BilateralParams> {
     let parts: Vec<f64> = text
         .split(',')
         .map(|p| p.trim().parse::<f64>())
         .collect::<Result<_, _>>()
         .with_context(|| format!("--prefilter: expected SIGMA_D,SIGMA_R like 1,0.1, got '{text}'"))?;
     match parts.as_slice() {
-        [d, r] if *d > 0.0 && *r > 0.0 => Ok(Prefilter { sigma_d: *d, sigma_r: *r }),
+        [d, r] if *d > 0.0 && *r > 0.0 => {
+            Ok(BilateralParams { sigma_d: *d, sigma_r: *r, ..BilateralParams::default() })
+        }
         _ => bail!("--prefilter: expected two positive numbers SIGMA_D,SIGMA_R like 1,0.1, got '{text}'"),
     }
 }

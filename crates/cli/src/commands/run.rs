@@ -14,6 +14,11 @@ pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
     let pipeline = parse(&text, &args.set).map_err(|e| anyhow::anyhow!("{}: {e}", args.pipeline.display()))?;
     let opts =
         RunOptions { pipeline_path: args.pipeline.clone(), input: args.input.clone(), output: args.output.clone() };
+    if args.print_settings {
+        let settings = mdtf_pipeline::run::resolved_settings(&pipeline, &opts).map_err(anyhow::Error::msg)?;
+        print!("{}", mdtf_pipeline::file::to_toml(&settings).map_err(anyhow::Error::msg)?);
+        return Ok(());
+    }
     if args.plan {
         let (plan, input, geo) = plan_pipeline(&pipeline, &opts)?;
         let [nx, ny, nz] = geo.dims;

@@ -31,12 +31,12 @@ pub use store::ChannelStore;
 use crate::file::Pipeline;
 use crate::hist_files::Counted;
 use crate::plan::Plan;
-use crate::run::{RunError, RunOptions, RunReport, Stages, fail};
+use crate::run::{RunError, RunOptions, RunReport, Stages, at, fail};
 use mdtf_boundary::{BoundaryInput, ReportAccumulator, VolumeStats};
 use mdtf_derive::DeriveParams;
 use mdtf_histogram::{AxisSpec, ChannelStats, Histogram, HvolAccumulator, HvolAxes, HvolParams, count, hit_mask};
 use mdtf_pack::{PackParams, PackWriter, Profile};
-use mdtf_volume::{Geometry, MultiField, OutputFolder, PlaneReader, ReadOptions, Volume};
+use mdtf_volume::{Geometry, MultiField, OutputFolder, PlaneReader, Volume};
 use std::collections::BTreeMap;
 use std::ops::Range;
 use std::path::Path;
@@ -73,7 +73,7 @@ pub fn automatic(p: &Pipeline, opts: &RunOptions) -> Option<(u64, Geometry)> {
         return None;
     }
     let file = crate::run::input_file(p, opts, &base)?;
-    let reader = PlaneReader::open(&file, &ReadOptions::default()).ok()??;
+    let reader = PlaneReader::open(&file, &crate::run::read_options(p)).ok()??;
     let geo = reader.geometry().clone();
     let budget = automatic_budget(p.pack.profile, geo.voxel_count() as u64, mdtf_volume::available_memory())?;
     Some((budget, geo))
@@ -95,7 +95,7 @@ impl Source {
 
     fn read(&mut self, z: Range<usize>) -> Result<Volume, RunError> {
         match self {
-            Source::Planes(r) => r.read(z).map_err(|e| fail("input")(e.to_string())),
+            Source::Planes(r) => r.read(z).map_err(at("input")),
             Source::Whole(v) => Ok(v.z_slab(z)),
         }
     }
@@ -105,7 +105,7 @@ impl Source {
 fn open_source(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(Source, String, Vec<String>), RunError> {
     if let Some(f) = crate::run::input_file(p, opts, base)
         && p.input.series.is_none()
-        && let Some(r) = PlaneReader::open(&f, &ReadOptions::default()).map_err(|e| fail("input")(e.to_string()))?
+        && let Some(r) = PlaneReader::open(&f, &crate::run::read_options(p)).map_err(at("input"))?
     {
         return Ok((Source::Planes(r), f.display().to_string(), Vec::new()));
     }
@@ -113,7 +113,7 @@ fn open_source(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(Source, 
     if let Some(why) = unsupported(p, mf.fields.len()) {
         return Err(fail("plan")(why));
     }
-    let v = mf.into_scalar().map_err(|e| fail("input")(e.to_string()))?;
+    let v = mf.into_scalar().map_err(at("input"))?;
     Ok((Source::Whole(v), name, warnings))
 }
 
@@ -152,7 +152,7 @@ impl Stats {
 
     fn axis(&self, spec: &AxisSpec, name: &str) -> Result<mdtf_histogram::Axis, RunError> {
         let s = self.0.get(name).ok_or_else(|| fail("histogram")(format!("no statistics of {name}")))?;
-        s.axis(spec, name).map_err(|e| fail("histogram")(e.to_string()))
+        s.axis(spec, name).map_err(at("histogram"))
     }
 
     fn range(&self, name: &str) -> Option<(f32, f32)> {
@@ -185,7 +185,7 @@ pub fn run(
         return Err(fail("plan")(why));
     }
     let inputs = crate::run::run_inputs(p, opts, &base);
-    let out = OutputFolder::begin(&opts.output, &inputs).map_err(|e| fail("output")(e.to_string()))?;
+    let out = OutputFolder::begin(&opts.output, &inputs).map_err(at("output"))?;
     let dir = out.path().to_path_buf();
     let mut stages = Stages::default();
 
@@ -195,7 +195,7 @@ pub fn run(
     let geo = source.geometry().clone();
     let n = geo.voxel_count();
     let nz = geo.dims[2];
-    let plan = Plan::resolve(p, &[], &geo).map_err(|e| fail("plan")(e.to_string()))?;
+    let plan = Plan::resolve(p, &[], &geo).map_err(at("plan"))?;
     let tf = crate::run::read_tf(p, &base)?;
     let profile = p.pack.profile;
     // the histogram volume: asked for, or the default TF's source
@@ -207,8 +207,8 @@ pub fn run(
     };
     let slabs = slabs(nz, height);
     on_stage(&format!("input: {} slabs of {height} planes", slabs.len()));
-    let mut store = ChannelStore::create(dir.join(".slabs"), geo.clone()).map_err(|e| fail("input")(e.to_string()))?;
-    let io = |stage: &'static str| move |e: std::io::Error| fail(stage)(e.to_string());
+    let mut store = ChannelStore::create(dir.join(".slabs"), geo.clone()).map_err(at("input"))?;
+    let io = |stage: &'static str| at::<std::io::Error>(stage);
     let mut stats = Stats::new(&["v", "g", "f2", "g_hit", "g_prefiltered"], n);
     for (k, z) in slabs.iter().enumerate() {
         on_slab(k + 1, slabs.len());
@@ -269,7 +269,7 @@ pub fn run(
                     on_slab(k + 1, slabs.len());
                     let read = grown(z, halo, 1, nz);
                     let v = chans.volumes(read.clone(), &[c]).map_err(fail("prefilter"))?.remove(0).1;
-                    let filtered = mdtf_bilateral::run(&v, &params).map_err(|e| fail("prefilter")(e.to_string()))?;
+                    let filtered = mdtf_bilateral::run(&v, &params).map_err(at("prefilter"))?;
                     let own = filtered.z_slab(z.start - read.start..z.end - read.start);
                     stats.add(out_name, own.samples());
                     chans.store.put_volume(out_name, z.start, &own).map_err(io("prefilter"))?;
@@ -293,7 +293,7 @@ pub fn run(
             let block = if plan.prefilter {
                 let mut c =
                     chans.volumes(read.clone(), &[g_name, f2_name, "nx", "ny", "nz"]).map_err(fail("boundary"))?;
-                let normal = MultiField::from_volumes(c.split_off(2)).map_err(|e| fail("boundary")(e.to_string()))?;
+                let normal = MultiField::from_volumes(c.split_off(2)).map_err(at("boundary"))?;
                 let (f2, g) = (c.remove(1).1, c.remove(0).1);
                 TraceBlock { planes: read.clone(), g, f2, normal, order: None }
             } else {
@@ -304,7 +304,7 @@ pub fn run(
             let own = z.start - block.planes.start..z.end - block.planes.start;
             let input = BoundaryInput { g: &block.g, f2: &block.f2, normal: &block.normal, value_range };
             let b = mdtf_boundary::trace_block(&input, &p.boundary, block.planes.start, own.clone(), &g_stats)
-                .map_err(|e| fail("boundary")(e.to_string()))?;
+                .map_err(at("boundary"))?;
             let g_own = block.g.z_slab(own);
             if let Some(out) = block.into_output() {
                 chans.recycle(out);
@@ -338,7 +338,7 @@ pub fn run(
         boundary = Some(crate::run::BoundarySummary { resolved: r, counts, lost });
         let rdir = dir.join("boundary");
         std::fs::create_dir_all(&rdir).map_err(io("boundary"))?;
-        report.finish().write(&rdir).map_err(|e| fail("boundary")(e.to_string()))?;
+        report.finish().write(&rdir).map_err(at("boundary"))?;
         for c in ["g_prefiltered", "f2_prefiltered"] {
             chans.store.remove(c);
         }
@@ -366,7 +366,7 @@ pub fn run(
             mdtf_volume::write_nifti_slabs(&path, &geo, mdtf_volume::SampleType::F32, &slabs, &mut |z| {
                 chans.samples(c, z).map_err(std::io::Error::other)
             })
-            .map_err(|e| fail("keep")(e.to_string()))?;
+            .map_err(at("keep"))?;
             written.push(format!("volumes/{c}.nii.gz"));
         }
         stages.done("keep", t, n, written);
@@ -399,7 +399,6 @@ pub fn run(
     // pack, a texture at a time, slab by slab
     on_stage("pack");
     let t = Instant::now();
-    let err = |e: String| fail("pack")(e);
     let pdir = dir.join("pack");
     std::fs::create_dir_all(&pdir).map_err(io("pack"))?;
     let names = profile.channels(&[]);
@@ -408,7 +407,7 @@ pub fn run(
         // the whole run's rule; the channels it leaves to the pack's own measure (the value) get
         // their finite range here, since no slab sees the whole channel
         let whole = || stats.0.get(c.as_str()).cloned().unwrap_or_else(|| ChannelStats::new((0.0, 0.0), 0));
-        let r = match crate::pack_inputs::range_of(c, whole, d_max).map_err(|e| err(e.to_string()))? {
+        let r = match crate::pack_inputs::range_of(c, whole, d_max).map_err(at("pack"))? {
             Some(r) => Some(r),
             None if matches!(c.as_str(), "nx" | "ny" | "nz") => None,
             None => stats.range(c).map(|(lo, hi)| [lo as f64, hi as f64]),
@@ -421,7 +420,7 @@ pub fn run(
     let stubs: Vec<(String, Volume)> = names.iter().map(|c| (c.clone(), Volume::zeros(geo.z_slab(0..1)))).collect();
     let alpha = p.pack.alpha.unwrap_or(mdtf_boundary::AlphaMap::Linear { a: 1.0, dc: None });
     let luts = crate::pack_inputs::luts(profile, tf.as_ref(), &alpha, &stubs, &ranges, hvol.as_ref(), kernel)
-        .map_err(|e| err(e.to_string()))?;
+        .map_err(at("pack"))?;
     let table_names: Vec<String> = luts.iter().map(|l| l.name.clone()).collect();
     let params = PackParams { profile, ranges, fields: vec![], dtype: None, nifti: false };
     let sources = BTreeMap::new();
@@ -433,15 +432,15 @@ pub fn run(
                 let names: Vec<&str> = layout.components.iter().flatten().map(String::as_str).collect();
                 chans.volumes(z, &names).map_err(|e| mdtf_pack::PackError::Io(mdtf_volume::VolumeError::Fields(e)))
             })
-            .map_err(|e| err(e.to_string()))?;
+            .map_err(at("pack"))?;
     }
     let provenance = crate::run::provenance(p, opts, &base, &input_name);
-    writer.finish(&luts, provenance).map_err(|e| err(e.to_string()))?;
+    writer.finish(&luts, provenance).map_err(at("pack"))?;
     let mut pack_outputs: Vec<String> = vec!["pack/manifest.json".into()];
     if !figure_hists.is_empty() {
         let hists: Vec<&Histogram> = figure_hists.iter().collect();
         let written = crate::figures::write_tf_figures(&dir.join("histogram"), &luts, &hists, &input_name, &arches)
-            .map_err(|e| err(e.to_string()))?;
+            .map_err(at("pack"))?;
         pack_outputs.extend(written.into_iter().map(|f| format!("histogram/{f}")));
     }
     stages.done("pack", t, n, pack_outputs);
@@ -569,7 +568,7 @@ fn count_histograms(
     n: usize,
     hvol_needed: bool,
 ) -> Result<Counted, RunError> {
-    let err = |e: mdtf_histogram::HistogramError| fail("histogram")(e.to_string());
+    let err = at::<mdtf_histogram::HistogramError>("histogram");
     let io = fail("histogram");
     let joint = p.histogram.as_ref().is_some_and(|h| h.joint);
     let stretched = p.histogram.as_ref().is_some_and(|h| h.stretched) && chans.has("g_hit") && chans.has("hit");
