@@ -3,7 +3,7 @@
 use divan::counter::ItemsCount;
 use mdtf_datagen::erf_sphere;
 use mdtf_derive::{DeriveParams, Item};
-use mdtf_histogram::{Axis, HvolParams, count, histogram_volume, histogram_volume_derived};
+use mdtf_histogram::{Axis, HvolParams, count, histogram_volume};
 use mdtf_volume::{Geometry, MultiField};
 
 fn main() {
@@ -28,18 +28,6 @@ fn joint_256x256_of_256_cubed(bencher: divan::Bencher) {
         Axis::new("g", 0.0, 35.0, 256).unwrap_or_else(|e| panic!("{e}")),
     ];
     bencher.counter(ItemsCount::new(v.len())).bench(|| count(&[&v, &g], axes.clone(), None));
-}
-
-/// Histogram volume including the derivative pass (g and f'' with the
-/// default kernel, streamed slice by slice), 256^3: what `mdtf histogram --hvol` runs.
-#[divan::bench(sample_count = 5, sample_size = 1)]
-fn hvol_with_derive_256_cubed(bencher: divan::Bencher) {
-    let n = 256;
-    let vol = erf_sphere(Geometry::new([n; 3], [1.0; 3]), 0.3 * n as f64, 3.0, 0.0, 255.0, None).volume();
-    let input = MultiField::from(vol);
-    bencher.counter(ItemsCount::new(n * n * n)).bench(|| {
-        histogram_volume_derived(&input, &DeriveParams::default(), &HvolParams::default()).map(|hv| hv.sigma)
-    });
 }
 
 /// Histogram volume of stored v, g and f'' (what the pipeline runner does: it keeps g and f'' for the pack), 256^3.

@@ -193,9 +193,8 @@ impl HvolAccumulator {
 /// second derivative `h`, x-fastest volumes of `plane` voxels per z-slice.
 /// The sums are kept per fixed part of the slices and their runs of equal
 /// bins are cut at every slice, so the result does not depend on the thread
-/// count and equals, bit for bit, the one fed slice by slice
-/// ([`histogram_volume_derived`](crate::histogram_volume_derived), a
-/// slab-by-slab run: see [`HvolAccumulator::add_slice`]).
+/// count and equals, bit for bit, the one fed slice by slice (derivatives
+/// streamed slice by slice, a slab-by-slab run: see [`HvolAccumulator::add_slice`]).
 pub fn histogram_volume(
     v: &[f32],
     g: &[f32],
@@ -228,14 +227,15 @@ pub fn histogram_volume(
 }
 
 /// [`HVOL_PARTS`] contiguous ranges covering `0..len` (voxels, or z-slices
-/// when streamed; some empty when len is smaller).
-pub(crate) fn fixed_parts(len: usize) -> Vec<Range<usize>> {
+/// when streamed; some empty when len is smaller): the fixed parts whose
+/// sums a caller feeding [`HvolAccumulator`]s must keep in one accumulator each.
+pub fn fixed_parts(len: usize) -> Vec<Range<usize>> {
     (0..HVOL_PARTS).map(|p| p * len / HVOL_PARTS..(p + 1) * len / HVOL_PARTS).collect()
 }
 
 /// The part indices grouped into one run of whole parts per thread, so that
 /// no part's sums are split between tasks.
-pub(crate) fn part_groups(threads: usize) -> Vec<Range<usize>> {
+pub fn part_groups(threads: usize) -> Vec<Range<usize>> {
     let per = HVOL_PARTS.div_ceil(threads.clamp(1, HVOL_PARTS));
     (0..HVOL_PARTS).step_by(per).map(|first| first..(first + per).min(HVOL_PARTS)).collect()
 }

@@ -12,7 +12,6 @@ mod count;
 mod figure;
 mod files;
 mod hvol;
-mod hvol_derived;
 mod image;
 mod percentile;
 mod rgb;
@@ -26,8 +25,9 @@ pub use figure::{
     ArchMark, FIGURE_SIZE, Labels, Overlay, PLOT_PIXELS, PROJECTIONS_SIZE, SIDE_BY_SIDE_SIZE, axis_label, count_colour,
 };
 pub use files::{write_histogram, write_histogram_marked, write_hvol, write_overlay_figure, write_stretched};
-pub use hvol::{HVOL_PARTS, HistogramVolume, HvolAccumulator, HvolAxes, HvolParams, histogram_volume};
-pub use hvol_derived::histogram_volume_derived;
+pub use hvol::{
+    HVOL_PARTS, HistogramVolume, HvolAccumulator, HvolAxes, HvolParams, fixed_parts, histogram_volume, part_groups,
+};
 pub use image::{Grey, Scale, grey_level, side_by_side, write_exr, write_png};
 pub use percentile::ChannelStats;
 pub use rgb::{Rgb, write_rgb_png};
@@ -44,9 +44,6 @@ pub enum HistogramError {
     /// The data hold nothing to measure.
     #[error("{0}")]
     Degenerate(String),
-    /// The derive pass of a histogram volume built straight from values failed.
-    #[error(transparent)]
-    Derive(#[from] mdtf_derive::DeriveError),
 }
 
 /// Voxels whose boundary tracing kept a hit (`hit` == 1), the mask of the stretched histogram.

@@ -3,8 +3,8 @@
 //! the erf sphere, none in pure noise.
 
 use mdtf_datagen::{RadialPhantom, add_gaussian_noise, erf_sphere};
-use mdtf_derive::DeriveParams;
-use mdtf_histogram::{DetectedBoundary, HvolParams, detect_boundaries, histogram_volume_derived};
+use mdtf_derive::{DeriveParams, Item};
+use mdtf_histogram::{DetectedBoundary, HvolParams, detect_boundaries, histogram_volume};
 use mdtf_volume::{Geometry, MultiField, Volume};
 use std::f64::consts::PI;
 
@@ -13,7 +13,11 @@ fn detect(v: Volume) -> Vec<DetectedBoundary> {
 }
 
 fn detect_with(v: Volume, derive: &DeriveParams) -> Vec<DetectedBoundary> {
-    let hv = histogram_volume_derived(&MultiField::from(v), derive, &HvolParams::default()).unwrap();
+    let d = DeriveParams { items: vec![Item::G, Item::F2], ..derive.clone() };
+    let out = mdtf_derive::run(&MultiField::from(v.clone()), &d).unwrap();
+    let (g, f2) = (&out.items[0].1.fields[0].data, &out.items[1].1.fields[0].data);
+    let (g, f2) = (g.as_slice().unwrap(), f2.as_slice().unwrap());
+    let hv = histogram_volume(v.samples(), g, f2, v.plane_len(), &HvolParams::default()).unwrap();
     detect_boundaries(&hv)
 }
 

@@ -278,44 +278,6 @@ fn histogram_volume_does_not_depend_on_the_thread_count() {
     }
 }
 
-#[test]
-fn histogram_volume_derived_on_the_fly_equals_the_stored_one_bit_for_bit() {
-    // 30 slices: the 16 fixed parts are uneven, and threads group them differently
-    let v = erf_sphere(Geometry::new([40, 44, 30], [1.0, 1.0, 1.2]), 12.0, 2.0, 0.0, 255.0, None).volume();
-    let c = channels(v.clone());
-    let stored =
-        histogram_volume(c.v.samples(), c.g.samples(), c.f2.samples(), c.v.plane_len(), &HvolParams::default())
-            .unwrap();
-    let input = MultiField::from(v);
-    let streamed = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-        pool.install(|| {
-            mdtf_histogram::histogram_volume_derived(&input, &DeriveParams::default(), &HvolParams::default())
-        })
-        .unwrap()
-    };
-    let s = streamed(2);
-    // the same axes (exact order statistics either way) and the same integer counts
-    assert_eq!(s.hist, stored.hist);
-    assert_eq!(s.count_vg, stored.count_vg);
-    assert_eq!(s.count_v, stored.count_v);
-    // and the same sums, bit for bit: both cut their runs at every slice and sum each part's slices in order
-    assert_eq!(s.sigma.to_bits(), stored.sigma.to_bits());
-    assert_eq!(
-        (&s.mean_g_v, &s.mean_h_v, &s.position, &s.opacity),
-        (&stored.mean_g_v, &stored.mean_h_v, &stored.position, &stored.opacity)
-    );
-    // and the streamed sums keep their bits on any thread count
-    for threads in [1, 3, 5] {
-        let t = streamed(threads);
-        assert_eq!((&t.hist, &t.mean_g_v, &t.mean_h_v, &t.position), (&s.hist, &s.mean_g_v, &s.mean_h_v, &s.position));
-    }
-    // a multi-field input is refused by the derive pass
-    let two = MultiField::from_volumes(vec![("a".into(), c.v.clone()), ("b".into(), c.g.clone())]).unwrap();
-    let e = mdtf_histogram::histogram_volume_derived(&two, &DeriveParams::default(), &HvolParams::default());
-    assert!(e.unwrap_err().to_string().contains("one field"));
-}
-
 /// A (v, g) histogram of 8 x 6 bins with 1000 voxels in bin (2, 5) and 10 in bin (6, 1), and its samples.
 fn two_bins() -> (mdtf_histogram::Histogram, Vec<f32>) {
     let mut v = vec![2.5f32; 1000];

@@ -22,6 +22,7 @@ pub mod figures;
 pub mod file;
 pub mod gaussians;
 pub mod hist_files;
+pub mod hvol_streamed;
 pub mod pack_inputs;
 pub mod plan;
 pub mod report_page;

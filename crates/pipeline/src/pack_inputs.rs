@@ -5,7 +5,6 @@
 use mdtf_boundary::AlphaMap;
 use mdtf_histogram::{
     AxisSpec, ChannelStats, HistogramError, HistogramVolume, HvolParams, detect_boundaries, histogram_volume,
-    histogram_volume_derived,
 };
 use mdtf_pack::{
     BoundaryArch, Lut, LutAxis, Profile, Tent, TfFile, boundary_alpha_u, boundary_isosurface_tf, boundary_tf,
@@ -19,13 +18,17 @@ fn hvol_or_computed<'a>(
     hvol: Option<&'a HistogramVolume>,
     v: &Volume,
     kernel: mdtf_derive::Kernel,
-) -> Result<std::borrow::Cow<'a, HistogramVolume>, HistogramError> {
+) -> Result<std::borrow::Cow<'a, HistogramVolume>, crate::error::StageError> {
     Ok(match hvol {
         Some(h) => std::borrow::Cow::Borrowed(h),
         None => {
             let input = mdtf_volume::MultiField::from(v.clone());
             let derive = mdtf_derive::DeriveParams { kernel, ..Default::default() };
-            std::borrow::Cow::Owned(histogram_volume_derived(&input, &derive, &HvolParams::default())?)
+            std::borrow::Cow::Owned(crate::hvol_streamed::histogram_volume_derived(
+                &input,
+                &derive,
+                &HvolParams::default(),
+            )?)
         }
     })
 }
@@ -36,7 +39,7 @@ pub fn detected_arches(
     v: &Volume,
     hvol: Option<&HistogramVolume>,
     kernel: mdtf_derive::Kernel,
-) -> Result<Vec<BoundaryArch>, HistogramError> {
+) -> Result<Vec<BoundaryArch>, crate::error::StageError> {
     Ok(arches_of(&*hvol_or_computed(hvol, v, kernel)?))
 }
 
@@ -135,7 +138,7 @@ pub fn luts(
     ranges: &BTreeMap<String, [f64; 2]>,
     hvol: Option<&HistogramVolume>,
     kernel: mdtf_derive::Kernel,
-) -> Result<Vec<Lut>, HistogramError> {
+) -> Result<Vec<Lut>, crate::error::StageError> {
     let get = |n: &str| chans.iter().find(|(c, _)| c == n).map(|(_, v)| v);
     let mut out = Vec::new();
     match profile {
@@ -147,7 +150,9 @@ pub fn luts(
                     Some(h) => h,
                     None => {
                         let (Some(v), Some(g), Some(f2)) = (get("v"), get("g"), get("f2")) else {
-                            return Err(HistogramError::Degenerate("the default opacity needs v, g and f2".into()));
+                            return Err(
+                                HistogramError::Degenerate("the default opacity needs v, g and f2".into()).into()
+                            );
                         };
                         computed = histogram_volume(
                             v.samples(),

@@ -6,8 +6,7 @@ use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
 use mdtf_derive::DeriveParams;
 use mdtf_histogram::{
-    Axis, AxisSpec, HvolParams, Scale, count, histogram_volume_derived, hit_mask, write_histogram, write_hvol,
-    write_stretched,
+    Axis, AxisSpec, HvolParams, Scale, count, hit_mask, write_histogram, write_hvol, write_stretched,
 };
 use mdtf_pipeline::boundary_chain::BoundaryChainParams;
 use mdtf_pipeline::channels;
@@ -128,7 +127,8 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
             value = MultiField::from(input.field_volume(0).context("the input has no fields")?);
             &value
         };
-        let hv = progress.step("histogram volume", || histogram_volume_derived(values, &d, &p))?;
+        let hv = progress
+            .step("histogram volume", || mdtf_pipeline::hvol_streamed::histogram_volume_derived(values, &d, &p))?;
         let arches = mdtf_pipeline::figures::boundary_arches(&mdtf_histogram::detect_boundaries(&hv));
         write_hvol(out, &hv, &title, &arches)?;
         progress.note(&format!("histogram volume: sigma {:.4} world units, g_thresh {:.4}", hv.sigma, hv.g_thresh));

@@ -7,25 +7,30 @@
 //! once (page faults of 2 x 4 bytes a voxel), and peak memory is the input
 //! plus the histogram.
 
-use crate::HistogramError;
-use crate::hvol::{HistogramVolume, HvolAccumulator, HvolAxes, HvolParams, fixed_parts, part_groups};
-use crate::percentile::ChannelStats;
+//!
+//! It lives here, not in the histogram crate, because it drives the derive
+//! stage: the stage crates never call each other.
+
+use crate::error::StageError;
 use mdtf_derive::{DeriveParams, Item};
+use mdtf_histogram::{
+    ChannelStats, HistogramError, HistogramVolume, HvolAccumulator, HvolAxes, HvolParams, fixed_parts, part_groups,
+};
 use mdtf_volume::MultiField;
 use std::ops::Range;
 
 /// The histogram volume of a one-field `input` with g and f'' derived by
 /// `derive`'s kernel, border and epsilon (its items are ignored). Equals
-/// [`histogram_volume`](crate::histogram_volume) on stored g and f'' up to
+/// [`mdtf_histogram::histogram_volume`] on stored g and f'' up to
 /// the rounding of the sums (the counts are the same); the result does not
 /// depend on the thread count.
 pub fn histogram_volume_derived(
     input: &MultiField,
     derive: &DeriveParams,
     params: &HvolParams,
-) -> Result<HistogramVolume, HistogramError> {
+) -> Result<HistogramVolume, StageError> {
     let Some(value) = input.fields.first() else {
-        return Err(HistogramError::Geometry("the input has no fields".into()));
+        return Err(HistogramError::Geometry("the input has no fields".into()).into());
     };
     let v = value.data.as_slice().unwrap_or(&[]);
     let [nx, ny, nz] = input.geometry.dims;
@@ -47,7 +52,7 @@ pub fn histogram_volume_derived(
         },
     )?;
     let Some((g_stats, h_stats)) = stats.into_iter().reduce(|(g, h), (g2, h2)| (g.merge(g2), h.merge(h2))) else {
-        return Err(HistogramError::Degenerate("the volume has no slices".into()));
+        return Err(HistogramError::Degenerate("the volume has no slices".into()).into());
     };
     let axes = HvolAxes {
         v: HvolAxes::spec("v", params.bins[0]).resolve("v", v)?,
@@ -67,7 +72,7 @@ pub fn histogram_volume_derived(
             }
         },
     )?;
-    HvolAccumulator::finish(tasks.into_iter().collect::<Result<_, _>>()?, params)
+    Ok(HvolAccumulator::finish(tasks.into_iter().collect::<Result<_, _>>()?, params)?)
 }
 
 /// One slab of z-slices per thread, each a run of whole `parts`, so that no
@@ -79,7 +84,7 @@ fn task_slabs(parts: &[Range<usize>], threads: usize) -> Vec<Range<usize>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::HVOL_PARTS;
+    use mdtf_histogram::HVOL_PARTS;
 
     #[test]
     fn parts_cover_the_slices_once_and_groups_never_split_a_part() {
