@@ -1476,9 +1476,9 @@ fn run_under_a_memory_budget_matches_the_whole_run_and_explains_a_budget_it_cann
     assert!(bad.status.code() == Some(2) && said.contains("unknown unit 'parsecs'"), "{said}");
     let small = mdtf_err(&["run", p, "--input", i, "-o", o, "--memory-budget", "1MiB"]);
     assert!(small.contains("too small") && small.contains("needs"), "{small}");
-    let gaussian = shipped_pipeline("gaussian-tf");
-    let refused = mdtf_err(&["run", gaussian.to_str().unwrap(), "--input", i, "-o", o, "--slab-planes", "4"]);
-    assert!(refused.contains("does not run slab by slab yet"), "{refused}");
+    let meshing = shipped_pipeline("projected-tetrahedra");
+    let refused = mdtf_err(&["run", meshing.to_str().unwrap(), "--input", i, "-o", o, "--slab-planes", "4"]);
+    assert!(refused.contains("does not run slab by slab: it meshes the whole volume"), "{refused}");
 }
 
 #[test]

@@ -629,7 +629,7 @@ pub struct RunArgs {
     /// Run slab by slab within this much memory (e.g. 2GiB, 512MiB): the input is read by planes,
     /// each stage works on z-slabs grown by its halo, and the channels wait between stages in
     /// files inside the output's staging folder (disk: about 40 bytes a voxel). The outputs are
-    /// byte-identical to a whole-volume run. One-field inputs, slicer-3dtf and distance-tf.
+    /// byte-identical to a whole-volume run. One-field inputs, every profile but projected-tetrahedra.
     /// Without it, a volume whose whole run would not fit in three quarters of the available
     /// memory runs this way within that.
     #[arg(long, value_name = "SIZE", value_parser = mdtf_volume::parse_size)]

@@ -67,7 +67,6 @@ pub fn gaussians(
             .map_err(|e| format!("fitting a Gaussian to the mask: {e}"))?;
         return Ok(vec![p]);
     }
-    let multi = fields.len() > 1;
     if let [value] = &data[..] {
         let (hvol, kernel) = boundaries_from;
         let arches = crate::pack_inputs::detected_arches(value, hvol, kernel).map_err(|e| e.to_string())?;
@@ -81,7 +80,7 @@ pub fn gaussians(
     let structured = g.iter().filter(|&&x| x > g_cut).count();
     let use_all = structured * 100 < g.len();
     let mut centre = Vec::new();
-    let mut k = vec![vec![0.0; fields.len()]; fields.len()];
+    let mut ranges = Vec::new();
     for (a, s) in samples.iter().enumerate() {
         let picked: Vec<f32>;
         let over = if use_all {
@@ -92,14 +91,27 @@ pub fn gaussians(
         };
         let m = median(over).ok_or(format!("channel '{}' has no finite sample", fields[a]))?;
         centre.push(m as f64);
-        let range = mdtf_volume::finite_sample_range(s).map_or(1.0, |(lo, hi)| (hi - lo) as f64);
-        k[a][a] = if multi && range > 0.0 { 1.0 / range } else { 1.0 };
+        ranges.push(mdtf_volume::finite_sample_range(s).map_or(1.0, |(lo, hi)| (hi - lo) as f64));
     }
-    Ok(vec![GaussianPrimitive { centre, k, alpha_max: 1.0, colour: [1.0, 1.0, 1.0], triangular: true }])
+    Ok(vec![median_tgtf(centre, &ranges)])
+}
+
+/// The paper's default triangular GTF, white and opaque at its centre: the
+/// centre is each field's median over the voxels whose gradient exceeds
+/// twice the gradient's median (over all voxels when fewer than 1 % do);
+/// for several fields each axis is scaled by its field's finite range
+/// (`ranges`, value units), for one field K = 1.
+pub fn median_tgtf(centre: Vec<f64>, ranges: &[f64]) -> GaussianPrimitive {
+    let m = centre.len();
+    let mut k = vec![vec![0.0; m]; m];
+    for (a, &range) in ranges.iter().enumerate().take(m) {
+        k[a][a] = if m > 1 && range > 0.0 { 1.0 / range } else { 1.0 };
+    }
+    GaussianPrimitive { centre, k, alpha_max: 1.0, colour: [1.0, 1.0, 1.0], triangular: true }
 }
 
 /// One triangular GTF per boundary (see the module docs).
-fn boundary_tgtfs(arches: &[BoundaryArch], geometry: &mdtf_volume::Geometry) -> Vec<GaussianPrimitive> {
+pub(crate) fn boundary_tgtfs(arches: &[BoundaryArch], geometry: &mdtf_volume::Geometry) -> Vec<GaussianPrimitive> {
     let spacing = geometry.spacing.iter().copied().fold(f64::INFINITY, f64::min);
     let per_voxel =
         mdtf_pack::per_voxel_opacities(&mdtf_pack::boundary_opacities(arches), BOUNDARY_TGTF_PATH / spacing.max(1e-12));

@@ -86,14 +86,24 @@ pub fn ranges(
             out.insert(name.clone(), r);
         }
         if name == "inv_g" {
-            let smallest =
-                v.samples().iter().copied().filter(|&x| x > 0.0 && x.is_finite()).fold(f32::INFINITY, f32::min);
+            let smallest = smallest_positive(v.samples());
             if smallest.is_finite() {
-                out.insert(name.clone(), [0.0, 100.0 * smallest as f64]);
+                out.insert(name.clone(), inv_g_range(smallest));
             }
         }
     }
     Ok(out)
+}
+
+/// The smallest positive finite sample of `data` (infinity without one).
+pub fn smallest_positive(data: &[f32]) -> f32 {
+    data.iter().copied().filter(|&x| x > 0.0 && x.is_finite()).fold(f32::INFINITY, f32::min)
+}
+
+/// The code range of 1/g from its smallest positive sample (world units):
+/// [0, 100 x smallest], so that g down to a hundredth of its largest keeps codes.
+pub fn inv_g_range(smallest: f32) -> [f64; 2] {
+    [0.0, 100.0 * smallest as f64]
 }
 
 /// [`ranges`]' rule for channel `name` from its statistics (`stats()`,

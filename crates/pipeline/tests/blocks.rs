@@ -89,8 +89,9 @@ const EIGHT_SLAB_BUDGET: u64 = 48 * 1024 * 1024 + 64 * 1024 * 1024 + 320 * 64 * 
 
 #[test]
 fn the_shipped_pipelines_give_the_same_files_slab_by_slab() {
-    for name in ["slicer-3dtf", "distance-tf"] {
-        let p = shipped(name, &["input.size=64"]);
+    for name in ["slicer-3dtf", "distance-tf", "peak-finding", "gaussian-tf"] {
+        // gaussian-tf ships on the three-field phantom; slabs take one field
+        let p = shipped(name, &["input.size=64", "input.phantom=\"shells\""]);
         let sizes =
             [SlabSize::Planes(1), SlabSize::Planes(7), SlabSize::Planes(33), SlabSize::Budget(EIGHT_SLAB_BUDGET)];
         let compared = assert_slab_runs_equal_the_whole(name, &p, None, &sizes);
@@ -141,13 +142,37 @@ fn an_anisotropic_noisy_file_read_by_planes_gives_the_same_files_with_the_prefil
 }
 
 #[test]
+fn on_pure_noise_gaussian_tf_takes_the_median_default_slab_by_slab_as_whole() {
+    // no boundary is found: the default TGTF comes from medians over the whole volume
+    let geo = Geometry::new([40, 36, 45], [1.0, 1.0, 1.5]);
+    let mut v = Volume::from_samples(geo.clone(), vec![1000.0; geo.voxel_count()]).unwrap();
+    mdtf_datagen::add_gaussian_noise(&mut v, 40.0, 9);
+    let v = Volume { geometry: geo, data: v.data.mapv(|x| x.round().clamp(0.0, 65535.0)) };
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("noise.nrrd");
+    write_volume(&input, &v, &WriteOptions { ty: SampleType::U16, gzip: false }, &[]).unwrap();
+    let p = parse("[histogram]\njoint = true\n[pack]\nprofile = \"gaussian-tf\"\n", &[]).unwrap();
+    let sizes = [SlabSize::Planes(1), SlabSize::Planes(7), SlabSize::Planes(33)];
+    assert_slab_runs_equal_the_whole("gaussian-tf", &p, Some(input.clone()), &sizes);
+    let out = dir.path().join("check");
+    let opts = RunOptions { pipeline_path: pipelines_dir().join("gaussian-tf.toml"), input: Some(input), output: out };
+    run_blocks(&p, &opts, SlabSize::Planes(5), &|_| {}, &|_, _| {}).unwrap();
+    let g: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(opts.output.join("pack/gaussians.json")).unwrap()).unwrap();
+    let g = g.as_array().unwrap();
+    assert_eq!(g.len(), 1, "one white TGTF: {g:?}");
+    let centre = g[0]["centre"][0].as_f64().unwrap();
+    assert!((centre - 1000.0).abs() < 5.0, "centre {centre} at the noise's median");
+}
+
+#[test]
 fn pipelines_it_cannot_run_by_slabs_are_refused_with_the_reason_and_no_output() {
-    for (name, why) in [
-        ("gaussian-tf", "does not run slab by slab"),
-        ("peak-finding", "does not run slab by slab"),
-        ("projected-tetrahedra", "does not run slab by slab"),
+    for (name, set, why) in [
+        ("gaussian-tf", "input.size=32", "the input has 3 fields"),
+        ("gaussian-tf", "pack.gtf_from_mask=\"mask.nii\"", "reads the whole mask"),
+        ("projected-tetrahedra", "input.size=32", "does not run slab by slab"),
     ] {
-        let p = shipped(name, &["input.size=32"]);
+        let p = shipped(name, &["input.size=32", set]);
         let dir = tempfile::tempdir().unwrap();
         let opts = RunOptions {
             pipeline_path: pipelines_dir().join(format!("{name}.toml")),

@@ -16,11 +16,12 @@
 //! Histograms are counted, textures quantised and kept volumes written slab
 //! by slab from the store.
 //!
-//! Scope: one-field inputs, the slicer-3dtf and distance-tf profiles (with
-//! or without a TF file, pre-filter, kept channels and histograms). Others
-//! are refused with the reason, before any work.
+//! Scope: one-field inputs, the slicer-3dtf, distance-tf, peak-finding and
+//! gaussian-tf profiles (with or without a TF file, pre-filter, kept
+//! channels and histograms). Others are refused with the reason, before any work.
 
 mod budget;
+mod medians;
 mod slab_channels;
 mod store;
 
@@ -50,11 +51,11 @@ pub fn unsupported(p: &Pipeline, fields: usize) -> Option<String> {
     if fields > 1 {
         return Some(format!("the input has {fields} fields; slab-by-slab runs take one-field inputs"));
     }
-    if !matches!(p.pack.profile, Profile::Slicer3dtf | Profile::DistanceTf) {
-        return Some(format!(
-            "the {} profile does not run slab by slab yet (slicer-3dtf and distance-tf do)",
-            p.pack.profile
-        ));
+    if p.pack.profile == Profile::ProjectedTetrahedra {
+        return Some("the projected-tetrahedra profile does not run slab by slab: it meshes the whole volume".into());
+    }
+    if p.pack.gtf_from_mask.is_some() {
+        return Some("a Gaussian fitted to a mask (pack.gtf_from_mask) reads the whole mask and its voxels".into());
     }
     if p.pack.nifti {
         return Some("NIfTI copies of the textures (pack.nifti) need each whole texture".into());
@@ -209,7 +210,7 @@ pub fn run(
     on_stage(&format!("input: {} slabs of {height} planes", slabs.len()));
     let mut store = ChannelStore::create(dir.join(".slabs"), geo.clone()).map_err(at("input"))?;
     let io = |stage: &'static str| at::<std::io::Error>(stage);
-    let mut stats = Stats::new(&["v", "g", "f2", "g_hit", "g_prefiltered"], n);
+    let mut stats = Stats::new(&["v", "g", "f2", "g_hit", "g_prefiltered", "inv_g"], n);
     for (k, z) in slabs.iter().enumerate() {
         on_slab(k + 1, slabs.len());
         let v = source.read(z.clone())?;
@@ -233,11 +234,21 @@ pub fn run(
         ..Default::default()
     };
     let mut groups = vec![derive(plan.derive.clone())];
+    if hvol_needed {
+        // the default TF's histogram volume, which the whole run derives on its own from the value
+        for item in [mdtf_derive::Item::G, mdtf_derive::Item::F2] {
+            if !groups[0].items.contains(&item) {
+                groups[0].items.push(item);
+            }
+        }
+    }
     if plan.defer_normals {
         groups.push(derive(vec![mdtf_derive::Item::Normal]));
     }
     let mut chans = SlabChannels::new(store, groups, plan.reach.kernel[2], nz);
-    let summarised: Vec<&str> = ["g", "f2"].into_iter().filter(|c| chans.has(c)).collect();
+    let summarised: Vec<&str> = ["g", "f2", "inv_g"].into_iter().filter(|c| chans.has(c)).collect();
+    // the smallest positive 1/g, whose multiple is the top of its code range
+    let mut smallest_inv_g = f32::INFINITY;
     if !summarised.is_empty() {
         on_stage("derive");
         let t = Instant::now();
@@ -245,6 +256,9 @@ pub fn run(
             on_slab(k + 1, slabs.len());
             for (name, v) in chans.volumes(z.clone(), &summarised).map_err(fail("derive"))? {
                 stats.add(&name, v.samples());
+                if name == "inv_g" {
+                    smallest_inv_g = crate::pack_inputs::smallest_positive(v.samples()).min(smallest_inv_g);
+                }
             }
         }
         chans.release();
@@ -409,6 +423,7 @@ pub fn run(
         let whole = || stats.0.get(c.as_str()).cloned().unwrap_or_else(|| ChannelStats::new((0.0, 0.0), 0));
         let r = match crate::pack_inputs::range_of(c, whole, d_max).map_err(at("pack"))? {
             Some(r) => Some(r),
+            None if c == "inv_g" && smallest_inv_g.is_finite() => Some(crate::pack_inputs::inv_g_range(smallest_inv_g)),
             None if matches!(c.as_str(), "nx" | "ny" | "nz") => None,
             None => stats.range(c).map(|(lo, hi)| [lo as f64, hi as f64]),
         };
@@ -436,6 +451,23 @@ pub fn run(
     }
     let provenance = crate::run::provenance(p, opts, &base, &input_name);
     writer.finish(&luts, provenance).map_err(at("pack"))?;
+    if profile == Profile::GaussianTf {
+        // the TF file's primitives, else a TGTF at each boundary found, else the paper's median default
+        let gaussians = match (tf.as_ref(), &hvol) {
+            (Some(tf), _) => tf.gaussians(),
+            (None, Some(hv)) => {
+                let arches = crate::pack_inputs::arches_from(&mdtf_histogram::detect_boundaries(hv));
+                match arches.is_empty() {
+                    false => crate::gaussians::boundary_tgtfs(&arches, &geo),
+                    true => vec![medians::median_tgtf(&mut chans, &slabs).map_err(fail("pack"))?],
+                }
+            }
+            (None, None) => return Err(fail("pack")("the default Gaussians need the histogram volume".into())),
+        };
+        let json = serde_json::to_string_pretty(&gaussians).map_err(at("pack"))?;
+        mdtf_volume::write_file_atomically(&pdir.join("gaussians.json"), |w| w.write_all(json.as_bytes()))
+            .map_err(at("pack"))?;
+    }
     let mut pack_outputs: Vec<String> = vec!["pack/manifest.json".into()];
     if !figure_hists.is_empty() {
         let hists: Vec<&Histogram> = figure_hists.iter().collect();
@@ -587,6 +619,11 @@ fn count_histograms(
         }
         false => None,
     };
+    // peak finding's TF domain (v, 1/g), over the whole g's axis
+    let inv_g_axes = match joint && chans.has("inv_g") {
+        true => medians::inverse_gradient_axis(chans, slabs).map_err(&io)?.map(|ia| vec![axes[0].clone(), ia]),
+        false => None,
+    };
     let nz = slabs.last().map_or(0, |z| z.end);
     let mut counted = Counted { voxels: n, ..Default::default() };
     let add = |into: &mut Option<Histogram>, h: Histogram| match into {
@@ -601,6 +638,9 @@ fn count_histograms(
         }
         if stretched {
             names.extend(["g_hit", "hit"]);
+        }
+        if inv_g_axes.is_some() {
+            names.push("inv_g");
         }
         let mut slab: BTreeMap<String, Vec<f32>> = chans
             .volumes(z.clone(), &names)
@@ -620,6 +660,9 @@ fn count_histograms(
         }
         if joint {
             add(&mut counted.joint, count(&[&v, &g], axes.clone(), None).map_err(err)?);
+        }
+        if let Some(ia) = &inv_g_axes {
+            add(&mut counted.inv_g, count(&[&v, &take("inv_g")?], ia.clone(), None).map_err(err)?);
         }
         if stretched {
             let g_hit = take("g_hit")?;

@@ -1,0 +1,66 @@
+//! The medians a whole run takes of whole channels (the (v, 1/g)
+//! histogram's axis, gaussian-tf's default TGTF), taken exactly slab by
+//! slab: a count of the selected finite samples, then the two passes of a
+//! radix select over the same selection ([`mdtf_volume::order_statistic_of_pieces`]).
+
+use super::SlabChannels;
+use mdtf_histogram::Axis;
+use mdtf_pack::GaussianPrimitive;
+use std::ops::Range;
+
+/// The lower median of the finite samples `piece(z)` gives over `slabs`
+/// (as [`mdtf_volume::median`] of the whole), or None without any.
+fn median_of_slabs(
+    slabs: &[Range<usize>],
+    piece: &mut dyn FnMut(Range<usize>) -> Result<Vec<f32>, String>,
+) -> Result<Option<f32>, String> {
+    let mut finite = 0u64;
+    for z in slabs {
+        finite += piece(z.clone())?.iter().filter(|v| v.is_finite()).count() as u64;
+    }
+    let Some(last) = finite.checked_sub(1) else { return Ok(None) };
+    mdtf_volume::order_statistic_of_pieces(last / 2, |visit| {
+        for z in slabs {
+            visit(&piece(z.clone())?);
+        }
+        Ok(())
+    })
+}
+
+/// [`Axis::inverse_gradient`] of the whole g, 256 bins.
+pub(super) fn inverse_gradient_axis(chans: &mut SlabChannels, slabs: &[Range<usize>]) -> Result<Option<Axis>, String> {
+    let Some(median) = median_of_slabs(slabs, &mut |z| chans.samples("g", z))? else { return Ok(None) };
+    let cut = 2.0 * median;
+    let above = median_of_slabs(slabs, &mut |z| {
+        Ok(chans.samples("g", z)?.into_iter().filter(|&x| x > cut && x.is_finite()).collect())
+    })?;
+    Ok(above.map(f64::from).filter(|&g_b| g_b > 0.0).map(|g_b| Axis {
+        name: "inv_g".into(),
+        min: 0.0,
+        max: 8.0 / g_b,
+        bins: 256,
+    }))
+}
+
+/// gaussian-tf's default TGTF of a one-field volume where no boundary is
+/// found ([`crate::gaussians::median_tgtf`]).
+pub(super) fn median_tgtf(chans: &mut SlabChannels, slabs: &[Range<usize>]) -> Result<GaussianPrimitive, String> {
+    let g_cut = 2.0 * median_of_slabs(slabs, &mut |z| chans.samples("g", z))?.unwrap_or(0.0);
+    let (mut structured, mut voxels) = (0usize, 0usize);
+    for z in slabs {
+        let g = chans.samples("g", z.clone())?;
+        structured += g.iter().filter(|&&x| x > g_cut).count();
+        voxels += g.len();
+    }
+    let use_all = structured * 100 < voxels;
+    let centre = median_of_slabs(slabs, &mut |z| {
+        let v = chans.samples("v", z.clone())?;
+        if use_all {
+            return Ok(v);
+        }
+        let g = chans.samples("g", z)?;
+        Ok(v.into_iter().zip(g).filter(|(_, g)| *g > g_cut).map(|(v, _)| v).collect())
+    })?
+    .ok_or("channel 'v' has no finite sample")?;
+    Ok(crate::gaussians::median_tgtf(vec![centre as f64], &[1.0]))
+}
