@@ -187,9 +187,9 @@ fn same_bits_with_one_and_two_threads() {
 fn bad_parameters_are_named() {
     let v = random_volume([8, 8, 8], [1.0; 3]);
     let e = run(&v, &BilateralParams { sigma_d: 0.0, ..Default::default() }).unwrap_err().to_string();
-    assert!(e.contains("--sigma-d"), "{e}");
+    assert!(e.contains("bilateral.sigma_d must be a positive number"), "{e}");
     let e = run(&v, &BilateralParams { sigma_r: f64::NAN, ..Default::default() }).unwrap_err().to_string();
-    assert!(e.contains("--sigma-r"), "{e}");
+    assert!(e.contains("bilateral.sigma_r must be a positive number"), "{e}");
     let e = run(&v, &BilateralParams { sigma_d: 4.0, ..Default::default() }).unwrap_err();
     assert!(matches!(e, BilateralError::RadiusTooLarge { radius: 10, axis: 'x', .. }), "{e}");
     // a huge sigma is refused before its neighbour list is built (it asked for more memory than there is)
