@@ -20,13 +20,12 @@ fn main() -> ExitCode {
         eprintln!("error: cannot start {n} worker threads: {e}");
         return ExitCode::FAILURE;
     }
-    let progress = progress::Progress::new(cli.global.quiet);
-    let flags = flags::of(&cli.command);
+    let progress = progress::Progress::new(cli.global.quiet, flags::of(&cli.command));
     match commands::run(cli.command, &progress) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             progress.clear();
-            eprintln!("error: {}", flags::with_flags(&format!("{e:#}"), &flags));
+            eprintln!("error: {}", progress.with_flags(&format!("{e:#}")));
             ExitCode::FAILURE
         }
     }

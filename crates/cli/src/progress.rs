@@ -9,11 +9,14 @@ use std::time::{Duration, Instant};
 pub struct Progress {
     bar: Option<ProgressBar>,
     quiet: bool,
+    /// The command's (parameter name, flag) pairs: notes name what the user typed ([`crate::flags`]).
+    flags: Vec<(&'static str, &'static str)>,
 }
 
 impl Progress {
-    /// A reporter; silent when `quiet` or when stderr is not a terminal.
-    pub fn new(quiet: bool) -> Progress {
+    /// A reporter; silent when `quiet` or when stderr is not a terminal. Its
+    /// notes name parameters by `flags` where the command has them.
+    pub fn new(quiet: bool, flags: Vec<(&'static str, &'static str)>) -> Progress {
         let bar = (!quiet && std::io::stderr().is_terminal()).then(|| {
             let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
             bar.set_style(
@@ -23,7 +26,7 @@ impl Progress {
             bar.enable_steady_tick(Duration::from_millis(120));
             bar
         });
-        Progress { bar, quiet }
+        Progress { bar, quiet, flags }
     }
 
     /// Runs `work` as a named step, showing it while it runs.
@@ -82,10 +85,16 @@ impl Progress {
         if self.quiet {
             return;
         }
+        let line = crate::flags::with_flags(line, &self.flags);
         match &self.bar {
             Some(bar) => bar.println(line),
             None => eprintln!("{line}"),
         }
+    }
+
+    /// `message` with the parameter names the command has flags for replaced by the flags.
+    pub fn with_flags(&self, message: &str) -> String {
+        crate::flags::with_flags(message, &self.flags)
     }
 
     /// Removes the spinner (before an error message or at the end).

@@ -97,9 +97,9 @@ fn a_camera_out_of_range_is_refused_before_the_pack_is_read() {
     let png = dir.path().join("p.png");
     let good = Camera { azimuth: 30.0, elevation: 20.0, size: 64, step: 0.5, shaded: true };
     for (cam, want) in [
-        (Camera { step: 1e-6, ..good }, "--step must be 0.01 to 16 voxels"),
+        (Camera { step: 1e-6, ..good }, "preview.step must be 0.01 to 16 voxels"),
         (Camera { elevation: f64::INFINITY, ..good }, "elevation must be a finite number"),
-        (Camera { size: 4, ..good }, "--size 4 must be 8 to 4096"),
+        (Camera { size: 4, ..good }, "preview.size 4 must be 8 to 4096"),
     ] {
         let e = mdtf_preview::preview(&missing, &png, &cam, true).unwrap_err().to_string();
         assert!(e.contains(want), "{e}");
