@@ -280,8 +280,13 @@ fn derive_refuses_bad_requests_and_writes_nothing() {
     let o = out.to_str().unwrap();
     let e = mdtf_err(&["derive", a.to_str().unwrap(), "-o", o, "--items", "g,fpp"]);
     assert!(e.contains("unknown item 'fpp'") && e.contains("f2, laplacian"), "{e}");
-    let e = mdtf_err(&["derive", a.to_str().unwrap(), "-o", o, "--kernel", "cubic"]);
-    assert!(e.contains("unknown kernel 'cubic'") && e.contains("gauss:SIGMA"), "{e}");
+    // a kernel or border the library does not know is a usage error (exit 2), said before the input is read
+    let missing = dir.path().join("missing.nii");
+    for (flag, value, said) in [("--kernel", "cubic", "unknown kernel 'cubic'"), ("--border", "mirorr", "`mirror`")] {
+        let bad = mdtf(&["derive", missing.to_str().unwrap(), "-o", o, flag, value]);
+        let e = String::from_utf8_lossy(&bad.stderr);
+        assert!(bad.status.code() == Some(2) && e.contains(said) && !e.contains("missing.nii"), "{e}");
+    }
     let e = mdtf_err(&["derive", a.to_str().unwrap(), b.to_str().unwrap(), "-o", o, "--items", "gnorm"]);
     assert!(e.contains("spacing"), "{e}");
     let tiny = dir.path().join("t.nii");

@@ -251,8 +251,8 @@ fn bad_input_is_refused() {
         run(&BoundaryInput { g: &d.g, f2: &other, normal: &d.normal, value_range: 255.0 }, &BoundaryParams::default());
     assert!(e.unwrap_err().to_string().contains("must share one grid"));
     for (p, what) in [
-        (BoundaryParams { step: Some(0.0), ..Default::default() }, "--step"),
-        (BoundaryParams { d_max: Some(-1.0), ..Default::default() }, "--d-max"),
+        (BoundaryParams { step: Some(0.0), ..Default::default() }, "boundary.step must be positive"),
+        (BoundaryParams { d_max: Some(-1.0), ..Default::default() }, "boundary.d_max must be positive"),
         (BoundaryParams { d_max: Some(100.0), ..Default::default() }, "larger than the volume"),
     ] {
         let e = run(&BoundaryInput { g: &d.g, f2: &d.f2, normal: &d.normal, value_range: 255.0 }, &p)

@@ -1,6 +1,10 @@
 //! Command-line arguments (clap derive). Every option says its unit and default.
 
+use crate::values::named;
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use mdtf_bilateral::{BilateralParams, Mode, RangeUnits};
+use mdtf_boundary::BoundaryParams;
+use mdtf_derive::{Border, Kernel};
 use std::path::PathBuf;
 
 /// mdtf prepares volume data for direct volume rendering with
@@ -298,12 +302,12 @@ pub struct DeriveArgs {
     /// Items to compute, comma-separated (see below). All are computed in one pass.
     #[arg(long, value_delimiter = ',', default_value = "g,f2", value_name = "ITEMS")]
     pub items: Vec<String>,
-    /// Kernel family: central4 (default), central, bspline3, catmull-rom, gauss:SIGMA.
-    #[arg(long, default_value = "central4", value_name = "K")]
-    pub kernel: String,
-    /// Border policy: clamp (repeat the edge, ITK's), mirror, or wrap (periodic).
-    #[arg(long, default_value = "clamp", value_name = "B")]
-    pub border: String,
+    /// Kernel family: central4, central, bspline3, catmull-rom, gauss:SIGMA.
+    #[arg(long, default_value_t = mdtf_derive::DEFAULT_KERNEL, value_name = "K")]
+    pub kernel: Kernel,
+    /// Border policy: `clamp` (repeat the edge, ITK's; the default), `mirror`, or `wrap` (periodic).
+    #[arg(long, value_parser = named::<Border>, value_name = "B")]
+    pub border: Option<Border>,
     /// g below this counts as 0 for normal, f2 and inv_g (value units per world unit).
     /// Default: 1e-6 x value range / smallest spacing.
     #[arg(long, value_name = "E")]
@@ -316,24 +320,6 @@ pub struct DeriveArgs {
     pub format: OutFormat,
     #[command(flatten)]
     pub read: InputArgs,
-}
-
-/// `--range-units` values.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum RangeUnitsArg {
-    /// --sigma-r is a fraction of the input's value range (max - min).
-    Fraction,
-    /// --sigma-r is in the input's value units.
-    Value,
-}
-
-/// `--mode` values.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum BilateralModeArg {
-    /// Every neighbour in the box of radius ceil(2.5 sigma_d / spacing) (ITK's BilateralImageFilter neighbourhood).
-    Exact,
-    /// Neighbours within 1.5 sigma_d only: about 10x faster, 43.6 dB PSNR from exact on the noisy erf sphere.
-    Fast,
 }
 
 /// `mdtf bilateral`.
@@ -353,17 +339,20 @@ pub struct BilateralArgs {
     #[arg(short, long, value_name = "OUT")]
     pub output: PathBuf,
     /// Spatial standard deviation, world units.
-    #[arg(long, default_value_t = 1.0, value_name = "S", allow_negative_numbers = true)]
+    #[arg(long, default_value_t = BilateralParams::default().sigma_d, value_name = "S", allow_negative_numbers = true)]
     pub sigma_d: f64,
     /// Range standard deviation, in --range-units.
-    #[arg(long, default_value_t = 0.05, value_name = "S", allow_negative_numbers = true)]
+    #[arg(long, default_value_t = BilateralParams::default().sigma_r, value_name = "S", allow_negative_numbers = true)]
     pub sigma_r: f64,
-    /// Units of --sigma-r.
-    #[arg(long, value_enum, default_value_t = RangeUnitsArg::Fraction)]
-    pub range_units: RangeUnitsArg,
-    /// Exact or fast.
-    #[arg(long, value_enum, default_value_t = BilateralModeArg::Exact)]
-    pub mode: BilateralModeArg,
+    /// Units of --sigma-r: `fraction` of the input's value range (max - min; the default) or `value`
+    /// (the input's value units).
+    #[arg(long, value_parser = named::<RangeUnits>, value_name = "UNITS")]
+    pub range_units: Option<RangeUnits>,
+    /// `exact` (the default): every neighbour in the box of radius ceil(2.5 sigma_d / spacing), ITK's
+    /// BilateralImageFilter neighbourhood; `fast`: the neighbours within 1.5 sigma_d only, about 10x
+    /// faster, 43.6 dB PSNR from exact on the noisy erf sphere.
+    #[arg(long, value_parser = named::<Mode>, value_name = "MODE")]
+    pub mode: Option<Mode>,
     /// Gzip NRRD data.
     #[arg(long)]
     pub gzip: bool,
@@ -418,7 +407,7 @@ pub struct BoundaryArgs {
     pub value_range: Option<f64>,
     /// Derivative kernel when deriving from a value volume (gauss:1 or bspline3 for noisy data).
     #[arg(long, value_name = "K")]
-    pub kernel: Option<String>,
+    pub kernel: Option<Kernel>,
     /// Bilateral pre-filter of g and f'': SIGMA_D (world units),SIGMA_R (fraction of each channel's range).
     #[arg(long, value_name = "SD,SR")]
     pub prefilter: Option<String>,
@@ -435,7 +424,7 @@ pub struct BoundaryArgs {
     #[arg(long, value_name = "D", allow_negative_numbers = true)]
     pub d_max: Option<f64>,
     /// Zero-crossing tolerance, voxels.
-    #[arg(long, default_value_t = 1e-3, value_name = "T")]
+    #[arg(long, default_value_t = BoundaryParams::default().tolerance, value_name = "T", allow_negative_numbers = true)]
     pub tolerance: f64,
     /// Also write `flipped` = d_max - d (the paper's display image).
     #[arg(long)]
@@ -513,7 +502,7 @@ pub struct HistogramArgs {
     pub tent_width: Option<f64>,
     /// Derivative kernel for g and f2.
     #[arg(long, value_name = "K")]
-    pub kernel: Option<String>,
+    pub kernel: Option<Kernel>,
     #[command(flatten)]
     pub read: InputArgs,
 }
@@ -561,7 +550,7 @@ pub struct PackArgs {
     pub range: Vec<String>,
     /// Derivative kernel when computing channels from a value volume.
     #[arg(long, value_name = "K")]
-    pub kernel: Option<String>,
+    pub kernel: Option<Kernel>,
     /// Transfer-function file (JSON: v_range, g_range, f2_range, boundary_emphasis, widgets, tf1d,
     /// product) rasterised into the profile's lookup tables. Without it, slicer-3dtf gets a default TF
     /// from the boundaries found in the histogram volume: each its own colour on its arch in (v, g),
@@ -680,14 +669,14 @@ pub struct PreviewArgs {
     /// Output PNG.
     #[arg(short, long, default_value = "preview.png", value_name = "PNG")]
     pub output: PathBuf,
-    /// View direction AZIMUTH,ELEVATION in degrees.
-    #[arg(long, default_value = "30,20", value_name = "AZ,EL", allow_hyphen_values = true)]
-    pub view: String,
+    /// View direction AZIMUTH,ELEVATION in degrees. Default: the `mdtf run` preview's, 30,20.
+    #[arg(long, value_name = "AZ,EL", allow_hyphen_values = true)]
+    pub view: Option<String>,
     /// Image size in pixels (square).
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = mdtf_preview::Camera::default().size)]
     pub size: usize,
     /// Sample spacing along rays, voxels (0.01 to 16).
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = mdtf_preview::Camera::default().step)]
     pub step: f64,
     /// Between-sample classification: gaussian-tf integrates the primitives along each segment
     /// analytically (eq. 11), peak-finding classifies at the TF peak crossed between samples;

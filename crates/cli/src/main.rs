@@ -7,6 +7,7 @@ mod commands;
 mod flags;
 mod input;
 mod progress;
+mod values;
 
 use clap::Parser;
 use std::process::ExitCode;

@@ -515,7 +515,7 @@ pub(crate) fn finish(
     if p.preview && previewable {
         on_stage("preview");
         let t = Instant::now();
-        let cam = mdtf_preview::Camera { azimuth: 30.0, elevation: 20.0, size: 512, step: 0.5, shaded: true };
+        let cam = mdtf_preview::Camera::default();
         mdtf_preview::preview_named(&pdir, &dir.join("preview.png"), &cam, true, &opts.output.join("pack"))
             .map_err(at("preview"))?;
         // the contact sheet: every picture of the run side by side, named

@@ -25,6 +25,13 @@ pub struct Camera {
     pub shaded: bool,
 }
 
+impl Default for Camera {
+    /// The view of every `mdtf run` preview: 30 degrees round, 20 up, 512 pixels, half-voxel steps, shaded.
+    fn default() -> Self {
+        Camera { azimuth: 30.0, elevation: 20.0, size: 512, step: 0.5, shaded: true }
+    }
+}
+
 impl Camera {
     /// Refuses views that would render nothing meaningful or take hours:
     /// non-finite angles, a size outside 8 to 4096 pixels, a step outside

@@ -1,21 +1,22 @@
 //! `mdtf bilateral`: the edge-preserving filter.
 
-use crate::args::{BilateralArgs, BilateralModeArg, RangeUnitsArg};
+use crate::args::BilateralArgs;
 use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result};
-use mdtf_bilateral::{BilateralParams, Mode, RangeUnits, range_sigma, run as filter};
+use mdtf_bilateral::{BilateralParams, range_sigma, run as filter};
 use mdtf_volume::{MultiField, WriteOptions, write};
 use std::time::Instant;
 
 /// The stage's parameters from the command line.
 pub fn params(args: &BilateralArgs) -> BilateralParams {
+    let defaults = BilateralParams::default();
     BilateralParams {
         sigma_d: args.sigma_d,
         sigma_r: args.sigma_r,
-        range_units: if args.range_units == RangeUnitsArg::Value { RangeUnits::Value } else { RangeUnits::Fraction },
-        mode: if args.mode == BilateralModeArg::Fast { Mode::Fast } else { Mode::Exact },
-        ..BilateralParams::default()
+        range_units: args.range_units.unwrap_or(defaults.range_units),
+        mode: args.mode.unwrap_or(defaults.mode),
+        ..defaults
     }
 }
 

@@ -61,7 +61,7 @@ pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
         (Some(input), None, None, None) => {
             let value = progress.step("reading", || scalar(input, args))?;
             let chain = BoundaryChainParams {
-                kernel: args.kernel.as_deref().map(str::parse).transpose()?,
+                kernel: args.kernel,
                 prefilter: args.prefilter.as_deref().map(prefilter).transpose()?,
                 boundary: p,
             };

@@ -4,7 +4,7 @@ use crate::args::DeriveArgs;
 use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
-use mdtf_derive::{BORDER_NAMES, Border, DeriveParams, Item, Kernel, run_with_progress};
+use mdtf_derive::{DeriveParams, Item, run_with_progress};
 use mdtf_volume::{Inputs, MultiField, OutputFolder, WriteOptions, write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -12,14 +12,13 @@ use std::time::Instant;
 /// Parses the command line into the stage's parameters.
 pub fn params(args: &DeriveArgs) -> Result<DeriveParams> {
     let items = args.items.iter().map(|s| s.parse::<Item>()).collect::<Result<Vec<_>, _>>()?;
-    let kernel: Kernel = args.kernel.parse()?;
-    let border = match args.border.as_str() {
-        "clamp" => Border::Clamp,
-        "mirror" => Border::Mirror,
-        "wrap" => Border::Wrap,
-        other => bail!("unknown border policy '{other}' (valid: {BORDER_NAMES})"),
-    };
-    Ok(DeriveParams { items, kernel, border, epsilon: args.epsilon })
+    let defaults = DeriveParams::default();
+    Ok(DeriveParams {
+        items,
+        kernel: args.kernel,
+        border: args.border.unwrap_or(defaults.border),
+        epsilon: args.epsilon,
+    })
 }
 
 /// Reads the inputs, derives, writes one file per item.

@@ -54,7 +54,7 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
     let folder = OutputFolder::begin(&args.output, &inputs)?;
     let out = folder.path();
     let (input, _) = progress.step("reading", || read_input(&args.input, &args.read, &read_options(&args.read)))?;
-    let kernel = args.kernel.as_deref().map(str::parse).transpose()?;
+    let kernel = args.kernel;
     let mut wanted: Vec<String> = args.axes.clone();
     for extra in [&["v", "g"][..], &["g_hit", "hit"][..]].into_iter().filter(|_| args.stretched).flatten() {
         if !wanted.iter().any(|w| w == extra) {

@@ -59,7 +59,7 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         input: Some(input.display().to_string()),
         input_sha256: if input.is_file() { sha256_file(input).ok() } else { None },
         stages: serde_json::json!({ "pack": { "profile": profile.to_string(), "ranges": ranges },
-            "derive": { "kernel": args.kernel.clone().unwrap_or_else(|| mdtf_derive::DEFAULT_KERNEL.to_string()) } }),
+            "derive": { "kernel": args.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL).to_string() } }),
     };
     let tf = match &args.tf {
         Some(p) => {
@@ -69,8 +69,7 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         None => None,
     };
     let alpha: AlphaMap = args.alpha.parse().map_err(anyhow::Error::msg)?;
-    let kernel: mdtf_derive::Kernel =
-        args.kernel.as_deref().map(str::parse).transpose()?.unwrap_or(mdtf_derive::DEFAULT_KERNEL);
+    let kernel = args.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL);
     let luts = progress
         .step("lookup tables", || pack_inputs::luts(profile, tf.as_ref(), &alpha, &chans, &ranges, None, kernel))?;
     let dtype = match args.dtype.as_deref() {
@@ -122,7 +121,7 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
 /// Channels of a value volume computed in process; a multi-field input's field names are the fields.
 fn from_value(input: &Path, profile: Profile, args: &PackArgs) -> Result<ChannelsAndFields> {
     let (mf, _) = read_input(input, &args.read, &read_options(&args.read))?;
-    let kernel = args.kernel.as_deref().map(str::parse).transpose()?;
+    let kernel = args.kernel;
     let fields: Vec<String> =
         if mf.fields.len() > 1 { mf.fields.iter().map(|f| f.name.clone()).collect() } else { Vec::new() };
     let names = profile.channels(&fields);

@@ -7,20 +7,19 @@ use mdtf_preview::{Camera, preview};
 
 /// Parses the view and renders.
 pub fn run(args: &PreviewArgs, progress: &Progress) -> Result<()> {
-    let (az, el) = args
-        .view
-        .split_once(',')
-        .with_context(|| format!("--view: expected AZIMUTH,ELEVATION, got '{}'", args.view))?;
-    let angle = |text: &str, name: &str| -> Result<f64> {
-        text.trim().parse().with_context(|| format!("--view: {name} '{text}' is not a number"))
+    let defaults = Camera::default();
+    let (azimuth, elevation) = match &args.view {
+        None => (defaults.azimuth, defaults.elevation),
+        Some(view) => {
+            let (az, el) =
+                view.split_once(',').with_context(|| format!("--view: expected AZIMUTH,ELEVATION, got '{view}'"))?;
+            let angle = |text: &str, name: &str| -> Result<f64> {
+                text.trim().parse().with_context(|| format!("--view: {name} '{text}' is not a number"))
+            };
+            (angle(az, "azimuth")?, angle(el, "elevation")?)
+        }
     };
-    let cam = Camera {
-        azimuth: angle(az, "azimuth")?,
-        elevation: angle(el, "elevation")?,
-        size: args.size,
-        step: args.step,
-        shaded: !args.no_shading,
-    };
+    let cam = Camera { azimuth, elevation, size: args.size, step: args.step, shaded: !args.no_shading };
     // the library's own check, here so that a bad view fails before the pack is read
     if let Err(e) = cam.check() {
         bail!(e);
