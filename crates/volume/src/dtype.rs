@@ -1,5 +1,6 @@
 //! Sample types on disk and their conversion to and from the f32 used inside.
 
+use rayon::prelude::*;
 use std::fmt;
 
 /// A sample type stored in a file. Inside mdtf every sample is f32.
@@ -151,6 +152,21 @@ pub fn decode_samples(bytes: &[u8], ty: SampleType, endian: Endian, out: &mut [f
     }
 }
 
+/// Rounds `samples` to the nearest integer (halves away from zero) and
+/// clamps them to the range of an integer `ty`, as a scanner storing 8- or
+/// 16-bit data would; float types are left as they are. NaN stays NaN
+/// (the writer refuses it).
+pub fn round_to_type(samples: &mut [f32], ty: SampleType) {
+    if !ty.is_integer() {
+        return;
+    }
+    let (lo, hi) = ty.range();
+    // u32's and i32's largest values round up as f32: clamp to the largest f32 the type holds
+    let below = |b: f64| if (b as f32) as f64 > b { (b as f32).next_down() } else { b as f32 };
+    let (lo, hi) = (lo as f32, below(hi));
+    samples.par_iter_mut().for_each(|x| *x = x.round().clamp(lo, hi));
+}
+
 /// Index and value of the first sample that `ty` cannot hold exactly, if any.
 pub fn first_unrepresentable(samples: &[f32], ty: SampleType) -> Option<(usize, f32)> {
     if !ty.is_integer() {
@@ -195,6 +211,28 @@ pub fn encode_samples(samples: &[f32], ty: SampleType, endian: Endian, out: &mut
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn rounding_to_a_type_rounds_halves_away_and_clamps_to_what_the_writer_takes() {
+        let v = [-3.6f32, 2.5, 300.2, 65535.7, 1e12, -1e12];
+        for (ty, want) in [
+            (SampleType::U8, [0.0, 3.0, 255.0, 255.0, 255.0, 0.0]),
+            (SampleType::U16, [0.0, 3.0, 300.0, 65535.0, 65535.0, 0.0]),
+            (SampleType::I16, [-4.0, 3.0, 300.0, 32767.0, 32767.0, -32768.0]),
+        ] {
+            let mut x = v;
+            round_to_type(&mut x, ty);
+            assert_eq!(x, want, "{ty:?}");
+        }
+        for ty in [SampleType::U32, SampleType::I32, SampleType::I8] {
+            let mut x = v;
+            round_to_type(&mut x, ty);
+            assert_eq!(first_unrepresentable(&x, ty), None, "{ty:?}: {x:?}");
+        }
+        let mut f = v;
+        round_to_type(&mut f, SampleType::F32);
+        assert_eq!(f, v);
+    }
 
     #[test]
     fn encode_then_decode_is_exact_for_every_type_and_endianness() {

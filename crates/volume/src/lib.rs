@@ -34,7 +34,7 @@ mod samples;
 mod tiff_stack;
 mod volume;
 
-pub use dtype::{Endian, SAMPLE_TYPE_NAMES, SampleType};
+pub use dtype::{Endian, SAMPLE_TYPE_NAMES, SampleType, round_to_type};
 pub use error::{Result, VolumeError};
 pub use geometry::Geometry;
 pub use io::{Format, WriteOptions, read, read_scalar, read_with_info, write, write_volume};

@@ -105,10 +105,7 @@ fn add_noise_seeded(v: &mut Volume, args: &SynthArgs, stream: u64) -> Result<()>
 
 /// Rounds and clamps to the integer output type, as an 8/16-bit scanner would store it.
 fn quantise(v: &mut Volume, t: OutType) {
-    let max = match t {
-        OutType::F32 => return,
-        OutType::U8 => 255.0,
-        OutType::U16 => 65535.0,
-    };
-    v.data.mapv_inplace(|x| x.round().clamp(0.0, max));
+    if let Some(samples) = v.data.as_slice_mut() {
+        mdtf_volume::round_to_type(samples, sample_type(t));
+    }
 }
