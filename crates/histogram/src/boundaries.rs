@@ -77,7 +77,14 @@ pub struct DetectedBoundary {
 impl DetectedBoundary {
     /// The boundary's arch to draw on a (v, g) figure, labelled and coloured.
     pub fn arch(&self, label: &str, colour: [u8; 3]) -> crate::ArchMark {
-        crate::ArchMark { v_low: self.v_low, v_high: self.v_high, g_peak: self.g_peak, label: label.into(), colour }
+        crate::ArchMark {
+            v_low: self.v_low,
+            v_high: self.v_high,
+            g_peak: self.g_peak,
+            label: label.into(),
+            colour,
+            collapsed: false,
+        }
     }
 }
 

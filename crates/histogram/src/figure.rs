@@ -52,6 +52,16 @@ pub struct ArchMark {
     pub label: String,
     /// Line and label colour.
     pub colour: [u8; 3],
+    /// Drawn as the line the boundary collapses to in a stretched (v, g_hit)
+    /// histogram, g = `g_peak` over the arch's v span, instead of the arch.
+    pub collapsed: bool,
+}
+
+impl ArchMark {
+    /// The same boundary drawn where a stretched (v, g_hit) histogram gathers it.
+    pub fn collapsed(&self) -> ArchMark {
+        ArchMark { collapsed: true, ..self.clone() }
+    }
 }
 
 /// An RGBA table over a 2D figure's two axes (e.g. a transfer function
@@ -211,7 +221,8 @@ fn draw_marks(
         let arch = (0..=80).map(|k| {
             let t = -3.0 + 6.0 * k as f64 / 80.0;
             let phi = 0.5 * (1.0 + libm::erf(t / std::f64::consts::SQRT_2));
-            (a.v_low + (a.v_high - a.v_low) * phi, a.g_peak * (-0.5 * t * t).exp())
+            let g = if a.collapsed { a.g_peak } else { a.g_peak * (-0.5 * t * t).exp() };
+            (a.v_low + (a.v_high - a.v_low) * phi, g)
         });
         let arch: Vec<(f64, f64)> = arch.filter(|&(v, g)| inside(v, g)).collect();
         // a dark edge under the colour, so that any colour shows on light and dark plots
@@ -417,6 +428,14 @@ impl Histogram {
         fill_heat_map(&mut pixels, w as usize, p0, self, (max, scale), None);
         fill_heat_map(&mut pixels, w as usize, p1, other, (max, scale), None);
         fill_colour_bar(&mut pixels, w as usize, bar, max, scale, count_colour);
+        if labels.iter().any(|l| !l.arches.is_empty() || l.note.is_some()) {
+            let root = BitMapBackend::with_buffer(&mut pixels, (w, h)).into_drawing_area();
+            let (panels, _) = root.split_horizontally(w - COLOUR_BAR_WIDTH);
+            let (left, right) = panels.split_horizontally((w - COLOUR_BAR_WIDTH) / 2);
+            draw_marks(&left, self, labels[0])?;
+            draw_marks(&right, other, labels[1])?;
+            root.present().map_err(plot_err)?;
+        }
         Ok(Some(Rgb { width: w as usize, height: h as usize, pixels }))
     }
 

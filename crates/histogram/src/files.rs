@@ -74,17 +74,25 @@ pub fn write_histogram_marked(
     Ok(())
 }
 
-/// Writes the stretched histogram's files and `normal_vs_stretched.png` (the distance paper's Fig. 5).
+/// Writes the stretched histogram's files and `normal_vs_stretched.png` (the distance paper's Fig. 5),
+/// with the detected boundaries `arches` drawn as arches on the normal (v, g) panel and as the
+/// lines they collapse to (g_hit = their peak g) on the stretched one and its own figure.
 pub fn write_stretched(
     dir: &Path,
     normal: &Histogram,
     stretched: &Histogram,
     scale: Scale,
     title: &str,
+    arches: &[ArchMark],
 ) -> Result<(), VolumeError> {
-    write_histogram(dir, stretched, scale, title)?;
-    let left = Labels::of(normal, &format!("normal (v, g) of the traced voxels of {title}"));
-    let right = Labels::of(stretched, &format!("stretched (v, g_hit) of {title}"));
+    let collapsed: Vec<ArchMark> = arches.iter().map(ArchMark::collapsed).collect();
+    write_histogram_marked(dir, stretched, scale, title, None, &collapsed)?;
+    // short panel titles (two long ones would run into each other); the input is named below
+    let mut left = Labels::of(normal, "normal (v, g) of the traced voxels");
+    left.arches = arches.to_vec();
+    left.note = Some(format!("input: {title}"));
+    let mut right = Labels::of(stretched, "stretched (v, g_hit)");
+    right.arches = collapsed;
     let text = format!("left: normal (v, g) of traced voxels; right: stretched (v, g_hit); {}", normal.describe(scale));
     match normal.figure_beside(stretched, scale, [&left, &right]).map_err(VolumeError::Fields)? {
         Some(both) => crate::rgb::write_rgb_png(&dir.join("normal_vs_stretched.png"), &both, &text),

@@ -390,8 +390,14 @@ fn a_table_over_the_counts_shows_its_colour_where_it_is_opaque_and_arches_follow
     // an arch in pure blue, from v 1 to 7 with peak g 5: its apex column is at v = 4, right of
     // red's left edge; drawn only when asked for
     let mut arched = labels.clone();
-    arched.arches =
-        vec![mdtf_histogram::ArchMark { v_low: 1.0, v_high: 7.0, g_peak: 5.0, label: "1".into(), colour: [0, 0, 255] }];
+    arched.arches = vec![mdtf_histogram::ArchMark {
+        v_low: 1.0,
+        v_high: 7.0,
+        g_peak: 5.0,
+        label: "1".into(),
+        colour: [0, 0, 255],
+        collapsed: false,
+    }];
     arched.note = Some("a note".into());
     let with_arch = h.figure_with(Scale::Log, &arched, Some(&overlay)).unwrap().unwrap();
     let blue = pixels_of(&with_arch, [0, 0, 255]);
@@ -431,6 +437,34 @@ fn two_histograms_side_by_side_share_one_colour_scale() {
     // a 1D histogram has no side-by-side heat map
     let one = count(&[&v], vec![Axis::new("v", 0.0, 8.0, 8).unwrap()], None).unwrap();
     assert!(one.figure_beside(&right, Scale::Log, labels).unwrap().is_none());
+
+    // a boundary from v 1 to 7 with peak g 5, in pure blue: an arch on the normal panel, the
+    // horizontal line g_hit = 5 it collapses to on the stretched one
+    let arch = mdtf_histogram::ArchMark {
+        v_low: 1.0,
+        v_high: 7.0,
+        g_peak: 5.0,
+        label: "1".into(),
+        colour: [0, 0, 255],
+        collapsed: false,
+    };
+    let (mut l, mut r) = (labels[0].clone(), labels[1].clone());
+    l.arches = vec![arch.clone()];
+    r.arches = vec![arch.collapsed()];
+    let marked = left.figure_beside(&right, Scale::Log, [&l, &r]).unwrap().unwrap();
+    assert!(count_in([0, 0, 255], 0..fig.width) == 0, "no marks unless asked for");
+    let blue: Vec<(usize, usize)> = (0..marked.height)
+        .flat_map(|y| (0..marked.width - 130).map(move |x| (x, y)))
+        .filter(|&(x, y)| marked.pixels[3 * (y * marked.width + x)..3 * (y * marked.width + x) + 3] == [0, 0, 255])
+        .collect();
+    let rows = |side: &dyn Fn(usize) -> bool| {
+        let ys: Vec<usize> = blue.iter().filter(|p| side(p.0)).map(|p| p.1).collect();
+        (ys.len(), ys.iter().max().unwrap_or(&0) - ys.iter().min().unwrap_or(&0))
+    };
+    let ((n_left, tall_left), (n_right, tall_right)) = (rows(&|x| x < half), rows(&|x| x >= half));
+    // the arch rises over most of the plot's g (0 to 5 of 6); the line is a few pixels thick
+    assert!(n_left > 200 && tall_left > 150, "arch: {n_left} pixels over {tall_left} rows");
+    assert!(n_right > 200 && tall_right <= 4, "line: {n_right} pixels over {tall_right} rows");
 }
 
 #[test]

@@ -76,7 +76,7 @@ pub fn write(hdir: &Path, c: Counted, input_name: &str, warnings: &mut Vec<Strin
         w.figure_hists.push(hist);
     }
     if let Some((normal, stretched)) = c.stretched {
-        write_stretched(hdir, &normal, &stretched, Scale::Log, input_name).map_err(err)?;
+        write_stretched(hdir, &normal, &stretched, Scale::Log, input_name, &w.arches).map_err(err)?;
         w.outputs.push("histogram/normal_vs_stretched.png".into());
         w.figure_hists.push(stretched);
     }

@@ -171,7 +171,7 @@ pub fn validate(n: usize, dir: &Path, params: &ValidateParams) -> Result<Vec<Che
     let mut sa = axes;
     sa[1].name = "g_hit".into();
     let stretched = count(&[value.samples(), b.g_hit.samples()], sa, Some(&traced)).map_err(|e| e.to_string())?;
-    write_stretched(&hdir, &normal_h, &stretched, Scale::Log, "the validation erf sphere")
+    write_stretched(&hdir, &normal_h, &stretched, Scale::Log, "the validation erf sphere", &[])
         .map_err(|e| e.to_string())?;
 
     // pack decode: worst decode(quantise(x)) error in code steps, over f'' as u8 and u16

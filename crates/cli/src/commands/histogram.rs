@@ -114,7 +114,7 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
         let mut stretched_axes = shared;
         stretched_axes[1].name = "g_hit".into();
         let stretched = count(&[v.samples(), g_hit.samples()], stretched_axes, Some(&traced))?;
-        write_stretched(out, &normal, &stretched, scale, &title)?;
+        write_stretched(out, &normal, &stretched, scale, &title, &[])?;
     }
     if args.hvol {
         let p = HvolParams { g_thresh: args.g_thresh, tent_width: args.tent_width, ..HvolParams::default() };
