@@ -347,6 +347,18 @@ fn figures_have_axes_labels_and_a_colour_bar_and_show_each_bin_in_place() {
     );
 }
 
+/// A boundary from v 1 to 7 with peak g 5, drawn in pure blue.
+fn blue_arch() -> mdtf_histogram::ArchMark {
+    mdtf_histogram::ArchMark {
+        v_low: 1.0,
+        v_high: 7.0,
+        g_peak: 5.0,
+        label: "1".into(),
+        colour: [0, 0, 255],
+        collapsed: false,
+    }
+}
+
 #[test]
 fn a_table_over_the_counts_shows_its_colour_where_it_is_opaque_and_arches_follow_the_model() {
     // counts in bins (2, 5) and (6, 1) of 8 x 6; a 4 x 3 table (cells of 2 x 2
@@ -390,14 +402,7 @@ fn a_table_over_the_counts_shows_its_colour_where_it_is_opaque_and_arches_follow
     // an arch in pure blue, from v 1 to 7 with peak g 5: its apex column is at v = 4, right of
     // red's left edge; drawn only when asked for
     let mut arched = labels.clone();
-    arched.arches = vec![mdtf_histogram::ArchMark {
-        v_low: 1.0,
-        v_high: 7.0,
-        g_peak: 5.0,
-        label: "1".into(),
-        colour: [0, 0, 255],
-        collapsed: false,
-    }];
+    arched.arches = vec![blue_arch()];
     arched.note = Some("a note".into());
     let with_arch = h.figure_with(Scale::Log, &arched, Some(&overlay)).unwrap().unwrap();
     let blue = pixels_of(&with_arch, [0, 0, 255]);
@@ -440,14 +445,7 @@ fn two_histograms_side_by_side_share_one_colour_scale() {
 
     // a boundary from v 1 to 7 with peak g 5, in pure blue: an arch on the normal panel, the
     // horizontal line g_hit = 5 it collapses to on the stretched one
-    let arch = mdtf_histogram::ArchMark {
-        v_low: 1.0,
-        v_high: 7.0,
-        g_peak: 5.0,
-        label: "1".into(),
-        colour: [0, 0, 255],
-        collapsed: false,
-    };
+    let arch = blue_arch();
     let (mut l, mut r) = (labels[0].clone(), labels[1].clone());
     l.arches = vec![arch.clone()];
     r.arches = vec![arch.collapsed()];
