@@ -27,10 +27,15 @@ const PREVIEW: &[(&str, &str)] = &[
     ("preview.step", "--step"),
 ];
 
-const TETRA: &[(&str, &str)] =
-    &[("tetra.tets", "--tets"), ("tetra.scalar", "--scalar"), ("pack.tf", "--tf"), ("boundary.d_max", "--d-max")];
+const TETRA: &[(&str, &str)] = &[
+    ("tetra.tets", "--tets"),
+    ("tetra.scalar", "--scalar"),
+    ("pack.tf", "--tf"),
+    ("tables.d_max", "--d-max"),
+    ("tables.tau_max", "--tau-max"),
+];
 
-const PACK: &[(&str, &str)] = &[("pack.tf", "--tf"), ("pack.alpha", "--alpha"), ("boundary.d_max", "--d-max")];
+const PACK: &[(&str, &str)] = &[("pack.tf", "--tf")];
 
 /// The (parameter name, flag) pairs of `command`'s flags; empty for the
 /// commands driven by a settings file (`run`, `validate`), whose users see

@@ -1,10 +1,8 @@
 //! Errors of a run: the stage that failed and the stage library's own typed
-//! error, kept as it was raised (a caller can match on it; the Python
-//! bindings raise it as an exception of its kind). Stage libraries name
+//! error, kept as it was raised, so that a caller can match on its kind
+//! (as bindings to other languages will need). Stage libraries name
 //! parameters as a settings file does (`boundary.tolerance`); the CLI maps
 //! them to its flags when it prints.
-
-use crate::channel::UnknownChannel;
 
 /// The typed error a stage library (or the run's own bookkeeping) raised.
 #[derive(Debug, thiserror::Error)]
@@ -33,9 +31,6 @@ pub enum StageError {
     /// The preview.
     #[error("{0}")]
     Preview(#[from] mdtf_preview::PreviewError),
-    /// A channel the plan does not know.
-    #[error("{0}")]
-    Channel(#[from] UnknownChannel),
     /// The plan cannot be made (e.g. `keep` names an unknown channel).
     #[error("{0}")]
     Plan(#[from] crate::plan::PlanError),
