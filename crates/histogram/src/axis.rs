@@ -31,7 +31,14 @@ impl Axis {
         let median = mdtf_volume::median;
         let cut = 2.0 * median(g)?;
         let boundary: Vec<f32> = g.iter().copied().filter(|&x| x > cut && x.is_finite()).collect();
-        let g_b = median(&boundary)? as f64;
+        Axis::inverse_gradient_at(median(&boundary)?, bins)
+    }
+
+    /// The [`Axis::inverse_gradient`] axis from `g_b`, the median g of the
+    /// voxels above twice the median g (for callers that take the medians
+    /// in pieces): [0, 8 / g_b], None unless g_b > 0.
+    pub fn inverse_gradient_at(g_b: f32, bins: usize) -> Option<Axis> {
+        let g_b = g_b as f64;
         (g_b > 0.0).then(|| Axis { name: "inv_g".into(), min: 0.0, max: 8.0 / g_b, bins })
     }
 

@@ -531,7 +531,7 @@ pub(crate) fn finish(
     report.settings = resolved_settings(p, opts).map_err(fail("report"))?;
     let json = serde_json::to_string_pretty(&report).map_err(at("report"))?;
     write_file_atomically(&dir.join("run_report.json"), |w| w.write_all(json.as_bytes())).map_err(at("report"))?;
-    write_report_page(p, opts, &report, dir).map_err(fail("report"))?;
+    write_report_page(&report, dir).map_err(fail("report"))?;
     let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
     out.publish(&run_inputs(p, opts, &base)).map_err(at("output"))?;
     Ok(report)
@@ -592,8 +592,8 @@ pub fn resolved_settings(p: &Pipeline, opts: &RunOptions) -> Result<toml::Table,
 
 /// Writes report.html into the staging folder `dir` from the report, the
 /// settings and the pack's manifest (absent for mesh packs).
-fn write_report_page(p: &Pipeline, opts: &RunOptions, report: &RunReport, dir: &Path) -> Result<(), String> {
-    let settings = crate::file::to_toml(&resolved_settings(p, opts)?)?;
+fn write_report_page(report: &RunReport, dir: &Path) -> Result<(), String> {
+    let settings = crate::file::to_toml(&report.settings)?;
     let manifest: Option<mdtf_pack::Manifest> =
         std::fs::read_to_string(dir.join("pack/manifest.json")).ok().and_then(|t| serde_json::from_str(&t).ok());
     let figures = crate::report_page::figures_in(dir);

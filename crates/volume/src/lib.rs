@@ -43,7 +43,9 @@ pub use nifti_io::{read_nifti, read_nifti_with_info, write_nifti, write_nifti_sl
 pub use output::{Inputs, OutputFolder, write_file_atomically};
 pub use planes::PlaneReader;
 pub use png_out::{PngColour, register_figure_font, write_png};
-pub use range::{finite_range, finite_sample_range, median, order_statistic, order_statistic_of_pieces};
+pub use range::{
+    finite_range, finite_sample_range, median, median_of_pieces, order_statistic, order_statistic_of_pieces,
+};
 pub use raw::{RawSpec, read_raw};
 pub use samples::{FileInfo, NanPolicy, ReadOptions};
 pub use volume::{Field, MultiField, Volume};

@@ -107,6 +107,17 @@ pub fn median(data: &[f32]) -> Option<f32> {
     order_statistic(data, finite.checked_sub(1)? / 2)
 }
 
+/// [`median`] of samples that come in pieces: `pass(visit)` hands every
+/// piece to `visit`; it is called three times (a count of the finite
+/// samples, then the two passes of [`order_statistic_of_pieces`]), and
+/// must hand out the same samples each time.
+pub fn median_of_pieces<E>(mut pass: impl FnMut(&mut dyn FnMut(&[f32])) -> Result<(), E>) -> Result<Option<f32>, E> {
+    let mut finite = 0u64;
+    pass(&mut |d| finite += d.iter().filter(|v| v.is_finite()).count() as u64)?;
+    let Some(last) = finite.checked_sub(1) else { return Ok(None) };
+    order_statistic_of_pieces(last / 2, pass)
+}
+
 /// Lanes of the block loop: two AVX-512 registers, so that the min, max and
 /// NaN chains of one register do not wait on the previous iteration's.
 const LANES: usize = 32;
@@ -163,6 +174,17 @@ mod tests {
             Ok(None)
         );
         assert_eq!(order_statistic_of_pieces(3, |_: &mut dyn FnMut(&[f32])| Err("disk")), Err("disk"));
+        // the median of pieces (NaN skipped) is the lower median of the whole, as median() takes it
+        let mut with_nan = data.clone();
+        with_nan[17] = f32::NAN;
+        let pieces = |visit: &mut dyn FnMut(&[f32])| -> Result<(), ()> {
+            for r in [2000..5000, 0..2000] {
+                visit(&with_nan[r]);
+            }
+            Ok(())
+        };
+        assert_eq!(median_of_pieces(pieces), Ok(median(&with_nan)));
+        assert_eq!(median_of_pieces(|_: &mut dyn FnMut(&[f32])| Ok::<(), ()>(())), Ok(None));
     }
 
     #[test]

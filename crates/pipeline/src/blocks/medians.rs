@@ -1,7 +1,7 @@
 //! The medians a whole run takes of whole channels (the (v, 1/g)
 //! histogram's axis, gaussian-tf's default TGTF), taken exactly slab by
-//! slab: a count of the selected finite samples, then the two passes of a
-//! radix select over the same selection ([`mdtf_volume::order_statistic_of_pieces`]).
+//! slab ([`mdtf_volume::median_of_pieces`]: a count of the selected finite
+//! samples, then the two passes of a radix select over the same selection).
 
 use super::SlabChannels;
 use mdtf_histogram::Axis;
@@ -14,12 +14,7 @@ fn median_of_slabs(
     slabs: &[Range<usize>],
     piece: &mut dyn FnMut(Range<usize>) -> Result<Vec<f32>, String>,
 ) -> Result<Option<f32>, String> {
-    let mut finite = 0u64;
-    for z in slabs {
-        finite += piece(z.clone())?.iter().filter(|v| v.is_finite()).count() as u64;
-    }
-    let Some(last) = finite.checked_sub(1) else { return Ok(None) };
-    mdtf_volume::order_statistic_of_pieces(last / 2, |visit| {
+    mdtf_volume::median_of_pieces(|visit| {
         for z in slabs {
             visit(&piece(z.clone())?);
         }
@@ -34,12 +29,7 @@ pub(super) fn inverse_gradient_axis(chans: &mut SlabChannels, slabs: &[Range<usi
     let above = median_of_slabs(slabs, &mut |z| {
         Ok(chans.samples("g", z)?.into_iter().filter(|&x| x > cut && x.is_finite()).collect())
     })?;
-    Ok(above.map(f64::from).filter(|&g_b| g_b > 0.0).map(|g_b| Axis {
-        name: "inv_g".into(),
-        min: 0.0,
-        max: 8.0 / g_b,
-        bins: 256,
-    }))
+    Ok(above.and_then(|g_b| Axis::inverse_gradient_at(g_b, 256)))
 }
 
 /// gaussian-tf's default TGTF of a one-field volume where no boundary is
