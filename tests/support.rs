@@ -68,11 +68,13 @@ pub fn mdtf_err(args: &[&str]) -> String {
 /// interop tests must run, not skip (CI installs them).
 pub fn python() -> String {
     let py = std::env::var("MDTF_PYTHON").unwrap_or_else(|_| "python3".into());
-    let ok = Command::new(&py).args(["-c", "import nibabel, nrrd, numpy, meshio, SimpleITK, tifffile"]).output();
+    let ok = Command::new(&py)
+        .args(["-c", "import nibabel, nrrd, numpy, meshio, SimpleITK, tifffile, zarr, ome_zarr_models"])
+        .output();
     match ok {
         Ok(o) if o.status.success() => py,
         _ => panic!(
-            "{py} lacks nibabel, pynrrd, numpy, meshio, SimpleITK or tifffile, the reference readers of the interop tests: run the tests with \
+            "{py} lacks nibabel, pynrrd, numpy, meshio, SimpleITK, tifffile, zarr or ome-zarr-models, the reference readers of the interop tests: run the tests with \
              `bash tests/run.sh`, which installs them (tests/requirements.txt) into target/test-venv, or set MDTF_PYTHON to a \
              Python that has them"
         ),

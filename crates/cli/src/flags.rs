@@ -5,7 +5,7 @@
 use crate::args::Command;
 
 /// Settings-file names shared by the input options of every subcommand that reads a volume.
-const INPUT: &[(&str, &str)] = &[("input.nan = \"zero\"", "--nan zero")];
+const INPUT: &[(&str, &str)] = &[("input.nan = \"zero\"", "--nan zero"), ("input.level", "--level")];
 
 const BOUNDARY: &[(&str, &str)] = &[
     ("boundary.step", "--step"),

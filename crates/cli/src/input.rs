@@ -78,6 +78,7 @@ pub fn read_options(args: &InputArgs) -> ReadOptions {
     ReadOptions {
         nan: if args.nan == NanArg::Zero { NanPolicy::Zero } else { NanPolicy::Refuse },
         dicom: DicomOptions { series: args.series.clone(), resample: args.resample },
+        level: args.level,
     }
 }
 

@@ -24,7 +24,7 @@ pub enum PhantomKind {
 #[serde(deny_unknown_fields, default)]
 pub struct InputSection {
     /// Volume file or folder (NIfTI, NRRD, MetaImage, TIFF, DICOM series or
-    /// DICOMDIR); relative paths are relative to the pipeline file.
+    /// DICOMDIR, OME-Zarr store); relative paths are relative to the pipeline file.
     pub file: Option<PathBuf>,
     /// DICOM: the series to read (SeriesNumber or SeriesInstanceUID) when the
     /// input holds several; `series = 3` and `series = "1.2.840..."` both work.
@@ -33,6 +33,8 @@ pub struct InputSection {
     /// DICOM: interpolate a stack with unequal slice gaps or a gantry tilt
     /// onto a regular grid instead of refusing it (reported in the run report).
     pub resample: bool,
+    /// OME-Zarr: the multiscale level to read, 0 (full resolution) by default.
+    pub level: usize,
     /// NaN or infinite samples: "refuse" the file (default), "zero" them, or
     /// "keep" them (the stages then refuse them).
     pub nan: mdtf_volume::NanPolicy,
@@ -66,6 +68,7 @@ impl Default for InputSection {
             file: None,
             series: None,
             resample: false,
+            level: 0,
             nan: mdtf_volume::NanPolicy::Refuse,
             phantom: PhantomKind::ErfSphere,
             size: 128,

@@ -654,7 +654,11 @@ pub(crate) fn input_file(p: &Pipeline, opts: &RunOptions, base: &Path) -> Option
 
 /// How the pipeline's `[input]` asks for its file to be read.
 pub(crate) fn read_options(p: &Pipeline) -> ReadOptions {
-    ReadOptions { nan: p.input.nan, dicom: DicomOptions { series: p.input.series.clone(), resample: p.input.resample } }
+    ReadOptions {
+        nan: p.input.nan,
+        dicom: DicomOptions { series: p.input.series.clone(), resample: p.input.resample },
+        level: p.input.level,
+    }
 }
 
 /// The input volume, its name for the report, and what its reader warned of.

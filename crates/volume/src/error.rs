@@ -206,6 +206,16 @@ pub enum VolumeError {
         /// The library's error.
         cause: nifti::NiftiError,
     },
+    /// The Zarr library refused the store, an array's metadata or a chunk.
+    #[error("{path}: {what}: {cause}")]
+    Zarr {
+        /// The store concerned.
+        path: PathBuf,
+        /// What mdtf was doing, e.g. "reading planes 0..16 of array 0".
+        what: String,
+        /// The library's error.
+        cause: Box<dyn std::error::Error + Send + Sync>,
+    },
 }
 
 impl VolumeError {
@@ -214,6 +224,13 @@ impl VolumeError {
     }
     pub(crate) fn header(path: &Path, message: impl Into<String>) -> Self {
         VolumeError::Header { path: path.to_path_buf(), message: message.into() }
+    }
+    pub(crate) fn zarr(
+        path: &Path,
+        what: impl Into<String>,
+    ) -> impl FnOnce(Box<dyn std::error::Error + Send + Sync>) -> Self {
+        let (path, what) = (path.to_path_buf(), what.into());
+        move |cause| VolumeError::Zarr { path, what, cause }
     }
 }
 

@@ -34,6 +34,8 @@ pub enum Format {
     Tiff,
     /// DICOM (`.dcm`, `.ima`, a DICOMDIR, a folder, or a `.txt` list of files; read only)
     Dicom,
+    /// OME-Zarr (`.ome.zarr`, `.zarr`: a folder; NGFF 0.4 and 0.5 read, 0.5 written)
+    OmeZarr,
 }
 
 impl Format {
@@ -56,6 +58,8 @@ impl Format {
             Some(Format::Tiff)
         } else if name.ends_with(".dcm") || name.ends_with(".ima") || name == "dicomdir" {
             Some(Format::Dicom)
+        } else if name.ends_with(".zarr") {
+            Some(Format::OmeZarr)
         } else {
             None
         }
@@ -100,6 +104,7 @@ impl Format {
             Format::Mhd => ".mhd",
             Format::Tiff => ".tif",
             Format::Dicom => ".dcm",
+            Format::OmeZarr => ".ome.zarr",
         }
     }
 }
@@ -111,6 +116,11 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
 
 /// [`read`], also returning how the file stores its samples.
 pub fn read_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiField, FileInfo)> {
+    if crate::ome_zarr::is_store(path) {
+        let image = crate::ome_zarr::ZarrImage::open(path, opts.level)?;
+        let mf = image.read(0..image.geometry().dims[2], opts.nan)?;
+        return Ok((mf, image.info().clone()));
+    }
     if path.is_dir() {
         // the folder formats: a DICOM series (or export) and TIFF slices
         return if crate::dicom::folder_is_dicom(path) {
@@ -128,6 +138,10 @@ pub fn read_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiField, Fi
         Some(Format::Nrrd | Format::Nhdr) => read_nrrd_with_info(path, opts),
         Some(Format::Mha | Format::Mhd) => read_metaimage_with_info(path, opts),
         Some(Format::Tiff) => read_tiff_with_info(path, opts),
+        Some(Format::OmeZarr) => Err(VolumeError::header(
+            path,
+            "not a Zarr store (a folder holding zarr.json, or .zgroup/.zarray for Zarr v2)",
+        )),
         None => Err(VolumeError::UnknownFormat { path: path.to_path_buf() }),
     }
 }
@@ -170,6 +184,7 @@ pub fn write(path: &Path, mf: &MultiField, opts: &WriteOptions, inputs: &[&Path]
         Some(Format::Nifti | Format::NiftiGz) => write_nifti(path, mf, opts.ty),
         Some(Format::Nrrd | Format::Nhdr) => write_nrrd(path, mf, opts.ty, encoding),
         Some(Format::Mha | Format::Mhd) => write_metaimage(path, mf, opts.ty),
+        Some(Format::OmeZarr) => crate::ome_zarr::write_ome_zarr(path, mf, opts.ty, &inputs),
         Some(Format::Tiff) => Err(VolumeError::header(
             path,
             "mdtf reads TIFF stacks but does not write them: write .nrrd, .nii.gz or .mha (Fiji opens all three)",

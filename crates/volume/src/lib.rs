@@ -25,6 +25,7 @@ mod limits;
 pub mod metaimage;
 mod nifti_io;
 pub mod nrrd;
+pub mod ome_zarr;
 pub mod output;
 mod planes;
 mod png_out;

@@ -1,8 +1,8 @@
 //! Reading a one-field volume file a few z-planes at a time, front to back,
 //! for slab-by-slab runs that never hold the whole volume: uncompressed and
-//! gzip NIfTI-1 and NRRD (raw or gzip, attached or detached). The file is
-//! read once, as a stream; a slab and the next may overlap (their halos),
-//! and the overlap is kept, not read again.
+//! gzip NIfTI-1 and NRRD (raw or gzip, attached or detached), read once as
+//! a stream (a slab and the next may overlap, their halos, and the overlap
+//! is kept, not read again), and OME-Zarr, read by chunks in any order.
 
 use crate::dtype::decode_samples;
 use crate::error::{Result, VolumeError};
@@ -14,10 +14,18 @@ use std::io::Read as _;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
+/// Where a [`PlaneReader`] takes its planes from.
+enum Source {
+    /// The samples as a stream, front to back.
+    Stream(SampleStream),
+    /// An OME-Zarr image, read by chunks.
+    Zarr(Box<crate::ome_zarr::ZarrImage>),
+}
+
 /// A one-field volume file read plane by plane (see the module docs).
 pub struct PlaneReader {
     path: PathBuf,
-    stream: SampleStream,
+    source: Source,
     geometry: Geometry,
     nan: NanPolicy,
     /// Decoded planes `first..next`, x-fastest.
@@ -32,6 +40,22 @@ impl PlaneReader {
     /// is read only whole (DICOM, TIFF, MetaImage, ascii NRRD, NRRD data
     /// located from the file's end) or it holds more than one field.
     pub fn open(path: &Path, opts: &ReadOptions) -> Result<Option<PlaneReader>> {
+        if crate::ome_zarr::is_store(path) {
+            let image = crate::ome_zarr::ZarrImage::open(path, opts.level)?;
+            if image.field_count() != 1 {
+                return Ok(None);
+            }
+            return Ok(Some(PlaneReader {
+                path: path.to_path_buf(),
+                geometry: image.geometry().clone(),
+                source: Source::Zarr(Box::new(image)),
+                nan: opts.nan,
+                kept: Vec::new(),
+                first: 0,
+                next: 0,
+                bytes: Vec::new(),
+            }));
+        }
         let format = Format::from_content(path).or_else(|| Format::from_path(path));
         let opened = match format {
             Some(Format::Nifti | Format::NiftiGz) => Some(crate::nifti_io::open_samples(path)?),
@@ -44,7 +68,7 @@ impl PlaneReader {
         }
         Ok(Some(PlaneReader {
             path: path.to_path_buf(),
-            stream,
+            source: Source::Stream(stream),
             geometry,
             nan: opts.nan,
             kept: Vec::new(),
@@ -60,9 +84,13 @@ impl PlaneReader {
     }
 
     /// Planes `z` (clamped to the grid) as a volume placed where they lie.
-    /// Planes before those of the previous call's start are gone: a call
-    /// asking for them fails, since the stream reads forward only.
+    /// From a stream, planes before those of the previous call's start are
+    /// gone: a call asking for them fails, since it reads forward only (an
+    /// OME-Zarr store gives any planes).
     pub fn read(&mut self, z: Range<usize>) -> Result<Volume> {
+        if let Source::Zarr(image) = &self.source {
+            return image.read(z, self.nan)?.into_scalar();
+        }
         let nz = self.geometry.dims[2];
         let (z0, z1) = (z.start.min(nz), z.end.min(nz).max(z.start.min(nz)));
         if z0 < self.first {
@@ -91,16 +119,19 @@ impl PlaneReader {
     /// Decodes the next plane onto the end of `kept`, with the file's
     /// scale and the NaN policy applied.
     fn read_plane(&mut self, plane: usize) -> Result<()> {
-        let layout = self.stream.layout;
+        let Source::Stream(stream) = &mut self.source else {
+            return Err(VolumeError::header(&self.path, "an OME-Zarr store is read by chunks, not as a stream"));
+        };
+        let layout = stream.layout;
         let size = layout.ty.size();
         self.bytes.resize(plane * size, 0);
         let mut got = 0;
         while got < self.bytes.len() {
-            match self.stream.src.read(&mut self.bytes[got..]) {
+            match stream.src.read(&mut self.bytes[got..]) {
                 Ok(0) => break,
                 Ok(k) => got += k,
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) if self.stream.compressed => {
+                Err(e) if stream.compressed => {
                     return Err(VolumeError::Gzip { path: self.path.clone(), cause: e });
                 }
                 Err(e) => return Err(VolumeError::io(&self.path, e)),
@@ -122,14 +153,7 @@ impl PlaneReader {
                 *v = (*v as f64 * slope + inter) as f32;
             }
         }
-        let bad = out.iter().filter(|v| !v.is_finite()).count() as u64;
-        if bad > 0 {
-            match self.nan {
-                NanPolicy::Refuse => return Err(VolumeError::NonFinite { path: self.path.clone(), count: bad }),
-                NanPolicy::Zero => out.iter_mut().filter(|v| !v.is_finite()).for_each(|v| *v = 0.0),
-                NanPolicy::Keep => {}
-            }
-        }
+        crate::samples::apply_nan_policy(&self.path, self.nan, out)?;
         self.next += 1;
         Ok(())
     }

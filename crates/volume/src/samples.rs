@@ -27,6 +27,8 @@ pub struct ReadOptions {
     pub nan: NanPolicy,
     /// Which DICOM series to read and whether to resample it (DICOM input only).
     pub dicom: crate::dicom::DicomOptions,
+    /// The multiscale level of an OME-Zarr input: 0 (the default) is full resolution.
+    pub level: usize,
 }
 
 /// What a file says about how it stores its samples (for `mdtf info`).
@@ -173,6 +175,19 @@ pub fn decode_fields(path: &Path, bytes: &[u8], layout: &SampleLayout, opts: &Re
     finish_fields(path, all, layout, opts)
 }
 
+/// Applies `policy` to the NaN and infinite samples among `samples` (of the file `path`).
+pub(crate) fn apply_nan_policy(path: &Path, policy: NanPolicy, samples: &mut [f32]) -> Result<()> {
+    let bad = samples.iter().filter(|v| !v.is_finite()).count() as u64;
+    if bad > 0 {
+        match policy {
+            NanPolicy::Refuse => return Err(VolumeError::NonFinite { path: path.to_path_buf(), count: bad }),
+            NanPolicy::Zero => samples.iter_mut().filter(|v| !v.is_finite()).for_each(|v| *v = 0.0),
+            NanPolicy::Keep => {}
+        }
+    }
+    Ok(())
+}
+
 /// Applies scale and NaN policy to decoded samples and splits them into fields.
 fn finish_fields(
     path: &Path,
@@ -187,16 +202,7 @@ fn finish_fields(
             *v = (*v as f64 * slope + inter) as f32;
         }
     }
-    let bad = all.iter().filter(|v| !v.is_finite()).count() as u64;
-    if bad > 0 {
-        match opts.nan {
-            NanPolicy::Refuse => {
-                return Err(VolumeError::NonFinite { path: path.to_path_buf(), count: bad });
-            }
-            NanPolicy::Zero => all.iter_mut().filter(|v| !v.is_finite()).for_each(|v| *v = 0.0),
-            NanPolicy::Keep => {}
-        }
-    }
+    apply_nan_policy(path, opts.nan, &mut all)?;
     let shape = (nz, ny, nx);
     let fields = match layout.field_axis {
         _ if layout.fields == 1 => vec![all],

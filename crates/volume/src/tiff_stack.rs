@@ -11,7 +11,7 @@
 
 use crate::error::{Result, VolumeError};
 use crate::geometry::Geometry;
-use crate::samples::{FileInfo, NanPolicy, ReadOptions};
+use crate::samples::{FileInfo, ReadOptions};
 use crate::volume::{Field, MultiField};
 use crate::{Endian, SampleType};
 use std::io::BufReader;
@@ -304,14 +304,7 @@ pub fn read_tiff_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiFiel
         ));
     }
     let spacing = meta.spacing.map(|s| s.unwrap_or(1.0));
-    let bad = samples.iter().filter(|v| !v.is_finite()).count();
-    if bad > 0 {
-        match opts.nan {
-            NanPolicy::Refuse => return Err(VolumeError::NonFinite { path: path.to_path_buf(), count: bad as u64 }),
-            NanPolicy::Zero => samples.iter_mut().filter(|v| !v.is_finite()).for_each(|v| *v = 0.0),
-            NanPolicy::Keep => {}
-        }
-    }
+    crate::samples::apply_nan_policy(path, opts.nan, &mut samples)?;
     let data = ndarray::Array3::from_shape_vec((dims[2], dims[1], dims[0]), samples)
         .map_err(|e| VolumeError::header(path, format!("the pages do not form a volume: {e}")))?;
     let geometry = Geometry::new(dims, spacing);

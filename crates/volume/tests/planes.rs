@@ -24,6 +24,7 @@ fn planes_equal_the_whole_reads_planes_in_every_streamable_format() {
         ("d.nrrd", SampleType::F32, true),
         ("e.nhdr", SampleType::U16, false),
         ("f.nhdr", SampleType::U16, true),
+        ("g.ome.zarr", SampleType::U16, false),
     ] {
         let path = dir.path().join(name);
         write_volume(&path, &v, &WriteOptions { ty, gzip }, &[]).unwrap();
@@ -38,8 +39,13 @@ fn planes_equal_the_whole_reads_planes_in_every_streamable_format() {
             assert_eq!(got.data, want.data, "{name} planes {z:?}");
             assert_eq!(got.geometry, want.geometry, "{name} planes {z:?}");
         }
-        let back = r.read(2..4).unwrap_err().to_string();
-        assert!(back.contains("front to back"), "{back}");
+        if name.ends_with(".zarr") {
+            // read by chunks: any planes, in any order
+            assert_eq!(r.read(2..4).unwrap().data, whole.z_slab(2..4).data);
+        } else {
+            let back = r.read(2..4).unwrap_err().to_string();
+            assert!(back.contains("front to back"), "{back}");
+        }
     }
 }
 
@@ -88,4 +94,38 @@ fn a_nifti_written_slab_by_slab_has_the_whole_writes_bytes() {
         Ok(v.z_slab(z).data.iter().copied().collect())
     });
     assert!(e.is_err() && !path.exists());
+}
+
+#[test]
+fn a_store_written_by_slabs_of_any_height_equals_the_one_written_whole() {
+    use mdtf_volume::ome_zarr::ZarrWriter;
+    let dir = tempfile::tempdir().unwrap();
+    // 70 planes: shards of 64 planes, so slabs straddle a shard's edge
+    let geo = Geometry::new([9, 6, 70], [0.5, 0.5, 1.0]);
+    let mut v = Volume::zeros(geo.clone());
+    for (i, x) in v.data.iter_mut().enumerate() {
+        *x = ((i * 7919) % 65536) as f32;
+    }
+    let whole = dir.path().join("whole.ome.zarr");
+    write_volume(&whole, &v, &WriteOptions { ty: SampleType::U16, gzip: false }, &[]).unwrap();
+    for height in [1, 7, 33, 64] {
+        let path = dir.path().join(format!("slabs{height}.ome.zarr"));
+        let mut w = ZarrWriter::create(&path, &geo, &["value".into()], SampleType::U16).unwrap();
+        for z0 in (0..70).step_by(height) {
+            let slab = v.z_slab(z0..(z0 + height).min(70));
+            w.write_planes(z0, &[slab.samples()]).unwrap();
+        }
+        let got = read_scalar(&path, &ReadOptions::default()).unwrap();
+        assert_eq!(got.data, v.data, "slabs of {height}");
+        assert!(got.geometry.same_grid(&geo));
+    }
+    assert_eq!(read_scalar(&whole, &ReadOptions::default()).unwrap().data, v.data);
+    // a value u16 cannot hold is refused with its index, as by every writer
+    let mut w = ZarrWriter::create(&dir.path().join("bad.ome.zarr"), &geo, &["value".into()], SampleType::U16).unwrap();
+    let mut plane = vec![0.0f32; 54];
+    plane[5] = 2.5;
+    let e = w.write_planes(3, &[&plane]).unwrap_err().to_string();
+    assert!(e.contains("2.5 at index 167") && e.contains("u16"), "{e}");
+    let e = w.write_planes(70, &[&plane]).unwrap_err().to_string();
+    assert!(e.contains("do not fit"), "{e}");
 }

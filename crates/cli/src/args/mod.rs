@@ -186,6 +186,10 @@ pub struct InputArgs {
     /// The run prints what it found and did.
     #[arg(long, help_heading = "DICOM input")]
     pub resample: bool,
+    /// The multiscale level of an OME-Zarr input: 0 is full resolution, each
+    /// level after it coarser (`mdtf info` lists them).
+    #[arg(long, default_value_t = 0, value_name = "N", help_heading = "OME-Zarr input")]
+    pub level: usize,
 }
 
 /// `--nan` values.
