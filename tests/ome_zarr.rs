@@ -259,20 +259,15 @@ fn a_run_reads_a_store_by_slabs_with_the_outputs_of_the_nifti_input() {
     mdtf_ok(&["convert", &p("s.nii"), &p("s.ome.zarr"), "--type", "u16", "-q"]);
     let pipeline = shipped_pipeline("slicer-3dtf");
     let pl = pipeline.to_str().unwrap();
-    mdtf_ok(&["run", pl, "--input", &p("s.nii"), "-o", &p("whole"), "--set", "preview=false", "-q"]);
-    mdtf_ok(&[
-        "run",
-        pl,
-        "--input",
-        &p("s.ome.zarr"),
-        "-o",
-        &p("slabs"),
-        "--set",
-        "preview=false",
-        "--slab-planes",
-        "7",
-        "-q",
-    ]);
+    let keep = ["--set", "preview=false", "--set", "keep=[\"g\", \"f2\"]", "--set", "keep_format=\"ome-zarr\"", "-q"];
+    let run = |input: &str, out: &str, extra: &[&str]| {
+        let mut args = vec!["run", pl, "--input", input, "-o", out];
+        args.extend(keep);
+        args.extend(extra);
+        mdtf_ok(&args);
+    };
+    run(&p("s.nii"), &p("whole"), &[]);
+    run(&p("s.ome.zarr"), &p("slabs"), &["--slab-planes", "7"]);
     let report: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("slabs/run_report.json")).unwrap()).unwrap();
     assert_eq!(report["slabs"]["count"].as_u64(), Some(6), "{report}");
@@ -289,4 +284,13 @@ fn a_run_reads_a_store_by_slabs_with_the_outputs_of_the_nifti_input() {
         compared += 1;
     }
     assert!(compared >= 2, "the pack's textures were compared");
+    // the kept channels, as OME-Zarr stores written whole and by slabs: the same samples, valid for ome-zarr-models
+    for c in ["g", "f2"] {
+        let stores = ["whole", "slabs"].map(|run| dir.path().join(format!("{run}/volumes/{c}.ome.zarr")));
+        let [a, b] = stores.clone().map(|s| mdtf_volume::read(&s, &ReadOptions::default()).unwrap());
+        assert!(a.geometry.same_grid(&b.geometry));
+        assert_eq!(samples(&a), samples(&b), "{c}");
+        let d: Value = serde_json::from_str(&run_python(DUMP_ZARR_PYTHON, &[stores[1].to_str().unwrap()])).unwrap();
+        assert_eq!((d["model"].as_str(), floats(&d["data"])), (Some("Image"), samples(&b)), "{c}");
+    }
 }

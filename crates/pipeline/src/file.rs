@@ -126,6 +126,28 @@ pub struct PackSection {
     pub nifti: bool,
 }
 
+/// The file format of kept channels (`keep_format`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub enum KeepFormat {
+    /// gzip NIfTI-1, `volumes/<channel>.nii.gz` (3D Slicer, ITK-SNAP, nibabel).
+    #[default]
+    #[serde(rename = "nii.gz")]
+    NiiGz,
+    /// OME-Zarr 0.5, `volumes/<channel>.ome.zarr` (napari, zarr-python, Dask).
+    #[serde(rename = "ome-zarr")]
+    OmeZarr,
+}
+
+impl KeepFormat {
+    /// The file name of kept channel `channel`, e.g. "g.nii.gz".
+    pub fn file_name(self, channel: &str) -> String {
+        match self {
+            KeepFormat::NiiGz => format!("{channel}.nii.gz"),
+            KeepFormat::OmeZarr => format!("{channel}.ome.zarr"),
+        }
+    }
+}
+
 /// A whole pipeline file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -158,6 +180,9 @@ pub struct Pipeline {
     /// Channels to write as volumes too (e.g. ["g", "f2", "distance"]).
     #[serde(default)]
     pub keep: Vec<String>,
+    /// How the kept channels are written: "nii.gz" (default) or "ome-zarr".
+    #[serde(default)]
+    pub keep_format: KeepFormat,
     /// Render preview.png from the pack (profiles with a preview: slicer-3dtf, distance-tf).
     #[serde(default = "yes")]
     pub preview: bool,

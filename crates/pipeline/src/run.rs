@@ -301,9 +301,9 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         let mut written = Vec::new();
         for c in &p.keep {
             let v = get(c).ok_or_else(|| fail("keep")(format!("no channel '{c}' was computed")))?;
-            let path = kdir.join(format!("{c}.nii.gz"));
-            mdtf_volume::write_volume(&path, v, &WriteOptions::default(), &[]).map_err(at("keep"))?;
-            written.push(format!("volumes/{c}.nii.gz"));
+            let name = p.keep_format.file_name(c);
+            mdtf_volume::write_volume(&kdir.join(&name), v, &WriteOptions::default(), &[]).map_err(at("keep"))?;
+            written.push(format!("volumes/{name}"));
         }
         stages.done("keep", t, n, written);
     }

@@ -202,3 +202,21 @@ pub fn write_volume(path: &Path, v: &Volume, opts: &WriteOptions, inputs: &[&Pat
     let mf = MultiField::from(v.clone());
     write(path, &mf, opts, inputs)
 }
+
+/// Writes a scalar volume slab by slab, by extension: NIfTI
+/// ([`write_nifti_slabs`](crate::write_nifti_slabs)) or OME-Zarr
+/// ([`write_ome_zarr_slabs`](crate::ome_zarr::write_ome_zarr_slabs)).
+/// `slab(z)` gives the samples of planes `z` for each of `slabs`, in order.
+pub fn write_slabs(
+    path: &Path,
+    geometry: &crate::geometry::Geometry,
+    ty: SampleType,
+    slabs: &[std::ops::Range<usize>],
+    slab: &mut dyn FnMut(std::ops::Range<usize>) -> std::io::Result<Vec<f32>>,
+) -> Result<()> {
+    match Format::from_path(path) {
+        Some(Format::Nifti | Format::NiftiGz) => crate::nifti_io::write_nifti_slabs(path, geometry, ty, slabs, slab),
+        Some(Format::OmeZarr) => crate::ome_zarr::write_ome_zarr_slabs(path, geometry, ty, slabs, slab),
+        _ => Err(VolumeError::header(path, "volumes are written by slabs as .nii, .nii.gz or .ome.zarr")),
+    }
+}

@@ -51,7 +51,7 @@ pub enum Command {
     Synth(SynthArgs),
     /// Describe a volume file: dims, stored type, geometry, value range, NaN/Inf count, histogram.
     Info(InfoArgs),
-    /// Convert a volume between formats, chosen by the file extensions (.nii, .nii.gz, .nrrd, .nhdr, .mha, .mhd).
+    /// Convert a volume between formats, chosen by the file extensions (.nii, .nii.gz, .nrrd, .nhdr, .mha, .mhd, .ome.zarr).
     Convert(ConvertArgs),
     /// Measure derivatives: gradient, g, normal, Hessian, f'', Laplacian, 1/g, shading weight, multi-field ||G||.
     Derive(DeriveArgs),
@@ -213,12 +213,12 @@ pub enum EndianArg {
 /// `mdtf info`.
 #[derive(Debug, Args)]
 #[command(
-    after_help = "Example:\n  mdtf info sphere.nii.gz\n  mdtf info scan.raw --raw-dims 256,256,128 --raw-type u16 --raw-spacing 0.5,0.5,1\n  mdtf info dicom-export/                 (lists the series if there are several)\n  mdtf info dicom-export/DICOMDIR --series 3"
+    after_help = "Example:\n  mdtf info sphere.nii.gz\n  mdtf info scan.raw --raw-dims 256,256,128 --raw-type u16 --raw-spacing 0.5,0.5,1\n  mdtf info dicom-export/                 (lists the series if there are several)\n  mdtf info dicom-export/DICOMDIR --series 3\n  mdtf info cells.ome.zarr --level 1       (a store's levels, axes, units, chunks, codecs)"
 )]
 pub struct InfoArgs {
     /// The volume: a file (NIfTI, NRRD, MetaImage, TIFF, DICOM; the content
-    /// picks the reader), a folder (a DICOM series or export, or TIFF
-    /// slices), a DICOMDIR, or a .txt list of DICOM files.
+    /// picks the reader), a folder (an OME-Zarr store, a DICOM series or
+    /// export, or TIFF slices), a DICOMDIR, or a .txt list of DICOM files.
     pub input: PathBuf,
     /// Bins of the text histogram.
     #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=200))]
@@ -230,6 +230,8 @@ pub struct InfoArgs {
 /// `mdtf convert`.
 #[derive(Debug, Args)]
 #[command(after_help = "Examples:\n  mdtf convert scan.nii.gz scan.nrrd\n  mdtf convert ct.nhdr ct.nii --type u16\n  \
+    mdtf convert scan.nii.gz scan.ome.zarr --type u16      (OME-Zarr 0.5: sharded, zstd)\n  \
+    mdtf convert cells.ome.zarr cells.nii.gz --level 1    (from NGFF 0.4 or 0.5, any level)\n  \
     mdtf convert scan.raw scan.nii.gz --raw-dims 256,256,128 --raw-type i16 --raw-endian big")]
 pub struct ConvertArgs {
     /// Input volume.
@@ -259,6 +261,9 @@ pub enum OutFormat {
     Nrrd,
     /// NRRD with detached header (.nhdr + .raw).
     Nhdr,
+    /// OME-Zarr 0.5 store (.ome.zarr folder; napari, zarr-python, Dask).
+    #[value(name = "ome-zarr")]
+    OmeZarr,
 }
 
 impl OutFormat {
@@ -269,6 +274,7 @@ impl OutFormat {
             OutFormat::NiiGz => ".nii.gz",
             OutFormat::Nrrd => ".nrrd",
             OutFormat::Nhdr => ".nhdr",
+            OutFormat::OmeZarr => ".ome.zarr",
         }
     }
 }

@@ -376,12 +376,12 @@ pub fn run(
             if !chans.has(c) {
                 return Err(fail("keep")(format!("no channel '{c}' was computed")));
             }
-            let path = kdir.join(format!("{c}.nii.gz"));
-            mdtf_volume::write_nifti_slabs(&path, &geo, mdtf_volume::SampleType::F32, &slabs, &mut |z| {
+            let name = p.keep_format.file_name(c);
+            mdtf_volume::write_slabs(&kdir.join(&name), &geo, mdtf_volume::SampleType::F32, &slabs, &mut |z| {
                 chans.samples(c, z).map_err(std::io::Error::other)
             })
             .map_err(at("keep"))?;
-            written.push(format!("volumes/{c}.nii.gz"));
+            written.push(format!("volumes/{name}"));
         }
         stages.done("keep", t, n, written);
     }
