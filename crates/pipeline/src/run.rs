@@ -136,7 +136,7 @@ pub(crate) fn peak_mib() -> f64 {
 }
 
 /// Where a run reads from and writes to.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct RunOptions {
     /// The pipeline file (relative paths inside it are relative to its folder).
     pub pipeline_path: PathBuf,
@@ -144,6 +144,20 @@ pub struct RunOptions {
     pub input: Option<PathBuf>,
     /// Output folder.
     pub output: PathBuf,
+    /// Set to stop the run at its next stage or slab, leaving no output
+    /// (the Python package sets it on Ctrl-C).
+    pub cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+}
+
+impl RunOptions {
+    /// An error when [`RunOptions::cancel`] is set: the run stops there,
+    /// and its partial output folder is removed.
+    pub fn check_cancelled(&self) -> Result<(), RunError> {
+        match &self.cancel {
+            Some(c) if c.load(std::sync::atomic::Ordering::Relaxed) => Err(fail("run")("cancelled".into())),
+            _ => Ok(()),
+        }
+    }
 }
 
 /// Runs `p`; `on_stage(name)` is called as each stage starts.
@@ -157,6 +171,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
 
     // input
     on_stage("input");
+    opts.check_cancelled()?;
     let t = Instant::now();
     let (input, input_name, mut warnings) = load_input(p, opts, &base)?;
     let mut boundary = None;
@@ -193,6 +208,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let mut value_mf = MultiField::from(value);
     if !items.is_empty() {
         on_stage("derive");
+        opts.check_cancelled()?;
         let t = Instant::now();
         let d = DeriveParams { items, kernel, ..Default::default() };
         let out = mdtf_derive::run(&value_mf, &d).map_err(at("derive"))?;
@@ -212,6 +228,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         && !multi_items.is_empty()
     {
         on_stage("derive (multi-field)");
+        opts.check_cancelled()?;
         let t = Instant::now();
         let d = DeriveParams { items: multi_items, kernel, ..Default::default() };
         let out = mdtf_derive::run(mf, &d).map_err(at("derive"))?;
@@ -245,6 +262,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         let filtered = match &p.prefilter {
             Some(pf) => {
                 on_stage("prefilter");
+                opts.check_cancelled()?;
                 let t = Instant::now();
                 let filter = |v: &Volume| crate::boundary_chain::prefilter(v, pf).map_err(at("prefilter"));
                 let pair = (filter(g0)?, filter(f20)?);
@@ -258,6 +276,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             None => (g0, f20),
         };
         on_stage("boundary");
+        opts.check_cancelled()?;
         let t = Instant::now();
         let out = mdtf_boundary::run(&BoundaryInput { g, f2, normal: nm, value_range }, &p.boundary)
             .map_err(at("boundary"))?;
@@ -295,6 +314,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     // kept intermediates
     if !p.keep.is_empty() {
         on_stage("keep");
+        opts.check_cancelled()?;
         let t = Instant::now();
         let kdir = dir.join("volumes");
         std::fs::create_dir_all(&kdir).map_err(at("keep"))?;
@@ -313,6 +333,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let mut hists = crate::hist_files::Written::default();
     if let Some(h) = &p.histogram {
         on_stage("histogram");
+        opts.check_cancelled()?;
         let t = Instant::now();
         let hdir = dir.join("histogram");
         std::fs::create_dir_all(&hdir).map_err(at("histogram"))?;
@@ -372,6 +393,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     // pack (for meshes: the tetra stage, which writes the pack itself)
     let pack_stage = if profile == Profile::ProjectedTetrahedra { "tetra + pack" } else { "pack" };
     on_stage(pack_stage);
+    opts.check_cancelled()?;
     let t = Instant::now();
     let err = |e: String| fail("pack")(e);
     let tf = read_tf(p, &base)?;
@@ -514,6 +536,7 @@ pub(crate) fn finish(
     };
     if p.preview && previewable {
         on_stage("preview");
+        opts.check_cancelled()?;
         let t = Instant::now();
         let cam = mdtf_preview::Camera::default();
         mdtf_preview::preview_named(&pdir, &dir.join("preview.png"), &cam, true, &opts.output.join("pack"))

@@ -36,7 +36,7 @@ fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
                 r.as_object_mut().unwrap().remove("total_seconds");
                 // how the run was cut is recorded by slab-by-slab runs only
                 r.as_object_mut().unwrap().remove("slabs");
-                out.insert(rel, serde_json::to_vec_pretty(&r).unwrap());
+                out.insert(rel, serde_json::to_vec_pretty(&keys_sorted(r)).unwrap());
             } else if rel != "report.html" && rel != ".mdtf-output" {
                 out.insert(rel, std::fs::read(&path).unwrap());
             }
@@ -45,6 +45,22 @@ fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     let mut out = BTreeMap::new();
     walk(dir, dir, &mut out);
     out
+}
+
+/// `v` with every object's keys in sorted order: serde_json keeps insertion
+/// order when a dependency enables its `preserve_order` feature (zarrs does),
+/// and `remove` then moves the last key into the gap, so the order of keys
+/// would depend on which keys were removed rather than on the report.
+fn keys_sorted(v: serde_json::Value) -> serde_json::Value {
+    match v {
+        serde_json::Value::Object(map) => {
+            let sorted: BTreeMap<String, serde_json::Value> =
+                map.into_iter().map(|(k, v)| (k, keys_sorted(v))).collect();
+            serde_json::Value::Object(sorted.into_iter().collect())
+        }
+        serde_json::Value::Array(items) => serde_json::Value::Array(items.into_iter().map(keys_sorted).collect()),
+        other => other,
+    }
 }
 
 /// The names of the files that differ between two runs (or exist in one only).
@@ -62,6 +78,7 @@ fn assert_slab_runs_equal_the_whole(name: &str, p: &Pipeline, input: Option<Path
         pipeline_path: pipelines_dir().join(format!("{name}.toml")),
         input,
         output: dir.path().join("out"),
+        cancel: None,
     };
     run_whole(p, &opts, &|_| {}).unwrap();
     let whole = files(&opts.output);
@@ -111,6 +128,7 @@ fn the_budget_sets_the_slab_height_and_a_budget_too_small_is_refused_before_any_
         pipeline_path: pipelines_dir().join("distance-tf.toml"),
         input: None,
         output: dir.path().join("out"),
+        cancel: None,
     };
     let e = run_blocks(&p, &opts, SlabSize::Budget(64 << 20), &|_| {}, &|_, _| {}).unwrap_err().to_string();
     assert!(e.contains("too small") && e.contains("needs"), "{e}");
@@ -155,7 +173,12 @@ fn on_pure_noise_gaussian_tf_takes_the_median_default_slab_by_slab_as_whole() {
     let sizes = [SlabSize::Planes(1), SlabSize::Planes(7), SlabSize::Planes(33)];
     assert_slab_runs_equal_the_whole("gaussian-tf", &p, Some(input.clone()), &sizes);
     let out = dir.path().join("check");
-    let opts = RunOptions { pipeline_path: pipelines_dir().join("gaussian-tf.toml"), input: Some(input), output: out };
+    let opts = RunOptions {
+        pipeline_path: pipelines_dir().join("gaussian-tf.toml"),
+        input: Some(input),
+        output: out,
+        cancel: None,
+    };
     run_blocks(&p, &opts, SlabSize::Planes(5), &|_| {}, &|_, _| {}).unwrap();
     let g: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(opts.output.join("pack/gaussians.json")).unwrap()).unwrap();
@@ -178,9 +201,30 @@ fn pipelines_it_cannot_run_by_slabs_are_refused_with_the_reason_and_no_output() 
             pipeline_path: pipelines_dir().join(format!("{name}.toml")),
             input: None,
             output: dir.path().join("out"),
+            cancel: None,
         };
         let e = run_blocks(&p, &opts, SlabSize::Planes(4), &|_| {}, &|_, _| {}).unwrap_err().to_string();
         assert!(e.contains(why), "{name}: {e}");
         assert!(!opts.output.exists(), "{name}: nothing is written");
     }
+}
+
+#[test]
+fn a_cancelled_run_stops_and_leaves_no_output() {
+    let p = shipped("distance-tf", &["input.size=24", "preview=false"]);
+    let dir = tempfile::tempdir().unwrap();
+    let cancel = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+    let opts = RunOptions {
+        pipeline_path: pipelines_dir().join("distance-tf.toml"),
+        input: None,
+        output: dir.path().join("out"),
+        cancel: Some(cancel),
+    };
+    let whole = run_whole(&p, &opts, &|_| {}).unwrap_err().to_string();
+    let slabs = run_blocks(&p, &opts, SlabSize::Planes(4), &|_| {}, &|_, _| {}).unwrap_err().to_string();
+    for e in [whole, slabs] {
+        assert!(e.contains("cancelled"), "{e}");
+    }
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+    assert!(left.is_empty(), "no output and no partial folder: {left:?}");
 }

@@ -12,8 +12,12 @@ pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
     let text =
         std::fs::read_to_string(&args.pipeline).with_context(|| format!("cannot read {}", args.pipeline.display()))?;
     let pipeline = parse(&text, &args.set).map_err(|e| anyhow::anyhow!("{}: {e}", args.pipeline.display()))?;
-    let opts =
-        RunOptions { pipeline_path: args.pipeline.clone(), input: args.input.clone(), output: args.output.clone() };
+    let opts = RunOptions {
+        pipeline_path: args.pipeline.clone(),
+        input: args.input.clone(),
+        output: args.output.clone(),
+        cancel: None,
+    };
     if args.print_settings {
         let settings = mdtf_pipeline::run::resolved_settings(&pipeline, &opts).map_err(anyhow::Error::msg)?;
         print!("{}", mdtf_pipeline::file::to_toml(&settings).map_err(anyhow::Error::msg)?);

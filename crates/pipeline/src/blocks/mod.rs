@@ -191,6 +191,7 @@ pub fn run(
     let mut stages = Stages::default();
 
     on_stage("input");
+    opts.check_cancelled()?;
     let t = Instant::now();
     let (mut source, input_name, mut warnings) = open_source(p, opts, &base)?;
     let geo = source.geometry().clone();
@@ -208,11 +209,13 @@ pub fn run(
     };
     let slabs = slabs(nz, height);
     on_stage(&format!("input: {} slabs of {height} planes", slabs.len()));
+    opts.check_cancelled()?;
     let mut store = ChannelStore::create(dir.join(".slabs"), geo.clone()).map_err(at("input"))?;
     let io = |stage: &'static str| at::<std::io::Error>(stage);
     let mut stats = Stats::new(&["v", "g", "f2", "g_hit", "g_prefiltered", "inv_g"], n);
     for (k, z) in slabs.iter().enumerate() {
         on_slab(k + 1, slabs.len());
+        opts.check_cancelled()?;
         let v = source.read(z.clone())?;
         stats.add("v", v.samples());
         store.put_volume("v", z.start, &v).map_err(io("input"))?;
@@ -251,9 +254,11 @@ pub fn run(
     let mut smallest_inv_g = f32::INFINITY;
     if !summarised.is_empty() {
         on_stage("derive");
+        opts.check_cancelled()?;
         let t = Instant::now();
         for (k, z) in slabs.iter().enumerate() {
             on_slab(k + 1, slabs.len());
+            opts.check_cancelled()?;
             for (name, v) in chans.volumes(z.clone(), &summarised).map_err(fail("derive"))? {
                 stats.add(&name, v.samples());
                 if name == "inv_g" {
@@ -274,6 +279,7 @@ pub fn run(
             && let Some(pf) = &p.prefilter
         {
             on_stage("prefilter");
+            opts.check_cancelled()?;
             let t = Instant::now();
             let halo = plan.reach.prefilter[2];
             for (c, out_name) in [("g", "g_prefiltered"), ("f2", "f2_prefiltered")] {
@@ -281,6 +287,7 @@ pub fn run(
                 let params = crate::boundary_chain::prefilter_params(pf, range);
                 for (k, z) in slabs.iter().enumerate() {
                     on_slab(k + 1, slabs.len());
+                    opts.check_cancelled()?;
                     let read = grown(z, halo, 1, nz);
                     let v = chans.volumes(read.clone(), &[c]).map_err(fail("prefilter"))?.remove(0).1;
                     let filtered = mdtf_bilateral::run(&v, &params).map_err(at("prefilter"))?;
@@ -294,6 +301,7 @@ pub fn run(
             stages.done("prefilter", t, n, vec![]);
         }
         on_stage("boundary");
+        opts.check_cancelled()?;
         let t = Instant::now();
         let g_stats = g_stats(&mut chans, g_name, &slabs, value_range, geo.min_spacing(), &stats)?;
         let halo = plan.reach.trace[2];
@@ -303,6 +311,7 @@ pub fn run(
         let mut resolved = None;
         for (k, z) in slabs.iter().enumerate() {
             on_slab(k + 1, slabs.len());
+            opts.check_cancelled()?;
             let read = grown(z, halo, 1, nz);
             let block = if plan.prefilter {
                 let mut c =
@@ -368,6 +377,7 @@ pub fn run(
     // kept channels
     if !p.keep.is_empty() {
         on_stage("keep");
+        opts.check_cancelled()?;
         let t = Instant::now();
         let kdir = dir.join("volumes");
         std::fs::create_dir_all(&kdir).map_err(io("keep"))?;
@@ -392,6 +402,7 @@ pub fn run(
     if p.histogram.is_some() || hvol_needed {
         if !hvol_only {
             on_stage("histogram");
+            opts.check_cancelled()?;
         }
         let t = Instant::now();
         let mut counted = count_histograms(p, &mut chans, &stats, &slabs, n, hvol_needed)?;
@@ -412,6 +423,7 @@ pub fn run(
 
     // pack, a texture at a time, slab by slab
     on_stage("pack");
+    opts.check_cancelled()?;
     let t = Instant::now();
     let pdir = dir.join("pack");
     std::fs::create_dir_all(&pdir).map_err(io("pack"))?;
