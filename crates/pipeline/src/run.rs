@@ -4,136 +4,24 @@
 //! renamed into place at the end, so a failed run leaves the output folder
 //! as it was.
 
-use crate::file::{PhantomKind, Pipeline};
+use crate::file::Pipeline;
 use crate::plan::{Plan, Step};
+use crate::progress::Progress;
 use mdtf_boundary::{AlphaMap, BoundaryInput};
-use mdtf_datagen::{MultiFieldPhantom, RadialPhantom, add_gaussian_noise, erf_sphere, min_extent};
 use mdtf_derive::{DeriveParams, Item, Kernel};
 use mdtf_histogram::{Axis, AxisSpec, HvolParams, count, histogram_volume, hit_mask};
-use mdtf_pack::{PackParams, PackWriter, Profile, Provenance, parse_tf};
-use mdtf_volume::dicom::DicomOptions;
-use mdtf_volume::{
-    Geometry, Inputs, MultiField, OutputFolder, ReadOptions, Volume, WriteOptions, write_file_atomically,
-};
-use serde::Serialize;
+use mdtf_pack::{PackParams, PackWriter, Profile};
+use mdtf_volume::{MultiField, OutputFolder, Volume, WriteOptions, write_file_atomically};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 pub use crate::error::RunError;
 pub(crate) use crate::error::{at, fail};
-
-/// One stage's line of the run report.
-#[derive(Debug, Clone, Serialize)]
-pub struct StageReport {
-    /// Stage name.
-    pub stage: String,
-    /// Wall time, seconds.
-    pub seconds: f64,
-    /// Voxels per second (of the input grid).
-    pub mvoxel_per_s: f64,
-    /// Peak resident memory of the process after the stage, MiB (Linux; 0 elsewhere).
-    pub peak_mib: f64,
-    /// Files written by the stage, relative to the output folder.
-    pub outputs: Vec<String>,
-}
-
-/// The run report, written as run_report.json.
-#[derive(Debug, Clone, Serialize)]
-pub struct RunReport {
-    /// Pipeline file.
-    pub pipeline: String,
-    /// Output folder.
-    pub output: String,
-    /// Input (file or phantom).
-    pub input: String,
-    /// Grid size.
-    pub dims: [usize; 3],
-    /// Grid spacing, world units.
-    pub spacing: [f64; 3],
-    /// The input's fields, when it has more than one.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub fields: Vec<String>,
-    /// Finite range of the (first) field, input units.
-    pub value_range: Option<[f64; 2]>,
-    /// What the reader assumed or repaired (e.g. a DICOM series resampled
-    /// onto a regular grid), and what a stage left out (e.g. a boundary below
-    /// the tracing thresholds).
-    pub warnings: Vec<String>,
-    /// The boundary tracing's thresholds and counts, when it ran.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub boundary: Option<BoundarySummary>,
-    /// The boundaries found in the histogram volume, when it was built
-    /// (`[histogram] hvol`): the materials they separate and their peak g.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub boundaries: Vec<mdtf_histogram::DetectedBoundary>,
-    /// Whether the histogram volume was built (so `boundaries` says what was found).
-    pub hvol_built: bool,
-    /// How the run was cut into z-slabs, when it ran slab by slab.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub slabs: Option<SlabRun>,
-    /// The stages, in order.
-    pub stages: Vec<StageReport>,
-    /// Total wall time, seconds.
-    pub total_seconds: f64,
-    /// The settings the run used, every default filled in ([`resolved_settings`]).
-    pub settings: toml::Table,
-}
-
-/// The slabs of a slab-by-slab run.
-#[derive(Debug, Clone, Serialize)]
-pub struct SlabRun {
-    /// z-planes per slab (the last may hold fewer).
-    pub planes: usize,
-    /// Number of slabs.
-    pub count: usize,
-    /// The memory budget they were sized for, bytes (None: the height was given).
-    pub budget: Option<u64>,
-}
-
-impl RunReport {
-    /// The report of a run of `opts` on `input` (its grid `geo`), with nothing done yet.
-    pub(crate) fn of(opts: &RunOptions, input: String, geo: &Geometry) -> RunReport {
-        RunReport {
-            pipeline: opts.pipeline_path.display().to_string(),
-            output: opts.output.display().to_string(),
-            input,
-            dims: geo.dims,
-            spacing: geo.spacing,
-            fields: Vec::new(),
-            value_range: None,
-            warnings: Vec::new(),
-            boundary: None,
-            boundaries: Vec::new(),
-            hvol_built: false,
-            slabs: None,
-            stages: Vec::new(),
-            total_seconds: 0.0,
-            settings: toml::Table::new(),
-        }
-    }
-}
-
-/// What the boundary tracing used and found.
-#[derive(Debug, Clone, Serialize)]
-pub struct BoundarySummary {
-    /// Thresholds and sampling after defaults.
-    pub resolved: mdtf_boundary::ResolvedParams,
-    /// Voxels per hit code.
-    pub counts: mdtf_boundary::TraceCounts,
-    /// Boundaries the thresholds took out of the outputs.
-    pub lost: Vec<mdtf_boundary::LostBoundary>,
-}
-
-/// Peak resident set size of this process in MiB (VmHWM), 0 where unknown.
-pub(crate) fn peak_mib() -> f64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
-        })
-        .map_or(0.0, |kb| kb / 1024.0)
-}
+use crate::inputs::{load_input, provenance, read_tf, run_inputs};
+pub use crate::inputs::{plan, resolved_settings};
+use crate::report::Stages;
+pub use crate::report::{BoundarySummary, RunReport, SlabRun, StageReport};
 
 /// Where a run reads from and writes to.
 #[derive(Debug, Clone, Default)]
@@ -145,19 +33,8 @@ pub struct RunOptions {
     /// Output folder.
     pub output: PathBuf,
     /// Set to stop the run at its next stage or slab, leaving no output
-    /// (the Python package sets it on Ctrl-C).
+    /// (the Python package sets it on Ctrl-C); see [`crate::progress`].
     pub cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
-}
-
-impl RunOptions {
-    /// An error when [`RunOptions::cancel`] is set: the run stops there,
-    /// and its partial output folder is removed.
-    pub fn check_cancelled(&self) -> Result<(), RunError> {
-        match &self.cancel {
-            Some(c) if c.load(std::sync::atomic::Ordering::Relaxed) => Err(fail("run")("cancelled".into())),
-            _ => Ok(()),
-        }
-    }
 }
 
 /// Runs `p`; `on_stage(name)` is called as each stage starts.
@@ -168,10 +45,10 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let out = OutputFolder::begin(&opts.output, &inputs).map_err(at("output"))?;
     let dir = out.path();
     let mut stages = Stages::default();
+    let progress = Progress::new(opts, on_stage, &|_, _| {});
 
     // input
-    on_stage("input");
-    opts.check_cancelled()?;
+    progress.stage("input")?;
     let t = Instant::now();
     let (input, input_name, mut warnings) = load_input(p, opts, &base)?;
     let mut boundary = None;
@@ -207,8 +84,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     // the value volume goes into derive as a one-field MultiField and comes back out: no copy
     let mut value_mf = MultiField::from(value);
     if !items.is_empty() {
-        on_stage("derive");
-        opts.check_cancelled()?;
+        progress.stage("derive")?;
         let t = Instant::now();
         let d = DeriveParams { items, kernel, ..Default::default() };
         let out = mdtf_derive::run(&value_mf, &d).map_err(at("derive"))?;
@@ -227,8 +103,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     if let Some(mf) = &input
         && !multi_items.is_empty()
     {
-        on_stage("derive (multi-field)");
-        opts.check_cancelled()?;
+        progress.stage("derive (multi-field)")?;
         let t = Instant::now();
         let d = DeriveParams { items: multi_items, kernel, ..Default::default() };
         let out = mdtf_derive::run(mf, &d).map_err(at("derive"))?;
@@ -261,8 +136,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         };
         let filtered = match &p.prefilter {
             Some(pf) => {
-                on_stage("prefilter");
-                opts.check_cancelled()?;
+                progress.stage("prefilter")?;
                 let t = Instant::now();
                 let filter = |v: &Volume| crate::boundary_chain::prefilter(v, pf).map_err(at("prefilter"));
                 let pair = (filter(g0)?, filter(f20)?);
@@ -275,8 +149,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             Some((g, f2)) => (g, f2),
             None => (g0, f20),
         };
-        on_stage("boundary");
-        opts.check_cancelled()?;
+        progress.stage("boundary")?;
         let t = Instant::now();
         let out = mdtf_boundary::run(&BoundaryInput { g, f2, normal: nm, value_range }, &p.boundary)
             .map_err(at("boundary"))?;
@@ -313,8 +186,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
 
     // kept intermediates
     if !p.keep.is_empty() {
-        on_stage("keep");
-        opts.check_cancelled()?;
+        progress.stage("keep")?;
         let t = Instant::now();
         let kdir = dir.join("volumes");
         std::fs::create_dir_all(&kdir).map_err(at("keep"))?;
@@ -332,8 +204,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     // it comes first so that the boundaries it shows are drawn on the others)
     let mut hists = crate::hist_files::Written::default();
     if let Some(h) = &p.histogram {
-        on_stage("histogram");
-        opts.check_cancelled()?;
+        progress.stage("histogram")?;
         let t = Instant::now();
         let hdir = dir.join("histogram");
         std::fs::create_dir_all(&hdir).map_err(at("histogram"))?;
@@ -392,8 +263,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
 
     // pack (for meshes: the tetra stage, which writes the pack itself)
     let pack_stage = if profile == Profile::ProjectedTetrahedra { "tetra + pack" } else { "pack" };
-    on_stage(pack_stage);
-    opts.check_cancelled()?;
+    progress.stage(pack_stage)?;
     let t = Instant::now();
     let err = |e: String| fail("pack")(e);
     let tf = read_tf(p, &base)?;
@@ -508,7 +378,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         stages: stages.0,
         ..RunReport::of(opts, input_name, &geo)
     };
-    finish(p, opts, out, report, &table_names, start, on_stage)
+    finish(p, opts, out, report, &table_names, start, &progress)
 }
 
 /// The end of every run: the preview and the contact sheet (when asked for
@@ -522,7 +392,7 @@ pub(crate) fn finish(
     mut report: RunReport,
     table_names: &[String],
     start: Instant,
-    on_stage: &dyn Fn(&str),
+    progress: &Progress,
 ) -> Result<RunReport, RunError> {
     let dir = out.path();
     let pdir = dir.join("pack");
@@ -535,8 +405,7 @@ pub(crate) fn finish(
         Profile::ProjectedTetrahedra => true,
     };
     if p.preview && previewable {
-        on_stage("preview");
-        opts.check_cancelled()?;
+        progress.stage("preview")?;
         let t = Instant::now();
         let cam = mdtf_preview::Camera::default();
         mdtf_preview::preview_named(&pdir, &dir.join("preview.png"), &cam, true, &opts.output.join("pack"))
@@ -560,59 +429,6 @@ pub(crate) fn finish(
     Ok(report)
 }
 
-/// The stage lines of a run report, as the stages finish.
-#[derive(Default)]
-pub(crate) struct Stages(pub Vec<StageReport>);
-
-impl Stages {
-    /// Records stage `name`, started at `t`, over `voxels` voxels, that wrote `outputs`.
-    pub(crate) fn done(&mut self, name: &str, t: Instant, voxels: usize, outputs: Vec<String>) {
-        let seconds = t.elapsed().as_secs_f64();
-        self.0.push(StageReport {
-            stage: name.into(),
-            seconds,
-            mvoxel_per_s: voxels as f64 / seconds.max(1e-9) / 1e6,
-            peak_mib: peak_mib(),
-            outputs,
-        });
-    }
-}
-
-/// The plan [`run`] follows for `p`, with the input's name and grid. It reads
-/// the input (or builds the phantom) to learn its fields and grid, and
-/// writes nothing.
-pub fn plan(p: &Pipeline, opts: &RunOptions) -> Result<(Plan, String, Geometry), RunError> {
-    let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
-    let (input, name, _) = load_input(p, opts, &base)?;
-    let fields: Vec<String> = input.fields.iter().map(|f| f.name.clone()).collect();
-    let plan = Plan::resolve(p, &fields, &input.geometry).map_err(at("plan"))?;
-    Ok((plan, name, input.geometry))
-}
-
-/// The settings of a run of `p` with every default filled in, as the run
-/// uses them: `--input` in place of the pipeline's input (and then no phantom
-/// keys), and no meshing section unless the profile meshes. `mdtf run
-/// --print-settings` prints them; the run report and report.html record them.
-pub fn resolved_settings(p: &Pipeline, opts: &RunOptions) -> Result<toml::Table, String> {
-    let mut resolved = p.clone();
-    if let Some(f) = &opts.input {
-        resolved.input.file = Some(f.clone());
-    }
-    resolved.derive.kernel.get_or_insert(mdtf_derive::DEFAULT_KERNEL);
-    let mut table = toml::Table::try_from(&resolved).map_err(|e| e.to_string())?;
-    if resolved.pack.profile != Profile::ProjectedTetrahedra {
-        table.remove("tetra");
-    }
-    if let Some(toml::Value::Table(input)) = table.get_mut("input")
-        && input.contains_key("file")
-    {
-        for k in ["phantom", "size", "sigma", "noise"] {
-            input.remove(k);
-        }
-    }
-    Ok(table)
-}
-
 /// Writes report.html into the staging folder `dir` from the report, the
 /// settings and the pack's manifest (absent for mesh packs).
 fn write_report_page(report: &RunReport, dir: &Path) -> Result<(), String> {
@@ -625,102 +441,9 @@ fn write_report_page(report: &RunReport, dir: &Path) -> Result<(), String> {
     crate::report_page::write(dir, &page).map_err(|e| e.to_string())
 }
 
-/// The pack's provenance: mdtf's version, the input and its digest, the settings.
-pub(crate) fn provenance(p: &Pipeline, opts: &RunOptions, base: &Path, input_name: &str) -> Provenance {
-    Provenance {
-        mdtf_version: env!("CARGO_PKG_VERSION").into(),
-        input: Some(input_name.to_string()),
-        input_sha256: input_file(p, opts, base).and_then(|f| mdtf_pack::sha256_file(&f).ok()),
-        stages: serde_json::to_value(p).unwrap_or(serde_json::Value::Null),
-    }
-}
-
-/// The pack's TF file, read and parsed, when the pipeline names one.
-pub(crate) fn read_tf(p: &Pipeline, base: &Path) -> Result<Option<mdtf_pack::TfFile>, RunError> {
-    let err = |e: String| fail("pack")(e);
-    match &p.pack.tf {
-        Some(f) => {
-            let path = base.join(f);
-            let text = std::fs::read_to_string(&path).map_err(|e| err(format!("{}: {e}", path.display())))?;
-            Ok(Some(parse_tf(&text).map_err(|e| err(format!("{}: {e}", path.display())))?))
-        }
-        None => Ok(None),
-    }
-}
-
-/// Every file a run reads: the pipeline file, the input and the TF file.
-pub(crate) fn run_inputs(p: &Pipeline, opts: &RunOptions, base: &Path) -> Inputs {
-    let mut inputs = Inputs::of(&[&opts.pipeline_path]);
-    if let Some(f) = input_file(p, opts, base) {
-        inputs.add(&f);
-    }
-    if let Some(tf) = &p.pack.tf {
-        inputs.add(&base.join(tf));
-    }
-    if let Some(mask) = &p.pack.gtf_from_mask {
-        inputs.add(&base.join(mask));
-    }
-    inputs
-}
-
 /// The unit normals (nx, ny, nz) of a one-field `value`, named.
 fn derive_normals(value: &MultiField, kernel: Kernel) -> Result<Vec<(String, Volume)>, RunError> {
     let d = DeriveParams { items: vec![Item::Normal], kernel, ..Default::default() };
     let out = mdtf_derive::run(value, &d).map_err(at("derive"))?;
     Ok(out.items.into_iter().flat_map(|(_, mf)| mf.into_volumes()).collect())
-}
-
-/// The input file of a run: `--input` as given, else the pipeline's, relative to its folder.
-pub(crate) fn input_file(p: &Pipeline, opts: &RunOptions, base: &Path) -> Option<PathBuf> {
-    opts.input.clone().or_else(|| p.input.file.as_ref().map(|f| base.join(f)))
-}
-
-/// How the pipeline's `[input]` asks for its file to be read.
-pub(crate) fn read_options(p: &Pipeline) -> ReadOptions {
-    ReadOptions {
-        nan: p.input.nan,
-        dicom: DicomOptions { series: p.input.series.clone(), resample: p.input.resample },
-        level: p.input.level,
-    }
-}
-
-/// The input volume, its name for the report, and what its reader warned of.
-pub(crate) fn load_input(
-    p: &Pipeline,
-    opts: &RunOptions,
-    base: &Path,
-) -> Result<(MultiField, String, Vec<String>), RunError> {
-    if let Some(f) = input_file(p, opts, base) {
-        let (mf, info) = mdtf_volume::read_with_info(&f, &read_options(p)).map_err(at("input"))?;
-        return Ok((mf, f.display().to_string(), info.warnings));
-    }
-    let i = &p.input;
-    if i.size < 8 || i.size > 1024 {
-        return Err(fail("input")(format!("phantom size {} must be 8 to 1024", i.size)));
-    }
-    if !(i.sigma.is_finite() && i.sigma > 0.0) {
-        return Err(fail("input")(format!("phantom sigma {} must be a positive number of voxels", i.sigma)));
-    }
-    if !(i.noise.is_finite() && i.noise >= 0.0) {
-        return Err(fail("input")(format!("phantom noise {} must be zero or a positive standard deviation", i.noise)));
-    }
-    let geo = Geometry::new([i.size; 3], [1.0; 3]);
-    let name = format!("built-in {:?} phantom, {}^3, sigma {}", i.phantom, i.size, i.sigma);
-    let mut mf = match i.phantom {
-        PhantomKind::ErfSphere => {
-            let r = 0.3 * min_extent(&geo);
-            MultiField::from(erf_sphere(geo, r, i.sigma, 0.0, 255.0, None).volume())
-        }
-        PhantomKind::Shells => MultiField::from(RadialPhantom::tooth(geo, i.sigma).volume()),
-        PhantomKind::Multifield => MultiFieldPhantom::new(geo, i.sigma).volume(),
-    };
-    if i.noise > 0.0 {
-        let g = mf.geometry.clone();
-        for (k, f) in mf.fields.iter_mut().enumerate() {
-            let mut v = Volume { geometry: g.clone(), data: std::mem::take(&mut f.data) };
-            add_gaussian_noise(&mut v, i.noise, 1 + k as u64);
-            f.data = v.data;
-        }
-    }
-    Ok((mf, name, Vec::new()))
 }

@@ -78,7 +78,7 @@ fn assert_slab_runs_equal_the_whole(name: &str, p: &Pipeline, input: Option<Path
         pipeline_path: pipelines_dir().join(format!("{name}.toml")),
         input,
         output: dir.path().join("out"),
-        cancel: None,
+        ..Default::default()
     };
     run_whole(p, &opts, &|_| {}).unwrap();
     let whole = files(&opts.output);
@@ -128,7 +128,7 @@ fn the_budget_sets_the_slab_height_and_a_budget_too_small_is_refused_before_any_
         pipeline_path: pipelines_dir().join("distance-tf.toml"),
         input: None,
         output: dir.path().join("out"),
-        cancel: None,
+        ..Default::default()
     };
     let e = run_blocks(&p, &opts, SlabSize::Budget(64 << 20), &|_| {}, &|_, _| {}).unwrap_err().to_string();
     assert!(e.contains("too small") && e.contains("needs"), "{e}");
@@ -177,7 +177,7 @@ fn on_pure_noise_gaussian_tf_takes_the_median_default_slab_by_slab_as_whole() {
         pipeline_path: pipelines_dir().join("gaussian-tf.toml"),
         input: Some(input),
         output: out,
-        cancel: None,
+        ..Default::default()
     };
     run_blocks(&p, &opts, SlabSize::Planes(5), &|_| {}, &|_, _| {}).unwrap();
     let g: serde_json::Value =
@@ -201,7 +201,7 @@ fn pipelines_it_cannot_run_by_slabs_are_refused_with_the_reason_and_no_output() 
             pipeline_path: pipelines_dir().join(format!("{name}.toml")),
             input: None,
             output: dir.path().join("out"),
-            cancel: None,
+            ..Default::default()
         };
         let e = run_blocks(&p, &opts, SlabSize::Planes(4), &|_| {}, &|_, _| {}).unwrap_err().to_string();
         assert!(e.contains(why), "{name}: {e}");

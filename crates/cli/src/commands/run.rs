@@ -16,7 +16,7 @@ pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
         pipeline_path: args.pipeline.clone(),
         input: args.input.clone(),
         output: args.output.clone(),
-        cancel: None,
+        ..Default::default()
     };
     if args.print_settings {
         let settings = mdtf_pipeline::run::resolved_settings(&pipeline, &opts).map_err(anyhow::Error::msg)?;

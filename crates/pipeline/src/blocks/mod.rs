@@ -32,7 +32,9 @@ pub use store::ChannelStore;
 use crate::file::Pipeline;
 use crate::hist_files::Counted;
 use crate::plan::Plan;
-use crate::run::{RunError, RunOptions, RunReport, Stages, at, fail};
+use crate::progress::Progress;
+use crate::report::Stages;
+use crate::run::{RunError, RunOptions, RunReport, at, fail};
 use mdtf_boundary::{BoundaryInput, ReportAccumulator, VolumeStats};
 use mdtf_derive::DeriveParams;
 use mdtf_histogram::{AxisSpec, ChannelStats, Histogram, HvolAccumulator, HvolAxes, HvolParams, count, hit_mask};
@@ -73,8 +75,8 @@ pub fn automatic(p: &Pipeline, opts: &RunOptions) -> Option<(u64, Geometry)> {
     if unsupported(p, 1).is_some() {
         return None;
     }
-    let file = crate::run::input_file(p, opts, &base)?;
-    let reader = PlaneReader::open(&file, &crate::run::read_options(p)).ok()??;
+    let file = crate::inputs::input_file(p, opts, &base)?;
+    let reader = PlaneReader::open(&file, &crate::inputs::read_options(p)).ok()??;
     let geo = reader.geometry().clone();
     let budget = automatic_budget(p.pack.profile, geo.voxel_count() as u64, mdtf_volume::available_memory())?;
     Some((budget, geo))
@@ -104,13 +106,13 @@ impl Source {
 
 /// The input of `p` as a [`Source`], its name for the report and its reader's warnings.
 fn open_source(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(Source, String, Vec<String>), RunError> {
-    if let Some(f) = crate::run::input_file(p, opts, base)
+    if let Some(f) = crate::inputs::input_file(p, opts, base)
         && p.input.series.is_none()
-        && let Some(r) = PlaneReader::open(&f, &crate::run::read_options(p)).map_err(at("input"))?
+        && let Some(r) = PlaneReader::open(&f, &crate::inputs::read_options(p)).map_err(at("input"))?
     {
         return Ok((Source::Planes(r), f.display().to_string(), Vec::new()));
     }
-    let (mf, name, warnings) = crate::run::load_input(p, opts, base)?;
+    let (mf, name, warnings) = crate::inputs::load_input(p, opts, base)?;
     if let Some(why) = unsupported(p, mf.fields.len()) {
         return Err(fail("plan")(why));
     }
@@ -185,20 +187,20 @@ pub fn run(
     if let Some(why) = unsupported(p, 1) {
         return Err(fail("plan")(why));
     }
-    let inputs = crate::run::run_inputs(p, opts, &base);
+    let inputs = crate::inputs::run_inputs(p, opts, &base);
     let out = OutputFolder::begin(&opts.output, &inputs).map_err(at("output"))?;
     let dir = out.path().to_path_buf();
     let mut stages = Stages::default();
+    let progress = Progress::new(opts, on_stage, on_slab);
 
-    on_stage("input");
-    opts.check_cancelled()?;
+    progress.stage("input")?;
     let t = Instant::now();
     let (mut source, input_name, mut warnings) = open_source(p, opts, &base)?;
     let geo = source.geometry().clone();
     let n = geo.voxel_count();
     let nz = geo.dims[2];
     let plan = Plan::resolve(p, &[], &geo).map_err(at("plan"))?;
-    let tf = crate::run::read_tf(p, &base)?;
+    let tf = crate::inputs::read_tf(p, &base)?;
     let profile = p.pack.profile;
     // the histogram volume: asked for, or the default TF's source
     let hvol_asked = p.histogram.as_ref().is_some_and(|h| h.hvol);
@@ -208,14 +210,12 @@ pub fn run(
         SlabSize::Planes(h) => h.clamp(1, nz.max(1)),
     };
     let slabs = slabs(nz, height);
-    on_stage(&format!("input: {} slabs of {height} planes", slabs.len()));
-    opts.check_cancelled()?;
+    progress.stage(&format!("input: {} slabs of {height} planes", slabs.len()))?;
     let mut store = ChannelStore::create(dir.join(".slabs"), geo.clone()).map_err(at("input"))?;
     let io = |stage: &'static str| at::<std::io::Error>(stage);
     let mut stats = Stats::new(&["v", "g", "f2", "g_hit", "g_prefiltered", "inv_g"], n);
     for (k, z) in slabs.iter().enumerate() {
-        on_slab(k + 1, slabs.len());
-        opts.check_cancelled()?;
+        progress.slab(k + 1, slabs.len())?;
         let v = source.read(z.clone())?;
         stats.add("v", v.samples());
         store.put_volume("v", z.start, &v).map_err(io("input"))?;
@@ -253,12 +253,10 @@ pub fn run(
     // the smallest positive 1/g, whose multiple is the top of its code range
     let mut smallest_inv_g = f32::INFINITY;
     if !summarised.is_empty() {
-        on_stage("derive");
-        opts.check_cancelled()?;
+        progress.stage("derive")?;
         let t = Instant::now();
         for (k, z) in slabs.iter().enumerate() {
-            on_slab(k + 1, slabs.len());
-            opts.check_cancelled()?;
+            progress.slab(k + 1, slabs.len())?;
             for (name, v) in chans.volumes(z.clone(), &summarised).map_err(fail("derive"))? {
                 stats.add(&name, v.samples());
                 if name == "inv_g" {
@@ -278,16 +276,14 @@ pub fn run(
         if plan.prefilter
             && let Some(pf) = &p.prefilter
         {
-            on_stage("prefilter");
-            opts.check_cancelled()?;
+            progress.stage("prefilter")?;
             let t = Instant::now();
             let halo = plan.reach.prefilter[2];
             for (c, out_name) in [("g", "g_prefiltered"), ("f2", "f2_prefiltered")] {
                 let range = stats.range(c).map_or(0.0, |(lo, hi)| (hi - lo) as f64);
                 let params = crate::boundary_chain::prefilter_params(pf, range);
                 for (k, z) in slabs.iter().enumerate() {
-                    on_slab(k + 1, slabs.len());
-                    opts.check_cancelled()?;
+                    progress.slab(k + 1, slabs.len())?;
                     let read = grown(z, halo, 1, nz);
                     let v = chans.volumes(read.clone(), &[c]).map_err(fail("prefilter"))?.remove(0).1;
                     let filtered = mdtf_bilateral::run(&v, &params).map_err(at("prefilter"))?;
@@ -300,8 +296,7 @@ pub fn run(
             chans.release();
             stages.done("prefilter", t, n, vec![]);
         }
-        on_stage("boundary");
-        opts.check_cancelled()?;
+        progress.stage("boundary")?;
         let t = Instant::now();
         let g_stats = g_stats(&mut chans, g_name, &slabs, value_range, geo.min_spacing(), &stats)?;
         let halo = plan.reach.trace[2];
@@ -310,8 +305,7 @@ pub fn run(
         let mut counts = mdtf_boundary::TraceCounts::default();
         let mut resolved = None;
         for (k, z) in slabs.iter().enumerate() {
-            on_slab(k + 1, slabs.len());
-            opts.check_cancelled()?;
+            progress.slab(k + 1, slabs.len())?;
             let read = grown(z, halo, 1, nz);
             let block = if plan.prefilter {
                 let mut c =
@@ -358,7 +352,7 @@ pub fn run(
         let (lost, lost_warnings) = crossings.lost(&r);
         warnings.extend(lost_warnings.iter().map(|w| format!("boundary: {w}")));
         d_max = Some(r.d_max);
-        boundary = Some(crate::run::BoundarySummary { resolved: r, counts, lost });
+        boundary = Some(crate::report::BoundarySummary { resolved: r, counts, lost });
         let rdir = dir.join("boundary");
         std::fs::create_dir_all(&rdir).map_err(io("boundary"))?;
         report.finish().write(&rdir).map_err(at("boundary"))?;
@@ -376,8 +370,7 @@ pub fn run(
 
     // kept channels
     if !p.keep.is_empty() {
-        on_stage("keep");
-        opts.check_cancelled()?;
+        progress.stage("keep")?;
         let t = Instant::now();
         let kdir = dir.join("volumes");
         std::fs::create_dir_all(&kdir).map_err(io("keep"))?;
@@ -401,8 +394,7 @@ pub fn run(
     let hvol_only = p.histogram.is_none() && hvol_needed;
     if p.histogram.is_some() || hvol_needed {
         if !hvol_only {
-            on_stage("histogram");
-            opts.check_cancelled()?;
+            progress.stage("histogram")?;
         }
         let t = Instant::now();
         let mut counted = count_histograms(p, &mut chans, &stats, &slabs, n, hvol_needed)?;
@@ -422,8 +414,7 @@ pub fn run(
     let crate::hist_files::Written { boundaries, arches, figure_hists, hvol, .. } = hists;
 
     // pack, a texture at a time, slab by slab
-    on_stage("pack");
-    opts.check_cancelled()?;
+    progress.stage("pack")?;
     let t = Instant::now();
     let pdir = dir.join("pack");
     std::fs::create_dir_all(&pdir).map_err(io("pack"))?;
@@ -453,15 +444,16 @@ pub fn run(
     let sources = BTreeMap::new();
     let mut writer = PackWriter::new(&pdir, &params, geo.clone(), &sources);
     for layout in mdtf_pack::texture_layouts(&params) {
+        progress.check()?;
         writer
             .add_slabs(&layout, &slabs, &mut |z| {
-                on_slab(z.end.div_ceil(height), slabs.len());
+                progress.report_slab(z.end.div_ceil(height), slabs.len());
                 let names: Vec<&str> = layout.components.iter().flatten().map(String::as_str).collect();
                 chans.volumes(z, &names).map_err(|e| mdtf_pack::PackError::Io(mdtf_volume::VolumeError::Fields(e)))
             })
             .map_err(at("pack"))?;
     }
-    let provenance = crate::run::provenance(p, opts, &base, &input_name);
+    let provenance = crate::inputs::provenance(p, opts, &base, &input_name);
     writer.finish(&luts, provenance).map_err(at("pack"))?;
     if profile == Profile::GaussianTf {
         // the TF file's primitives, else a TGTF at each boundary found, else the paper's median default
@@ -512,7 +504,7 @@ pub fn run(
         boundary,
         boundaries,
         hvol_built: hvol_asked,
-        slabs: Some(crate::run::SlabRun {
+        slabs: Some(crate::report::SlabRun {
             planes: height,
             count: slabs.len(),
             budget: match size {
@@ -523,7 +515,7 @@ pub fn run(
         stages: stages.0,
         ..RunReport::of(opts, input_name, &geo)
     };
-    crate::run::finish(&finishing, opts, out, report, &table_names, start, on_stage)
+    crate::run::finish(&finishing, opts, out, report, &table_names, start, &progress)
 }
 
 /// What a block's tracing reads: g, f'' and the normal on `planes`.

@@ -1,0 +1,49 @@
+//! Where a run reports its progress and may be stopped: every stage and
+//! every slab starts through [`Progress`], so each start is shown and is a
+//! point at which a cancelled run ends.
+
+use crate::error::{RunError, fail};
+use crate::run::RunOptions;
+use std::sync::atomic::Ordering;
+
+/// A run's progress callbacks and its cancel flag ([`RunOptions::cancel`]).
+pub(crate) struct Progress<'a> {
+    opts: &'a RunOptions,
+    on_stage: &'a dyn Fn(&str),
+    on_slab: &'a dyn Fn(usize, usize),
+}
+
+impl<'a> Progress<'a> {
+    /// Progress of a run of `opts`: `on_stage(name)` as each stage or pass
+    /// starts, `on_slab(k, slabs)` as it starts its slab k (from 1).
+    pub(crate) fn new(opts: &'a RunOptions, on_stage: &'a dyn Fn(&str), on_slab: &'a dyn Fn(usize, usize)) -> Self {
+        Progress { opts, on_stage, on_slab }
+    }
+
+    /// Reports that stage `name` starts; an error if the run was cancelled.
+    pub(crate) fn stage(&self, name: &str) -> Result<(), RunError> {
+        (self.on_stage)(name);
+        self.check()
+    }
+
+    /// Reports that slab `k` of `slabs` starts; an error if the run was cancelled.
+    pub(crate) fn slab(&self, k: usize, slabs: usize) -> Result<(), RunError> {
+        (self.on_slab)(k, slabs);
+        self.check()
+    }
+
+    /// Reports that slab `k` of `slabs` starts, where the run cannot stop
+    /// (inside a texture being written; it stops at the next texture).
+    pub(crate) fn report_slab(&self, k: usize, slabs: usize) {
+        (self.on_slab)(k, slabs);
+    }
+
+    /// An error when the run was cancelled: it stops there, and its partial
+    /// output folder is removed.
+    pub(crate) fn check(&self) -> Result<(), RunError> {
+        match &self.opts.cancel {
+            Some(c) if c.load(Ordering::Relaxed) => Err(fail("run")("cancelled".into())),
+            _ => Ok(()),
+        }
+    }
+}
