@@ -59,7 +59,7 @@ pub struct RunReport {
     pub stages: Vec<StageReport>,
     /// Total wall time, seconds.
     pub total_seconds: f64,
-    /// The settings the run used, every default filled in ([`resolved_settings`]).
+    /// The settings the run used, every default filled in ([`resolved_settings`](crate::inputs::resolved_settings)).
     pub settings: toml::Table,
 }
 

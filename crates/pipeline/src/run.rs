@@ -33,7 +33,7 @@ pub struct RunOptions {
     /// Output folder.
     pub output: PathBuf,
     /// Set to stop the run at its next stage or slab, leaving no output
-    /// (the Python package sets it on Ctrl-C); see [`crate::progress`].
+    /// (the Python package sets it on Ctrl-C).
     pub cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
 }
 
