@@ -32,8 +32,8 @@ impl<'a> Progress<'a> {
         self.check()
     }
 
-    /// Reports that slab `k` of `slabs` starts, where the run cannot stop
-    /// (inside a texture being written; it stops at the next texture).
+    /// Reports that slab `k` of `slabs` starts, where the run does not stop
+    /// (its reads fail once it is cancelled).
     pub(crate) fn report_slab(&self, k: usize, slabs: usize) {
         (self.on_slab)(k, slabs);
     }

@@ -228,3 +228,38 @@ fn a_cancelled_run_stops_and_leaves_no_output() {
     let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
     assert!(left.is_empty(), "no output and no partial folder: {left:?}");
 }
+
+#[test]
+fn a_run_cancelled_inside_each_pass_stops_there_and_leaves_no_output() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let p = shipped("distance-tf", &["input.size=24", "preview=false"]);
+    for pass in ["input", "derive", "boundary", "histogram", "pack"] {
+        let dir = tempfile::tempdir().unwrap();
+        let cancel = std::sync::Arc::new(AtomicBool::new(false));
+        let opts = RunOptions {
+            pipeline_path: pipelines_dir().join("distance-tf.toml"),
+            input: None,
+            output: dir.path().join("out"),
+            cancel: Some(cancel.clone()),
+        };
+        let current = std::sync::Mutex::new(String::new());
+        let later_stages = std::sync::Mutex::new(Vec::new());
+        let on_stage = |s: &str| {
+            if cancel.load(Ordering::Relaxed) {
+                later_stages.lock().unwrap().push(s.to_string());
+            }
+            *current.lock().unwrap() = s.to_string();
+        };
+        // the flag is set as the pass's second slab starts (Ctrl-C in the middle of it)
+        let on_slab = |k: usize, _| {
+            if k == 2 && current.lock().unwrap().starts_with(pass) {
+                cancel.store(true, Ordering::Relaxed);
+            }
+        };
+        let e = run_blocks(&p, &opts, SlabSize::Planes(4), &on_stage, &on_slab).unwrap_err().to_string();
+        assert!(e.contains("cancelled"), "{pass}: {e}");
+        assert!(later_stages.lock().unwrap().is_empty(), "{pass}: went on to {:?}", later_stages.lock().unwrap());
+        let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert!(left.is_empty(), "{pass}: no output and no partial folder: {left:?}");
+    }
+}

@@ -182,6 +182,21 @@ pub fn run(
     on_stage: &dyn Fn(&str),
     on_slab: &dyn Fn(usize, usize),
 ) -> Result<RunReport, RunError> {
+    // a cancelled run fails wherever it noticed (a slab's read fails first): it ends as cancelled
+    run_slabs(p, opts, size, on_stage, on_slab).map_err(|e| match Progress::new(opts, on_stage, on_slab).check() {
+        Err(cancelled) => cancelled,
+        Ok(()) => e,
+    })
+}
+
+/// [`run`], with whatever error stopped it.
+fn run_slabs(
+    p: &Pipeline,
+    opts: &RunOptions,
+    size: SlabSize,
+    on_stage: &dyn Fn(&str),
+    on_slab: &dyn Fn(usize, usize),
+) -> Result<RunReport, RunError> {
     let start = Instant::now();
     let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
     if let Some(why) = unsupported(p, 1) {
@@ -248,7 +263,7 @@ pub fn run(
     if plan.defer_normals {
         groups.push(derive(vec![mdtf_derive::Item::Normal]));
     }
-    let mut chans = SlabChannels::new(store, groups, plan.reach.kernel[2], nz);
+    let mut chans = SlabChannels::new(store, groups, plan.reach.kernel[2], nz).cancelled_by(opts.cancel.clone());
     let summarised: Vec<&str> = ["g", "f2", "inv_g"].into_iter().filter(|c| chans.has(c)).collect();
     // the smallest positive 1/g, whose multiple is the top of its code range
     let mut smallest_inv_g = f32::INFINITY;
@@ -397,7 +412,7 @@ pub fn run(
             progress.stage("histogram")?;
         }
         let t = Instant::now();
-        let mut counted = count_histograms(p, &mut chans, &stats, &slabs, n, hvol_needed)?;
+        let mut counted = count_histograms(p, &mut chans, &stats, &slabs, n, hvol_needed, &progress)?;
         chans.release();
         // the default TF's histogram volume is an output only when the histograms ask for it
         let default_hvol = if hvol_asked { None } else { counted.hvol.take() };
@@ -603,6 +618,7 @@ fn count_histograms(
     slabs: &[Range<usize>],
     n: usize,
     hvol_needed: bool,
+    progress: &Progress,
 ) -> Result<Counted, RunError> {
     let err = at::<mdtf_histogram::HistogramError>("histogram");
     let io = fail("histogram");
@@ -635,7 +651,8 @@ fn count_histograms(
         None => *into = Some(h),
     };
     let mut stretched_pair: (Option<Histogram>, Option<Histogram>) = (None, None);
-    for z in slabs {
+    for (k, z) in slabs.iter().enumerate() {
+        progress.slab(k + 1, slabs.len())?;
         let mut names = vec!["v", "g"];
         if hvol.is_some() {
             names.push("f2");

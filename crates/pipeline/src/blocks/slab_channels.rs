@@ -10,6 +10,8 @@ use super::{ChannelStore, grown};
 use mdtf_derive::{DeriveOutput, DeriveParams, Item};
 use mdtf_volume::{MultiField, Volume};
 use std::ops::Range;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Stored and derivable channels (see the module docs).
 pub struct SlabChannels {
@@ -26,6 +28,8 @@ pub struct SlabChannels {
     previous: Vec<Option<DeriveOutput>>,
     /// Memory of the last value block read for it.
     value_buffer: Vec<f32>,
+    /// When set, every read fails: a cancelled run stops in the middle of a pass.
+    cancel: Option<Arc<AtomicBool>>,
 }
 
 /// The channels derive item `item` makes.
@@ -50,7 +54,29 @@ impl SlabChannels {
             })
             .collect();
         let previous = groups.iter().map(|_| None).collect();
-        SlabChannels { store, groups, kernel_reach, nz, recycled: None, previous, value_buffer: Vec::new() }
+        SlabChannels {
+            store,
+            groups,
+            kernel_reach,
+            nz,
+            recycled: None,
+            previous,
+            value_buffer: Vec::new(),
+            cancel: None,
+        }
+    }
+
+    /// These channels, whose reads fail once `cancel` is set.
+    pub fn cancelled_by(self, cancel: Option<Arc<AtomicBool>>) -> SlabChannels {
+        SlabChannels { cancel, ..self }
+    }
+
+    /// An error once the run is cancelled.
+    fn check(&self) -> Result<(), String> {
+        match &self.cancel {
+            Some(c) if c.load(Ordering::Relaxed) => Err("cancelled".into()),
+            _ => Ok(()),
+        }
     }
 
     /// Whether channel `name` is stored or derivable.
@@ -60,6 +86,7 @@ impl SlabChannels {
 
     /// Channels `names` on planes `z`, in that order.
     pub fn volumes(&mut self, z: Range<usize>, names: &[&str]) -> Result<Vec<(String, Volume)>, String> {
+        self.check()?;
         let mut derived: Vec<(String, Volume)> = Vec::new();
         for g in 0..self.groups.len() {
             let (d, made) = &self.groups[g];
@@ -115,6 +142,7 @@ impl SlabChannels {
 
     /// The stored value on planes `z`, read into the memory of the last one.
     fn value(&mut self, z: Range<usize>) -> Result<MultiField, String> {
+        self.check()?;
         let mut buffer = std::mem::take(&mut self.value_buffer);
         self.store.samples_into("v", z.clone(), &mut buffer).map_err(|e| e.to_string())?;
         let geometry = self.store.geometry().z_slab(z);
@@ -141,6 +169,7 @@ impl SlabChannels {
 
     /// The samples of channel `name` on planes `z`.
     pub fn samples(&mut self, name: &str, z: Range<usize>) -> Result<Vec<f32>, String> {
+        self.check()?;
         if self.store.has(name) {
             return self.store.samples(name, z).map_err(|e| e.to_string());
         }
