@@ -13,7 +13,11 @@
 #   it), as root with apt-get; otherwise the command to run is printed;
 # - a real scan from a Debian package (Colin27's T1 MRI, mricron-data) in
 #   target/real-data, or $MDTF_REAL_DATA, exported as MDTF_REAL_DATA;
-# - cargo test --workspace.
+# - cargo test --workspace;
+# - the Python package: `pip install ./crates/python` (maturin's PEP 517
+#   backend; a dev-profile build here, which reuses the tests' compiled
+#   crates) into that environment, then its pytest tests against the
+#   mdtf command.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -98,4 +102,11 @@ fi
 export MDTF_REAL_DATA="$real"
 
 say "cargo test --workspace"
-exec cargo test --workspace --locked "$@"
+cargo test --workspace --locked "$@"
+
+say "python package (pip install ./crates/python; pytest crates/python/tests)"
+cargo build --locked --quiet -p mdtf-cli --bin mdtf
+MATURIN_PEP517_ARGS="--profile dev --locked" "$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
+  --force-reinstall --no-deps ./crates/python \
+  || die "pip could not build and install the Python package (crates/python)"
+MDTF_BIN="$PWD/target/debug/mdtf" "$venv/bin/python" -m pytest -q -p no:cacheprovider crates/python/tests

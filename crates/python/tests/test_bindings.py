@@ -1,0 +1,170 @@
+"""Every binding against the mdtf command on the same phantom (bit for
+bit), and the readers and writers against nibabel."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import nibabel
+import nrrd
+import numpy as np
+import pytest
+
+import mdtf
+from conftest import cli
+
+
+def zyx(path: Path) -> np.ndarray:
+    """A NIfTI file's samples as (z, y, x) or (component, z, y, x), read by nibabel."""
+    data = np.asarray(nibabel.load(path).dataobj, dtype=np.float32)
+    return data.T if data.ndim == 3 else data.transpose(3, 2, 1, 0)
+
+
+def test_read_gives_nibabels_samples_and_affine(sphere: Path) -> None:
+    vol = mdtf.read(sphere)
+    img = nibabel.load(sphere)
+    np.testing.assert_array_equal(vol.data, np.asarray(img.dataobj, dtype=np.float32).T)
+    np.testing.assert_allclose(np.array(vol.world_from_voxel), img.affine, atol=1e-5)
+    assert vol.spacing == pytest.approx((1.2, 1.0, 0.8))
+    assert vol.data.shape == (48, 44, 40) and vol.data.dtype == np.float32
+
+
+def test_write_is_read_by_nibabel_with_the_grid(tmp_path: Path) -> None:
+    rng = np.random.default_rng(7)
+    data = rng.normal(size=(5, 6, 7)).astype(np.float32)
+    out = tmp_path / "w.nii.gz"
+    mdtf.write(out, data, spacing=(3.0, 2.0, 0.5), origin={"z": -1.0, "y": 4.0, "x": 10.0})
+    img = nibabel.load(out)
+    np.testing.assert_array_equal(np.asarray(img.dataobj, dtype=np.float32).T, data)
+    assert img.header.get_zooms() == pytest.approx((0.5, 2.0, 3.0))
+    assert img.affine[:3, 3] == pytest.approx((10.0, 4.0, -1.0))
+    # and a Volume goes back out with its own orientation
+    rotated = nibabel.Nifti1Image(data.T, np.array([[0, -2.0, 0, 5], [0.5, 0, 0, 6], [0, 0, 3.0, 7], [0, 0, 0, 1]]))
+    src = tmp_path / "rot.nii"
+    nibabel.save(rotated, src)
+    again = tmp_path / "again.nii"
+    mdtf.write(again, mdtf.read(src))
+    np.testing.assert_allclose(nibabel.load(again).affine, rotated.affine, atol=1e-6)
+
+
+def test_write_never_replaces_a_folder_it_did_not_write(tmp_path: Path) -> None:
+    keep = tmp_path / "mine.ome.zarr"
+    keep.mkdir()
+    (keep / "notes.txt").write_text("precious")
+    with pytest.raises(mdtf.MdtfError):
+        mdtf.write(keep, np.zeros((4, 4, 4), np.float32))
+    assert (keep / "notes.txt").read_text() == "precious"
+
+
+def test_derive_equals_the_command(mdtf_bin: Path, sphere: Path, tmp_path: Path) -> None:
+    cli(mdtf_bin, "derive", sphere, "--items", "g,f2,normal,laplacian", "--kernel", "bspline3", "-o", tmp_path / "d")
+    vol = mdtf.read(sphere)
+    got = mdtf.derive(vol.data, vol.spacing, items=["g", "f2", "normal", "laplacian"], kernel="bspline3")
+    for item in ["g", "f2", "laplacian"]:
+        np.testing.assert_array_equal(got[item], zyx(tmp_path / "d" / f"{item}.nii.gz"), err_msg=item)
+    normal = zyx(tmp_path / "d" / "normal.nii.gz")
+    for k, c in enumerate(["nx", "ny", "nz"]):
+        np.testing.assert_array_equal(got[c], normal[k], err_msg=c)
+
+
+def test_derive_of_several_fields_equals_the_command(mdtf_bin: Path, tmp_path: Path) -> None:
+    src = tmp_path / "mf.nrrd"
+    cli(mdtf_bin, "synth", "multifield", "--size", "24", "-o", src)
+    cli(mdtf_bin, "derive", src, "--items", "gnorm", "-o", tmp_path / "d")
+    vol = mdtf.read(src)
+    assert len(vol.fields) == 3
+    got = mdtf.derive(vol.fields, vol.spacing, items=["gnorm"])
+    np.testing.assert_array_equal(got["gnorm"], zyx(tmp_path / "d" / "gnorm.nii.gz"))
+
+
+def test_bilateral_equals_the_command(mdtf_bin: Path, sphere: Path, tmp_path: Path) -> None:
+    cli(mdtf_bin, "bilateral", sphere, "--sigma-d", "1.5", "--sigma-r", "0.1", "-o", tmp_path / "f.nii")
+    vol = mdtf.read(sphere)
+    got = mdtf.bilateral(vol.data, vol.spacing, sigma_d=1.5, sigma_r=0.1)
+    np.testing.assert_array_equal(got, zyx(tmp_path / "f.nii"))
+
+
+def test_boundary_equals_the_command(mdtf_bin: Path, sphere: Path, tmp_path: Path) -> None:
+    cli(mdtf_bin, "boundary", sphere, "--kernel", "gauss:1", "--d-max", "9", "-o", tmp_path / "b")
+    vol = mdtf.read(sphere)
+    got = mdtf.boundary(vol.data, vol.spacing, kernel="gauss:1", d_max=9.0)
+    for name in ["distance", "g_hit", "hit", "dot"]:
+        np.testing.assert_array_equal(getattr(got, name), zyx(tmp_path / "b" / f"{name}.nii.gz"), err_msg=name)
+    s = got.summary
+    assert s["d_max"] == 9.0
+    assert s["hits"] == int((got.hit == 1).sum()) and s["hits"] > 1000
+    assert s["hits"] + s["not_traced"] + s["no_crossing"] + s["rejected"] == got.hit.size
+
+
+def test_histogram_equals_the_command(mdtf_bin: Path, sphere: Path, tmp_path: Path) -> None:
+    cli(mdtf_bin, "histogram", sphere, "--axes", "v,g", "--bins", "64,32", "-o", tmp_path / "h")
+    vol = mdtf.read(sphere)
+    g = mdtf.derive(vol.data, vol.spacing, items=["g"])["g"]
+    got = mdtf.histogram({"v": vol.data, "g": g}, bins={"v": 64, "g": 32})
+    counts, _ = nrrd.read(str(tmp_path / "h" / "hist_v_g.nrrd"), index_order="C")
+    np.testing.assert_array_equal(got.counts, counts)
+    meta = json.loads((tmp_path / "h" / "hist_v_g.json").read_text())
+    for (name, lo, hi, bins), axis in zip(got.axes, meta["axes"]):
+        assert (name, lo, hi, bins) == (axis["name"], axis["min"], axis["max"], axis["bins"])
+    # and against a brute-force count of the documented bin rule, floor((x - min) bins / (max - min)),
+    # the maximum in the last bin, voxels outside either range (g's is clipped) left out
+    def bins_of(x: np.ndarray, axis: tuple[str, float, float, int]) -> tuple[np.ndarray, np.ndarray]:
+        _, lo, hi, n = axis
+        x = x.astype(np.float64).ravel()
+        return np.minimum(np.floor((x - lo) * (n / (hi - lo))), n - 1).astype(int), (x >= lo) & (x <= hi)
+
+    (bv, inv), (bg, ing) = bins_of(vol.data, got.axes[0]), bins_of(g, got.axes[1])
+    inside = inv & ing
+    assert inside.sum() < inside.size, "g's range is clipped"
+    ref = np.zeros((32, 64), np.int64)
+    np.add.at(ref, (bg[inside], bv[inside]), 1)
+    np.testing.assert_array_equal(got.counts, ref)
+
+
+def test_histogram_with_a_mask_counts_only_its_voxels(sphere: Path) -> None:
+    v = mdtf.read(sphere).data
+    mask = v > np.median(v)
+    got = mdtf.histogram({"v": v}, ranges={"v": (float(v.min()), float(v.max()) + 1)}, bins=10, mask=mask)
+    assert got.counts.sum() == mask.sum()
+
+
+def test_quantise_codes_decode_to_within_half_a_step(sphere: Path) -> None:
+    v = mdtf.read(sphere).data
+    lo, hi = float(v.min()), float(v.max())
+    for dtype, top in [("u8", 255), ("u16", 65535)]:
+        codes, offset, scale = mdtf.quantise(v, lo, hi, dtype)
+        assert codes.dtype == np.dtype(dtype.replace("u", "uint")) and codes.min() == 0 and codes.max() == top
+        assert scale == pytest.approx((hi - lo) / top) and offset == pytest.approx(lo)
+        assert np.abs(offset + scale * codes.astype(np.float64) - v).max() <= scale / 2 * (1 + 1e-9)
+    # signed: 0 is exactly a code
+    codes, offset, scale = mdtf.quantise(v - 50, lo - 50, hi - 50, "u8", signed=True)
+    z = -offset / scale
+    assert z == pytest.approx(round(z), abs=1e-9)
+    half, _, _ = mdtf.quantise(v, lo, hi, "f16")
+    np.testing.assert_array_equal(half, v.astype(np.float16))
+
+
+def test_run_equals_the_command(mdtf_bin: Path, pipelines: Path, tmp_path: Path) -> None:
+    pipeline = pipelines / "distance-tf.toml"
+    cli(mdtf_bin, "run", pipeline, "--set", "input.size=32", "--set", "preview=false", "-o", tmp_path / "cli")
+    report = mdtf.run(pipeline, tmp_path / "py", input__size=32, preview=False)
+    assert report["dims"] == [32, 32, 32] and report["settings"]["input"]["size"] == 32
+    for f in sorted((tmp_path / "cli" / "pack").iterdir()):
+        if f.name != "manifest.json":
+            assert (tmp_path / "py" / "pack" / f.name).read_bytes() == f.read_bytes(), f.name
+    # slab by slab: the same textures
+    mdtf.run(pipeline, tmp_path / "slabs", settings={"input.size": 32, "preview": False}, slab_planes=5)
+    for f in sorted((tmp_path / "cli" / "pack").glob("*.raw")):
+        assert (tmp_path / "slabs" / "pack" / f.name).read_bytes() == f.read_bytes(), f.name
+
+
+def test_halo_and_plan_equal_the_command(mdtf_bin: Path, pipelines: Path) -> None:
+    for name in ["distance-tf", "slicer-3dtf"]:
+        pipeline = pipelines / f"{name}.toml"
+        text = cli(mdtf_bin, "run", pipeline, "--plan", "--set", "input.size=40").stdout
+        x, y, z = map(int, re.search(r"halo of a block: x (\d+), y (\d+), z (\d+)", text).groups())
+        assert mdtf.halo(pipeline, input__size=40) == (z, y, x)
+        # the command's first line names the pipeline file and input; the plan follows
+        assert mdtf.plan(pipeline, input__size=40).strip() == text.split("\n", 1)[1].strip()
