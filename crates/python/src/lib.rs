@@ -8,6 +8,7 @@ mod convert;
 mod error;
 mod io;
 mod pipeline;
+mod reach;
 mod stages;
 
 use pyo3::prelude::*;
@@ -46,5 +47,9 @@ fn _mdtf(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(stages::quantise, m)?)?;
     m.add_function(wrap_pyfunction!(pipeline::run, m)?)?;
     m.add_function(wrap_pyfunction!(pipeline::plan, m)?)?;
+    m.add_function(wrap_pyfunction!(reach::kernel_reach, m)?)?;
+    m.add_function(wrap_pyfunction!(reach::bilateral_reach, m)?)?;
+    m.add_function(wrap_pyfunction!(reach::default_epsilon, m)?)?;
+    m.add_function(wrap_pyfunction!(reach::derive_components, m)?)?;
     Ok(())
 }

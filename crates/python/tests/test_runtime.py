@@ -75,7 +75,7 @@ SCRIPT = """
 import sys, time, mdtf
 print("started", flush=True)
 try:
-    mdtf.run(sys.argv[1], sys.argv[2], input__size=112, preview=False, slab_planes=4)
+    mdtf.run(sys.argv[1], sys.argv[2], input__size=192, preview=False, slab_planes=4)
     print("finished", flush=True)
 except KeyboardInterrupt:
     print("interrupted", time.monotonic(), flush=True)
@@ -92,7 +92,7 @@ def test_ctrl_c_during_a_run_raises_keyboard_interrupt_within_a_second(pipelines
     )
     assert child.stdout is not None
     assert child.stdout.readline().strip() == "started"
-    time.sleep(1.5)
+    time.sleep(1.0)
     sent = time.monotonic()
     child.send_signal(signal.SIGINT)
     stdout, stderr = child.communicate(timeout=60)

@@ -1,0 +1,90 @@
+"""mdtf.dask on a 2-worker process cluster: blocks of an OME-Zarr store
+with chunks that do not divide the shape give what the whole-volume calls
+give, bit for bit."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+import pytest
+
+import mdtf
+
+distributed = pytest.importorskip("distributed", reason="mdtf.dask's tests need dask.distributed")
+import mdtf.dask as mdask  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def client() -> Iterator[distributed.Client]:
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    with distributed.Client(cluster) as c:
+        yield c
+    cluster.close()
+
+
+@pytest.fixture(scope="module")
+def store(sphere: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("zarr") / "sphere.ome.zarr"
+    mdtf.write(path, mdtf.read(sphere))
+    return path
+
+
+def test_the_store_reads_as_the_volume(store: Path, sphere: Path) -> None:
+    arr, spacing = mdask.from_ome_zarr(store, chunks=(13, 17, 19))
+    vol = mdtf.read(sphere)
+    assert spacing == pytest.approx(vol.spacing)
+    assert arr.chunks[0] == (13, 13, 13, 9) and arr.shape == vol.data.shape
+    np.testing.assert_array_equal(arr.compute(), vol.data)
+
+
+@pytest.mark.parametrize(("kernel", "border"), [(None, None), ("gauss:1.5", "mirror"), ("bspline3", "wrap")])
+def test_derive_by_blocks_equals_the_whole(
+    client: distributed.Client, store: Path, sphere: Path, kernel: str | None, border: str | None
+) -> None:
+    arr, spacing = mdask.from_ome_zarr(store, chunks=(13, 17, 19))
+    items = ["g", "f2", "normal", "inv_g"]
+    lazy = mdask.derive(arr, spacing, items=items, kernel=kernel, border=border)
+    got = dict(zip(lazy, client.compute(list(lazy.values()), sync=True)))
+    vol = mdtf.read(sphere)
+    want = mdtf.derive(vol.data, vol.spacing, items=items, kernel=kernel, border=border)
+    assert set(got) == set(want) == {"g", "f2", "nx", "ny", "nz", "inv_g"}
+    for name in want:
+        np.testing.assert_array_equal(got[name], want[name], err_msg=f"{name}, kernel {kernel}, border {border}")
+
+
+def test_bilateral_by_blocks_equals_the_whole(client: distributed.Client, store: Path, sphere: Path) -> None:
+    arr, spacing = mdask.from_ome_zarr(store, chunks=(13, 17, 19))
+    got = client.compute(mdask.bilateral(arr, spacing, sigma_d=1.5, sigma_r=0.1), sync=True)
+    vol = mdtf.read(sphere)
+    np.testing.assert_array_equal(got, mdtf.bilateral(vol.data, vol.spacing, sigma_d=1.5, sigma_r=0.1))
+
+
+def test_a_worker_killed_mid_run_changes_nothing(client: distributed.Client, sphere: Path) -> None:
+    vol = mdtf.read(sphere)
+    big = np.tile(vol.data, (2, 2, 2))
+    lazy = mdask.bilateral(mdask.da.from_array(big, chunks=(24, 30, 26)), vol.spacing, sigma_d=3.0)
+    future = client.compute(lazy)
+    # once the first blocks are done, one worker process dies with what it holds and runs
+    deadline = time.monotonic() + 60
+    while not any(client.processing().values()) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.3)
+    assert not future.done(), "the run ended before a worker could be killed"
+    victim = next(iter(client.scheduler_info()["workers"]))
+    pid = client.run(os.getpid, workers=[victim])[victim]
+    os.kill(pid, signal.SIGKILL)
+    got = future.result(timeout=300)
+    np.testing.assert_array_equal(got, mdtf.bilateral(big, vol.spacing, sigma_d=3.0))
+
+
+def test_halos_are_the_stages_reach() -> None:
+    # central4: two samples each side; a Gaussian of sigma 1.5 world units cut at 4 sigma: ceil(6 / spacing)
+    assert mdtf._mdtf.kernel_reach((1.0, 1.0, 1.0), None) == (2, 2, 2)
+    assert mdtf._mdtf.kernel_reach((2.0, 1.0, 0.5), "gauss:1.5") == (3, 6, 12)
+    # bilateral exact: ceil(2.5 sigma_d / spacing)
+    assert mdtf._mdtf.bilateral_reach((1.2, 1.0, 0.8), 1.5, "exact", None) == (4, 4, 5)
