@@ -19,10 +19,12 @@ mod fused;
 mod items;
 mod kernel;
 mod measures;
+mod view;
 
 pub use border::{BORDER_NAMES, Border};
 pub use items::{ITEM_NAMES, Item, Needs, UnknownItem};
 pub use kernel::{AxisTaps, DEFAULT_KERNEL, GAUSS_CUT, KERNEL_NAMES, Kernel, UnknownKernel};
+pub use view::{FieldView, FieldsView};
 
 use engine::{Engine, FieldInput, Stencil};
 use mdtf_volume::{Field, MultiField};
@@ -123,8 +125,18 @@ pub fn run_with_progress(
     previous: Option<DeriveOutput>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<DeriveOutput, DeriveError> {
+    run_view(&FieldsView::from(input), params, previous, progress)
+}
+
+/// [`run_with_progress`] on borrowed samples (no copy of the input).
+pub fn run_view(
+    input: &FieldsView,
+    params: &DeriveParams,
+    previous: Option<DeriveOutput>,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<DeriveOutput, DeriveError> {
     let Prepared { items, layout, engine } = prepare(input, params)?;
-    let g = &input.geometry;
+    let g = input.geometry;
     let [nx, ny, nz] = g.dims;
     let plane = nx * ny;
     let mut buffers = reuse_buffers(previous, layout.components(), plane * nz);
@@ -190,7 +202,7 @@ pub fn stream_slices<S: Send>(
             "shade cannot be streamed slice by slice: it is scaled by the whole volume's largest g".into(),
         ));
     }
-    let Prepared { layout, engine, .. } = prepare(input, params)?;
+    let Prepared { layout, engine, .. } = prepare(&FieldsView::from(input), params)?;
     let [nx, ny, nz] = input.geometry.dims;
     Ok(slabs
         .par_iter()
@@ -219,12 +231,12 @@ struct Prepared<'a> {
 
 /// Checks `params` against `input` and builds the pass (shared by [`run`]
 /// and [`stream_slices`]).
-fn prepare<'a>(input: &'a MultiField, params: &DeriveParams) -> Result<Prepared<'a>, DeriveError> {
+fn prepare<'a>(input: &FieldsView<'a>, params: &DeriveParams) -> Result<Prepared<'a>, DeriveError> {
     let items = dedup(&params.items);
     if items.is_empty() {
         return Err(DeriveError::NoItems);
     }
-    let g = &input.geometry;
+    let g = input.geometry;
     let m = input.fields.len();
     let multi: Vec<Item> = items.iter().copied().filter(|i| i.is_multi_field()).collect();
     let single: Vec<Item> = items.iter().copied().filter(|i| !i.is_multi_field() && !i.is_any_field_count()).collect();
@@ -258,10 +270,7 @@ fn prepare<'a>(input: &'a MultiField, params: &DeriveParams) -> Result<Prepared<
     let ranges: Vec<(f32, f32)> = input
         .fields
         .iter()
-        .map(|f| {
-            mdtf_volume::finite_range(f.data.as_slice().unwrap_or(&[]))
-                .ok_or_else(|| DeriveError::NonFinite(f.name.clone()))
-        })
+        .map(|f| mdtf_volume::finite_range(f.samples).ok_or_else(|| DeriveError::NonFinite(f.name.to_string())))
         .collect::<Result<_, _>>()?;
     let base = [0, 1, 2].map(|a| params.kernel.axis_taps(g.spacing[a]));
     for (a, taps) in base.iter().enumerate() {
@@ -286,7 +295,7 @@ fn prepare<'a>(input: &'a MultiField, params: &DeriveParams) -> Result<Prepared<
             // Every derivative is a product of one x, one y and one z tap: scaling z's taps scales them all once.
             let [x, y, z] = base.clone();
             let z = z.scaled(factor);
-            FieldInput { data: f.data.as_slice().unwrap_or(&[]), stencil: Stencil { x, y, z } }
+            FieldInput { data: f.samples, stencil: Stencil { x, y, z } }
         })
         .collect();
     let epsilon = params.epsilon.unwrap_or_else(|| {

@@ -1,17 +1,18 @@
 //! The stages on numpy arrays: derive, bilateral, boundary, histogram and
-//! quantise. Each copies its inputs once into mdtf's volumes, runs with the
-//! GIL released ([`crate::call`]) and hands its outputs to numpy without a copy.
+//! quantise. derive, histogram and quantise read the arrays where numpy
+//! holds them; bilateral and boundary copy their input once into an mdtf
+//! volume. Each runs with the GIL released ([`crate::call`]) and hands its
+//! outputs to numpy without a copy.
 
 use crate::call::run_released;
 use crate::convert::{array, geometry, view, volume};
 use crate::error::{mdtf_error, parse_choice, value_error};
 use mdtf_bilateral::BilateralParams;
 use mdtf_boundary::BoundaryParams;
-use mdtf_derive::{DeriveParams, Item, Kernel};
+use mdtf_derive::{DeriveParams, FieldView, FieldsView, Item, Kernel};
 use mdtf_histogram::{Axis, AxisSpec, count};
 use mdtf_pack::Dtype;
 use mdtf_pipeline::boundary_chain::{self, BoundaryChainParams};
-use mdtf_volume::{Field, MultiField};
 use ndarray::{Array3, ArrayView3, Zip};
 use numpy::{IntoPyArray, PyArrayDyn, PyReadonlyArray3, PyUntypedArray};
 use pyo3::prelude::*;
@@ -64,9 +65,11 @@ pub fn derive<'py>(
     let views = views(&fields)?;
     let Some((_, first)) = views.first() else { return Err(value_error("derive: give at least one field")) };
     let geo = geometry(shape(first), spacing, [0.0; 3])?;
+    // the arrays are read where numpy holds them: no copy of the input
     let out = run_released(py, None, || {
-        let fields = views.iter().map(|(n, v)| Field { name: n.to_string(), data: v.to_owned() }).collect();
-        mdtf_derive::run(&MultiField { geometry: geo.clone(), fields }, &params)
+        let samples: Vec<FieldView> =
+            views.iter().map(|(n, v)| FieldView { name: n, samples: v.as_slice().unwrap_or(&[]) }).collect();
+        mdtf_derive::run_view(&FieldsView::new(&geo, samples)?, &params, None, &|_, _| {})
     })?
     .map_err(mdtf_error)?;
     let d = PyDict::new(py);
