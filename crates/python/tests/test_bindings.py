@@ -154,6 +154,20 @@ def test_run_equals_the_command(mdtf_bin: Path, pipelines: Path, tmp_path: Path)
     for f in sorted((tmp_path / "cli" / "pack").iterdir()):
         if f.name != "manifest.json":
             assert (tmp_path / "py" / "pack" / f.name).read_bytes() == f.read_bytes(), f.name
+    # the pack's g_hit and distance codes are mdtf.quantise of the kept volumes over the manifest's ranges
+    manifest = json.loads((tmp_path / "cli" / "pack" / "manifest.json").read_text())
+    for name in ["g_hit", "distance"]:
+        entry = next(c for c in manifest["channels"] if c["name"] == name)
+        texture = next(t for t in manifest["textures"] if t["name"] == entry["texture"])
+        nx, ny, nz = texture["dims"]
+        stored = np.dtype(texture["dtype"].replace("u", "uint"))
+        raw = np.fromfile(tmp_path / "cli" / "pack" / texture["data"], dtype=stored)
+        packed = raw.reshape(nz, ny, nx, texture["components"])[..., entry["component"]]
+        kept = mdtf.read(tmp_path / "cli" / "volumes" / f"{name}.nii.gz").data
+        codes, offset, scale = mdtf.quantise(kept, *entry["range"], texture["dtype"])
+        assert (offset, scale) == pytest.approx((entry["decode"]["offset"], entry["decode"]["scale"]), rel=1e-12)
+        np.testing.assert_array_equal(codes, packed, err_msg=name)
+        assert len(np.unique(codes)) > (1 if name == "g_hit" else 20), name
     # slab by slab: the same textures
     mdtf.run(pipeline, tmp_path / "slabs", settings={"input.size": 32, "preview": False}, slab_planes=5)
     for f in sorted((tmp_path / "cli" / "pack").glob("*.raw")):
