@@ -18,7 +18,7 @@
 
 mod fastexp;
 
-use mdtf_volume::Volume;
+use mdtf_volume::{Geometry, Volume};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -121,6 +121,9 @@ pub enum BilateralError {
     /// A spacing is zero, negative or not finite.
     #[error("spacing {0:?} must be positive and finite")]
     BadSpacing([f64; 3]),
+    /// The samples do not fill the grid.
+    #[error("{0}")]
+    BadInput(String),
 }
 
 /// One neighbour: offsets (dx, dy, dz) in voxels and its spatial weight.
@@ -183,6 +186,19 @@ pub fn range_sigma(input: &Volume, params: &BilateralParams) -> f64 {
 
 /// Filters `input`; the output has the input's geometry.
 pub fn run(input: &Volume, params: &BilateralParams) -> Result<Volume, BilateralError> {
+    run_on(&input.geometry, input.samples(), params)
+}
+
+/// [`run`] on borrowed samples (`input`: x fastest, on grid `g`), which it does not copy.
+pub fn run_on(g: &Geometry, input: &[f32], params: &BilateralParams) -> Result<Volume, BilateralError> {
+    if input.len() != g.voxel_count() {
+        return Err(BilateralError::BadInput(format!(
+            "{} samples for a grid of {} ({} voxels)",
+            input.len(),
+            g.dims_string(),
+            g.voxel_count()
+        )));
+    }
     for (name, value) in
         [("bilateral.sigma_d", params.sigma_d), ("bilateral.sigma_r", params.sigma_r), ("bilateral.k", params.k)]
     {
@@ -190,11 +206,10 @@ pub fn run(input: &Volume, params: &BilateralParams) -> Result<Volume, Bilateral
             return Err(BilateralError::BadParameter { name, value });
         }
     }
-    let g = &input.geometry;
     if g.spacing.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
         return Err(BilateralError::BadSpacing(g.spacing));
     }
-    let Some((lo, hi)) = mdtf_volume::finite_range(input.samples()) else {
+    let Some((lo, hi)) = mdtf_volume::finite_range(input) else {
         return Err(BilateralError::NonFinite);
     };
     // checked before the neighbour list is built: a huge sigma_d would
@@ -221,11 +236,11 @@ pub fn run(input: &Volume, params: &BilateralParams) -> Result<Volume, Bilateral
     };
     if !(sigma_r.is_finite() && sigma_r > 0.0) {
         // A constant volume: every weight is 1 or the range is degenerate; nothing changes.
-        return Ok(input.clone());
+        return Volume::from_samples(g.clone(), input.to_vec()).map_err(|e| BilateralError::BadInput(e.to_string()));
     }
     let inv_2sr2 = (1.0 / (2.0 * sigma_r * sigma_r)) as f32;
     let [nx, ny, _] = g.dims;
-    let src = input.samples();
+    let src = input;
     let mut out = Volume::zeros(g.clone());
     let plane = nx * ny;
     let out_slice = out.data.as_slice_mut().unwrap_or(&mut []);

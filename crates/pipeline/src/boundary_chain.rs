@@ -3,8 +3,8 @@
 
 use mdtf_bilateral::{BilateralError, BilateralParams, RangeUnits};
 use mdtf_boundary::{BoundaryError, BoundaryInput, BoundaryOutput, BoundaryParams};
-use mdtf_derive::{DeriveError, DeriveParams, Item, Kernel};
-use mdtf_volume::{MultiField, Volume};
+use mdtf_derive::{DeriveError, DeriveParams, FieldView, FieldsView, Item, Kernel};
+use mdtf_volume::{Geometry, MultiField, Volume};
 use serde::{Deserialize, Serialize};
 
 /// Parameters of the chain.
@@ -71,16 +71,26 @@ impl From<BoundaryError> for ChainError {
 
 /// Runs derive, the optional pre-filter and tracing on a value volume.
 pub fn run(value: &Volume, params: &BoundaryChainParams) -> Result<BoundaryChainOutput, ChainError> {
-    let value_range = value.finite_range().map_or(0.0, |(lo, hi)| (hi - lo) as f64);
+    run_on(&value.geometry, value.samples(), params)
+}
+
+/// [`run`] on borrowed samples (`value`: x fastest, on `geometry`), which it does not copy.
+pub fn run_on(
+    geometry: &Geometry,
+    value: &[f32],
+    params: &BoundaryChainParams,
+) -> Result<BoundaryChainOutput, ChainError> {
+    let value_range = mdtf_volume::finite_range(value).map_or(0.0, |(lo, hi)| (hi - lo) as f64);
     // Check the tracing parameters before the expensive stages.
-    let floor = mdtf_boundary::noise_floor(&[], value_range, value.geometry.min_spacing());
-    mdtf_boundary::resolve(&params.boundary, &value.geometry, value_range, floor)?;
+    let floor = mdtf_boundary::noise_floor(&[], value_range, geometry.min_spacing());
+    mdtf_boundary::resolve(&params.boundary, geometry, value_range, floor)?;
     let d = DeriveParams {
         items: vec![Item::G, Item::F2, Item::Normal],
         kernel: params.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
         ..DeriveParams::default()
     };
-    let mut out = mdtf_derive::run(&MultiField::from(value.clone()), &d)?;
+    let input = FieldsView::new(geometry, vec![FieldView { name: "value", samples: value }])?;
+    let mut out = mdtf_derive::run_view(&input, &d, None, &|_, _| {})?;
     let take = |out: &mut mdtf_derive::DeriveOutput, item| {
         let i = out.items.iter().position(|(it, _)| *it == item).unwrap_or(0);
         out.items.remove(i).1

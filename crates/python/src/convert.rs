@@ -32,11 +32,6 @@ pub fn view<'a>(name: &str, a: &'a PyReadonlyArray3<'_, f32>) -> PyResult<ArrayV
     Ok(v)
 }
 
-/// The volume of a (z, y, x) view on grid `geo` (one copy, into mdtf's own memory).
-pub fn volume(v: ArrayView3<'_, f32>, geo: &Geometry) -> Volume {
-    Volume { geometry: geo.clone(), data: v.to_owned() }
-}
-
 /// Hands a volume's samples to numpy without copying, shape (z, y, x).
 pub fn array<'py>(py: Python<'py>, v: Volume) -> Bound<'py, PyArray3<f32>> {
     v.data.into_pyarray(py)

@@ -1,11 +1,10 @@
 //! The stages on numpy arrays: derive, bilateral, boundary, histogram and
-//! quantise. derive, histogram and quantise read the arrays where numpy
-//! holds them; bilateral and boundary copy their input once into an mdtf
-//! volume. Each runs with the GIL released ([`crate::call`]) and hands its
-//! outputs to numpy without a copy.
+//! quantise. Each reads its arrays where numpy holds them (no copy), runs
+//! with the GIL released ([`crate::call`]) and hands its outputs to numpy
+//! without a copy.
 
 use crate::call::run_released;
-use crate::convert::{array, geometry, view, volume};
+use crate::convert::{array, geometry, view};
 use crate::error::{mdtf_error, parse_choice, value_error};
 use mdtf_bilateral::BilateralParams;
 use mdtf_boundary::BoundaryParams;
@@ -109,7 +108,8 @@ pub fn bilateral<'py>(
     };
     let v = view("values", &values)?;
     let geo = geometry(shape(&v), spacing, [0.0; 3])?;
-    let out = run_released(py, None, || mdtf_bilateral::run(&volume(v, &geo), &params))?.map_err(mdtf_error)?;
+    let out = run_released(py, None, || mdtf_bilateral::run_on(&geo, v.as_slice().unwrap_or(&[]), &params))?
+        .map_err(mdtf_error)?;
     Ok(array(py, out))
 }
 
@@ -146,7 +146,8 @@ pub fn boundary<'py>(
     };
     let v = view("values", &values)?;
     let geo = geometry(shape(&v), spacing, [0.0; 3])?;
-    let out = run_released(py, None, || boundary_chain::run(&volume(v, &geo), &params))?.map_err(mdtf_error)?;
+    let out = run_released(py, None, || boundary_chain::run_on(&geo, v.as_slice().unwrap_or(&[]), &params))?
+        .map_err(mdtf_error)?;
     let b = out.boundary;
     let arrays = PyDict::new(py);
     for (name, v) in [("distance", b.distance), ("g_hit", b.g_hit), ("hit", b.hit), ("dot", b.dot)] {

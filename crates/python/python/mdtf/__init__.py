@@ -5,11 +5,10 @@ distance to the nearest boundary, joint histograms and quantised codes,
 on numpy arrays; volume files in every format mdtf reads; and pipeline
 runs (``mdtf run``) into an output folder.
 
-Arrays are (z, y, x), C order, float32 (others are converted first).
-derive, histogram and quantise read them where numpy holds them;
-bilateral and boundary copy their input once. Spacing and origin are (z, y, x) in world units
-(mm for a scan), or a mapping with keys ``z``, ``y``, ``x``, or one number
-for isotropic voxels. Outputs are numpy arrays mdtf hands over without a
+Arrays are (z, y, x), C order, float32 (others are converted first), and
+are read where numpy holds them, without a copy. Spacing and origin are
+(z, y, x) in world units (mm for a scan), or a mapping with keys ``z``,
+``y``, ``x``, or one number for isotropic voxels. Outputs are numpy arrays mdtf hands over without a
 copy. Every call releases the GIL while it runs; ``set_threads`` sets the
 number of worker threads. ``run`` stops between stages and slabs on Ctrl-C
 (KeyboardInterrupt) and leaves no partial output; the stage functions
