@@ -71,14 +71,27 @@ impl From<BoundaryError> for ChainError {
 
 /// Runs derive, the optional pre-filter and tracing on a value volume.
 pub fn run(value: &Volume, params: &BoundaryChainParams) -> Result<BoundaryChainOutput, ChainError> {
-    run_on(&value.geometry, value.samples(), params)
+    run_on(&value.geometry, value.samples(), params, &Placement::default())
 }
 
-/// [`run`] on borrowed samples (`value`: x fastest, on `geometry`), which it does not copy.
+/// Where the volume a chain runs on lies in a larger one, for a block
+/// (z-slab) of it to give the larger volume's bits.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Placement {
+    /// derive's epsilon (None: from the block's own range; a block passes
+    /// the whole volume's, [`mdtf_derive::default_epsilon`]).
+    pub epsilon: Option<f32>,
+    /// The block's first plane in the whole volume (rays are traced in its coordinates).
+    pub first_plane: usize,
+}
+
+/// [`run`] on borrowed samples (`value`: x fastest, on `geometry`), which it
+/// does not copy, placed in a larger volume by `at`.
 pub fn run_on(
     geometry: &Geometry,
     value: &[f32],
     params: &BoundaryChainParams,
+    at: &Placement,
 ) -> Result<BoundaryChainOutput, ChainError> {
     let value_range = mdtf_volume::finite_range(value).map_or(0.0, |(lo, hi)| (hi - lo) as f64);
     // Check the tracing parameters before the expensive stages.
@@ -87,6 +100,7 @@ pub fn run_on(
     let d = DeriveParams {
         items: vec![Item::G, Item::F2, Item::Normal],
         kernel: params.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
+        epsilon: at.epsilon,
         ..DeriveParams::default()
     };
     let input = FieldsView::new(geometry, vec![FieldView { name: "value", samples: value }])?;
@@ -98,7 +112,10 @@ pub fn run_on(
     let normal = take(&mut out, Item::Normal);
     let f2 = first_field(take(&mut out, Item::F2));
     let g = first_field(take(&mut out, Item::G));
-    trace_derived(g, f2, normal, value_range, params)
+    let (g, f2) = prefiltered(g, f2, params)?;
+    let input = BoundaryInput { g: &g, f2: &f2, normal: &normal, value_range };
+    let boundary = mdtf_boundary::run_block(&input, &params.boundary, at.first_plane)?;
+    Ok(BoundaryChainOutput { g, f2, normal, boundary })
 }
 
 /// The bilateral pre-filter of one channel (a fraction `sigma_r` is of the channel's own range).
@@ -129,13 +146,18 @@ pub fn trace_derived(
     value_range: f64,
     params: &BoundaryChainParams,
 ) -> Result<BoundaryChainOutput, ChainError> {
-    let (g, f2) = match &params.prefilter {
-        Some(p) => (prefilter(&g, p)?, prefilter(&f2, p)?),
-        None => (g, f2),
-    };
+    let (g, f2) = prefiltered(g, f2, params)?;
     let boundary =
         mdtf_boundary::run(&BoundaryInput { g: &g, f2: &f2, normal: &normal, value_range }, &params.boundary)?;
     Ok(BoundaryChainOutput { g, f2, normal, boundary })
+}
+
+/// g and f'' pre-filtered, when the chain asks for it.
+fn prefiltered(g: Volume, f2: Volume, params: &BoundaryChainParams) -> Result<(Volume, Volume), BilateralError> {
+    match &params.prefilter {
+        Some(p) => Ok((prefilter(&g, p)?, prefilter(&f2, p)?)),
+        None => Ok((g, f2)),
+    }
 }
 
 fn first_field(mf: MultiField) -> Volume {

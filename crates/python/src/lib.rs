@@ -51,5 +51,7 @@ fn _mdtf(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(reach::bilateral_reach, m)?)?;
     m.add_function(wrap_pyfunction!(reach::default_epsilon, m)?)?;
     m.add_function(wrap_pyfunction!(reach::derive_components, m)?)?;
+    m.add_function(wrap_pyfunction!(reach::trace_reach, m)?)?;
+    m.add_function(wrap_pyfunction!(reach::boundary_thresholds, m)?)?;
     Ok(())
 }

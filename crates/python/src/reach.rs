@@ -58,3 +58,38 @@ pub fn derive_components(items: Vec<String>) -> PyResult<Vec<String>> {
     }
     Ok(out)
 }
+
+/// The voxels (z, y, x) the tracing reads on each side of a voxel: d_max
+/// (world units) and the tricubic g at the hit (derive's reach comes on top).
+#[pyfunction]
+pub fn trace_reach(spacing: [f64; 3], d_max: f64) -> (usize, usize, usize) {
+    let [sz, sy, sx] = spacing;
+    zyx(mdtf_pipeline::channel::Reach::new(mdtf_derive::DEFAULT_KERNEL, [0; 3], d_max, [sx, sy, sz]).trace)
+}
+
+/// The tracing's thresholds for a whole volume of `shape` (z, y, x): `median_g` (its lower median
+/// of g; None without any), `value_range` (max - min of the values) and the
+/// parameters given (None: the default). Returns (g_min, g_hit_min, step,
+/// d_max, tolerance in voxels) as every block must be given them.
+#[pyfunction]
+#[pyo3(signature = (shape, spacing, value_range, median_g=None, g_min=None, g_hit_min=None, step=None, d_max=None, tolerance=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn boundary_thresholds(
+    shape: [usize; 3],
+    spacing: [f64; 3],
+    value_range: f64,
+    median_g: Option<f32>,
+    g_min: Option<f64>,
+    g_hit_min: Option<f64>,
+    step: Option<f64>,
+    d_max: Option<f64>,
+    tolerance: Option<f64>,
+) -> PyResult<(f64, f64, f64, f64, f64)> {
+    let geo = crate::convert::geometry(shape, spacing, [0.0; 3])?;
+    let defaults = mdtf_boundary::BoundaryParams::default();
+    let tolerance = tolerance.unwrap_or(defaults.tolerance);
+    let params = mdtf_boundary::BoundaryParams { g_min, g_hit_min, step, d_max, tolerance, ..defaults };
+    let floor = mdtf_boundary::noise_floor_of_median(median_g, value_range, geo.min_spacing());
+    let r = mdtf_boundary::resolve(&params, &geo, value_range, floor).map_err(crate::error::mdtf_error)?;
+    Ok((r.g_min, r.g_hit_min, r.step, r.d_max, tolerance))
+}

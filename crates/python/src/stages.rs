@@ -115,9 +115,10 @@ pub fn bilateral<'py>(
 
 /// Distance to the nearest boundary of a (z, y, x) value array: derive (g,
 /// f'', normal), the optional bilateral pre-filter of g and f'', and the
-/// tracing, as `mdtf boundary --input` runs them.
+/// tracing, as `mdtf boundary --input` runs them. A z-slab of a larger
+/// volume passes the whole volume's `epsilon` and its `first_plane` there.
 #[pyfunction]
-#[pyo3(signature = (values, spacing, kernel=None, prefilter=None, g_min=None, g_hit_min=None, step=None, d_max=None, tolerance=None))]
+#[pyo3(signature = (values, spacing, kernel=None, prefilter=None, g_min=None, g_hit_min=None, step=None, d_max=None, tolerance=None, epsilon=None, first_plane=0))]
 #[allow(clippy::too_many_arguments)]
 pub fn boundary<'py>(
     py: Python<'py>,
@@ -130,6 +131,8 @@ pub fn boundary<'py>(
     step: Option<f64>,
     d_max: Option<f64>,
     tolerance: Option<f64>,
+    epsilon: Option<f32>,
+    first_plane: usize,
 ) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyDict>)> {
     let defaults = BoundaryParams::default();
     let params = BoundaryChainParams {
@@ -146,8 +149,11 @@ pub fn boundary<'py>(
     };
     let v = view("values", &values)?;
     let geo = geometry(shape(&v), spacing, [0.0; 3])?;
-    let out = run_released(py, None, || boundary_chain::run_on(&geo, v.as_slice().unwrap_or(&[]), &params))?
-        .map_err(mdtf_error)?;
+    let out = run_released(py, None, || {
+        let at = boundary_chain::Placement { epsilon, first_plane };
+        boundary_chain::run_on(&geo, v.as_slice().unwrap_or(&[]), &params, &at)
+    })?
+    .map_err(mdtf_error)?;
     let b = out.boundary;
     let arrays = PyDict::new(py);
     for (name, v) in [("distance", b.distance), ("g_hit", b.g_hit), ("hit", b.hit), ("dot", b.dot)] {

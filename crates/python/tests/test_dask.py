@@ -64,6 +64,27 @@ def test_bilateral_by_blocks_equals_the_whole(client: distributed.Client, store:
     np.testing.assert_array_equal(got, mdtf.bilateral(vol.data, vol.spacing, sigma_d=1.5, sigma_r=0.1))
 
 
+def test_the_median_is_exact() -> None:
+    rng = np.random.default_rng(5)
+    data = rng.gamma(2.0, 3.0, size=(21, 22, 23)).astype(np.float32)
+    data[0, 0, :5] = np.nan
+    arr = mdask.da.from_array(data, chunks=(5, 7, 9))
+    finite = np.sort(data[np.isfinite(data)])
+    assert mdask.lower_median(arr) == float(finite[(finite.size - 1) // 2])
+    assert mdask.lower_median(mdask.da.full((4, 4, 4), np.nan, dtype=np.float32, chunks=2)) is None
+
+
+def test_boundary_by_blocks_equals_the_whole(client: distributed.Client, store: Path, sphere: Path) -> None:
+    arr, spacing = mdask.from_ome_zarr(store, chunks=(13, 17, 19))
+    lazy = mdask.boundary(arr, spacing, kernel="gauss:1", d_max=6.0)
+    got = dict(zip(lazy, client.compute(list(lazy.values()), sync=True)))
+    vol = mdtf.read(sphere)
+    want = mdtf.boundary(vol.data, vol.spacing, kernel="gauss:1", d_max=6.0)
+    assert (want.hit == 1).sum() > 1000
+    for name in ["distance", "g_hit", "hit", "dot"]:
+        np.testing.assert_array_equal(got[name], getattr(want, name), err_msg=name)
+
+
 def test_a_worker_killed_mid_run_changes_nothing(client: distributed.Client, sphere: Path) -> None:
     vol = mdtf.read(sphere)
     big = np.tile(vol.data, (2, 2, 2))

@@ -54,6 +54,8 @@ def boundary(
     step: float | None = None,
     d_max: float | None = None,
     tolerance: float | None = None,
+    epsilon: float | None = None,
+    first_plane: int = 0,
 ) -> tuple[dict[str, F32], dict[str, Any]]: ...
 def histogram(
     channels: list[F32],
@@ -76,3 +78,15 @@ def kernel_reach(spacing: Triple, kernel: str | None = None) -> tuple[int, int, 
 def bilateral_reach(spacing: Triple, sigma_d: float = 1.0, mode: str = "exact", k: float | None = None) -> tuple[int, int, int]: ...
 def default_epsilon(span: float, min_spacing: float) -> float: ...
 def derive_components(items: list[str]) -> list[str]: ...
+def trace_reach(spacing: Triple, d_max: float) -> tuple[int, int, int]: ...
+def boundary_thresholds(
+    shape: tuple[int, int, int],
+    spacing: Triple,
+    value_range: float,
+    median_g: float | None = None,
+    g_min: float | None = None,
+    g_hit_min: float | None = None,
+    step: float | None = None,
+    d_max: float | None = None,
+    tolerance: float | None = None,
+) -> tuple[float, float, float, float, float]: ...

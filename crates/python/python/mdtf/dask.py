@@ -33,7 +33,7 @@ try:
 except ImportError as e:  # pragma: no cover - the message is the point
     raise ImportError("mdtf.dask needs dask: pip install 'dask[array]' (and distributed for a cluster)") from e
 
-__all__ = ["derive", "bilateral", "from_ome_zarr", "da"]
+__all__ = ["derive", "bilateral", "boundary", "lower_median", "from_ome_zarr", "da"]
 
 
 def _value_range(arr: da.Array) -> tuple[float, float]:
@@ -51,18 +51,27 @@ def _at_least(chunks: tuple[int, ...], need: int) -> tuple[int, ...]:
 
 
 def _with_halo(arr: da.Array, reach: tuple[int, int, int], block: Any, count: int, wrap: bool = False) -> da.Array:
-    """``block`` (a (z, y, x) array with its halo -> (count, z, y, x)) over
+    """``block(b, first)`` (``b`` a (z, y, x) block with its halo, ``first``
+    the global index of its first voxel; returns (count, z, y, x)) over
     every block of ``arr`` grown by ``reach``, trimmed back. No padding at
     the volume's edges, where the stage's own border rule applies, except
     for a periodic (``wrap``) border, whose halo comes from the other side."""
     chunks = tuple(_at_least(c, 2 * r + 1) for c, r in zip(arr.chunks, reach))
     if chunks != arr.chunks:
         arr = arr.rechunk(chunks)
+    starts = [np.concatenate([[0], np.cumsum(c)[:-1]]) for c in chunks]
     depth = {0: reach[0], 1: reach[1], 2: reach[2]}
     boundary = "periodic" if wrap else "none"
     grown = overlap(arr, depth, boundary=boundary)
+
+    def placed(b: np.ndarray, block_info: dict | None = None) -> np.ndarray:
+        where = block_info[0]["chunk-location"] if block_info else (0, 0, 0)
+        grown_by = [0 if (k == 0 and not wrap) else r for k, r in zip(where, reach)]
+        first = tuple(int(s[k]) - g for s, k, g in zip(starts, where, grown_by))
+        return block(b, first)
+
     meta = np.empty((0, 0, 0, 0), np.float32)
-    out = grown.map_blocks(block, new_axis=0, chunks=((count,), *grown.chunks), dtype=np.float32, meta=meta)
+    out = grown.map_blocks(placed, new_axis=0, chunks=((count,), *grown.chunks), dtype=np.float32, meta=meta)
     return trim_internal(out, {0: 0, 1: reach[0], 2: reach[1], 3: reach[2]}, boundary=boundary)
 
 
@@ -92,7 +101,7 @@ def derive(
         lo, hi = _value_range(arr)
         epsilon = _mdtf.default_epsilon(np.float32(hi) - np.float32(lo), min(sp))
 
-    def block(b: np.ndarray) -> np.ndarray:
+    def block(b: np.ndarray, _first: tuple[int, int, int]) -> np.ndarray:
         d = _mdtf.derive([("v", _f32(b, "block"))], sp, items, kernel, border, float(epsilon))
         return np.stack([d[n] for n in names])
 
@@ -123,10 +132,86 @@ def bilateral(
     elif range_units != "value":
         raise ValueError(f"range_units: unknown value '{range_units}' (valid: fraction, value)")
 
-    def block(b: np.ndarray) -> np.ndarray:
+    def block(b: np.ndarray, _first: tuple[int, int, int]) -> np.ndarray:
         return _mdtf.bilateral(_f32(b, "block"), sp, sigma_d, sigma_r, "value", mode, k)[np.newaxis]
 
     return _with_halo(arr, reach, block, 1)[0]
+
+
+def lower_median(arr: da.Array) -> float | None:
+    """The lower median (the ((n - 1) // 2)-th smallest) of the finite,
+    non-negative samples of ``arr``, exactly, in two passes of counts over
+    its blocks: the high 16 bits of the samples' float32 patterns (which sort
+    as the values do), then the low 16 bits within the bucket the median
+    falls in. None without any such sample."""
+    bits = da.where(da.isfinite(arr) & (arr >= 0), arr.astype(np.float32), np.float32(np.nan))
+
+    def counts(b: np.ndarray, bucket: int | None) -> np.ndarray:
+        u = b[np.isfinite(b)].view(np.uint32)
+        u = (u[(u >> 16) == bucket] & 0xFFFF) if bucket is not None else u >> 16
+        return np.bincount(u, minlength=1 << 16).astype(np.int64)
+
+    def total(bucket: int | None) -> np.ndarray:
+        parts = [dask.delayed(counts)(b, bucket) for b in bits.to_delayed().ravel()]
+        return dask.delayed(sum)(parts).compute()
+
+    high = total(None)
+    n = int(high.sum())
+    if n == 0:
+        return None
+    k = (n - 1) // 2
+    cum = np.cumsum(high)
+    bucket = int(np.searchsorted(cum, k, side="right"))
+    before = int(cum[bucket - 1]) if bucket > 0 else 0
+    low = np.cumsum(total(bucket))
+    rest = int(np.searchsorted(low, k - before, side="right"))
+    return float(np.array([(bucket << 16) | rest], np.uint32).view(np.float32)[0])
+
+
+def boundary(
+    arr: Any,
+    spacing: SpacingLike = 1.0,
+    kernel: str | None = None,
+    g_min: float | None = None,
+    g_hit_min: float | None = None,
+    step: float | None = None,
+    d_max: float | None = None,
+    tolerance: float | None = None,
+) -> dict[str, da.Array]:
+    """``mdtf.boundary`` of a dask array (z, y, x), lazily: ``distance``,
+    ``g_hit``, ``hit`` and ``dot``, bit-identical to the whole-volume call.
+    The whole array's value range, and (for a default g_min or g_hit_min)
+    the exact median of g behind the noise floor, are computed first; the
+    array is then traced in z-slabs of whole planes (its z chunks), each
+    grown by d_max and the kernel's reach, with the same thresholds. No
+    pre-filter block by block yet."""
+    arr = da.asarray(arr).astype(np.float32)
+    if arr.ndim != 3:
+        raise ValueError(f"expected a 3-D (z, y, x) array, got shape {arr.shape}")
+    sp = _triple(spacing, "spacing")
+    lo, hi = _value_range(arr)
+    value_range = float(np.float32(hi) - np.float32(lo))
+    epsilon = _mdtf.default_epsilon(np.float32(hi) - np.float32(lo), min(sp))
+    median = None
+    if g_min is None or g_hit_min is None:
+        median = lower_median(derive(arr, sp, items=["g"], kernel=kernel, epsilon=epsilon)["g"])
+    g_min, g_hit_min, step, d_max, tolerance = _mdtf.boundary_thresholds(
+        arr.shape, sp, value_range, median, g_min, g_hit_min, step, d_max, tolerance
+    )
+    # z-slabs of whole planes, as the slab-by-slab run: rays are traced in the whole volume's
+    # coordinates along z, so each slab needs its place (first plane), and no x or y halo
+    slabs = arr.rechunk({1: -1, 2: -1})
+    reach = (_mdtf.kernel_reach(sp, kernel)[0] + _mdtf.trace_reach(sp, d_max)[0], 0, 0)
+    names = ["distance", "g_hit", "hit", "dot"]
+
+    def block(b: np.ndarray, first: tuple[int, int, int]) -> np.ndarray:
+        arrays, _ = _mdtf.boundary(
+            _f32(b, "block"), sp, kernel, None, g_min, g_hit_min, step, d_max, tolerance, float(epsilon), first[0]
+        )
+        return np.stack([arrays[n] for n in names])
+
+    out = _with_halo(slabs, reach, block, len(names))
+    return {n: out[k] for k, n in enumerate(names)}
 
 
 def from_ome_zarr(path: str | os.PathLike[str], level: int = 0, chunks: Any = None) -> tuple[da.Array, tuple[float, float, float]]:
