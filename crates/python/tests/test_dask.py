@@ -64,6 +64,25 @@ def test_bilateral_by_blocks_equals_the_whole(client: distributed.Client, store:
     np.testing.assert_array_equal(got, mdtf.bilateral(vol.data, vol.spacing, sigma_d=1.5, sigma_r=0.1))
 
 
+def test_results_go_to_an_ome_zarr_store_mdtf_and_ome_zarr_models_read(
+    client: distributed.Client, store: Path, sphere: Path, tmp_path: Path
+) -> None:
+    arr, spacing = mdask.from_ome_zarr(store, chunks=(13, 17, 19))
+    g = mdask.derive(arr, spacing, items=["g"])["g"]
+    out = tmp_path / "g.ome.zarr"
+    assert mdask.to_ome_zarr(g, out, spacing, origin=(1.0, 2.0, 3.0)) == str(out)
+    vol = mdtf.read(sphere)
+    back = mdtf.read(out)
+    np.testing.assert_array_equal(back.data, mdtf.derive(vol.data, vol.spacing, items=["g"])["g"])
+    assert back.spacing == pytest.approx(vol.spacing) and back.origin == pytest.approx((1.0, 2.0, 3.0))
+    from ome_zarr_models.v05.image import Image
+
+    Image.from_zarr(__import__("zarr").open_group(str(out), mode="r"))
+    assert [p.name for p in tmp_path.iterdir()] == ["g.ome.zarr"], "no staging folder left"
+    with pytest.raises(FileExistsError):
+        mdask.to_ome_zarr(g, out, spacing)
+
+
 def test_the_median_is_exact() -> None:
     rng = np.random.default_rng(5)
     data = rng.gamma(2.0, 3.0, size=(21, 22, 23)).astype(np.float32)

@@ -9,8 +9,8 @@ gives it: the results are bit-identical to ``mdtf.derive`` and
 value range behind derive's epsilon and the filter's fractional range
 sigma) is reduced over the whole array first, exactly (min and max).
 
-Read an OME-Zarr store with ``mdtf.dask.from_ome_zarr`` (or
-``dask.array.from_zarr``) and write results with ``dask.array.to_zarr``.
+Read an OME-Zarr store with ``mdtf.dask.from_ome_zarr`` and write results
+with ``mdtf.dask.to_ome_zarr`` (each block writes only its own chunks).
 Needs ``dask[array]`` (and ``zarr`` for stores). Whole pipeline runs on a
 cluster (``mdtf run``'s passes as block tasks) are not here yet.
 """
@@ -33,7 +33,7 @@ try:
 except ImportError as e:  # pragma: no cover - the message is the point
     raise ImportError("mdtf.dask needs dask: pip install 'dask[array]' (and distributed for a cluster)") from e
 
-__all__ = ["derive", "bilateral", "boundary", "lower_median", "from_ome_zarr", "da"]
+__all__ = ["derive", "bilateral", "boundary", "lower_median", "from_ome_zarr", "to_ome_zarr", "da"]
 
 
 def _value_range(arr: da.Array) -> tuple[float, float]:
@@ -239,3 +239,66 @@ def from_ome_zarr(path: str | os.PathLike[str], level: int = 0, chunks: Any = No
     if chunks is not None:
         arr = arr.rechunk(chunks)
     return arr, tuple(float(scale[i]) for i in keep)  # type: ignore[return-value]
+
+
+def to_ome_zarr(
+    arr: Any,
+    path: str | os.PathLike[str],
+    spacing: SpacingLike = 1.0,
+    origin: SpacingLike = 0.0,
+    compute: bool = True,
+) -> Any:
+    """Writes a dask array (z, y, x) as an OME-Zarr 0.5 image (Zarr v3,
+    zstd; one chunk per dask block, the blocks rechunked to one regular
+    shape first), each block writing only its own chunk, so a rerun block
+    rewrites the same bytes. The store is built beside ``path`` and renamed
+    into place when every block is written (with ``compute=False``: when the
+    returned task is computed); an existing ``path`` is refused."""
+    import shutil
+    import tempfile
+
+    import zarr
+
+    target = Path(path)
+    if target.exists():
+        raise FileExistsError(f"{target} exists: mdtf.dask does not replace a store")
+    arr = da.asarray(arr)
+    if arr.ndim != 3:
+        raise ValueError(f"expected a 3-D (z, y, x) array, got shape {arr.shape}")
+    chunk = tuple(int(c) for c in arr.chunksize)
+    arr = arr.rechunk(chunk)
+    sp, org = _triple(spacing, "spacing"), _triple(origin, "origin")
+    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    axes = [{"name": a, "type": "space"} for a in ("z", "y", "x")]
+    transforms = [{"type": "scale", "scale": list(sp)}, {"type": "translation", "translation": list(org)}]
+    try:
+        group = zarr.open_group(store=str(staging), mode="w", zarr_format=3)
+        group.attrs["ome"] = {
+            "version": "0.5",
+            "multiscales": [{"axes": axes, "datasets": [{"path": "0", "coordinateTransformations": transforms}]}],
+        }
+        image = group.create_array(
+            "0",
+            shape=arr.shape,
+            chunks=chunk,
+            dtype=arr.dtype,
+            compressors=zarr.codecs.ZstdCodec(level=3),
+            dimension_names=["z", "y", "x"],
+        )
+        stored = da.to_zarr(arr, image, compute=False)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+
+    def publish(_: Any) -> str:
+        os.replace(staging, target)
+        return str(target)
+
+    task = dask.delayed(publish)(stored)
+    if not compute:
+        return task
+    try:
+        return task.compute()
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
