@@ -36,7 +36,9 @@ def main() -> None:
     c = (n - 1) / 2
     z, y, x = np.ogrid[:n, :n, :n]
     r = np.sqrt((x - c) ** 2 + (y - c) ** 2 + (z - c) ** 2, dtype=np.float32)
-    v = (255 / (1 + np.exp(np.clip((r - 0.3 * n) / 1.5, -60, 60)))).astype(np.float32)
+    # a smooth sphere whose outside and inside are exactly 0 and 255 (a logistic's tiny tails
+    # would make the filter's weights subnormal floats, several times slower to compute)
+    v = (127.5 * (1 - np.tanh((r - 0.3 * n) / 1.5, dtype=np.float32))).astype(np.float32)
     mvox = n**3 / 1e6
     copy = median_seconds(lambda: v.copy(), args.repeat)
     derive = median_seconds(lambda: mdtf.derive(v, 1.0, items=["g", "f2"]), args.repeat)
