@@ -122,6 +122,13 @@ def test_a_worker_killed_mid_run_changes_nothing(client: distributed.Client, sph
     np.testing.assert_array_equal(got, mdtf.bilateral(big, vol.spacing, sigma_d=3.0))
 
 
+def test_thin_edge_chunks_are_merged_not_refused(sphere: Path) -> None:
+    vol = mdtf.read(sphere)
+    arr = mdask.da.from_array(vol.data, chunks=((1, 20, 26, 1), (2, 42), (40,)))
+    got = mdask.derive(arr, vol.spacing, items=["g"])["g"].compute(scheduler="threads")
+    np.testing.assert_array_equal(got, mdtf.derive(vol.data, vol.spacing, items=["g"])["g"])
+
+
 def test_halos_are_the_stages_reach() -> None:
     # central4: two samples each side; a Gaussian of sigma 1.5 world units cut at 4 sigma: ceil(6 / spacing)
     assert mdtf._mdtf.kernel_reach((1.0, 1.0, 1.0), None) == (2, 2, 2)

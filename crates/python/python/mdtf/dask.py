@@ -43,11 +43,15 @@ def _value_range(arr: da.Array) -> tuple[float, float]:
 
 
 def _at_least(chunks: tuple[int, ...], need: int) -> tuple[int, ...]:
-    """Chunks along one axis with a last chunk of fewer than ``need`` samples
-    merged into the one before (a stage refuses blocks thinner than its kernel)."""
-    if len(chunks) > 1 and chunks[-1] < need:
-        return (*chunks[:-2], chunks[-2] + chunks[-1])
-    return chunks
+    """Chunks along one axis with a first or last chunk of fewer than
+    ``need`` samples merged into its neighbour (an edge block gets a halo on
+    one side only, and a stage refuses blocks thinner than its kernel)."""
+    c = list(chunks)
+    if len(c) > 1 and c[-1] < need:
+        c[-2:] = [c[-2] + c[-1]]
+    if len(c) > 1 and c[0] < need:
+        c[:2] = [c[0] + c[1]]
+    return tuple(c)
 
 
 def _with_halo(arr: da.Array, reach: tuple[int, int, int], block: Any, count: int, wrap: bool = False) -> da.Array:
