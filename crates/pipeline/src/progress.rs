@@ -4,7 +4,8 @@
 
 use crate::error::{RunError, fail};
 use crate::run::RunOptions;
-use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// A run's progress callbacks and its cancel flag ([`RunOptions::cancel`]).
 pub(crate) struct Progress<'a> {
@@ -41,9 +42,16 @@ impl<'a> Progress<'a> {
     /// An error when the run was cancelled: it stops there, and its partial
     /// output folder is removed.
     pub(crate) fn check(&self) -> Result<(), RunError> {
-        match &self.opts.cancel {
-            Some(c) if c.load(Ordering::Relaxed) => Err(fail("run")("cancelled".into())),
-            _ => Ok(()),
-        }
+        if self.opts.is_cancelled() { Err(cancelled()) } else { Ok(()) }
     }
+}
+
+/// Whether a cancel flag is set (None: the run cannot be cancelled).
+pub(crate) fn is_set(flag: &Option<Arc<AtomicBool>>) -> bool {
+    flag.as_ref().is_some_and(|c| c.load(Ordering::Relaxed))
+}
+
+/// The error a cancelled run ends with.
+pub(crate) fn cancelled() -> RunError {
+    fail("run")("cancelled".into())
 }

@@ -37,6 +37,13 @@ pub struct RunOptions {
     pub cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
 }
 
+impl RunOptions {
+    /// Whether [`RunOptions::cancel`] is set.
+    pub fn is_cancelled(&self) -> bool {
+        crate::progress::is_set(&self.cancel)
+    }
+}
+
 /// Runs `p`; `on_stage(name)` is called as each stage starts.
 pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<RunReport, RunError> {
     let start = Instant::now();

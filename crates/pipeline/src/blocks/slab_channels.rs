@@ -11,7 +11,7 @@ use mdtf_derive::{DeriveOutput, DeriveParams, Item};
 use mdtf_volume::{MultiField, Volume};
 use std::ops::Range;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 
 /// Stored and derivable channels (see the module docs).
 pub struct SlabChannels {
@@ -73,10 +73,7 @@ impl SlabChannels {
 
     /// An error once the run is cancelled.
     fn check(&self) -> Result<(), String> {
-        match &self.cancel {
-            Some(c) if c.load(Ordering::Relaxed) => Err("cancelled".into()),
-            _ => Ok(()),
-        }
+        if crate::progress::is_set(&self.cancel) { Err("cancelled".into()) } else { Ok(()) }
     }
 
     /// Whether channel `name` is stored or derivable.
