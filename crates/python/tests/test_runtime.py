@@ -60,15 +60,21 @@ def test_the_gil_is_released_during_a_call() -> None:
     t = threading.Thread(target=count)
     t.start()
     time.sleep(0.05)
-    start = time.monotonic()
-    mdtf.bilateral(data, sigma_d=2.0)
-    end = time.monotonic()
+    # calls are repeated until they add up to long enough to tell, however fast this machine is
+    calls: list[tuple[float, float]] = []
+    while sum(end - start for start, end in calls) < 0.5:
+        start = time.monotonic()
+        mdtf.bilateral(data, sigma_d=2.0)
+        calls.append((start, time.monotonic()))
     stop.set()
     t.join()
-    during = [x for x in ticks if start <= x <= end]
-    assert end - start > 0.3, f"the call took {end - start:.3f} s, too short to tell"
-    gaps = np.diff([start, *during, end])
-    assert len(during) > 50 and gaps.max() < 0.1, f"{len(during)} ticks, longest gap {gaps.max():.3f} s"
+    during = 0
+    longest = 0.0
+    for start, end in calls:
+        inside = [x for x in ticks if start <= x <= end]
+        during += len(inside)
+        longest = max(longest, float(np.diff([start, *inside, end]).max()))
+    assert during > 80 and longest < 0.1, f"{during} ticks in {len(calls)} calls, longest gap {longest:.3f} s"
 
 
 SCRIPT = """
