@@ -49,12 +49,31 @@ pub struct GaussianPrimitive {
     pub triangular: bool,
 }
 
+/// Fields up to which an evaluation keeps its coordinates on the stack (the
+/// renderers evaluate every primitive at every sample; no allocation there).
+const STACK_FIELDS: usize = 8;
+
+/// Squared distance (in K's units) beyond which a segment's line adds
+/// nothing: the integral is below sqrt(pi) exp(-64) / 1e-4, under 3e-24
+/// (renderers evaluate every primitive at every sample, most far away).
+const FAR_SQUARED: f64 = 64.0;
+
+/// `f` given two zeroed scratch slices of length `m`, on the stack where `m` allows.
+fn with_scratch<R>(m: usize, f: impl FnOnce(&mut [f64], &mut [f64]) -> R) -> R {
+    if m <= STACK_FIELDS {
+        let (mut a, mut b) = ([0.0; STACK_FIELDS], [0.0; STACK_FIELDS]);
+        f(&mut a[..m], &mut b[..m])
+    } else {
+        f(&mut vec![0.0; m], &mut vec![0.0; m])
+    }
+}
+
 impl GaussianPrimitive {
-    fn transform(&self, v: &[f64]) -> Vec<f64> {
-        self.k
-            .iter()
-            .map(|row| row.iter().zip(v.iter().zip(&self.centre)).map(|(k, (x, c))| k * (x - c)).sum())
-            .collect()
+    /// K (v - c) into `out` (one entry per row of K).
+    fn transform(&self, v: &[f64], out: &mut [f64]) {
+        for (o, row) in out.iter_mut().zip(&self.k) {
+            *o = row.iter().zip(v.iter().zip(&self.centre)).map(|(k, (x, c))| k * (x - c)).sum();
+        }
     }
 
     /// The dimension m of the primitive's fields (a triangular one reads one more coordinate, g).
@@ -70,15 +89,17 @@ impl GaussianPrimitive {
     /// The density, in [0, 1]: exp(-||K (v - c)||^2); for a triangular
     /// primitive exp(-||K (v - c)||^2 / g^2) with g = v[m] (0 where g <= 0).
     pub fn density(&self, v: &[f64]) -> f64 {
-        let mut t = self.transform(v);
-        if self.triangular {
-            let g = self.gradient(v);
-            if g <= 0.0 {
-                return 0.0;
+        with_scratch(self.k.len(), |t, _| {
+            self.transform(v, t);
+            if self.triangular {
+                let g = self.gradient(v);
+                if g <= 0.0 {
+                    return 0.0;
+                }
+                t.iter_mut().for_each(|x| *x /= g);
             }
-            t.iter_mut().for_each(|x| *x /= g);
-        }
-        (-t.iter().map(|x| x * x).sum::<f64>()).exp()
+            (-t.iter().map(|x| x * x).sum::<f64>()).exp()
+        })
     }
 
     /// The mean density over the segment from v1 to v2 with linearly varying
@@ -86,30 +107,36 @@ impl GaussianPrimitive {
     /// For a triangular primitive g is held at the endpoints' mean (section
     /// 5.2.1); 0 when that mean is not positive.
     pub fn segment_integral(&self, v1: &[f64], v2: &[f64]) -> f64 {
-        let mut p1 = self.transform(v1);
-        let mut p2 = self.transform(v2);
-        if self.triangular {
-            let g_hat = 0.5 * (self.gradient(v1) + self.gradient(v2));
-            if g_hat <= 0.0 {
+        with_scratch(self.k.len(), |p1, d| {
+            self.transform(v1, p1);
+            self.transform(v2, d);
+            if self.triangular {
+                let g_hat = 0.5 * (self.gradient(v1) + self.gradient(v2));
+                if g_hat <= 0.0 {
+                    return 0.0;
+                }
+                p1.iter_mut().chain(d.iter_mut()).for_each(|x| *x /= g_hat);
+            }
+            // d = p2 - p1, in place of p2
+            d.iter_mut().zip(p1.iter()).for_each(|(b, a)| *b -= a);
+            let dn = d.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if dn < 1e-4 {
+                return (-p1.iter().zip(d.iter()).map(|(a, x)| (a + 0.5 * x).powi(2)).sum::<f64>()).exp();
+            }
+            let a = d.iter().zip(p1.iter()).map(|(x, y)| x * y).sum::<f64>() / dn;
+            let b = a + dn;
+            // the squared distance of the segment's line from the centre, summed
+            // directly: |p1|^2 - a^2 cancels to garbage (even to +inf under exp)
+            // when g_hat is tiny and the coordinates huge
+            let perp2: f64 = p1.iter().zip(d.iter()).map(|(p, x)| (p - a * x / dn).powi(2)).sum();
+            if perp2 > FAR_SQUARED {
+                // the line passes far from the centre: nothing to integrate (and no erf to evaluate)
                 return 0.0;
             }
-            p1.iter_mut().chain(p2.iter_mut()).for_each(|x| *x /= g_hat);
-        }
-        let d: Vec<f64> = p2.iter().zip(&p1).map(|(b, a)| b - a).collect();
-        let dn = d.iter().map(|x| x * x).sum::<f64>().sqrt();
-        if dn < 1e-4 {
-            let mid: Vec<f64> = p1.iter().zip(&d).map(|(a, x)| a + 0.5 * x).collect();
-            return (-mid.iter().map(|x| x * x).sum::<f64>()).exp();
-        }
-        let a = d.iter().zip(&p1).map(|(x, y)| x * y).sum::<f64>() / dn;
-        let b = a + dn;
-        // the squared distance of the segment's line from the centre, summed
-        // directly: |p1|^2 - a^2 cancels to garbage (even to +inf under exp)
-        // when g_hat is tiny and the coordinates huge
-        let perp2: f64 = p1.iter().zip(&d).map(|(p, x)| (p - a * x / dn).powi(2)).sum();
-        let s = (-perp2).exp();
-        let diff = erf_difference(b, a);
-        std::f64::consts::PI.sqrt() / 2.0 * s / dn * diff
+            let s = (-perp2).exp();
+            let diff = erf_difference(b, a);
+            std::f64::consts::PI.sqrt() / 2.0 * s / dn * diff
+        })
     }
 }
 
@@ -139,6 +166,20 @@ impl GaussianPrimitive {
         alpha_max: f64,
         colour: [f64; 3],
     ) -> Result<GaussianPrimitive, FitError> {
+        Self::fit_with_floor(fields, selected, alpha_max, colour, &vec![0.0; fields.len()])
+    }
+
+    /// [`GaussianPrimitive::fit`] with `floor[a]` (field a's units squared)
+    /// added to each field's variance: the variance a measurement of
+    /// limited resolution cannot go below (a field constant in the region
+    /// then gets that width instead of a singular covariance).
+    pub fn fit_with_floor(
+        fields: &[&[f32]],
+        selected: impl Fn(usize) -> bool,
+        alpha_max: f64,
+        colour: [f64; 3],
+        floor: &[f64],
+    ) -> Result<GaussianPrimitive, FitError> {
         let m = fields.len();
         let n_all = fields.first().map_or(0, |f| f.len());
         let (mut n, mut sum) = (0usize, vec![0.0f64; m]);
@@ -165,7 +206,8 @@ impl GaussianPrimitive {
         let mut l = vec![vec![0.0f64; m]; m];
         for a in 0..m {
             for b in 0..=a {
-                let two_sigma = 2.0 * cov[a][b] / (n - 1) as f64;
+                let floored = if a == b { floor.get(a).copied().unwrap_or(0.0) } else { 0.0 };
+                let two_sigma = 2.0 * (cov[a][b] / (n - 1) as f64 + floored);
                 let s = two_sigma - (0..b).map(|k| l[a][k] * l[b][k]).sum::<f64>();
                 if a == b {
                     // what is left of the variance once the other fields explain it
