@@ -874,6 +874,76 @@ fn a_head_ct_phantom_shows_its_skin_faintly_and_its_bone_through_it() {
     assert!(foreground > w * h / 10 && lone * 1000 < foreground, "{lone} lone of {foreground} lit pixels");
 }
 
+#[test]
+fn a_two_field_head_phantom_gets_a_gaussian_per_material_and_shows_them_all() {
+    // two MR-like contrasts of air | skin (r 0.45) | skull (r 0.36) | brain (r 0.27), layers of 8.6
+    // voxels blurred by sigma 1 voxel, independent noise of 3 in each: in the joint histogram,
+    // four blobs joined by the arcs of their partial-volume voxels
+    use mdtf_datagen::{Boundary, RadialPhantom, add_gaussian_noise, grid_centre};
+    let n = 96;
+    let geometry = mdtf_volume::Geometry::new([n; 3], [1.0; 3]);
+    let e = n as f64;
+    // (skin, skull, brain) in each field; air is 0 in both
+    let materials = [[60.0, 90.0], [20.0, 15.0], [100.0, 50.0]];
+    let field = |a: usize, seed: u64| {
+        let phantom = RadialPhantom {
+            centre: grid_centre(&geometry),
+            geometry: geometry.clone(),
+            sigma: 1.0,
+            outside: 0.0,
+            boundaries: [0.45, 0.36, 0.27]
+                .iter()
+                .zip(&materials)
+                .map(|(r, m)| Boundary { radius: r * e, inside: m[a] })
+                .collect(),
+        };
+        let mut v = phantom.volume();
+        add_gaussian_noise(&mut v, 3.0, seed);
+        (format!("field{a}"), v)
+    };
+    let stack = mdtf_volume::MultiField::from_volumes(vec![field(0, 11), field(1, 12)]).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("head-2field.nii");
+    mdtf_volume::write_nifti(&input, &stack, mdtf_volume::SampleType::F32).unwrap();
+    let out = dir.path().join("out");
+    let pipeline = shipped_pipeline("gaussian-tf");
+    mdtf_ok(&[
+        "run",
+        pipeline.to_str().unwrap(),
+        "--input",
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    let gaussians: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("pack/gaussians.json")).unwrap()).unwrap();
+    let gaussians = gaussians.as_array().unwrap();
+    // the air (the background, on the volume's faces) gets none; each material one, at its values
+    assert_eq!(gaussians.len(), 3, "{gaussians:?}");
+    for m in materials {
+        let at = |g: &&serde_json::Value| {
+            let c = g["centre"].as_array().unwrap();
+            (0..2).all(|a| (c[a].as_f64().unwrap() - m[a]).abs() < 2.0)
+        };
+        let g = gaussians.iter().find(at).unwrap_or_else(|| panic!("no Gaussian at {m:?}: {gaussians:?}"));
+        assert!(g["triangular"].is_null(), "a full Gaussian: {g}");
+        let a = g["alpha_max"].as_f64().unwrap();
+        assert!(a > 0.0 && a <= 1.0, "{g}");
+    }
+    // the brain, innermost, opaque per voxel; the skin and skull around it faint enough to see through
+    let alpha = |k: usize| gaussians[k]["alpha_max"].as_f64().unwrap();
+    let brain = gaussians.iter().position(|g| g["centre"][0].as_f64().unwrap() > 90.0).unwrap();
+    assert!((0..3).filter(|&k| k != brain).all(|k| alpha(k) < 0.3 && alpha(k) < alpha(brain)), "{gaussians:?}");
+    // the colours of the palette, each shown by at least 2 % of the preview's foreground
+    let colours: Vec<_> = gaussians.iter().map(|g| g["colour"].clone()).collect();
+    for (k, c) in colours.iter().enumerate() {
+        let want: Vec<f64> = mdtf_pack::BOUNDARY_PALETTE[k].to_vec();
+        assert_eq!(c.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect::<Vec<_>>(), want);
+    }
+    assert_every_boundary_colour_shows(&out.join("preview.png"), 3, "two-field head");
+}
+
 /// Packs the shells phantom (96^3) as `profile` without a TF, checks that
 /// its default table `lut` says `says`, and previews it (160^2): every
 /// boundary's colour must show. Returns the table's manifest entry.

@@ -8,6 +8,7 @@
 
 mod axis;
 mod boundaries;
+mod clusters;
 mod count;
 mod figure;
 mod files;
@@ -19,6 +20,10 @@ mod rgb;
 pub use axis::{Axis, AxisSpec, DEFAULT_BINS, MAX_INTEGER_BINS};
 pub use boundaries::{
     CORE_HALF_WIDTH, DetectedBoundary, MIN_CORE_SHARE, MIN_RISE_CORRELATION, background_value, detect_boundaries,
+};
+pub use clusters::{
+    CLUSTER_BINS, CLUSTER_MASK, CORE_BIT, CORE_DENSITY, Cluster, JointClusters, MAX_CLUSTERS, MERGE_RATIO,
+    MIN_CLUSTER_SHARE, NO_CLUSTER, TOP_BIT, TOP_DENSITY, joint_clusters,
 };
 pub use count::{Histogram, count};
 pub use figure::{

@@ -8,7 +8,9 @@
 //! each boundary's centre value, in its colour, with the extinction per
 //! voxel that accumulates the boundary's surface opacity over the two world
 //! units of path a head-on ray spends in it (see
-//! [`mdtf_pack::boundary_opacities`]); else the paper's default TF (section 3.2,
+//! [`mdtf_pack::boundary_opacities`]); on multi-field data, one Gaussian per
+//! material found in the fields' joint histogram (see [`material_gaussians`]);
+//! else the paper's default TF (section 3.2,
 //! Fig. 5): one triangular GTF centred at each field's median, of width one
 //! (K = 1 on scalar data, where v and g share value units, so it selects the
 //! voxels within about one world unit of the median's isosurface;
@@ -28,7 +30,7 @@ use mdtf_pack::{
     BoundaryArch, ERF_DOMAIN, ERF_SIZE, GaussianPrimitive, IGAUSS_DOMAIN, IGAUSS_SIZE, Lut, LutAxis, TfFile,
     erf_difference_table, igauss_table,
 };
-use mdtf_volume::Volume;
+use mdtf_volume::{Geometry, Volume};
 
 /// World units of path a ray crossing a boundary head-on spends inside its
 /// triangular GTF of width 1: |v - c| / g < 1 holds within about one world
@@ -72,6 +74,11 @@ pub fn gaussians(
         let arches = crate::pack_inputs::detected_arches(value, hvol, kernel).map_err(|e| e.to_string())?;
         if !arches.is_empty() {
             return Ok(boundary_tgtfs(&arches, &value.geometry));
+        }
+    } else if let Some(first) = data.first() {
+        let materials = material_gaussians(&samples, &first.geometry)?;
+        if !materials.is_empty() {
+            return Ok(materials);
         }
     }
     let g = get(gradient)?.samples();
@@ -127,6 +134,97 @@ pub(crate) fn boundary_tgtfs(arches: &[BoundaryArch], geometry: &mdtf_volume::Ge
             triangular: true,
         })
         .collect()
+}
+
+/// How many of a material Gaussian's standard deviations (Mahalanobis
+/// distance) at least separate its centre from every other material's.
+pub const SEPARATION_SIGMAS: f64 = 4.0;
+
+/// One full Gaussian per material of a multi-field volume (`fields`: each
+/// field's samples on `geometry`'s grid), largest material first; empty
+/// when the data show no material but the background. The rule:
+/// * the materials are the clusters of the fields' joint histogram
+///   ([`mdtf_histogram::joint_clusters`]);
+/// * the background, the material holding more than half of the voxels on
+///   the volume's six faces (the air around a head, which every ray from
+///   outside crosses first), gets no Gaussian;
+/// * each other material's Gaussian has the spread of the voxels of its
+///   core ([`GaussianPrimitive::fit_with_floor`]), each field's variance at
+///   least that of a uniform spread over one histogram bin (width^2 / 12),
+///   so a field that is constant in a material (0 outside a mask) still
+///   gives a Gaussian; its centre is the mean of the voxels of its top;
+///   where another material's centre (the background's too) lies within
+///   [`SEPARATION_SIGMAS`] of its deviations, it is narrowed (K scaled)
+///   until none does: a wide material (the tissues around a brain, from
+///   fat to bone) would otherwise tint the background, which fills most
+///   of the volume, as fog;
+/// * its colour is [`mdtf_pack::boundary_colour`]'s k-th (white when alone);
+/// * its opacity lets the materials inside show through: what a ray
+///   crossing it accumulates is [`mdtf_pack::MAX_BOUNDARY_OPACITY`] for the
+///   innermost materials (the deepest layer below the outside, see
+///   [`crate::materials::MaterialShapes`]) and
+///   [`mdtf_pack::OUTER_BOUNDARY_OPACITY`] for those around them, spread
+///   per voxel over the material's mean chord
+///   ([`crate::materials::MaterialShapes::mean_chord`]) times the
+///   Gaussian's mean density over its own voxels, 2^(-m/2) for m fields.
+pub fn material_gaussians(fields: &[&[f32]], geometry: &Geometry) -> Result<Vec<GaussianPrimitive>, String> {
+    use mdtf_histogram::{CLUSTER_MASK, CORE_BIT, TOP_BIT};
+    let clusters = mdtf_histogram::joint_clusters(fields).map_err(|e| e.to_string())?;
+    let labels = clusters.labels(fields);
+    let shapes = crate::materials::MaterialShapes::of(&labels, geometry.dims, clusters.clusters.len());
+    let floor: Vec<f64> = clusters.bin_widths().iter().map(|w| w * w / 12.0).collect();
+    let is =
+        |k: usize, bit: u8| move |l: u8| l != mdtf_histogram::NO_CLUSTER && l & (CLUSTER_MASK | bit) == k as u8 | bit;
+    let tops: Vec<Vec<f64>> = (0..clusters.clusters.len())
+        .map(|k| {
+            let in_top = is(k, TOP_BIT);
+            mean_where(fields, |i| in_top(labels[i]))
+        })
+        .collect();
+    let mut fitted = Vec::new();
+    for k in (0..clusters.clusters.len()).filter(|&k| Some(k) != shapes.background) {
+        let in_core = is(k, CORE_BIT);
+        let mut g = GaussianPrimitive::fit_with_floor(fields, |i| in_core(labels[i]), 1.0, [1.0; 3], &floor)
+            .map_err(|e| format!("fitting a Gaussian to material {k}: {e}"))?;
+        g.centre = tops[k].clone();
+        // narrowed until every other material's centre lies SEPARATION_SIGMAS of its deviations away
+        let nearest = (0..tops.len()).filter(|&j| j != k).map(|j| g.density(&tops[j])).fold(0.0, f64::max);
+        let limit = (-SEPARATION_SIGMAS * SEPARATION_SIGMAS / 2.0).exp();
+        if nearest > limit {
+            // density exp(-q) at the nearest centre; K scaled by f gives exp(-f^2 q)
+            let f = (limit.ln() / nearest.ln().min(-f64::MIN_POSITIVE)).sqrt();
+            g.k.iter_mut().flatten().for_each(|x| *x *= f);
+        }
+        fitted.push((k, g));
+    }
+    let mean_density = 0.5f64.powf(fields.len() as f64 / 2.0);
+    let count = fitted.len();
+    Ok(fitted
+        .into_iter()
+        .enumerate()
+        .map(|(j, (k, mut g))| {
+            let surface = match shapes.innermost(k) {
+                true => mdtf_pack::MAX_BOUNDARY_OPACITY,
+                false => mdtf_pack::OUTER_BOUNDARY_OPACITY,
+            };
+            let path = shapes.mean_chord(k) * mean_density;
+            g.alpha_max = mdtf_pack::per_voxel_opacities(&[surface], path)[0];
+            g.colour = mdtf_pack::boundary_colour(j, count);
+            g
+        })
+        .collect())
+}
+
+/// Each field's mean over the voxels `selected` (0 where none is).
+fn mean_where(fields: &[&[f32]], selected: impl Fn(usize) -> bool) -> Vec<f64> {
+    let n = fields.first().map_or(0, |f| f.len());
+    let mut sum = vec![0.0f64; fields.len()];
+    let mut count = 0usize;
+    for i in (0..n).filter(|&i| selected(i)) {
+        count += 1;
+        sum.iter_mut().zip(fields).for_each(|(s, f)| *s += f[i] as f64);
+    }
+    sum.iter().map(|s| s / count.max(1) as f64).collect()
 }
 
 /// The IGauss table (eq. 16, 128^2 over [-10, 10]^2) and the erf-difference

@@ -24,6 +24,7 @@ pub mod gaussians;
 pub mod hist_files;
 pub mod hvol_streamed;
 pub mod inputs;
+pub mod materials;
 pub mod pack_inputs;
 pub mod plan;
 pub(crate) mod progress;
