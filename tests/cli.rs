@@ -773,6 +773,20 @@ fn the_default_slicer_tf_shows_every_boundary_the_histogram_volume_finds() {
     }
 }
 
+/// Runs the shipped pipeline `name` on `input` into `out`, quietly.
+fn run_shipped(name: &str, input: &Path, out: &Path) {
+    let pipeline = shipped_pipeline(name);
+    mdtf_ok(&[
+        "run",
+        pipeline.to_str().unwrap(),
+        "--input",
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+}
+
 /// Asserts that of the foreground pixels of the RGB picture `png` (|rgb| >= 30),
 /// each of the first `boundaries` colours of the default TFs' palette is the
 /// nearest in hue (cosine) to at least 2 %.
@@ -827,16 +841,7 @@ fn a_head_ct_phantom_shows_its_skin_faintly_and_its_bone_through_it() {
     let input = dir.path().join("head-ct.nii.gz");
     mdtf_volume::write_nifti(&input, &mdtf_volume::MultiField::from(ct), mdtf_volume::SampleType::I16).unwrap();
     let out = dir.path().join("out");
-    let pipeline = shipped_pipeline("slicer-3dtf");
-    mdtf_ok(&[
-        "run",
-        pipeline.to_str().unwrap(),
-        "--input",
-        input.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "-q",
-    ]);
+    run_shipped("slicer-3dtf", &input, &out);
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("run_report.json")).unwrap()).unwrap();
     let found = report["boundaries"].as_array().unwrap();
@@ -906,16 +911,7 @@ fn a_two_field_head_phantom_gets_a_gaussian_per_material_and_shows_them_all() {
     let input = dir.path().join("head-2field.nii");
     mdtf_volume::write_nifti(&input, &stack, mdtf_volume::SampleType::F32).unwrap();
     let out = dir.path().join("out");
-    let pipeline = shipped_pipeline("gaussian-tf");
-    mdtf_ok(&[
-        "run",
-        pipeline.to_str().unwrap(),
-        "--input",
-        input.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "-q",
-    ]);
+    run_shipped("gaussian-tf", &input, &out);
     let gaussians: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("pack/gaussians.json")).unwrap()).unwrap();
     let gaussians = gaussians.as_array().unwrap();
@@ -942,6 +938,11 @@ fn a_two_field_head_phantom_gets_a_gaussian_per_material_and_shows_them_all() {
         assert_eq!(c.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect::<Vec<_>>(), want);
     }
     assert_every_boundary_colour_shows(&out.join("preview.png"), 3, "two-field head");
+    // the report page lists them
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(page.contains("<h2>Gaussian transfer function</h2>"));
+    assert_eq!(page.matches("<td>full</td>").count(), 3);
+    assert!(page.contains("field0 99.") || page.contains("field0 100."), "the brain's centre is listed");
 }
 
 /// Packs the shells phantom (96^3) as `profile` without a TF, checks that

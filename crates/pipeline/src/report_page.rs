@@ -104,6 +104,8 @@ pub struct PageInputs<'a> {
     pub settings: &'a str,
     /// The pack's manifest, when the run wrote a volume pack.
     pub manifest: Option<&'a Manifest>,
+    /// The pack's Gaussian primitives (`gaussians.json`), when it has them.
+    pub gaussians: Option<&'a [mdtf_pack::GaussianPrimitive]>,
     /// The figures, in order.
     pub figures: &'a [Figure],
 }
@@ -131,6 +133,9 @@ pub fn render(page: &PageInputs) -> String {
     input_section(&mut h, r);
     warnings_section(&mut h, r);
     boundaries_section(&mut h, r);
+    if let Some(g) = page.gaussians {
+        gaussians_section(&mut h, g, &r.fields);
+    }
     figures_section(&mut h, page.figures);
     stages_section(&mut h, r);
     if let Some(m) = page.manifest {
@@ -242,6 +247,43 @@ fn boundaries_section(h: &mut String, r: &RunReport) {
             esc(&serde_json::to_string_pretty(c).unwrap_or_default())
         );
     }
+}
+
+fn gaussians_section(h: &mut String, gaussians: &[mdtf_pack::GaussianPrimitive], fields: &[String]) {
+    let _ = writeln!(
+        h,
+        "<h2>Gaussian transfer function</h2>\n<p>The primitives of <code>pack/gaussians.json</code> (from the TF \
+         file, else the defaults the data gave: on one field a triangular Gaussian at each boundary found, on \
+         several a Gaussian at each material of the fields' joint histogram but the background). Width: how far \
+         along each field's axis from the centre the density falls to exp(-1/2), 1 / (sqrt(2) |K's column|) \
+         (times the gradient for a triangular one).</p>\n<table><tr>\
+         <th>#</th><th>colour</th><th>kind</th><th>centre</th><th>width</th><th>opacity per voxel</th></tr>"
+    );
+    for (k, g) in gaussians.iter().enumerate() {
+        let [cr, cg, cb] = g.colour.map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8);
+        let name =
+            |a: usize| fields.get(a).cloned().unwrap_or_else(|| if a == 0 { "v".into() } else { format!("field{a}") });
+        let centre: Vec<String> =
+            g.centre.iter().enumerate().map(|(a, c)| format!("{} {}", name(a), num(*c))).collect();
+        let width: Vec<String> = (0..g.fields())
+            .map(|a| {
+                let column = g.k.iter().map(|row| row.get(a).copied().unwrap_or(0.0).powi(2)).sum::<f64>().sqrt();
+                let sd = if column > 0.0 { 1.0 / (std::f64::consts::SQRT_2 * column) } else { f64::INFINITY };
+                format!("{} {}", name(a), num(sd))
+            })
+            .collect();
+        let kind = if g.triangular { "triangular (width grows with the gradient)" } else { "full" };
+        let _ = writeln!(
+            h,
+            "<tr><td class=\"n\">{}</td><td><span class=\"swatch\" style=\"background:rgb({cr},{cg},{cb})\"></span>\
+             </td><td>{kind}</td><td>{}</td><td>{}</td><td class=\"n\">{}</td></tr>",
+            k + 1,
+            esc(&centre.join(", ")),
+            esc(&width.join(", ")),
+            num(g.alpha_max)
+        );
+    }
+    h.push_str("</table>\n");
 }
 
 fn figures_section(h: &mut String, figures: &[Figure]) {

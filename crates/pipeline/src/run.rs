@@ -437,14 +437,21 @@ pub(crate) fn finish(
 }
 
 /// Writes report.html into the staging folder `dir` from the report, the
-/// settings and the pack's manifest (absent for mesh packs).
+/// settings, the pack's manifest (absent for mesh packs) and its Gaussians (gaussian-tf).
 fn write_report_page(report: &RunReport, dir: &Path) -> Result<(), String> {
     let settings = crate::file::to_toml(&report.settings)?;
     let manifest: Option<mdtf_pack::Manifest> =
         std::fs::read_to_string(dir.join("pack/manifest.json")).ok().and_then(|t| serde_json::from_str(&t).ok());
+    let gaussians: Option<Vec<mdtf_pack::GaussianPrimitive>> =
+        std::fs::read_to_string(dir.join("pack/gaussians.json")).ok().and_then(|t| serde_json::from_str(&t).ok());
     let figures = crate::report_page::figures_in(dir);
-    let page =
-        crate::report_page::PageInputs { report, settings: &settings, manifest: manifest.as_ref(), figures: &figures };
+    let page = crate::report_page::PageInputs {
+        report,
+        settings: &settings,
+        manifest: manifest.as_ref(),
+        gaussians: gaussians.as_deref(),
+        figures: &figures,
+    };
     crate::report_page::write(dir, &page).map_err(|e| e.to_string())
 }
 
