@@ -938,6 +938,9 @@ fn a_two_field_head_phantom_gets_a_gaussian_per_material_and_shows_them_all() {
         assert_eq!(c.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect::<Vec<_>>(), want);
     }
     assert_every_boundary_colour_shows(&out.join("preview.png"), 3, "two-field head");
+    // drawn over the fields' joint histogram, within the figure size limit
+    let (w, h, _) = mdtf_e2e::read_rgb_png(&out.join("histogram/tf_gaussians_field0_field1.png"));
+    assert!(w <= 1200 && h <= 1200, "{w} x {h}");
     // the report page lists them
     let page = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(page.contains("<h2>Gaussian transfer function</h2>"));

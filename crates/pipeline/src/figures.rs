@@ -74,13 +74,14 @@ pub const MAX_PAIRED_FIELDS: usize = 4;
 /// The joint histograms of a multi-field input: every pair of its first
 /// [`MAX_PAIRED_FIELDS`] fields, and each of them against ||G|| when it was
 /// derived (the gaussian-tf pack's gradient), written into `hdir`; returns
-/// the figures written, relative to the run's folder.
+/// the figures written, relative to the run's folder, and the histograms
+/// of the field pairs (for [`write_gaussian_figures`]).
 pub fn write_field_pair_histograms(
     fields: &[String],
     chans: &BTreeMap<String, Volume>,
     hdir: &Path,
     title: &str,
-) -> Result<Vec<String>, String> {
+) -> Result<(Vec<String>, Vec<Histogram>), String> {
     let named: Vec<(&str, &Volume)> =
         fields.iter().take(MAX_PAIRED_FIELDS).filter_map(|f| chans.get(f).map(|v| (f.as_str(), v))).collect();
     let axis = |name: &str, v: &Volume, spec: AxisSpec| spec.resolve(name, v.samples()).map_err(|e| e.to_string());
@@ -97,11 +98,74 @@ pub fn write_field_pair_histograms(
         pairs.extend((0..named.len()).map(|a| (a, gnorm, gnorm_axis.clone())));
     }
     let mut written = Vec::new();
+    let mut field_pairs = Vec::new();
     for (a, second, second_axis) in pairs {
         let file = format!("histogram/hist_{}_{}.png", axes[a].name, second_axis.name);
         let hist = count(&[named[a].1.samples(), second.samples()], vec![axes[a].clone(), second_axis], None)
             .map_err(|e| e.to_string())?;
         write_histogram(hdir, &hist, Scale::Log, title).map_err(|e| e.to_string())?;
+        written.push(file);
+        if hist.axes[1].name != "gnorm" {
+            field_pairs.push(hist);
+        }
+    }
+    Ok((written, field_pairs))
+}
+
+/// Cells per axis of the Gaussian TF drawn over a field-pair histogram.
+const GAUSSIAN_FIGURE_CELLS: usize = 256;
+
+/// Writes `tf_gaussians_<a>_<b>.png` into `dir` for every field-pair
+/// histogram of `hists` (fields named as in `fields`): the full Gaussians
+/// of `gaussians` over the pair's plane, the other fields at each
+/// primitive's centre, drawn over the counts (colour by each primitive's
+/// share of the extinction sum alpha_max rho, opacity 1 - exp(-sum)).
+/// Triangular primitives, which need the gradient, are left out. Returns
+/// the files written, relative to `dir`.
+pub fn write_gaussian_figures(
+    dir: &Path,
+    gaussians: &[mdtf_pack::GaussianPrimitive],
+    hists: &[Histogram],
+    fields: &[String],
+    title: &str,
+) -> Result<Vec<String>, VolumeError> {
+    let full: Vec<&mdtf_pack::GaussianPrimitive> =
+        gaussians.iter().filter(|g| !g.triangular && g.fields() == fields.len()).collect();
+    let mut written = Vec::new();
+    if full.is_empty() {
+        return Ok(written);
+    }
+    let n = GAUSSIAN_FIGURE_CELLS;
+    for h in hists.iter().filter(|h| h.axes.len() == 2) {
+        let index = |name: &str| fields.iter().position(|f| f == name);
+        let (Some(a), Some(b)) = (index(&h.axes[0].name), index(&h.axes[1].name)) else { continue };
+        let (x, y) = (&h.axes[0], &h.axes[1]);
+        let centre = |axis: &Axis, i: usize| axis.min + (i as f64 + 0.5) * (axis.max - axis.min) / n as f64;
+        let mut rgba = vec![0f32; 4 * n * n];
+        for (cell, out) in rgba.chunks_exact_mut(4).enumerate() {
+            let (xv, yv) = (centre(x, cell % n), centre(y, cell / n));
+            let (mut depth, mut colour) = (0.0, [0.0f64; 3]);
+            for g in &full {
+                let mut v = g.centre.clone();
+                (v[a], v[b]) = (xv, yv);
+                let e = g.alpha_max * g.density(&v);
+                depth += e;
+                colour.iter_mut().zip(g.colour).for_each(|(c, gc)| *c += e * gc);
+            }
+            if depth > 0.0 {
+                out[..3].iter_mut().zip(colour).for_each(|(o, c)| *o = (c / depth) as f32);
+                out[3] = (1.0 - (-depth).exp()) as f32;
+            }
+        }
+        let mut labels = Labels::of(h, &format!("Gaussian TF over the ({}, {}) histogram of {title}", x.name, y.name));
+        labels.note = Some(
+            "the Gaussians' colour mixed in by the square root of their opacity relative to the largest; other \
+             fields at each Gaussian's centre"
+                .into(),
+        );
+        let overlay = Overlay { x: (x.min, x.max, n), y: (y.min, y.max, n), rgba: &rgba };
+        let file = format!("tf_gaussians_{}_{}.png", x.name, y.name);
+        write_overlay_figure(&dir.join(&file), h, Scale::Log, &labels, &overlay)?;
         written.push(file);
     }
     Ok(written)

@@ -210,6 +210,8 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     // histograms (the histogram volume is kept for the pack's default opacity;
     // it comes first so that the boundaries it shows are drawn on the others)
     let mut hists = crate::hist_files::Written::default();
+    // the field pairs' joint histograms, which the Gaussian TF figures draw over
+    let mut field_pair_hists = Vec::new();
     if let Some(h) = &p.histogram {
         progress.stage("histogram")?;
         let t = Instant::now();
@@ -260,9 +262,10 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         }
         hists = crate::hist_files::write(&hdir, counted, &input_name, &mut warnings).map_err(err)?;
         if h.joint && !fields.is_empty() {
-            hists
-                .outputs
-                .extend(crate::figures::write_field_pair_histograms(&fields, &chans, &hdir, &input_name).map_err(err)?);
+            let (written, pairs) =
+                crate::figures::write_field_pair_histograms(&fields, &chans, &hdir, &input_name).map_err(err)?;
+            hists.outputs.extend(written);
+            field_pair_hists = pairs;
         }
         stages.done("histogram", t, n, hists.outputs.clone());
     }
@@ -371,6 +374,10 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
             let json = serde_json::to_string_pretty(g).map_err(at("pack"))?;
             write_file_atomically(&pdir.join("gaussians.json"), |w| w.write_all(json.as_bytes()))
                 .map_err(at("pack"))?;
+            let hdir = dir.join("histogram");
+            let written = crate::figures::write_gaussian_figures(&hdir, g, &field_pair_hists, &fields, &input_name)
+                .map_err(at("pack"))?;
+            pack_outputs.extend(written.into_iter().map(|f| format!("histogram/{f}")));
         }
     }
     stages.done(pack_stage, t, n, pack_outputs);
