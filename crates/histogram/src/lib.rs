@@ -1,7 +1,8 @@
 //! Histogram stage of mdtf: joint histograms of 1 to 3 channels (v, g, f'',
 //! the stretched (v, g_hit), pairs of fields), their pictures, and the
 //! histogram volume of Kindlmann and Durkin with the position function and a
-//! default opacity transfer function.
+//! default opacity transfer function, the boundaries it shows, and the
+//! materials (clusters) of several fields' joint histogram.
 //!
 //! Counts are integers and parts are summed in a fixed order, so results do
 //! not depend on the thread count. Bin rule: [`Axis::bin`].
