@@ -575,7 +575,9 @@ fn render_impl(
             let origin = [0, 1, 2].map(|a| centre[a] + u * right[a] + v * up[a] - radius * dir[a]);
             let (mut rgb, mut alpha) = ([0f64; 3], 0f64);
             // the previous sample's TF coordinates (analytic Gaussian segments)
-            let mut previous: Option<Vec<f64>> = None;
+            // (two buffers swapped each sample: no allocation per sample)
+            let (mut previous, mut has_previous, mut here): (Vec<f64>, bool, Vec<f64>) =
+                (Vec::new(), false, Vec::new());
             // the previous sample's cell and block (chord and peak classifiers),
             // and its TF coordinates once the chord classifier computed them
             let mut prev: Option<(Cell, usize, [f64; 3])> = None;
@@ -686,21 +688,26 @@ fn render_impl(
                         }
                     }
                     Classifier::Gaussian { primitives, channels: _, analytic, sqrt_last } => {
-                        let mut v: Vec<f64> = table_chans.iter().map(|&c| sample(c) as f64).collect();
-                        if *sqrt_last && let Some(last) = v.last_mut() {
+                        here.clear();
+                        here.extend(table_chans.iter().map(|&c| sample(c) as f64));
+                        if *sqrt_last && let Some(last) = here.last_mut() {
                             *last = last.max(0.0).sqrt();
                         }
-                        let from = if *analytic { previous.replace(v.clone()) } else { None };
+                        let from_previous = *analytic && has_previous;
                         let (mut depth, mut c) = (0.0, [0.0f64; 3]);
                         for gp in primitives {
-                            let rho = match &from {
-                                Some(v0) => gp.segment_integral(v0, &v),
-                                None => gp.density(&v),
+                            let rho = match from_previous {
+                                true => gp.segment_integral(&previous, &here),
+                                false => gp.density(&here),
                             };
                             depth += gp.alpha_max * rho;
                             for k in 0..3 {
                                 c[k] += gp.alpha_max * rho * gp.colour[k];
                             }
+                        }
+                        if *analytic {
+                            std::mem::swap(&mut previous, &mut here);
+                            has_previous = true;
                         }
                         let colour = if depth > 0.0 { c.map(|x| (x / depth) as f32) } else { [0.0; 3] };
                         // eq. 15: alpha = 1 - exp(-l sum tau_i rho'_i), l = the step in voxels
