@@ -6,8 +6,8 @@
 //! A homogeneous material is a blob of voxels around its fields' values
 //! (spread by noise); the voxels between two materials (partial volume)
 //! lie on a thin arc joining their blobs. So the materials are the modes
-//! of the joint histogram, and each voxel belongs to the mode its cell
-//! climbs to. The rule, in full:
+//! of the joint histogram, and each voxel belongs to the mode whose basin
+//! holds its cell. The rule, in full:
 //! 1. the m fields (1 to 4) are binned over their finite ranges into
 //!    [`CLUSTER_BINS`]`[m - 1]` bins per axis; voxels with a non-finite field
 //!    are left out;
@@ -151,11 +151,11 @@ pub fn joint_clusters(fields: &[&[f32]]) -> Result<JointClusters, HistogramError
         axes.push((lo as f64, (hi as f64 - lo as f64) / bins as f64));
     }
     let cells = bins.pow(m as u32);
-    let mut shell = JointClusters { axes, bins, cell_label: vec![NO_CLUSTER; cells], clusters: Vec::new() };
-    let counts = count_cells(&shell, fields, cells);
+    let mut found = JointClusters { axes, bins, cell_label: vec![NO_CLUSTER; cells], clusters: Vec::new() };
+    let counts = count_cells(&found, fields, cells);
     let total: u64 = counts.iter().sum();
     let smooth = smoothed(&counts, bins, m);
-    let peak_of = climb(&smooth, bins, m);
+    let peak_of = basins(&smooth, bins, m);
 
     let mut mass: std::collections::BTreeMap<usize, u64> = std::collections::BTreeMap::new();
     for (c, &count) in counts.iter().enumerate() {
@@ -174,19 +174,19 @@ pub fn joint_clusters(fields: &[&[f32]]) -> Result<JointClusters, HistogramError
         for c in (0..cells).filter(|&c| counts[c] > 0 && peak_of[c] == peak) {
             let core = smooth[c] >= floor;
             let bits = if core { CORE_BIT } else { 0 } | if smooth[c] >= top { TOP_BIT } else { 0 };
-            shell.cell_label[c] = k as u8 | bits;
+            found.cell_label[c] = k as u8 | bits;
             core_voxels += if core { counts[c] } else { 0 };
         }
         let centre = (0..m)
             .map(|a| {
                 let b = (peak / bins.pow(a as u32)) % bins;
-                let (lo, width) = shell.axes[a];
+                let (lo, width) = found.axes[a];
                 lo + (b as f64 + 0.5) * width
             })
             .collect();
-        shell.clusters.push(Cluster { peak: centre, voxels, core_voxels });
+        found.clusters.push(Cluster { peak: centre, voxels, core_voxels });
     }
-    Ok(shell)
+    Ok(found)
 }
 
 /// The joint histogram's counts per cell, counted in parts summed in order.
@@ -233,7 +233,7 @@ fn smoothed(counts: &[u64], bins: usize, m: usize) -> Vec<f64> {
 /// else it joins the neighbouring basin with the highest peak, and two
 /// basins it touches become one when its count (their saddle) is at least
 /// [`MERGE_RATIO`] of the lower peak's.
-fn climb(smooth: &[f64], bins: usize, m: usize) -> Vec<usize> {
+fn basins(smooth: &[f64], bins: usize, m: usize) -> Vec<usize> {
     let cells = smooth.len();
     let offsets: Vec<Vec<i64>> = (0..3usize.pow(m as u32))
         .map(|k| (0..m).map(|a| (k / 3usize.pow(a as u32)) as i64 % 3 - 1).collect())

@@ -142,11 +142,12 @@ pub fn write_gaussian_figures(
         let (x, y) = (&h.axes[0], &h.axes[1]);
         let centre = |axis: &Axis, i: usize| axis.min + (i as f64 + 0.5) * (axis.max - axis.min) / n as f64;
         let mut rgba = vec![0f32; 4 * n * n];
+        let mut v = vec![0.0; fields.len()];
         for (cell, out) in rgba.chunks_exact_mut(4).enumerate() {
             let (xv, yv) = (centre(x, cell % n), centre(y, cell / n));
             let (mut depth, mut colour) = (0.0, [0.0f64; 3]);
             for g in &full {
-                let mut v = g.centre.clone();
+                v.copy_from_slice(&g.centre);
                 (v[a], v[b]) = (xv, yv);
                 let e = g.alpha_max * g.density(&v);
                 depth += e;

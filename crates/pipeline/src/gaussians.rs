@@ -168,19 +168,14 @@ pub const SEPARATION_SIGMAS: f64 = 4.0;
 ///   ([`crate::materials::MaterialShapes::mean_chord`]) times the
 ///   Gaussian's mean density over its own voxels, 2^(-m/2) for m fields.
 pub fn material_gaussians(fields: &[&[f32]], geometry: &Geometry) -> Result<Vec<GaussianPrimitive>, String> {
-    use mdtf_histogram::{CLUSTER_MASK, CORE_BIT, TOP_BIT};
+    use mdtf_histogram::{CLUSTER_MASK, CORE_BIT};
     let clusters = mdtf_histogram::joint_clusters(fields).map_err(|e| e.to_string())?;
     let labels = clusters.labels(fields);
     let shapes = crate::materials::MaterialShapes::of(&labels, geometry.dims, clusters.clusters.len());
     let floor: Vec<f64> = clusters.bin_widths().iter().map(|w| w * w / 12.0).collect();
     let is =
         |k: usize, bit: u8| move |l: u8| l != mdtf_histogram::NO_CLUSTER && l & (CLUSTER_MASK | bit) == k as u8 | bit;
-    let tops: Vec<Vec<f64>> = (0..clusters.clusters.len())
-        .map(|k| {
-            let in_top = is(k, TOP_BIT);
-            mean_where(fields, |i| in_top(labels[i]))
-        })
-        .collect();
+    let tops = top_means(fields, &labels, clusters.clusters.len());
     let mut fitted = Vec::new();
     for k in (0..clusters.clusters.len()).filter(|&k| Some(k) != shapes.background) {
         let in_core = is(k, CORE_BIT);
@@ -215,16 +210,22 @@ pub fn material_gaussians(fields: &[&[f32]], geometry: &Geometry) -> Result<Vec<
         .collect())
 }
 
-/// Each field's mean over the voxels `selected` (0 where none is).
-fn mean_where(fields: &[&[f32]], selected: impl Fn(usize) -> bool) -> Vec<f64> {
-    let n = fields.first().map_or(0, |f| f.len());
-    let mut sum = vec![0.0f64; fields.len()];
-    let mut count = 0usize;
-    for i in (0..n).filter(|&i| selected(i)) {
-        count += 1;
-        sum.iter_mut().zip(fields).for_each(|(s, f)| *s += f[i] as f64);
+/// Each of the `count` clusters' mean of every field over the voxels of
+/// its top (`labels` as [`mdtf_histogram::JointClusters::labels`] gives
+/// them; 0 for a cluster without such a voxel), in one pass.
+fn top_means(fields: &[&[f32]], labels: &[u8], count: usize) -> Vec<Vec<f64>> {
+    use mdtf_histogram::{CLUSTER_MASK, NO_CLUSTER, TOP_BIT};
+    let mut sums = vec![vec![0.0f64; fields.len()]; count];
+    let mut voxels = vec![0usize; count];
+    for (i, &l) in labels.iter().enumerate() {
+        if l == NO_CLUSTER || l & TOP_BIT == 0 {
+            continue;
+        }
+        let k = (l & CLUSTER_MASK) as usize;
+        voxels[k] += 1;
+        sums[k].iter_mut().zip(fields).for_each(|(s, f)| *s += f[i] as f64);
     }
-    sum.iter().map(|s| s / count.max(1) as f64).collect()
+    sums.into_iter().zip(voxels).map(|(s, n)| s.into_iter().map(|x| x / n.max(1) as f64).collect()).collect()
 }
 
 /// The IGauss table (eq. 16, 128^2 over [-10, 10]^2) and the erf-difference
