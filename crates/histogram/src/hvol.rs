@@ -189,6 +189,59 @@ impl HvolAccumulator {
     }
 }
 
+/// A histogram volume fed slab by slab (runs of whole z-slices, in order),
+/// counted in parallel over the fixed parts a slab spans: each part always
+/// goes to the same lane, which adds its slices in order, so the result
+/// equals [`histogram_volume`]'s bit for bit whatever the slabs and lanes.
+pub struct HvolBySlabs {
+    lanes: Vec<HvolAccumulator>,
+    parts: Vec<Range<usize>>,
+    plane: usize,
+}
+
+impl HvolBySlabs {
+    /// An empty histogram volume over `axes` for a volume of `slices`
+    /// z-slices of `plane` voxels, counted on `lanes` accumulators (at most
+    /// [`HVOL_PARTS`]; each holds its own counts, up to 4 bytes a bin).
+    pub fn new(axes: &HvolAxes, plane: usize, slices: usize, lanes: usize) -> Result<HvolBySlabs, HistogramError> {
+        let lanes = (0..lanes.clamp(1, HVOL_PARTS))
+            .map(|_| HvolAccumulator::new(axes, plane * slices))
+            .collect::<Result<_, _>>()?;
+        Ok(HvolBySlabs { lanes, parts: fixed_parts(slices), plane })
+    }
+
+    /// Adds the slab of z-slices from `first` on: its v, g and f'' samples,
+    /// whole slices (the slabs must come in order and cover each slice once).
+    pub fn add_slab(&mut self, first: usize, v: &[f32], g: &[f32], h: &[f32]) -> Result<(), HistogramError> {
+        let plane = self.plane;
+        let n = v.len();
+        if g.len() != n || h.len() != n || !n.is_multiple_of(plane) {
+            return Err(HistogramError::Geometry(format!(
+                "a slab of {n}, {} and {} samples is not whole z-slices of {plane} voxels",
+                g.len(),
+                h.len()
+            )));
+        }
+        let slab = first..first + n / plane;
+        let count = self.lanes.len();
+        let parts = &self.parts;
+        self.lanes.par_iter_mut().enumerate().for_each(|(lane, acc)| {
+            for (p, part) in parts.iter().enumerate().filter(|(p, _)| p % count == lane) {
+                for k in part.start.max(slab.start)..part.end.min(slab.end) {
+                    let at = (k - first) * plane..(k - first + 1) * plane;
+                    acc.add(p, &v[at.clone()], &g[at.clone()], &h[at]);
+                }
+            }
+        });
+        Ok(())
+    }
+
+    /// The histogram volume of every slab added.
+    pub fn finish(self, params: &HvolParams) -> Result<HistogramVolume, HistogramError> {
+        HvolAccumulator::finish(self.lanes, params)
+    }
+}
+
 /// Builds the histogram volume of value `v`, gradient magnitude `g` and
 /// second derivative `h`, x-fastest volumes of `plane` voxels per z-slice.
 /// The sums are kept per fixed part of the slices and their runs of equal

@@ -4,7 +4,7 @@
 use mdtf_boundary::{BoundaryInput, BoundaryParams};
 use mdtf_datagen::{RadialPhantom, erf_sphere};
 use mdtf_derive::{DeriveParams, Item};
-use mdtf_histogram::{Axis, AxisSpec, HvolParams, Scale, count, grey_level, histogram_volume, hit_mask, write_png};
+use mdtf_histogram::{Axis, AxisSpec, HvolAxes, HvolBySlabs, HvolParams, Scale, count, grey_level, histogram_volume, hit_mask, write_png};
 use mdtf_volume::{Geometry, MultiField, Volume};
 use std::f64::consts::PI;
 
@@ -276,6 +276,33 @@ fn histogram_volume_does_not_depend_on_the_thread_count() {
     for threads in [2, 3, 5] {
         assert_eq!(one, run(threads), "{threads} threads");
     }
+}
+
+#[test]
+fn a_histogram_volume_fed_by_slabs_equals_the_whole_one_for_any_slabs_and_lanes() {
+    let c = channels(erf_sphere(Geometry::new([40, 36, 48], [1.0, 1.2, 0.8]), 13.0, 2.0, 3.0, 255.0, None).volume());
+    let (v, g, f2, plane) = (c.v.samples(), c.g.samples(), c.f2.samples(), c.v.plane_len());
+    let params = HvolParams::default();
+    let whole = histogram_volume(v, g, f2, plane, &params).unwrap();
+    let axes = HvolAxes::of(v, g, f2, &params).unwrap();
+    for height in [1, 7, 33, 48] {
+        for lanes in [1, 2, 3, 16] {
+            let mut by_slabs = HvolBySlabs::new(&axes, plane, 48, lanes).unwrap();
+            for first in (0..48).step_by(height) {
+                let at = first * plane..(first + height).min(48) * plane;
+                by_slabs.add_slab(first, &v[at.clone()], &g[at.clone()], &f2[at]).unwrap();
+            }
+            let hv = by_slabs.finish(&params).unwrap();
+            assert_eq!(hv.hist, whole.hist, "height {height}, lanes {lanes}");
+            assert_eq!(
+                (hv.mean_g_v, hv.mean_h_v, hv.position, hv.sigma),
+                (whole.mean_g_v.clone(), whole.mean_h_v.clone(), whole.position.clone(), whole.sigma),
+                "height {height}, lanes {lanes}"
+            );
+        }
+    }
+    let mut by_slabs = HvolBySlabs::new(&axes, plane, 48, 2).unwrap();
+    assert!(by_slabs.add_slab(0, &v[..plane + 1], &g[..plane + 1], &f2[..plane + 1]).is_err(), "a partial slice");
 }
 
 /// A (v, g) histogram of 8 x 6 bins with 1000 voxels in bin (2, 5) and 10 in bin (6, 1), and its samples.

@@ -8,7 +8,8 @@ use crate::manifest::{ChannelEntry, ChannelSource, Manifest, ManifestGeometry, P
 use crate::profile::{Profile, TextureLayout, describe};
 use crate::quantise::{Decode, Dtype, decode_for};
 use crate::{Lut, PackError, PackParams};
-use mdtf_volume::{Geometry, Volume, VolumeError, write_file_atomically};
+use mdtf_volume::{AtomicWriter, Geometry, Volume, VolumeError, write_file_atomically};
+use std::io::Write;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::ops::Range;
@@ -262,15 +263,17 @@ impl<'a> PackWriter<'a> {
         Ok(())
     }
 
-    /// Quantises texture `layout` a slab of z-slices at a time and writes it:
-    /// `slab(z)` gives the texture's channels on planes `z` (each a volume of
-    /// those planes), for each range of `slabs` in turn (in order, covering
-    /// every plane once). Every channel needs its code range in the pack's
-    /// parameters (unit normals excepted), since no slab sees the whole
-    /// channel; the bytes equal [`PackWriter::add`]'s with those ranges.
+    /// Quantises the textures `layouts` together, a slab of z-slices at a
+    /// time, and writes them: `slab(z)` gives every channel the textures read
+    /// on planes `z` (each a volume of those planes), for each range of
+    /// `slabs` in turn (in order, covering every plane once), so each slab's
+    /// channels are made once for all the textures. Every channel needs its
+    /// code range in the pack's parameters (unit normals excepted), since no
+    /// slab sees the whole channel; the bytes equal [`PackWriter::add`]'s
+    /// with those ranges. On an error no texture of `layouts` is written.
     pub fn add_slabs(
         &mut self,
-        layout: &TextureLayout,
+        layouts: &[TextureLayout],
         slabs: &[Range<usize>],
         slab: &mut dyn FnMut(Range<usize>) -> Result<Vec<(String, Volume)>, PackError>,
     ) -> Result<(), PackError> {
@@ -289,63 +292,62 @@ impl<'a> PackWriter<'a> {
                     .into(),
             ));
         }
-        let decodes = self.encoder.prepare_ranged(layout)?;
-        let mut failure: Option<PackError> = None;
-        let geometry = self.encoder.geometry.clone();
-        let fields = !self.encoder.params.fields.is_empty();
-        let profile = self.encoder.params.profile.to_string();
-        let mut write_slabs = |w: &mut dyn std::io::Write| -> std::io::Result<()> {
-            let mut bytes = Vec::new();
-            for z in slabs {
-                let chans = match slab(z.clone()) {
-                    Ok(c) => c,
-                    Err(e) => {
-                        failure = Some(e);
-                        return Err(std::io::Error::other("a slab's channels could not be made"));
-                    }
-                };
-                let mut slab_decodes = Vec::with_capacity(decodes.len());
-                for (c, d) in layout.components.iter().zip(&decodes) {
-                    let (Some(c), Some(d)) = (c, d) else {
-                        slab_decodes.push(None);
-                        continue;
-                    };
-                    let Some((_, v)) = chans.iter().find(|(n, _)| n == c) else {
-                        failure = Some(PackError::MissingChannels {
-                            profile: profile.clone(),
-                            missing: format!("{c} (made by the {} stage)", describe(c, fields).2),
-                        });
-                        return Err(std::io::Error::other("a channel is missing from a slab"));
-                    };
-                    if v.geometry.dims != [geometry.dims[0], geometry.dims[1], z.len()] {
-                        failure = Some(PackError::Geometry(format!(
-                            "channel {c} of planes {z:?} has {} voxels, not {} x {} x {}",
-                            v.geometry.dims_string(),
-                            geometry.dims[0],
-                            geometry.dims[1],
-                            z.len()
-                        )));
-                        return Err(std::io::Error::other("a slab is not on the pack's grid"));
-                    }
-                    slab_decodes.push(Some((v.samples(), *d)));
-                }
-                let p = Prepared {
-                    dtype: layout.dtype,
-                    dims: [geometry.dims[0], geometry.dims[1], z.len()],
-                    decodes: slab_decodes,
-                };
+        let decodes =
+            layouts.iter().map(|layout| self.encoder.prepare_ranged(layout)).collect::<Result<Vec<_>, _>>()?;
+        let mut files = layouts
+            .iter()
+            .map(|layout| AtomicWriter::create(&self.dir.join(format!("{}.raw", layout.name))))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut bytes = Vec::new();
+        for z in slabs {
+            let chans = slab(z.clone())?;
+            for ((layout, decodes), file) in layouts.iter().zip(&decodes).zip(&mut files) {
+                let p = self.slab_of(layout, decodes, z, &chans)?;
                 bytes.resize(p.plane_bytes() * z.len(), 0);
                 p.encode_planes(0, &mut bytes);
-                w.write_all(&bytes)?;
+                file.write_all(&bytes).map_err(|cause| {
+                    PackError::Io(VolumeError::Io { path: self.dir.join(format!("{}.raw", layout.name)), cause })
+                })?;
             }
-            Ok(())
-        };
-        let written = write_texture(self.dir, &geometry, layout, TextureBytes::Slabs(&mut write_slabs), false);
-        if let Some(e) = failure {
-            return Err(e);
         }
-        self.textures.push(written?);
+        for (layout, file) in layouts.iter().zip(files) {
+            file.publish()?;
+            self.textures.push(write_header(self.dir, &self.encoder.geometry, layout, None)?);
+        }
         Ok(())
+    }
+
+    /// Texture `layout` on the planes `z` of a slab whose channels are
+    /// `chans`, ready to quantise with its components' `decodes`.
+    fn slab_of<'v>(
+        &self,
+        layout: &TextureLayout,
+        decodes: &[Option<Decode>],
+        z: &Range<usize>,
+        chans: &'v [(String, Volume)],
+    ) -> Result<Prepared<'v>, PackError> {
+        let geometry = &self.encoder.geometry;
+        let mut slab_decodes = Vec::with_capacity(decodes.len());
+        for (c, d) in layout.components.iter().zip(decodes) {
+            let (Some(c), Some(d)) = (c, d) else {
+                slab_decodes.push(None);
+                continue;
+            };
+            let Some((_, v)) = chans.iter().find(|(n, _)| n == c) else {
+                return Err(self.encoder.missing(c));
+            };
+            if v.geometry.dims != [geometry.dims[0], geometry.dims[1], z.len()] {
+                return Err(PackError::Geometry(format!(
+                    "channel {c} of planes {z:?} has {} voxels, not {} x {} x {}",
+                    v.geometry.dims_string(),
+                    geometry.dims[0],
+                    geometry.dims[1],
+                    z.len()
+                )));
+            }
+            slab_decodes.push(Some((v.samples(), *d)));
+        }
+        Ok(Prepared { dtype: layout.dtype, dims: [geometry.dims[0], geometry.dims[1], z.len()], decodes: slab_decodes })
     }
 
     /// Writes the lookup tables and `manifest.json`; returns the manifest.
@@ -359,8 +361,6 @@ impl<'a> PackWriter<'a> {
 pub(crate) enum TextureBytes<'a, 'v> {
     Whole(&'a [u8]),
     Streamed(&'a Prepared<'v>),
-    /// Written by the closure, slab by slab.
-    Slabs(&'a mut dyn FnMut(&mut dyn std::io::Write) -> std::io::Result<()>),
 }
 
 /// Writes one texture's bytes as `<name>.raw` with a detached NRRD header
@@ -373,15 +373,33 @@ pub(crate) fn write_texture(
     bytes: TextureBytes,
     nifti: bool,
 ) -> Result<TextureEntry, PackError> {
+    let mut bytes = bytes;
+    write_file_atomically(&dir.join(format!("{}.raw", layout.name)), |w| match &mut bytes {
+        TextureBytes::Whole(b) => w.write_all(b),
+        TextureBytes::Streamed(p) => p.stream(&mut |b| w.write_all(b)),
+    })?;
+    let nifti = match (nifti, &bytes) {
+        (true, TextureBytes::Whole(b)) => {
+            let file = format!("{}.nii", layout.name);
+            write_nifti_texture(&dir.join(&file), geometry, &layout.components, layout.dtype, b)?;
+            Some(file)
+        }
+        _ => None,
+    };
+    write_header(dir, geometry, layout, nifti)
+}
+
+/// Writes the detached NRRD header `<name>.nhdr` of texture `layout`, whose
+/// data `<name>.raw` (and NIfTI copy `nifti`) is written; returns its manifest entry.
+fn write_header(
+    dir: &Path,
+    geometry: &Geometry,
+    layout: &TextureLayout,
+    nifti: Option<String>,
+) -> Result<TextureEntry, PackError> {
     let comps = layout.components.len();
     let data_file = format!("{}.raw", layout.name);
     let header_file = format!("{}.nhdr", layout.name);
-    let mut bytes = bytes;
-    write_file_atomically(&dir.join(&data_file), |w| match &mut bytes {
-        TextureBytes::Whole(b) => w.write_all(b),
-        TextureBytes::Streamed(p) => p.stream(&mut |b| w.write_all(b)),
-        TextureBytes::Slabs(f) => f(w),
-    })?;
     let type_name = match layout.dtype {
         Dtype::U8 => "uint8",
         Dtype::U16 | Dtype::F16 => "uint16",
@@ -391,14 +409,6 @@ pub(crate) fn write_texture(
     let extra = [("mdtf_components", order.join(" ")), ("mdtf_dtype", format!("{:?}", layout.dtype).to_lowercase())];
     let header = mdtf_volume::nrrd::texture_header(geometry, comps, type_name, &data_file, &extra);
     write_file_atomically(&dir.join(&header_file), |w| w.write_all(header.as_bytes()))?;
-    let nifti = match (nifti, &bytes) {
-        (true, TextureBytes::Whole(b)) => {
-            let file = format!("{}.nii", layout.name);
-            write_nifti_texture(&dir.join(&file), geometry, &layout.components, layout.dtype, b)?;
-            Some(file)
-        }
-        _ => None,
-    };
     Ok(TextureEntry {
         name: layout.name.clone(),
         header: header_file,

@@ -1,4 +1,5 @@
-//! A texture written slab by slab ([`PackWriter::add_slabs`]) has the bytes
+//! Textures written slab by slab ([`PackWriter::add_slabs`]), one at a time
+//! or all from one pass, have the bytes
 //! and manifest entries of the same texture written whole, for slabs of one
 //! plane, of uneven heights and of the whole volume.
 
@@ -72,19 +73,27 @@ fn a_texture_written_slab_by_slab_equals_the_whole_one() {
             slabs.push(z..z + h);
             z += h;
         }
-        let dir = tempfile::tempdir().unwrap();
-        let mut w = PackWriter::new(dir.path(), &params, geo.clone(), &sources);
-        for layout in texture_layouts(&params) {
-            let mut seen = Vec::new();
-            w.add_slabs(&layout, &slabs, &mut |z| {
-                seen.push(z.clone());
-                Ok(chans.iter().map(|(c, v)| (c.clone(), v.z_slab(z.clone()))).collect())
-            })
-            .unwrap();
-            assert_eq!(seen, slabs, "each slab asked for once, in order");
+        // each texture on its own, then all of them from one pass over the slabs
+        let layouts = texture_layouts(&params);
+        for together in [false, true] {
+            let groups: Vec<&[mdtf_pack::TextureLayout]> = match together {
+                false => layouts.chunks(1).collect(),
+                true => vec![&layouts[..]],
+            };
+            let dir = tempfile::tempdir().unwrap();
+            let mut w = PackWriter::new(dir.path(), &params, geo.clone(), &sources);
+            for group in groups {
+                let mut seen = Vec::new();
+                w.add_slabs(group, &slabs, &mut |z| {
+                    seen.push(z.clone());
+                    Ok(chans.iter().map(|(c, v)| (c.clone(), v.z_slab(z.clone()))).collect())
+                })
+                .unwrap();
+                assert_eq!(seen, slabs, "each slab asked for once, in order");
+            }
+            w.finish(&[], provenance()).unwrap();
+            assert_eq!(written(dir.path()), whole, "slab heights {heights:?}, together {together}");
         }
-        w.finish(&[], provenance()).unwrap();
-        assert_eq!(written(dir.path()), whole, "slab heights {heights:?}");
     }
 }
 
@@ -99,15 +108,24 @@ fn slab_writing_refuses_gaps_missing_ranges_and_wrong_slabs() {
     let dir = tempfile::tempdir().unwrap();
     let all = |z: std::ops::Range<usize>| Ok(chans.iter().map(|(c, v)| (c.clone(), v.z_slab(z.clone()))).collect());
     let mut w = PackWriter::new(dir.path(), &params, geo.clone(), &sources);
-    let gap = w.add_slabs(&layout, &[0..5, 6..23], &mut |z| all(z)).unwrap_err().to_string();
+    let gap = w.add_slabs(std::slice::from_ref(&layout), &[0..5, 6..23], &mut |z| all(z)).unwrap_err().to_string();
     assert!(gap.contains("do not cover"), "{gap}");
     // a slab of the wrong height
-    let wrong = w.add_slabs(&layout, &[0..5, 5..23], &mut |z| all(0..z.len() + 1)).unwrap_err().to_string();
+    let layouts = texture_layouts(&params);
+    let wrong = w.add_slabs(&layouts, &[0..5, 5..23], &mut |z| all(0..z.len() + 1)).unwrap_err().to_string();
     assert!(wrong.contains("voxels, not"), "{wrong}");
-    assert!(!dir.path().join(format!("{}.raw", layout.name)).exists(), "no partial texture is left");
+    // a failure on the second slab: no texture and no partial file is left
+    let mut slab = 0;
+    let failing = w.add_slabs(&layouts, &[0..5, 5..23], &mut |z| {
+        slab += 1;
+        if slab == 2 { Err(mdtf_pack::PackError::Geometry("made to fail".into())) } else { all(z) }
+    });
+    assert!(failing.unwrap_err().to_string().contains("made to fail"));
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(left.is_empty(), "no texture and no partial file is left: {left:?}");
     params.ranges.remove("v");
     let mut w = PackWriter::new(dir.path(), &params, geo, &sources);
     let whole = vec![std::ops::Range { start: 0, end: 23 }];
-    let unranged = w.add_slabs(&layout, &whole, &mut |z| all(z)).unwrap_err().to_string();
+    let unranged = w.add_slabs(std::slice::from_ref(&layout), &whole, &mut |z| all(z)).unwrap_err().to_string();
     assert!(unranged.contains("channel v") && unranged.contains("no code range"), "{unranged}");
 }

@@ -233,7 +233,7 @@ fn a_cancelled_run_stops_and_leaves_no_output() {
 fn a_run_cancelled_inside_each_pass_stops_there_and_leaves_no_output() {
     use std::sync::atomic::{AtomicBool, Ordering};
     let p = shipped("distance-tf", &["input.size=24", "preview=false"]);
-    for pass in ["input", "derive", "boundary", "histogram", "pack"] {
+    for pass in ["input", "derive", "boundary", "histogram and pack"] {
         let dir = tempfile::tempdir().unwrap();
         let cancel = std::sync::Arc::new(AtomicBool::new(false));
         let opts = RunOptions {

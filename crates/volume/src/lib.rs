@@ -41,7 +41,7 @@ pub use geometry::Geometry;
 pub use io::{Format, WriteOptions, read, read_scalar, read_with_info, write, write_slabs, write_volume};
 pub use limits::{available_memory, human_bytes, parse_size};
 pub use nifti_io::{read_nifti, read_nifti_with_info, write_nifti, write_nifti_slabs};
-pub use output::{Inputs, OutputFolder, write_file_atomically};
+pub use output::{AtomicWriter, Inputs, OutputFolder, write_file_atomically};
 pub use planes::PlaneReader;
 pub use png_out::{PngColour, register_figure_font, write_png};
 pub use range::{

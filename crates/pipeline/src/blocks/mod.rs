@@ -40,7 +40,7 @@ use mdtf_derive::DeriveParams;
 use mdtf_histogram::{ChannelStats, Histogram};
 use mdtf_pack::{PackParams, PackWriter, Profile};
 use mdtf_volume::{Geometry, MultiField, OutputFolder, PlaneReader, Volume};
-use reductions::{Stats, count_histograms, g_stats};
+use reductions::{SlabHistograms, Stats, g_stats};
 use std::collections::BTreeMap;
 use std::ops::Range;
 use std::path::Path;
@@ -374,40 +374,11 @@ fn run_slabs(
         stages.done("keep", t, n, written);
     }
 
-    // histograms, counted slab by slab
-    let mut hists = crate::hist_files::Written::default();
-    let hvol_only = p.histogram.is_none() && hvol_needed;
-    if p.histogram.is_some() || hvol_needed {
-        if !hvol_only {
-            progress.stage("histogram")?;
-        }
-        let t = Instant::now();
-        let mut counted = count_histograms(p, &mut chans, &stats, &slabs, n, hvol_needed, &progress)?;
-        chans.release();
-        // the default TF's histogram volume is an output only when the histograms ask for it
-        let default_hvol = if hvol_asked { None } else { counted.hvol.take() };
-        if !hvol_only {
-            let hdir = dir.join("histogram");
-            std::fs::create_dir_all(&hdir).map_err(io("histogram"))?;
-            hists = crate::hist_files::write(&hdir, counted, &input_name, &mut warnings).map_err(fail("histogram"))?;
-            stages.done("histogram", t, n, hists.outputs.clone());
-        }
-        if default_hvol.is_some() {
-            hists.hvol = default_hvol;
-        }
-    }
-    let crate::hist_files::Written { boundaries, arches, figure_hists, hvol, .. } = hists;
-
-    // pack, a texture at a time, slab by slab
-    progress.stage("pack")?;
-    let t = Instant::now();
-    let pdir = dir.join("pack");
-    std::fs::create_dir_all(&pdir).map_err(io("pack"))?;
+    // the pack's code ranges: the whole run's rule; the channels it leaves to the pack's own
+    // measure (the value) get their finite range here, since no slab sees the whole channel
     let names = profile.channels(&[]);
     let mut ranges = BTreeMap::new();
     for c in &names {
-        // the whole run's rule; the channels it leaves to the pack's own measure (the value) get
-        // their finite range here, since no slab sees the whole channel
         let whole = || stats.0.get(c.as_str()).cloned().unwrap_or_else(|| ChannelStats::new((0.0, 0.0), 0));
         let r = match crate::pack_inputs::range_of(c, whole, d_max).map_err(at("pack"))? {
             Some(r) => Some(r),
@@ -419,25 +390,75 @@ fn run_slabs(
             ranges.insert(c.clone(), r);
         }
     }
+    let params = PackParams { profile, ranges, fields: vec![], dtype: None, nifti: false };
+    let pdir = dir.join("pack");
+    std::fs::create_dir_all(&pdir).map_err(io("pack"))?;
+    let sources = BTreeMap::new();
+    let mut writer = PackWriter::new(&pdir, &params, geo.clone(), &sources);
+
+    // one pass over the slabs counts the histograms and quantises every texture, so each
+    // slab's channels are made once; its time is the pack stage's, the histogram stage's is
+    // writing the histogram files
+    let counting = p.histogram.is_some() || hvol_needed;
+    progress.stage(if counting { "histogram and pack" } else { "pack" })?;
+    let t = Instant::now();
+    let mut histograms = match counting {
+        true => Some(SlabHistograms::new(p, &mut chans, &stats, &slabs, n, hvol_needed)?),
+        false => None,
+    };
+    let layouts = mdtf_pack::texture_layouts(&params);
+    let mut read: Vec<&str> = histograms.as_ref().map(SlabHistograms::channels).unwrap_or_default();
+    for c in layouts.iter().flat_map(|l| l.components.iter().flatten()) {
+        if !read.contains(&c.as_str()) {
+            read.push(c);
+        }
+    }
+    let mut counting_failed = None;
+    let written = writer.add_slabs(&layouts, &slabs, &mut |z| {
+        progress.report_slab(z.end.div_ceil(height), slabs.len());
+        let slab = chans.volumes(z.clone(), &read).map_err(|e| mdtf_pack::PackError::Io(mdtf_volume::VolumeError::Fields(e)))?;
+        if let Some(h) = &mut histograms
+            && let Err(e) = h.add(z.start, &slab)
+        {
+            counting_failed = Some(e);
+            return Err(mdtf_pack::PackError::Geometry("the histograms could not count a slab".into()));
+        }
+        Ok(slab)
+    });
+    if let Some(e) = counting_failed {
+        return Err(e);
+    }
+    written.map_err(at("pack"))?;
+    chans.release();
+    let pack_seconds = t.elapsed();
+
+    // the histogram files
+    let mut hists = crate::hist_files::Written::default();
+    if let Some(h) = histograms {
+        let t = Instant::now();
+        let mut counted = h.finish()?;
+        // the default TF's histogram volume is an output only when the histograms ask for it
+        let default_hvol = if hvol_asked { None } else { counted.hvol.take() };
+        if p.histogram.is_some() {
+            let hdir = dir.join("histogram");
+            std::fs::create_dir_all(&hdir).map_err(io("histogram"))?;
+            hists = crate::hist_files::write(&hdir, counted, &input_name, &mut warnings).map_err(fail("histogram"))?;
+            stages.done("histogram", t, n, hists.outputs.clone());
+        }
+        if default_hvol.is_some() {
+            hists.hvol = default_hvol;
+        }
+    }
+    let crate::hist_files::Written { boundaries, arches, figure_hists, hvol, .. } = hists;
+
+    // the lookup tables, the manifest and the Gaussians
+    let t = Instant::now().checked_sub(pack_seconds).unwrap_or_else(Instant::now);
     // the tables read the channels' names and grid (their data only without a histogram volume)
     let stubs: Vec<(String, Volume)> = names.iter().map(|c| (c.clone(), Volume::zeros(geo.z_slab(0..1)))).collect();
     let alpha = p.pack.alpha.unwrap_or(mdtf_boundary::AlphaMap::Linear { a: 1.0, dc: None });
-    let luts = crate::pack_inputs::luts(profile, tf.as_ref(), &alpha, &stubs, &ranges, hvol.as_ref(), kernel)
+    let luts = crate::pack_inputs::luts(profile, tf.as_ref(), &alpha, &stubs, &params.ranges, hvol.as_ref(), kernel)
         .map_err(at("pack"))?;
     let table_names: Vec<String> = luts.iter().map(|l| l.name.clone()).collect();
-    let params = PackParams { profile, ranges, fields: vec![], dtype: None, nifti: false };
-    let sources = BTreeMap::new();
-    let mut writer = PackWriter::new(&pdir, &params, geo.clone(), &sources);
-    for layout in mdtf_pack::texture_layouts(&params) {
-        progress.check()?;
-        writer
-            .add_slabs(&layout, &slabs, &mut |z| {
-                progress.report_slab(z.end.div_ceil(height), slabs.len());
-                let names: Vec<&str> = layout.components.iter().flatten().map(String::as_str).collect();
-                chans.volumes(z, &names).map_err(|e| mdtf_pack::PackError::Io(mdtf_volume::VolumeError::Fields(e)))
-            })
-            .map_err(at("pack"))?;
-    }
     let provenance = crate::inputs::provenance(p, opts, &base, &input_name);
     writer.finish(&luts, provenance).map_err(at("pack"))?;
     if profile == Profile::GaussianTf {

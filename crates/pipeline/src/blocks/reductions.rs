@@ -5,10 +5,10 @@
 use super::{SlabChannels, medians};
 use crate::file::Pipeline;
 use crate::hist_files::Counted;
-use crate::progress::Progress;
 use crate::run::{RunError, at, fail};
 use mdtf_boundary::VolumeStats;
-use mdtf_histogram::{AxisSpec, ChannelStats, Histogram, HvolAccumulator, HvolAxes, HvolParams, count, hit_mask};
+use mdtf_histogram::{Axis, AxisSpec, ChannelStats, Histogram, HvolAxes, HvolBySlabs, HvolParams, count, hit_mask};
+use mdtf_volume::Volume;
 use std::collections::BTreeMap;
 use std::ops::Range;
 
@@ -67,95 +67,135 @@ pub(super) fn g_stats(
     Ok(VolumeStats { value_range, noise_floor, g_max })
 }
 
-/// The histograms of the pipeline (and the histogram volume when
-/// `hvol_needed`), counted slab by slab from the store with the axes the
-/// whole volume's statistics give.
-pub(super) fn count_histograms(
-    p: &Pipeline,
-    chans: &mut SlabChannels,
-    stats: &Stats,
-    slabs: &[Range<usize>],
-    n: usize,
-    hvol_needed: bool,
-    progress: &Progress,
-) -> Result<Counted, RunError> {
-    let err = at::<mdtf_histogram::HistogramError>("histogram");
-    let io = fail("histogram");
-    let joint = p.histogram.as_ref().is_some_and(|h| h.joint);
-    let stretched = p.histogram.as_ref().is_some_and(|h| h.stretched) && chans.has("g_hit") && chans.has("hit");
-    let axes = vec![stats.axis(&AxisSpec::qbert("v"), "v")?, stats.axis(&AxisSpec::qbert("g"), "g")?];
-    let mut sa = axes.clone();
-    sa[1].name = "g_hit".into();
-    let bins = HvolParams::default().bins;
-    let mut hvol = match hvol_needed {
-        true => {
-            let axes = HvolAxes {
-                v: stats.axis(&HvolAxes::spec("v", bins[0]), "v")?,
-                g: stats.axis(&HvolAxes::spec("g", bins[1]), "g")?,
-                h: stats.axis(&HvolAxes::spec("f2", bins[2]), "f2")?,
-            };
-            Some(HvolAccumulator::new(&axes, n).map_err(err)?)
-        }
-        false => None,
-    };
-    // peak finding's TF domain (v, 1/g), over the whole g's axis
-    let inv_g_axes = match joint && chans.has("inv_g") {
-        true => medians::inverse_gradient_axis(chans, slabs).map_err(&io)?.map(|ia| vec![axes[0].clone(), ia]),
-        false => None,
-    };
-    let nz = slabs.last().map_or(0, |z| z.end);
-    let mut counted = Counted { voxels: n, ..Default::default() };
-    let add = |into: &mut Option<Histogram>, h: Histogram| match into {
-        Some(a) => a.counts.iter_mut().zip(&h.counts).for_each(|(x, y)| *x += y),
-        None => *into = Some(h),
-    };
-    let mut stretched_pair: (Option<Histogram>, Option<Histogram>) = (None, None);
-    for (k, z) in slabs.iter().enumerate() {
-        progress.slab(k + 1, slabs.len())?;
+/// The histograms of the pipeline (and the histogram volume when it is
+/// needed), counted slab by slab with the axes the whole volume's
+/// statistics give: [`SlabHistograms::add`] takes each slab's channels
+/// ([`SlabHistograms::channels`]) in order.
+pub(super) struct SlabHistograms {
+    joint: bool,
+    stretched: bool,
+    /// The (v, g) axes; the stretched pair's second is g_hit.
+    axes: Vec<Axis>,
+    stretched_axes: Vec<Axis>,
+    hvol: Option<HvolBySlabs>,
+    /// Peak finding's TF domain (v, 1/g), over the whole g's axis.
+    inv_g_axes: Option<Vec<Axis>>,
+    counted: Counted,
+    stretched_pair: (Option<Histogram>, Option<Histogram>),
+}
+
+impl SlabHistograms {
+    /// Empty histograms of `p` (with the histogram volume when
+    /// `hvol_needed`) over the axes of `stats`, for the `slabs` of a volume
+    /// of `n` voxels. Peak finding's (v, 1/g) axis takes its own passes over `chans`.
+    pub(super) fn new(
+        p: &Pipeline,
+        chans: &mut SlabChannels,
+        stats: &Stats,
+        slabs: &[Range<usize>],
+        n: usize,
+        hvol_needed: bool,
+    ) -> Result<SlabHistograms, RunError> {
+        let err = at::<mdtf_histogram::HistogramError>("histogram");
+        let joint = p.histogram.as_ref().is_some_and(|h| h.joint);
+        let stretched = p.histogram.as_ref().is_some_and(|h| h.stretched) && chans.has("g_hit") && chans.has("hit");
+        let axes = vec![stats.axis(&AxisSpec::qbert("v"), "v")?, stats.axis(&AxisSpec::qbert("g"), "g")?];
+        let mut stretched_axes = axes.clone();
+        stretched_axes[1].name = "g_hit".into();
+        let bins = HvolParams::default().bins;
+        let nz = slabs.last().map_or(0, |z| z.end);
+        let hvol = match hvol_needed {
+            true => {
+                let axes = HvolAxes {
+                    v: stats.axis(&HvolAxes::spec("v", bins[0]), "v")?,
+                    g: stats.axis(&HvolAxes::spec("g", bins[1]), "g")?,
+                    h: stats.axis(&HvolAxes::spec("f2", bins[2]), "f2")?,
+                };
+                let plane = n / nz.max(1);
+                Some(HvolBySlabs::new(&axes, plane, nz, rayon::current_num_threads()).map_err(err)?)
+            }
+            false => None,
+        };
+        let inv_g_axes = match joint && chans.has("inv_g") {
+            true => medians::inverse_gradient_axis(chans, slabs)
+                .map_err(fail("histogram"))?
+                .map(|ia| vec![axes[0].clone(), ia]),
+            false => None,
+        };
+        Ok(SlabHistograms {
+            joint,
+            stretched,
+            axes,
+            stretched_axes,
+            hvol,
+            inv_g_axes,
+            counted: Counted { voxels: n, ..Default::default() },
+            stretched_pair: (None, None),
+        })
+    }
+
+    /// The channels each slab's [`SlabHistograms::add`] reads.
+    pub(super) fn channels(&self) -> Vec<&'static str> {
         let mut names = vec!["v", "g"];
-        if hvol.is_some() {
+        if self.hvol.is_some() {
             names.push("f2");
         }
-        if stretched {
+        if self.stretched {
             names.extend(["g_hit", "hit"]);
         }
-        if inv_g_axes.is_some() {
+        if self.inv_g_axes.is_some() {
             names.push("inv_g");
         }
-        let mut slab: BTreeMap<String, Vec<f32>> = chans
-            .volumes(z.clone(), &names)
-            .map_err(&io)?
-            .into_iter()
-            .map(|(c, v)| (c, v.data.into_raw_vec_and_offset().0))
-            .collect();
-        let mut take = |c: &str| slab.remove(c).ok_or_else(|| fail("histogram")(format!("{c} missing")));
-        let (v, g) = (take("v")?, take("g")?);
-        if let Some(acc) = &mut hvol {
-            let f2 = take("f2")?;
-            let plane = v.len() / z.len();
-            for (i, k) in z.clone().enumerate() {
-                let at = i * plane..(i + 1) * plane;
-                acc.add_slice(k, nz, &v[at.clone()], &g[at.clone()], &f2[at]);
-            }
-        }
-        if joint {
-            add(&mut counted.joint, count(&[&v, &g], axes.clone(), None).map_err(err)?);
-        }
-        if let Some(ia) = &inv_g_axes {
-            add(&mut counted.inv_g, count(&[&v, &take("inv_g")?], ia.clone(), None).map_err(err)?);
-        }
-        if stretched {
-            let g_hit = take("g_hit")?;
-            let traced = hit_mask(&take("hit")?);
-            add(&mut stretched_pair.0, count(&[&v, &g], axes.clone(), Some(&traced)).map_err(err)?);
-            add(&mut stretched_pair.1, count(&[&v, &g_hit], sa.clone(), Some(&traced)).map_err(err)?);
-        }
+        names
     }
-    if let Some(acc) = hvol {
-        counted.hvol = Some(HvolAccumulator::finish(vec![acc], &HvolParams::default()).map_err(err)?);
+
+    /// Counts the slab of planes from `first` on, whose channels are `slab`
+    /// (at least [`SlabHistograms::channels`]); slabs come in order.
+    pub(super) fn add(&mut self, first: usize, slab: &[(String, Volume)]) -> Result<(), RunError> {
+        let err = at::<mdtf_histogram::HistogramError>("histogram");
+        let get = |c: &str| {
+            slab.iter()
+                .find(|(n, _)| n == c)
+                .map(|(_, v)| v.samples())
+                .ok_or_else(|| fail("histogram")(format!("{c} missing")))
+        };
+        let (v, g) = (get("v")?, get("g")?);
+        if let Some(acc) = &mut self.hvol {
+            acc.add_slab(first, v, g, get("f2")?).map_err(err)?;
+        }
+        let counted = &mut self.counted;
+        if self.joint {
+            add(&mut counted.joint, count(&[v, g], self.axes.clone(), None).map_err(err)?);
+        }
+        if let Some(ia) = &self.inv_g_axes {
+            add(&mut counted.inv_g, count(&[v, get("inv_g")?], ia.clone(), None).map_err(err)?);
+        }
+        if self.stretched {
+            let traced = hit_mask(get("hit")?);
+            let pair = &mut self.stretched_pair;
+            add(&mut pair.0, count(&[v, g], self.axes.clone(), Some(&traced)).map_err(err)?);
+            add(&mut pair.1, count(&[v, get("g_hit")?], self.stretched_axes.clone(), Some(&traced)).map_err(err)?);
+        }
+        Ok(())
     }
-    if let (Some(a), Some(b)) = stretched_pair {
-        counted.stretched = Some((a, b));
+
+    /// The histograms of every slab added.
+    pub(super) fn finish(self) -> Result<Counted, RunError> {
+        let mut counted = self.counted;
+        if let Some(acc) = self.hvol {
+            counted.hvol = Some(acc.finish(&HvolParams::default()).map_err(at("histogram"))?);
+        }
+        if let (Some(a), Some(b)) = self.stretched_pair {
+            counted.stretched = Some((a, b));
+        }
+        Ok(counted)
     }
-    Ok(counted)
+}
+
+/// Adds the counts of `h` into `into` (h itself when it is the first).
+fn add(into: &mut Option<Histogram>, h: Histogram) {
+    match into {
+        Some(a) => a.counts.iter_mut().zip(&h.counts).for_each(|(x, y)| *x += y),
+        None => *into = Some(h),
+    }
 }

@@ -22,19 +22,29 @@ pub(crate) struct StagedFile {
 impl StagedFile {
     /// Writes the bytes `fill` produces into a partial file beside `target`.
     pub(crate) fn write(target: &Path, fill: impl FnOnce(&mut dyn Write) -> std::io::Result<()>) -> Result<Self> {
+        let (staged, file) = StagedFile::open(target)?;
+        let mut w = std::io::BufWriter::new(file);
+        fill(&mut w).map_err(|e| VolumeError::io(target, e))?;
+        staged.written(w)
+    }
+
+    /// A new, empty partial file beside `target`, open for writing.
+    fn open(target: &Path) -> Result<(Self, std::fs::File)> {
         let (parent, name) = super::parent_and_name(target)?;
         let tmp = staging::builder(&prefix_for(&name.to_string_lossy()))
             .tempfile_in(&parent)
             .map_err(|e| VolumeError::io(target, e))?;
         let (file, partial) = tmp.keep().map_err(|e| VolumeError::io(target, e.error))?;
         register(&partial);
-        let staged = StagedFile { partial, target: parent.join(&name), published: false };
-        let mut w = std::io::BufWriter::new(file);
-        fill(&mut w).map_err(|e| VolumeError::io(target, e))?;
-        let file = w.into_inner().map_err(|e| VolumeError::io(target, e.into_error()))?;
+        Ok((StagedFile { partial, target: parent.join(&name), published: false }, file))
+    }
+
+    /// The partial file with every byte of `w` in it, closed, ready to publish.
+    fn written(self, w: std::io::BufWriter<std::fs::File>) -> Result<Self> {
+        let file = w.into_inner().map_err(|e| VolumeError::io(&self.target, e.into_error()))?;
         drop(file);
-        publish_permissions(&staged.partial, &staged.target);
-        Ok(staged)
+        publish_permissions(&self.partial, &self.target);
+        Ok(self)
     }
 
     /// Renames the partial file over the target.
@@ -64,6 +74,49 @@ pub fn write_file_atomically(path: &Path, fill: impl FnOnce(&mut dyn Write) -> s
     let _lock = OutputLock::acquire(path)?;
     sweep(path);
     StagedFile::write(path, fill)?.publish()
+}
+
+/// A file written piece by piece and published whole: its bytes go into a
+/// partial file beside the target, renamed over it by
+/// [`AtomicWriter::publish`]. Dropped unpublished (an error, a panic), the
+/// partial file is removed and the target is left as it was. For writers
+/// that keep several files open at once; one file written by one closure is
+/// [`write_file_atomically`].
+#[derive(Debug)]
+pub struct AtomicWriter {
+    _lock: OutputLock,
+    staged: StagedFile,
+    out: std::io::BufWriter<std::fs::File>,
+}
+
+impl AtomicWriter {
+    /// Starts writing `path` (removing leftovers of an earlier, killed write to it).
+    pub fn create(path: &Path) -> Result<AtomicWriter> {
+        let lock = OutputLock::acquire(path)?;
+        sweep(path);
+        let (staged, file) = StagedFile::open(path)?;
+        Ok(AtomicWriter { _lock: lock, staged, out: std::io::BufWriter::new(file) })
+    }
+
+    /// Puts the file in place of its target, with every byte written so far.
+    pub fn publish(self) -> Result<()> {
+        let AtomicWriter { _lock, staged, out } = self;
+        staged.written(out)?.publish()
+    }
+}
+
+impl Write for AtomicWriter {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.out.write(buf)
+    }
+
+    fn write_all(&mut self, buf: &[u8]) -> std::io::Result<()> {
+        self.out.write_all(buf)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.out.flush()
+    }
 }
 
 /// Removes leftovers of killed writes to `path` (the caller holds its lock).

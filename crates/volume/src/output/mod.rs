@@ -20,7 +20,7 @@ mod identity;
 mod lock;
 mod staging;
 
-pub use file::write_file_atomically;
+pub use file::{AtomicWriter, write_file_atomically};
 pub(crate) use file::{StagedFile, old_pair_data, publish_pair, sweep};
 pub use folder::{MARKER_NAME, OutputFolder};
 pub use identity::{FileId, Inputs};
