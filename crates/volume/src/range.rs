@@ -52,46 +52,89 @@ pub fn order_statistic_of_pieces<E>(
     k: u64,
     mut pass: impl FnMut(&mut dyn FnMut(&[f32])) -> Result<(), E>,
 ) -> Result<Option<f32>, E> {
-    const BUCKETS: usize = 1 << 16;
-    fn key(v: f32) -> u32 {
-        let b = v.to_bits();
-        if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
+    let mut upper = KeyBuckets::new();
+    pass(&mut |d| upper.add(d))?;
+    order_statistic_from_buckets(k, &upper, pass)
+}
+
+/// Buckets of a radix select over f32 samples: 2^16 buckets by the upper
+/// half of an order-preserving key.
+const BUCKETS: usize = 1 << 16;
+
+/// The key of `v` whose unsigned order is the order of the floats.
+fn key(v: f32) -> u32 {
+    let b = v.to_bits();
+    if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
+}
+
+/// The first pass of [`order_statistic_of_pieces`]: counts of the finite
+/// samples seen so far by the upper half of their keys. A caller that sees
+/// the samples anyway (a pass computing them) keeps these, and the select
+/// ([`order_statistic_from_buckets`]) then takes one pass instead of two.
+#[derive(Debug, Clone)]
+pub struct KeyBuckets(Vec<u64>);
+
+impl Default for KeyBuckets {
+    fn default() -> Self {
+        KeyBuckets::new()
     }
-    let count_piece = |data: &[f32], select: &(dyn Fn(u32) -> Option<usize> + Sync), into: &mut Vec<u64>| {
-        let h = data
-            .par_chunks(1 << 18)
-            .map(|c| {
-                let mut h = vec![0u64; BUCKETS];
-                for &v in c.iter().filter(|v| v.is_finite()) {
-                    if let Some(b) = select(key(v)) {
-                        h[b] += 1;
-                    }
+}
+
+impl KeyBuckets {
+    /// No samples counted.
+    pub fn new() -> KeyBuckets {
+        KeyBuckets(vec![0; BUCKETS])
+    }
+
+    /// Counts the finite samples of `data`.
+    pub fn add(&mut self, data: &[f32]) {
+        count_piece(data, &|key| Some((key >> 16) as usize), &mut self.0);
+    }
+}
+
+/// Counts the finite samples of `data` into `into` by the bucket `select` gives each key (None: not counted).
+fn count_piece(data: &[f32], select: &(dyn Fn(u32) -> Option<usize> + Sync), into: &mut [u64]) {
+    let h = data
+        .par_chunks(1 << 18)
+        .map(|c| {
+            let mut h = vec![0u64; BUCKETS];
+            for &v in c.iter().filter(|v| v.is_finite()) {
+                if let Some(b) = select(key(v)) {
+                    h[b] += 1;
                 }
-                h
-            })
-            .reduce(
-                || vec![0u64; BUCKETS],
-                |mut a, b| {
-                    a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
-                    a
-                },
-            );
-        into.iter_mut().zip(&h).for_each(|(x, y)| *x += y);
-    };
-    // the bucket holding the k-th key, and how many keys lie in lower buckets
-    let find = |h: &[u64], k: u64| -> Option<(usize, u64)> {
-        let mut below = 0u64;
-        for (b, &n) in h.iter().enumerate() {
-            if below + n > k {
-                return Some((b, below));
             }
-            below += n;
+            h
+        })
+        .reduce(
+            || vec![0u64; BUCKETS],
+            |mut a, b| {
+                a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
+                a
+            },
+        );
+    into.iter_mut().zip(&h).for_each(|(x, y)| *x += y);
+}
+
+/// The bucket holding the k-th key, and how many keys lie in lower buckets.
+fn find(h: &[u64], k: u64) -> Option<(usize, u64)> {
+    let mut below = 0u64;
+    for (b, &n) in h.iter().enumerate() {
+        if below + n > k {
+            return Some((b, below));
         }
-        None
-    };
-    let mut upper = vec![0u64; BUCKETS];
-    pass(&mut |d| count_piece(d, &|key| Some((key >> 16) as usize), &mut upper))?;
-    let Some((hi, below)) = find(&upper, k) else { return Ok(None) };
+        below += n;
+    }
+    None
+}
+
+/// [`order_statistic_of_pieces`] whose first pass is done: `upper` counted
+/// every piece `pass(visit)` hands out (called once more here, with the same samples).
+pub fn order_statistic_from_buckets<E>(
+    k: u64,
+    upper: &KeyBuckets,
+    mut pass: impl FnMut(&mut dyn FnMut(&[f32])) -> Result<(), E>,
+) -> Result<Option<f32>, E> {
+    let Some((hi, below)) = find(&upper.0, k) else { return Ok(None) };
     let mut low = vec![0u64; BUCKETS];
     pass(&mut |d| count_piece(d, &|key| ((key >> 16) as usize == hi).then_some((key & 0xffff) as usize), &mut low))?;
     let Some((lo, _)) = find(&low, k - below) else { return Ok(None) };

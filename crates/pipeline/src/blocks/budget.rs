@@ -24,8 +24,9 @@ fn pass_planes(h: u64, plan: &Plan) -> u64 {
     // the value and its five derivatives over the block grown by the kernel; distance, g_hit,
     // hit, dot and the report's g over the slab
     let trace = if plan.trace { 6 * (h + 2 * t + 2 * k) + 5 * h } else { 0 };
-    // a texture's four channels and its bytes, or the histograms' channels
-    let pack = 5 * h;
+    // the histograms and the textures from one pass: a derive's planes, the slab's channels
+    // copied out (the value and up to five derived) and one texture's bytes at a time
+    let pack = 8 * read + 7 * h;
     derive.max(prefilter).max(trace).max(pack)
 }
 

@@ -235,6 +235,8 @@ fn run_slabs(
     }
     let mut chans = SlabChannels::new(store, groups, plan.reach.kernel[2], nz).cancelled_by(opts.cancel.clone());
     let summarised: Vec<&str> = ["g", "f2", "inv_g"].into_iter().filter(|c| chans.has(c)).collect();
+    // the first pass of the median of the g the tracing takes, when it is the unfiltered g this pass derives
+    let mut g_buckets = (plan.trace && !plan.prefilter).then(mdtf_volume::KeyBuckets::new);
     // the smallest positive 1/g, whose multiple is the top of its code range
     let mut smallest_inv_g = f32::INFINITY;
     if !summarised.is_empty() {
@@ -244,6 +246,11 @@ fn run_slabs(
             progress.slab(k + 1, slabs.len())?;
             for (name, v) in chans.volumes(z.clone(), &summarised).map_err(fail("derive"))? {
                 stats.add(&name, v.samples());
+                if name == "g"
+                    && let Some(b) = &mut g_buckets
+                {
+                    b.add(v.samples());
+                }
                 if name == "inv_g" {
                     smallest_inv_g = crate::pack_inputs::smallest_positive(v.samples()).min(smallest_inv_g);
                 }
@@ -283,7 +290,8 @@ fn run_slabs(
         }
         progress.stage("boundary")?;
         let t = Instant::now();
-        let g_stats = g_stats(&mut chans, g_name, &slabs, value_range, geo.min_spacing(), &stats)?;
+        let g_buckets = g_buckets.as_ref().filter(|_| g_name == "g");
+        let g_stats = g_stats(&mut chans, g_name, g_buckets, &slabs, value_range, geo.min_spacing(), &stats)?;
         let halo = plan.reach.trace[2];
         let mut report: Option<ReportAccumulator> = None;
         let mut crossings: Option<mdtf_boundary::Crossings> = None;

@@ -8,7 +8,7 @@ use crate::hist_files::Counted;
 use crate::run::{RunError, at, fail};
 use mdtf_boundary::VolumeStats;
 use mdtf_histogram::{Axis, AxisSpec, ChannelStats, Histogram, HvolAxes, HvolBySlabs, HvolParams, count, hit_mask};
-use mdtf_volume::Volume;
+use mdtf_volume::{KeyBuckets, Volume};
 use std::collections::BTreeMap;
 use std::ops::Range;
 
@@ -41,11 +41,12 @@ impl Stats {
 }
 
 /// The tracing's whole-volume statistics of the g it traces (`g_name`):
-/// the noise floor from its median (a two-pass select over the slabs) and
-/// its largest value.
+/// the noise floor from its median (a two-pass select over the slabs, one
+/// pass when `buckets` counted the first) and its largest value.
 pub(super) fn g_stats(
     chans: &mut SlabChannels,
     g_name: &str,
+    buckets: Option<&KeyBuckets>,
     slabs: &[Range<usize>],
     value_range: f64,
     l_min: f64,
@@ -55,13 +56,19 @@ pub(super) fn g_stats(
     let g_max = s.finite_range().map_or(0.0, |r| r.1);
     let median = match s.finite_count().checked_sub(1) {
         None => None,
-        Some(last) => mdtf_volume::order_statistic_of_pieces(last / 2, |visit| {
-            for z in slabs {
-                visit(&chans.samples(g_name, z.clone())?);
+        Some(last) => {
+            let pass = |visit: &mut dyn FnMut(&[f32])| {
+                for z in slabs {
+                    visit(&chans.samples(g_name, z.clone())?);
+                }
+                Ok::<(), String>(())
+            };
+            match buckets {
+                Some(b) => mdtf_volume::order_statistic_from_buckets(last / 2, b, pass),
+                None => mdtf_volume::order_statistic_of_pieces(last / 2, pass),
             }
-            Ok::<(), String>(())
-        })
-        .map_err(fail("boundary"))?,
+            .map_err(fail("boundary"))?
+        }
     };
     let noise_floor = mdtf_boundary::noise_floor_of_median(median, value_range, l_min);
     Ok(VolumeStats { value_range, noise_floor, g_max })
