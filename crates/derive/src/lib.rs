@@ -135,6 +135,41 @@ pub fn run_view(
     previous: Option<DeriveOutput>,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<DeriveOutput, DeriveError> {
+    derive_slices(input, params, previous, 0..0, progress)
+}
+
+/// [`run_with_progress`] that computes every z-slice but those of `kept`:
+/// their samples are `previous`'s, as they are (a caller sliding a block
+/// along z moves the planes it already has to their new place first, and
+/// derives only the new ones). `previous` must have this call's items and
+/// grid; `shade` is refused (it is scaled by the whole output's largest g).
+pub fn run_keeping(
+    input: &MultiField,
+    params: &DeriveParams,
+    previous: DeriveOutput,
+    kept: std::ops::Range<usize>,
+) -> Result<DeriveOutput, DeriveError> {
+    if params.items.contains(&Item::Shade) {
+        return Err(DeriveError::BadParameter("shade is scaled by the whole output: no slice can be kept".into()));
+    }
+    let fits = previous.items.iter().map(|(i, _)| *i).eq(dedup(&params.items))
+        && previous.items.iter().all(|(_, mf)| mf.geometry.dims == input.geometry.dims);
+    if !fits {
+        return Err(DeriveError::BadParameter(
+            "the slices kept come from an output of other items or another grid".into(),
+        ));
+    }
+    derive_slices(&FieldsView::from(input), params, Some(previous), kept, &|_, _| {})
+}
+
+/// The derive pass over every z-slice of `input` but those of `kept` (left as `previous` holds them).
+fn derive_slices(
+    input: &FieldsView,
+    params: &DeriveParams,
+    previous: Option<DeriveOutput>,
+    kept: std::ops::Range<usize>,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<DeriveOutput, DeriveError> {
     let Prepared { items, layout, engine } = prepare(input, params)?;
     let g = input.geometry;
     let [nx, ny, nz] = g.dims;
@@ -148,7 +183,7 @@ pub fn run_view(
             }
         }
         let done = AtomicUsize::new(0);
-        per_slice.into_par_iter().enumerate().for_each_init(
+        per_slice.into_par_iter().enumerate().filter(|(k, _)| !kept.contains(k)).for_each_init(
             || engine.scratch(),
             |scratch, (k, mut outs)| {
                 engine::compute_slice(&engine, &layout, k, scratch, &mut outs);

@@ -22,8 +22,10 @@ pub struct SlabChannels {
     /// Planes the kernel reads on each side.
     kernel_reach: usize,
     nz: usize,
-    /// Memory of the last block derived whole, for the next (see [`SlabChannels::derive_block`]).
-    recycled: Option<DeriveOutput>,
+    /// The last block derived whole and its planes, for the next (see [`SlabChannels::derive_block`]).
+    recycled: Option<(Range<usize>, DeriveOutput)>,
+    /// The planes of the last block [`SlabChannels::derive_block`] handed out.
+    last_block: Range<usize>,
     /// Each group's last output, whose memory its next derivation reuses.
     previous: Vec<Option<DeriveOutput>>,
     /// Memory of the last value block read for it.
@@ -60,6 +62,7 @@ impl SlabChannels {
             kernel_reach,
             nz,
             recycled: None,
+            last_block: 0..0,
             previous,
             value_buffer: Vec::new(),
             cancel: None,
@@ -124,17 +127,55 @@ impl SlabChannels {
     /// copying them out; hand the output back with
     /// [`SlabChannels::recycle`] and the next block of the same height is
     /// derived into its memory, as is the value read for it (fresh memory
-    /// page-faults, which costs as much as the derivation).
+    /// page-faults, which costs as much as the derivation). When the next
+    /// block overlaps it (blocks grown by a halo), the planes the last one
+    /// had exact are moved to their new place and only the others are
+    /// derived: they are the same samples a derivation would give.
     pub fn derive_block(&mut self, z: Range<usize>) -> Result<(Range<usize>, DeriveOutput), String> {
         let Some((d, _)) = self.groups.first() else { return Err("nothing is derived".into()) };
         let k = self.kernel_reach;
         let read = grown(&z, k, 2 * k + 1, self.nz);
         let d = d.clone();
         let value = self.value(read.clone())?;
-        let out = mdtf_derive::run_with_progress(&value, &d, self.recycled.take(), &|_, _| {})
-            .map_err(|e| format!("derive: {e}"))?;
+        let out = match self.recycled.take() {
+            Some((last, mut out)) if last.len() == read.len() && last.start < read.start && read.start < last.end => {
+                let kept = self.slide(&last, &read, &mut out);
+                mdtf_derive::run_keeping(&value, &d, out, kept)
+            }
+            recycled => mdtf_derive::run_with_progress(&value, &d, recycled.map(|(_, o)| o), &|_, _| {}),
+        }
+        .map_err(|e| format!("derive: {e}"))?;
         self.keep_value(value);
+        self.last_block = read.clone();
         Ok((read, out))
+    }
+
+    /// Moves the planes of `out` (derived over `last`) that are exact there
+    /// and lie in `read` (as tall, further along z) to their place in
+    /// `read`; returns where they now are, in `read`'s planes.
+    fn slide(&self, last: &Range<usize>, read: &Range<usize>, out: &mut DeriveOutput) -> Range<usize> {
+        let k = self.kernel_reach;
+        // exact planes of the last block: all but a kernel's reach from a cut (not a volume face)
+        let exact_start = if last.start == 0 { 0 } else { last.start + k };
+        let exact_end = if last.end == self.nz { last.end } else { last.end - k };
+        let (from, to) = (exact_start.max(read.start), exact_end.min(read.end));
+        if from >= to {
+            return 0..0;
+        }
+        let plane = self.store.plane_len();
+        let mut fields: Vec<&mut [f32]> = Vec::new();
+        for (_, mf) in &mut out.items {
+            for f in &mut mf.fields {
+                match f.data.as_slice_mut() {
+                    Some(data) => fields.push(data),
+                    None => return 0..0,
+                }
+            }
+        }
+        for data in fields {
+            data.copy_within((from - last.start) * plane..(to - last.start) * plane, (from - read.start) * plane);
+        }
+        from - read.start..to - read.start
     }
 
     /// The stored value on planes `z`, read into the memory of the last one.
@@ -161,7 +202,7 @@ impl SlabChannels {
 
     /// Gives back the output of [`SlabChannels::derive_block`] for reuse.
     pub fn recycle(&mut self, out: DeriveOutput) {
-        self.recycled = Some(out);
+        self.recycled = Some((self.last_block.clone(), out));
     }
 
     /// The samples of channel `name` on planes `z`.
