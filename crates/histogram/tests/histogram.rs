@@ -4,7 +4,9 @@
 use mdtf_boundary::{BoundaryInput, BoundaryParams};
 use mdtf_datagen::{RadialPhantom, erf_sphere};
 use mdtf_derive::{DeriveParams, Item};
-use mdtf_histogram::{Axis, AxisSpec, HvolAxes, HvolBySlabs, HvolParams, Scale, count, grey_level, histogram_volume, hit_mask, write_png};
+use mdtf_histogram::{
+    Axis, AxisSpec, HvolAxes, HvolBySlabs, HvolParams, Scale, count, grey_level, histogram_volume, hit_mask, write_png,
+};
 use mdtf_volume::{Geometry, MultiField, Volume};
 use std::f64::consts::PI;
 

@@ -9,9 +9,9 @@ use crate::profile::{Profile, TextureLayout, describe};
 use crate::quantise::{Decode, Dtype, decode_for};
 use crate::{Lut, PackError, PackParams};
 use mdtf_volume::{AtomicWriter, Geometry, Volume, VolumeError, write_file_atomically};
-use std::io::Write;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
+use std::io::Write;
 use std::ops::Range;
 use std::path::Path;
 

@@ -424,7 +424,9 @@ fn run_slabs(
     let mut counting_failed = None;
     let written = writer.add_slabs(&layouts, &slabs, &mut |z| {
         progress.report_slab(z.end.div_ceil(height), slabs.len());
-        let slab = chans.volumes(z.clone(), &read).map_err(|e| mdtf_pack::PackError::Io(mdtf_volume::VolumeError::Fields(e)))?;
+        let slab = chans
+            .volumes(z.clone(), &read)
+            .map_err(|e| mdtf_pack::PackError::Io(mdtf_volume::VolumeError::Fields(e)))?;
         if let Some(h) = &mut histograms
             && let Err(e) = h.add(z.start, &slab)
         {
