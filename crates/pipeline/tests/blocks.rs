@@ -121,7 +121,7 @@ fn the_budget_sets_the_slab_height_and_a_budget_too_small_is_refused_before_any_
     let p = shipped("distance-tf", &["input.size=64"]);
     let geo = Geometry::new([64; 3], [1.0; 3]);
     let plan = mdtf_pipeline::plan::Plan::resolve(&p, &[], &geo).unwrap();
-    let h = mdtf_pipeline::blocks::slab_height(EIGHT_SLAB_BUDGET, &geo, &plan, true).unwrap();
+    let h = mdtf_pipeline::blocks::slab_height(EIGHT_SLAB_BUDGET, &geo, &plan, 1).unwrap();
     assert_eq!(h, 8, "8 slabs of 64 planes");
     let dir = tempfile::tempdir().unwrap();
     let opts = RunOptions {

@@ -7,7 +7,8 @@ use mdtf_volume::{Geometry, human_bytes};
 
 /// What the process holds whatever the slab: code, thread stacks, figures (bytes).
 const BASE_BYTES: u64 = 48 << 20;
-/// The histogram volume's counts (256^3 u32, at most; the untouched pages cost nothing).
+/// The histogram volume's counts on one lane (256^3 u32, at most; the
+/// untouched pages cost nothing, but on real data most are touched).
 const HVOL_BYTES: u64 = 64 << 20;
 
 /// f32 planes each pass holds per plane of its slab (`h`) and of its halo
@@ -30,11 +31,34 @@ fn pass_planes(h: u64, plan: &Plan) -> u64 {
     derive.max(prefilter).max(trace).max(pack)
 }
 
+/// The slab height and the histogram volume's lanes (see
+/// [`mdtf_histogram::HvolBySlabs`]; 0 without one) of a run within
+/// `budget`: a lane per thread (`threads`) when their counts still leave
+/// slabs at least 3/4 as tall as one lane does, else one lane, so a tight
+/// budget buys taller slabs (less halo) rather than parallel counting.
+pub fn fit_slabs(
+    budget: u64,
+    geometry: &Geometry,
+    plan: &Plan,
+    hvol: bool,
+    threads: usize,
+) -> Result<(usize, usize), String> {
+    if !hvol {
+        return Ok((slab_height(budget, geometry, plan, 0)?, 0));
+    }
+    let one = slab_height(budget, geometry, plan, 1)?;
+    match slab_height(budget, geometry, plan, threads.max(1)) {
+        Ok(h) if 4 * h >= 3 * one => Ok((h, threads.max(1))),
+        _ => Ok((one, 1)),
+    }
+}
+
 /// The tallest slab (planes, at most the volume's) whose passes fit in
-/// `budget` bytes with the plan's halos, or why none does.
-pub fn slab_height(budget: u64, geometry: &Geometry, plan: &Plan, hvol: bool) -> Result<usize, String> {
+/// `budget` bytes with the plan's halos and `hvol_lanes` histogram-volume
+/// counts (0: no histogram volume), or why none does.
+pub fn slab_height(budget: u64, geometry: &Geometry, plan: &Plan, hvol_lanes: usize) -> Result<usize, String> {
     let plane_bytes = (geometry.dims[0] * geometry.dims[1] * 4) as u64;
-    let fixed = BASE_BYTES + if hvol { HVOL_BYTES } else { 0 };
+    let fixed = BASE_BYTES + HVOL_BYTES * hvol_lanes as u64;
     let cost = |h: u64| fixed + pass_planes(h, plan) * plane_bytes;
     let nz = geometry.dims[2] as u64;
     if cost(1) > budget {
@@ -91,16 +115,26 @@ mod tests {
         let plan = Plan::resolve(&parse(text, &[]).unwrap(), &[], &geo).unwrap();
         let plane = 256 * 256 * 4;
         let budget = 256u64 << 20;
-        let h = slab_height(budget, &geo, &plan, false).unwrap() as u64;
+        let h = slab_height(budget, &geo, &plan, 0).unwrap() as u64;
         assert!(BASE_BYTES + pass_planes(h, &plan) * plane <= budget);
         assert!(BASE_BYTES + pass_planes(h + 1, &plan) * plane > budget);
         // the tracing's value and derivatives over its halo-grown block, and its outputs, are counted
         let (t, k) = (plan.reach.trace[2] as u64, plan.reach.kernel[2] as u64);
         assert!(pass_planes(h, &plan) >= 6 * (h + 2 * t + 2 * k) + 5 * h);
         assert_eq!(slabs(10, 4), vec![0..4, 4..8, 8..10]);
-        let e = slab_height(1 << 20, &geo, &plan, false).unwrap_err();
+        let e = slab_height(1 << 20, &geo, &plan, 0).unwrap_err();
         assert!(e.contains("too small") && e.contains("1.0 MiB"), "{e}");
-        assert_eq!(slab_height(1 << 40, &geo, &plan, true).unwrap(), 256, "a large budget: one slab");
+        assert_eq!(slab_height(1 << 40, &geo, &plan, 1).unwrap(), 256, "a large budget: one slab");
+        // each histogram-volume lane's counts come off the slabs' share
+        let h2 = slab_height(budget, &geo, &plan, 2).unwrap() as u64;
+        assert!(BASE_BYTES + 2 * HVOL_BYTES + pass_planes(h2, &plan) * plane <= budget);
+        assert!(BASE_BYTES + 2 * HVOL_BYTES + pass_planes(h2 + 1, &plan) * plane > budget);
+        // lanes when they cost little height, one lane when they would cost much
+        let big = 2u64 << 30;
+        assert_eq!(fit_slabs(big, &geo, &plan, true, 2).unwrap().1, 2);
+        let tight = BASE_BYTES + 2 * HVOL_BYTES + pass_planes(4, &plan) * plane;
+        assert_eq!(fit_slabs(tight, &geo, &plan, true, 2).unwrap(), (slab_height(tight, &geo, &plan, 1).unwrap(), 1));
+        assert_eq!(fit_slabs(budget, &geo, &plan, false, 2).unwrap(), (h as usize, 0));
     }
 
     #[test]

@@ -26,7 +26,7 @@ mod reductions;
 mod slab_channels;
 mod store;
 
-pub use budget::{automatic_budget, slab_height, slabs};
+pub use budget::{automatic_budget, fit_slabs, slab_height, slabs};
 pub use slab_channels::SlabChannels;
 pub use store::ChannelStore;
 
@@ -190,9 +190,10 @@ fn run_slabs(
     // the histogram volume: asked for, or the default TF's source
     let hvol_asked = p.histogram.as_ref().is_some_and(|h| h.hvol);
     let hvol_needed = hvol_asked || tf.is_none();
-    let height = match size {
-        SlabSize::Budget(b) => slab_height(b, &geo, &plan, hvol_needed).map_err(fail("plan"))?,
-        SlabSize::Planes(h) => h.clamp(1, nz.max(1)),
+    let threads = rayon::current_num_threads();
+    let (height, hvol_lanes) = match size {
+        SlabSize::Budget(b) => fit_slabs(b, &geo, &plan, hvol_needed, threads).map_err(fail("plan"))?,
+        SlabSize::Planes(h) => (h.clamp(1, nz.max(1)), threads),
     };
     let slabs = slabs(nz, height);
     progress.stage(&format!("input: {} slabs of {height} planes", slabs.len()))?;
@@ -411,7 +412,7 @@ fn run_slabs(
     progress.stage(if counting { "histogram and pack" } else { "pack" })?;
     let t = Instant::now();
     let mut histograms = match counting {
-        true => Some(SlabHistograms::new(p, &mut chans, &stats, &slabs, n, hvol_needed)?),
+        true => Some(SlabHistograms::new(p, &mut chans, &stats, &slabs, n, hvol_needed.then_some(hvol_lanes))?),
         false => None,
     };
     let layouts = mdtf_pack::texture_layouts(&params);

@@ -92,16 +92,17 @@ pub(super) struct SlabHistograms {
 }
 
 impl SlabHistograms {
-    /// Empty histograms of `p` (with the histogram volume when
-    /// `hvol_needed`) over the axes of `stats`, for the `slabs` of a volume
-    /// of `n` voxels. Peak finding's (v, 1/g) axis takes its own passes over `chans`.
+    /// Empty histograms of `p` (with the histogram volume, counted on this
+    /// many lanes, when `hvol_lanes` is given) over the axes of `stats`, for
+    /// the `slabs` of a volume of `n` voxels. Peak finding's (v, 1/g) axis
+    /// takes its own passes over `chans`.
     pub(super) fn new(
         p: &Pipeline,
         chans: &mut SlabChannels,
         stats: &Stats,
         slabs: &[Range<usize>],
         n: usize,
-        hvol_needed: bool,
+        hvol_lanes: Option<usize>,
     ) -> Result<SlabHistograms, RunError> {
         let err = at::<mdtf_histogram::HistogramError>("histogram");
         let joint = p.histogram.as_ref().is_some_and(|h| h.joint);
@@ -111,17 +112,17 @@ impl SlabHistograms {
         stretched_axes[1].name = "g_hit".into();
         let bins = HvolParams::default().bins;
         let nz = slabs.last().map_or(0, |z| z.end);
-        let hvol = match hvol_needed {
-            true => {
+        let hvol = match hvol_lanes {
+            Some(lanes) => {
                 let axes = HvolAxes {
                     v: stats.axis(&HvolAxes::spec("v", bins[0]), "v")?,
                     g: stats.axis(&HvolAxes::spec("g", bins[1]), "g")?,
                     h: stats.axis(&HvolAxes::spec("f2", bins[2]), "f2")?,
                 };
                 let plane = n / nz.max(1);
-                Some(HvolBySlabs::new(&axes, plane, nz, rayon::current_num_threads()).map_err(err)?)
+                Some(HvolBySlabs::new(&axes, plane, nz, lanes).map_err(err)?)
             }
-            false => None,
+            None => None,
         };
         let inv_g_axes = match joint && chans.has("inv_g") {
             true => medians::inverse_gradient_axis(chans, slabs)
