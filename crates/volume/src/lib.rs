@@ -45,7 +45,7 @@ pub use output::{AtomicWriter, Inputs, OutputFolder, write_file_atomically};
 pub use planes::PlaneReader;
 pub use png_out::{PngColour, register_figure_font, write_png};
 pub use range::{
-    KeyBuckets, finite_range, finite_sample_range, median, median_of_pieces, order_statistic,
+    KeyBuckets, finite_range, finite_sample_range, median, median_from_buckets, median_of_pieces, order_statistic,
     order_statistic_from_buckets, order_statistic_of_pieces,
 };
 pub use raw::{RawSpec, read_raw};

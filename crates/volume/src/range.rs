@@ -90,6 +90,21 @@ impl KeyBuckets {
     pub fn add(&mut self, data: &[f32]) {
         count_piece(data, &|key| Some((key >> 16) as usize), &mut self.0);
     }
+
+    /// How many finite samples were counted.
+    pub fn total(&self) -> u64 {
+        self.0.iter().sum()
+    }
+}
+
+/// [`median`] of the samples `upper` counted: the lower median, taken by
+/// one more pass (`pass(visit)` hands out the same samples), or None without finite samples.
+pub fn median_from_buckets<E>(
+    upper: &KeyBuckets,
+    pass: impl FnMut(&mut dyn FnMut(&[f32])) -> Result<(), E>,
+) -> Result<Option<f32>, E> {
+    let Some(last) = upper.total().checked_sub(1) else { return Ok(None) };
+    order_statistic_from_buckets(last / 2, upper, pass)
 }
 
 /// Counts the finite samples of `data` into `into` by the bucket `select` gives each key (None: not counted).
@@ -151,14 +166,13 @@ pub fn median(data: &[f32]) -> Option<f32> {
 }
 
 /// [`median`] of samples that come in pieces: `pass(visit)` hands every
-/// piece to `visit`; it is called three times (a count of the finite
-/// samples, then the two passes of [`order_statistic_of_pieces`]), and
-/// must hand out the same samples each time.
+/// piece to `visit`; it is called twice (the two passes of a radix select,
+/// the first also counting the finite samples), and must hand out the same
+/// samples each time.
 pub fn median_of_pieces<E>(mut pass: impl FnMut(&mut dyn FnMut(&[f32])) -> Result<(), E>) -> Result<Option<f32>, E> {
-    let mut finite = 0u64;
-    pass(&mut |d| finite += d.iter().filter(|v| v.is_finite()).count() as u64)?;
-    let Some(last) = finite.checked_sub(1) else { return Ok(None) };
-    order_statistic_of_pieces(last / 2, pass)
+    let mut upper = KeyBuckets::new();
+    pass(&mut |d| upper.add(d))?;
+    median_from_buckets(&upper, pass)
 }
 
 /// Lanes of the block loop: two AVX-512 registers, so that the min, max and

@@ -1,11 +1,13 @@
 //! The medians a whole run takes of whole channels (the (v, 1/g)
 //! histogram's axis, gaussian-tf's default TGTF), taken exactly slab by
-//! slab ([`mdtf_volume::median_of_pieces`]: a count of the selected finite
-//! samples, then the two passes of a radix select over the same selection).
+//! slab ([`mdtf_volume::median_of_pieces`]: the two passes of a radix
+//! select over the selection, the first also counting it; one pass for g's
+//! median when the derive pass counted its first).
 
 use super::SlabChannels;
 use mdtf_histogram::Axis;
 use mdtf_pack::GaussianPrimitive;
+use mdtf_volume::KeyBuckets;
 use std::ops::Range;
 
 /// The lower median of the finite samples `piece(z)` gives over `slabs`
@@ -22,9 +24,31 @@ fn median_of_slabs(
     })
 }
 
-/// [`Axis::inverse_gradient`] of the whole g, 256 bins.
-pub(super) fn inverse_gradient_axis(chans: &mut SlabChannels, slabs: &[Range<usize>]) -> Result<Option<Axis>, String> {
-    let Some(median) = median_of_slabs(slabs, &mut |z| chans.samples("g", z))? else { return Ok(None) };
+/// The lower median of g over `slabs`, one pass when `buckets` counted every g already.
+fn median_of_g(
+    chans: &mut SlabChannels,
+    slabs: &[Range<usize>],
+    buckets: Option<&KeyBuckets>,
+) -> Result<Option<f32>, String> {
+    match buckets {
+        Some(b) => mdtf_volume::median_from_buckets(b, |visit| {
+            for z in slabs {
+                visit(&chans.samples("g", z.clone())?);
+            }
+            Ok(())
+        }),
+        None => median_of_slabs(slabs, &mut |z| chans.samples("g", z)),
+    }
+}
+
+/// [`Axis::inverse_gradient`] of the whole g, 256 bins; `g_buckets`: the
+/// first radix pass over g, if a pass that derived it took it.
+pub(super) fn inverse_gradient_axis(
+    chans: &mut SlabChannels,
+    slabs: &[Range<usize>],
+    g_buckets: Option<&KeyBuckets>,
+) -> Result<Option<Axis>, String> {
+    let Some(median) = median_of_g(chans, slabs, g_buckets)? else { return Ok(None) };
     let cut = 2.0 * median;
     let above = median_of_slabs(slabs, &mut |z| {
         Ok(chans.samples("g", z)?.into_iter().filter(|&x| x > cut && x.is_finite()).collect())
@@ -33,9 +57,13 @@ pub(super) fn inverse_gradient_axis(chans: &mut SlabChannels, slabs: &[Range<usi
 }
 
 /// gaussian-tf's default TGTF of a one-field volume where no boundary is
-/// found ([`crate::gaussians::median_tgtf`]).
-pub(super) fn median_tgtf(chans: &mut SlabChannels, slabs: &[Range<usize>]) -> Result<GaussianPrimitive, String> {
-    let g_cut = 2.0 * median_of_slabs(slabs, &mut |z| chans.samples("g", z))?.unwrap_or(0.0);
+/// found ([`crate::gaussians::median_tgtf`]); `g_buckets` as for [`inverse_gradient_axis`].
+pub(super) fn median_tgtf(
+    chans: &mut SlabChannels,
+    slabs: &[Range<usize>],
+    g_buckets: Option<&KeyBuckets>,
+) -> Result<GaussianPrimitive, String> {
+    let g_cut = 2.0 * median_of_g(chans, slabs, g_buckets)?.unwrap_or(0.0);
     let (mut structured, mut voxels) = (0usize, 0usize);
     for z in slabs {
         let g = chans.samples("g", z.clone())?;

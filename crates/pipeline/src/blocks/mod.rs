@@ -236,8 +236,9 @@ fn run_slabs(
     }
     let mut chans = SlabChannels::new(store, groups, plan.reach.kernel[2], nz).cancelled_by(opts.cancel.clone());
     let summarised: Vec<&str> = ["g", "f2", "inv_g"].into_iter().filter(|c| chans.has(c)).collect();
-    // the first pass of the median of the g the tracing takes, when it is the unfiltered g this pass derives
-    let mut g_buckets = (plan.trace && !plan.prefilter).then(mdtf_volume::KeyBuckets::new);
+    // the first radix pass of g's median (the tracing's noise floor, the (v, 1/g) axis,
+    // gaussian-tf's default), taken as this pass derives g
+    let mut g_buckets = summarised.contains(&"g").then(mdtf_volume::KeyBuckets::new);
     // the smallest positive 1/g, whose multiple is the top of its code range
     let mut smallest_inv_g = f32::INFINITY;
     if !summarised.is_empty() {
@@ -291,8 +292,8 @@ fn run_slabs(
         }
         progress.stage("boundary")?;
         let t = Instant::now();
-        let g_buckets = g_buckets.as_ref().filter(|_| g_name == "g");
-        let g_stats = g_stats(&mut chans, g_name, g_buckets, &slabs, value_range, geo.min_spacing(), &stats)?;
+        let traced_buckets = g_buckets.as_ref().filter(|_| g_name == "g");
+        let g_stats = g_stats(&mut chans, g_name, traced_buckets, &slabs, value_range, geo.min_spacing(), &stats)?;
         let halo = plan.reach.trace[2];
         let mut report: Option<ReportAccumulator> = None;
         let mut crossings: Option<mdtf_boundary::Crossings> = None;
@@ -412,7 +413,15 @@ fn run_slabs(
     progress.stage(if counting { "histogram and pack" } else { "pack" })?;
     let t = Instant::now();
     let mut histograms = match counting {
-        true => Some(SlabHistograms::new(p, &mut chans, &stats, &slabs, n, hvol_needed.then_some(hvol_lanes))?),
+        true => Some(SlabHistograms::new(
+            p,
+            &mut chans,
+            &stats,
+            &slabs,
+            n,
+            hvol_needed.then_some(hvol_lanes),
+            g_buckets.as_ref(),
+        )?),
         false => None,
     };
     let layouts = mdtf_pack::texture_layouts(&params);
@@ -480,7 +489,7 @@ fn run_slabs(
                 let arches = crate::pack_inputs::arches_from(&mdtf_histogram::detect_boundaries(hv));
                 match arches.is_empty() {
                     false => crate::gaussians::boundary_tgtfs(&arches, &geo),
-                    true => vec![medians::median_tgtf(&mut chans, &slabs).map_err(fail("pack"))?],
+                    true => vec![medians::median_tgtf(&mut chans, &slabs, g_buckets.as_ref()).map_err(fail("pack"))?],
                 }
             }
             (None, None) => return Err(fail("pack")("the default Gaussians need the histogram volume".into())),

@@ -95,7 +95,8 @@ impl SlabHistograms {
     /// Empty histograms of `p` (with the histogram volume, counted on this
     /// many lanes, when `hvol_lanes` is given) over the axes of `stats`, for
     /// the `slabs` of a volume of `n` voxels. Peak finding's (v, 1/g) axis
-    /// takes its own passes over `chans`.
+    /// takes its own passes over `chans` (one fewer with `g_buckets`, the
+    /// first radix pass over g).
     pub(super) fn new(
         p: &Pipeline,
         chans: &mut SlabChannels,
@@ -103,6 +104,7 @@ impl SlabHistograms {
         slabs: &[Range<usize>],
         n: usize,
         hvol_lanes: Option<usize>,
+        g_buckets: Option<&KeyBuckets>,
     ) -> Result<SlabHistograms, RunError> {
         let err = at::<mdtf_histogram::HistogramError>("histogram");
         let joint = p.histogram.as_ref().is_some_and(|h| h.joint);
@@ -125,7 +127,7 @@ impl SlabHistograms {
             None => None,
         };
         let inv_g_axes = match joint && chans.has("inv_g") {
-            true => medians::inverse_gradient_axis(chans, slabs)
+            true => medians::inverse_gradient_axis(chans, slabs, g_buckets)
                 .map_err(fail("histogram"))?
                 .map(|ia| vec![axes[0].clone(), ia]),
             false => None,
