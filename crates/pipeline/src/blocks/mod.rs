@@ -2,19 +2,27 @@
 //! outputs byte-identical to the whole-volume [`run`](crate::run::run).
 //!
 //! The input is read once, by planes (uncompressed or gzip NIfTI/NRRD;
-//! other formats and phantoms are read whole first). Each pass works on
+//! other formats and phantoms are read whole first), into a
+//! [`ChannelStore`] on disk in the staging folder. Each pass works on
 //! z-slabs grown by its own halo from the plan ([`Plan::reach`]): derive
 //! (the kernel's support), the pre-filter (its box), the tracing (d_max plus
-//! the tricubic support at the hit); it writes each slab's own planes into a
-//! [`ChannelStore`] on disk in the staging folder, so a later pass reads the
-//! exact whole-volume channels with any halo it needs, and nothing is
-//! computed twice. The whole-volume quantities are reductions that merge
-//! exactly: finite ranges and the percentile tails ([`ChannelStats`]), the
-//! median of g (a two-pass radix select over the store), histogram counts,
-//! the histogram volume's sums (fed slice by slice, as the whole run sums
-//! them), the Fig. 2 report's sums (fed in voxel order) and the crossings.
-//! Histograms are counted, textures quantised and kept volumes written slab
-//! by slab from the store.
+//! the tricubic support at the hit). What a later pass cannot remake
+//! cheaply (the pre-filtered g and f'', the tracing's outputs) goes into
+//! the store; the derivatives are remade from the stored value by each pass
+//! that reads them ([`SlabChannels`]: on this machine's page cache that is
+//! cheaper than writing them), the tracing's overlapping blocks sliding so
+//! that each plane is derived about once.
+//!
+//! The passes: input (the value's statistics); derive (the statistics of
+//! g, f'' and 1/g, and the first radix pass of g's median); pre-filter;
+//! tracing; kept volumes; then one pass that counts every histogram and
+//! quantises every pack texture from the same slab's channels. The
+//! whole-volume quantities are reductions that merge exactly: finite
+//! ranges and the percentile tails ([`ChannelStats`]), medians (radix
+//! selects over the slabs), histogram counts, the histogram volume's sums
+//! (per fixed part of the slices, fed slice by slice, as the whole run sums
+//! them; parts on parallel lanes when the budget pays for their counts),
+//! the Fig. 2 report's sums (fed in voxel order) and the crossings.
 //!
 //! Scope: one-field inputs, the slicer-3dtf, distance-tf, peak-finding and
 //! gaussian-tf profiles (with or without a TF file, pre-filter, kept

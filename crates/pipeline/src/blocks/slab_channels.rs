@@ -4,7 +4,9 @@
 //! over the planes grown by the kernel's support. Recomputing the
 //! derivatives costs less than writing them to disk and reading them back,
 //! and the items are derived in the groups the whole-volume run derives them
-//! in, so every sample has its bits.
+//! in, so every sample has its bits. Blocks that overlap (the tracing's,
+//! grown by its halo) keep the planes they share and derive only the new
+//! ones ([`SlabChannels::derive_block`]).
 
 use super::{ChannelStore, grown};
 use mdtf_derive::{DeriveOutput, DeriveParams, Item};
