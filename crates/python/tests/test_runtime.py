@@ -81,7 +81,7 @@ SCRIPT = """
 import sys, time, mdtf
 print("started", flush=True)
 try:
-    mdtf.run(sys.argv[1], sys.argv[2], input__size=192, preview=False, slab_planes=4)
+    mdtf.run(sys.argv[1], sys.argv[2], input__size=256, preview=False, slab_planes=4)
     print("finished", flush=True)
 except KeyboardInterrupt:
     print("interrupted", time.monotonic(), flush=True)
