@@ -419,7 +419,7 @@ fn run_slabs(
     // writing the histogram files
     let counting = p.histogram.is_some() || hvol_needed;
     progress.stage(if counting { "histogram and pack" } else { "pack" })?;
-    let t = Instant::now();
+    let pack_start = Instant::now();
     let mut histograms = match counting {
         true => Some(SlabHistograms::new(
             p,
@@ -458,7 +458,6 @@ fn run_slabs(
     }
     written.map_err(at("pack"))?;
     chans.release();
-    let pack_seconds = t.elapsed();
 
     // the histogram files
     let mut hists = crate::hist_files::Written::default();
@@ -480,7 +479,6 @@ fn run_slabs(
     let crate::hist_files::Written { boundaries, arches, figure_hists, hvol, .. } = hists;
 
     // the lookup tables, the manifest and the Gaussians
-    let t = Instant::now().checked_sub(pack_seconds).unwrap_or_else(Instant::now);
     // the tables read the channels' names and grid (their data only without a histogram volume)
     let stubs: Vec<(String, Volume)> = names.iter().map(|c| (c.clone(), Volume::zeros(geo.z_slab(0..1)))).collect();
     let alpha = p.pack.alpha.unwrap_or(mdtf_boundary::AlphaMap::Linear { a: 1.0, dc: None });
@@ -513,7 +511,7 @@ fn run_slabs(
             .map_err(at("pack"))?;
         pack_outputs.extend(written.into_iter().map(|f| format!("histogram/{f}")));
     }
-    stages.done("pack", t, n, pack_outputs);
+    stages.done("pack", pack_start, n, pack_outputs);
     chans.store.clear();
 
     // the preview decodes the pack whole: under a budget it cannot keep, it is left to `mdtf preview`
