@@ -131,7 +131,7 @@ pub enum BoundaryError {
 }
 
 /// Counts of the hit codes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct TraceCounts {
     /// Voxels below g_min (or without a gradient direction).
     pub not_traced: u64,
@@ -185,7 +185,7 @@ pub struct BoundaryOutput {
 }
 
 /// Parameters after defaults are applied.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ResolvedParams {
     /// The noise floor, value units per world unit: voxels with g at or above it are traced.
     pub noise_floor: f64,
@@ -305,7 +305,7 @@ pub fn run(input: &BoundaryInput, params: &BoundaryParams) -> Result<BoundaryOut
 
 /// What the tracing of a block takes from the whole volume (reductions of a
 /// first pass), so that a slab-by-slab run gives the whole-volume run's bits.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct VolumeStats {
     /// Value range (max - min) of the data g and f'' came from.
     pub value_range: f64,
@@ -330,7 +330,7 @@ pub fn g_max(g: &[f32]) -> f32 {
 
 /// The g at the zero crossings of the traced voxels, counted over
 /// [0, [`VolumeStats::g_max`]]; the counts of blocks add up exactly.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Crossings(lost::CrossingHistogram);
 
 impl Crossings {

@@ -9,7 +9,7 @@
 //! thresholds in force is a boundary whose voxels were all rejected or not
 //! traced; the stage warns about it.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Bins of the crossing histogram, over [0, the largest g].
 pub(crate) const BINS: usize = 256;
@@ -17,7 +17,7 @@ pub(crate) const BINS: usize = 256;
 pub const LOST_MIN_SHARE: f64 = 0.01;
 
 /// Counts of g at the zero crossings.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub(crate) struct CrossingHistogram {
     /// Upper end of the g axis (the largest g in the volume).
     max: f32,

@@ -35,6 +35,10 @@ pub struct RunOptions {
     /// Set to stop the run at its next stage or slab, leaving no output
     /// (the Python package sets it on Ctrl-C).
     pub cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+    /// Where a slab-by-slab run's derive, pre-filter and tracing passes
+    /// run: None in this process, else as tasks the runner hands out (see
+    /// [`crate::blocks::SlabTasks`]; a whole-volume run ignores it).
+    pub tasks: Option<std::sync::Arc<dyn crate::blocks::SlabTasks>>,
 }
 
 impl RunOptions {

@@ -4,14 +4,19 @@
 //! files (pack textures and tables, manifest, kept volumes, histogram counts
 //! and figures, the boundary report, the preview) as the whole-volume run,
 //! on the 64^3 phantom and on a noisy anisotropic file read by planes with
-//! the pre-filter on. The run report differs only in its timings.
+//! the pre-filter on. The run report differs only in its timings. So do
+//! runs whose derive, pre-filter and tracing passes go to tasks (run out of
+//! order, on several threads, one of them twice, each from the job's JSON,
+//! as `mdtf.dask` hands them to a cluster).
 
-use mdtf_pipeline::blocks::{SlabSize, run as run_blocks};
+use mdtf_pipeline::blocks::{SlabJob, SlabSize, SlabTasks, run as run_blocks, run_task};
 use mdtf_pipeline::file::{Pipeline, parse};
 use mdtf_pipeline::run::{RunOptions, run as run_whole};
 use mdtf_volume::{Geometry, SampleType, Volume, WriteOptions, write_volume};
 use std::collections::BTreeMap;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
 
 fn pipelines_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines")
@@ -73,8 +78,19 @@ fn differing(a: &BTreeMap<String, Vec<u8>>, b: &BTreeMap<String, Vec<u8>>) -> Ve
 /// output path (the preview names it); asserts every run's files equal the
 /// whole run's and returns how many files were compared.
 fn assert_slab_runs_equal_the_whole(name: &str, p: &Pipeline, input: Option<PathBuf>, sizes: &[SlabSize]) -> usize {
+    assert_runs_equal_the_whole(name, p, input, sizes, None)
+}
+
+/// [`assert_slab_runs_equal_the_whole`], the slab runs handing their passes to `tasks`.
+fn assert_runs_equal_the_whole(
+    name: &str,
+    p: &Pipeline,
+    input: Option<PathBuf>,
+    sizes: &[SlabSize],
+    tasks: Option<Arc<dyn SlabTasks>>,
+) -> usize {
     let dir = tempfile::tempdir().unwrap();
-    let opts = RunOptions {
+    let mut opts = RunOptions {
         pipeline_path: pipelines_dir().join(format!("{name}.toml")),
         input,
         output: dir.path().join("out"),
@@ -83,6 +99,7 @@ fn assert_slab_runs_equal_the_whole(name: &str, p: &Pipeline, input: Option<Path
     run_whole(p, &opts, &|_| {}).unwrap();
     let whole = files(&opts.output);
     std::fs::remove_dir_all(&opts.output).unwrap();
+    opts.tasks = tasks;
     for &size in sizes {
         run_blocks(p, &opts, size, &|_| {}, &|_, _| {}).unwrap_or_else(|e| panic!("{name} {size:?}: {e}"));
         let slabbed = files(&opts.output);
@@ -219,6 +236,7 @@ fn a_cancelled_run_stops_and_leaves_no_output() {
         input: None,
         output: dir.path().join("out"),
         cancel: Some(cancel),
+        ..Default::default()
     };
     let whole = run_whole(&p, &opts, &|_| {}).unwrap_err().to_string();
     let slabs = run_blocks(&p, &opts, SlabSize::Planes(4), &|_| {}, &|_, _| {}).unwrap_err().to_string();
@@ -241,6 +259,7 @@ fn a_run_cancelled_inside_each_pass_stops_there_and_leaves_no_output() {
             input: None,
             output: dir.path().join("out"),
             cancel: Some(cancel.clone()),
+            ..Default::default()
         };
         let current = std::sync::Mutex::new(String::new());
         let later_stages = std::sync::Mutex::new(Vec::new());
@@ -262,4 +281,101 @@ fn a_run_cancelled_inside_each_pass_stops_there_and_leaves_no_output() {
         let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
         assert!(left.is_empty(), "{pass}: no output and no partial folder: {left:?}");
     }
+}
+
+/// Runs each pass's tasks on threads, the last slab first, the first slab's
+/// task twice (a rerun after a lost worker), each from the job's JSON; counts them.
+#[derive(Debug, Default)]
+struct ThreadTasks {
+    ran: Mutex<Vec<(String, usize)>>,
+}
+
+impl SlabTasks for ThreadTasks {
+    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
+        let json = serde_json::to_string(job).map_err(|e| e.to_string())?;
+        let value: serde_json::Value = serde_json::from_str(&json).map_err(|e| e.to_string())?;
+        let pass = value["pass"].as_object().and_then(|o| o.keys().next().cloned()).unwrap_or_default();
+        let mut order: Vec<Range<usize>> = slabs.iter().rev().cloned().collect();
+        order.extend(slabs.first().cloned());
+        let results: Vec<Result<(), String>> = std::thread::scope(|s| {
+            let handles: Vec<_> = order
+                .chunks(3)
+                .map(|group| {
+                    let json = &json;
+                    s.spawn(move || {
+                        let job: SlabJob = serde_json::from_str(json).map_err(|e| e.to_string())?;
+                        group.iter().try_for_each(|z| run_task(&job, z.clone()).map_err(|e| e.to_string()))
+                    })
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        self.ran.lock().unwrap().push((pass, order.len()));
+        results.into_iter().collect()
+    }
+}
+
+#[test]
+fn runs_whose_passes_go_to_tasks_give_the_same_files() {
+    for name in ["slicer-3dtf", "distance-tf", "peak-finding", "gaussian-tf"] {
+        let p = shipped(name, &["input.size=48", "input.phantom=\"shells\""]);
+        let tasks = Arc::new(ThreadTasks::default());
+        let compared = assert_runs_equal_the_whole(name, &p, None, &[SlabSize::Planes(7)], Some(tasks.clone()));
+        assert!(compared >= 15, "{name}: {compared} files compared");
+        let ran = tasks.ran.lock().unwrap().clone();
+        let passes: Vec<&str> = ran.iter().map(|(p, _)| p.as_str()).collect();
+        let traced = name == "distance-tf";
+        assert_eq!(passes, if traced { vec!["Derive", "Trace"] } else { vec!["Derive"] }, "{name}");
+        assert!(ran.iter().all(|(_, n)| *n == 48usize.div_ceil(7) + 1), "{name}: {ran:?}");
+    }
+    // the pre-filter's pass too, on an anisotropic noisy file read by planes
+    let geo = Geometry::new([30, 28, 33], [1.0, 0.8, 1.3]);
+    let mut v = mdtf_datagen::RadialPhantom::tooth(geo, 1.5).volume();
+    mdtf_datagen::add_gaussian_noise(&mut v, 3.0, 5);
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("tooth.nrrd");
+    write_volume(&input, &v, &WriteOptions { ty: SampleType::F32, gzip: false }, &[]).unwrap();
+    let text = "keep = [\"distance\", \"g\"]\n[prefilter]\nsigma_d = 1.0\nsigma_r = 0.1\n\
+                [histogram]\njoint = true\nstretched = true\n[pack]\nprofile = \"distance-tf\"\n";
+    let p = parse(text, &[]).unwrap();
+    let tasks = Arc::new(ThreadTasks::default());
+    assert_runs_equal_the_whole("distance-tf", &p, Some(input), &[SlabSize::Planes(5)], Some(tasks.clone()));
+    let passes: Vec<String> = tasks.ran.lock().unwrap().iter().map(|(p, _)| p.clone()).collect();
+    assert_eq!(passes, ["Derive", "Prefilter", "Trace"]);
+}
+
+/// Tasks that fail as a lost store would make them.
+#[derive(Debug)]
+struct FailingTasks;
+
+impl SlabTasks for FailingTasks {
+    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
+        let mut job = job.clone();
+        job.store = job.store.join("gone");
+        run_task(&job, slabs[0].clone()).map_err(|e| format!("a task failed: {e}"))
+    }
+}
+
+#[test]
+fn a_failed_task_fails_the_run_with_its_message_and_no_output() {
+    let p = shipped("distance-tf", &["input.size=24", "preview=false"]);
+    let dir = tempfile::tempdir().unwrap();
+    let opts = RunOptions {
+        pipeline_path: pipelines_dir().join("distance-tf.toml"),
+        output: dir.path().join("out"),
+        tasks: Some(Arc::new(FailingTasks)),
+        ..Default::default()
+    };
+    let e = run_blocks(&p, &opts, SlabSize::Planes(4), &|_| {}, &|_, _| {}).unwrap_err().to_string();
+    assert!(e.starts_with("derive: a task failed: ") && e.contains("v.f32"), "{e}");
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+    assert!(left.is_empty(), "no output and no partial folder: {left:?}");
+    // a slab outside the volume is refused
+    let job = SlabJob {
+        store: dir.path().to_path_buf(),
+        geometry: Geometry::new([4, 4, 4], [1.0; 3]),
+        pass: mdtf_pipeline::blocks::SlabPass::Derive { groups: vec![], kernel_reach: 1 },
+    };
+    let e = run_task(&job, 2..9).unwrap_err().to_string();
+    assert!(e.contains("not a slab of the volume's 4"), "{e}");
 }

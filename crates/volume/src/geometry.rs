@@ -6,7 +6,7 @@
 //! is RAS (NIfTI's); NRRD files in LPS are converted on read.
 
 /// Geometry of a regular 3D grid.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Geometry {
     /// Number of samples along x, y, z.
     pub dims: [usize; 3],

@@ -31,10 +31,13 @@
 mod budget;
 mod medians;
 mod reductions;
+mod remote;
 mod slab_channels;
 mod store;
+mod trace;
 
 pub use budget::{automatic_budget, fit_slabs, slab_height, slabs};
+pub use remote::{Prefilter, SlabJob, SlabPass, SlabTasks, TracePartial, run_task};
 pub use slab_channels::SlabChannels;
 pub use store::ChannelStore;
 
@@ -43,11 +46,11 @@ use crate::plan::Plan;
 use crate::progress::{Progress, cancelled};
 use crate::report::Stages;
 use crate::run::{RunError, RunOptions, RunReport, at, fail};
-use mdtf_boundary::{BoundaryInput, ReportAccumulator};
+use mdtf_boundary::ReportAccumulator;
 use mdtf_derive::DeriveParams;
 use mdtf_histogram::{ChannelStats, Histogram};
 use mdtf_pack::{PackParams, PackWriter, Profile};
-use mdtf_volume::{Geometry, MultiField, OutputFolder, PlaneReader, Volume};
+use mdtf_volume::{Geometry, OutputFolder, PlaneReader, Volume};
 use reductions::{SlabHistograms, Stats, g_stats};
 use std::collections::BTreeMap;
 use std::ops::Range;
@@ -242,7 +245,21 @@ fn run_slabs(
     if plan.defer_normals {
         groups.push(derive(vec![mdtf_derive::Item::Normal]));
     }
+    let tasks = opts.tasks.as_deref();
+    let store_dir = store.dir().to_path_buf();
+    let job = |pass: SlabPass| SlabJob { store: store_dir.clone(), geometry: geo.clone(), pass };
+    if let Some(tasks) = tasks {
+        // the tasks store every derived channel; the passes below read them instead of deriving
+        progress.stage("derive (tasks)")?;
+        let pass = SlabPass::Derive { groups: groups.clone(), kernel_reach: plan.reach.kernel[2] };
+        tasks.run(&job(pass), &slabs).map_err(fail("derive"))?;
+    }
     let mut chans = SlabChannels::new(store, groups, plan.reach.kernel[2], nz).cancelled_by(opts.cancel.clone());
+    if tasks.is_some() {
+        for c in chans.derived_names() {
+            chans.store.adopt(&c).map_err(io("derive"))?;
+        }
+    }
     let summarised: Vec<&str> = ["g", "f2", "inv_g"].into_iter().filter(|c| chans.has(c)).collect();
     // the first radix pass of g's median (the tracing's noise floor, the (v, 1/g) axis,
     // gaussian-tf's default), taken as this pass derives g
@@ -281,17 +298,32 @@ fn run_slabs(
             progress.stage("prefilter")?;
             let t = Instant::now();
             let halo = plan.reach.prefilter[2];
-            for (c, out_name) in [("g", "g_prefiltered"), ("f2", "f2_prefiltered")] {
-                let range = stats.range(c).map_or(0.0, |(lo, hi)| (hi - lo) as f64);
-                let params = crate::boundary_chain::prefilter_params(pf, range);
+            let filters: Vec<Prefilter> = [("g", "g_prefiltered"), ("f2", "f2_prefiltered")]
+                .map(|(c, out)| {
+                    let range = stats.range(c).map_or(0.0, |(lo, hi)| (hi - lo) as f64);
+                    let params = crate::boundary_chain::prefilter_params(pf, range);
+                    Prefilter { input: c.into(), output: out.into(), params }
+                })
+                .into();
+            if let Some(tasks) = tasks {
+                let pass = SlabPass::Prefilter { filters: filters.clone(), halo };
+                tasks.run(&job(pass), &slabs).map_err(fail("prefilter"))?;
+                for f in &filters {
+                    chans.store.adopt(&f.output).map_err(io("prefilter"))?;
+                }
+            }
+            for f in &filters {
                 for (k, z) in slabs.iter().enumerate() {
                     progress.slab(k + 1, slabs.len())?;
-                    let read = grown(z, halo, 1, nz);
-                    let v = chans.volumes(read.clone(), &[c]).map_err(fail("prefilter"))?.remove(0).1;
-                    let filtered = mdtf_bilateral::run(&v, &params).map_err(at("prefilter"))?;
-                    let own = filtered.z_slab(z.start - read.start..z.end - read.start);
-                    stats.add(out_name, own.samples());
-                    chans.store.put_volume(out_name, z.start, &own).map_err(io("prefilter"))?;
+                    let own = match tasks {
+                        Some(_) => chans.store.volume(&f.output, z.clone()).map_err(io("prefilter"))?,
+                        None => {
+                            let own = trace::prefilter_slab(&mut chans, &f.input, &f.params, z, halo)?;
+                            chans.store.put_volume(&f.output, z.start, &own).map_err(io("prefilter"))?;
+                            own
+                        }
+                    };
+                    stats.add(&f.output, own.samples());
                 }
             }
             (g_name, f2_name) = ("g_prefiltered", "f2_prefiltered");
@@ -302,33 +334,47 @@ fn run_slabs(
         let t = Instant::now();
         let traced_buckets = g_buckets.as_ref().filter(|_| g_name == "g");
         let g_stats = g_stats(&mut chans, g_name, traced_buckets, &slabs, value_range, geo.min_spacing(), &stats)?;
-        let halo = plan.reach.trace[2];
+        let setup = trace::TraceSetup {
+            g: g_name,
+            f2: f2_name,
+            stored: plan.prefilter || tasks.is_some(),
+            params: &p.boundary,
+            stats: &g_stats,
+            halo: plan.reach.trace[2],
+            value_range,
+        };
+        if let Some(tasks) = tasks {
+            let pass = SlabPass::Trace {
+                g: g_name.into(),
+                f2: f2_name.into(),
+                params: p.boundary.clone(),
+                stats: g_stats,
+                halo: setup.halo,
+                value_range,
+            };
+            tasks.run(&job(pass), &slabs).map_err(fail("boundary"))?;
+            for c in remote::TRACED {
+                chans.store.adopt(c).map_err(io("boundary"))?;
+            }
+        }
         let mut report: Option<ReportAccumulator> = None;
         let mut crossings: Option<mdtf_boundary::Crossings> = None;
         let mut counts = mdtf_boundary::TraceCounts::default();
         let mut resolved = None;
         for (k, z) in slabs.iter().enumerate() {
             progress.slab(k + 1, slabs.len())?;
-            let read = grown(z, halo, 1, nz);
-            let block = if plan.prefilter {
-                let mut c =
-                    chans.volumes(read.clone(), &[g_name, f2_name, "nx", "ny", "nz"]).map_err(fail("boundary"))?;
-                let normal = MultiField::from_volumes(c.split_off(2)).map_err(at("boundary"))?;
-                let (f2, g) = (c.remove(1).1, c.remove(0).1);
-                TraceBlock { planes: read.clone(), g, f2, normal, order: None }
-            } else {
-                // the derivatives over the block as derived (its planes beyond `read` are never reached)
-                let (planes, out) = chans.derive_block(read.clone()).map_err(fail("boundary"))?;
-                TraceBlock::of(planes, out).map_err(fail("boundary"))?
+            let b = match tasks {
+                Some(_) => remote::stored_trace(&mut chans, g_name, z)?,
+                None => {
+                    let t = trace::trace_slab(&mut chans, &setup, z)?;
+                    let b = &t.trace;
+                    for (c, v) in [("g_hit", &b.g_hit), ("hit", &b.hit), ("distance", &b.distance)] {
+                        chans.store.put_volume(c, z.start, v).map_err(io("boundary"))?;
+                    }
+                    t
+                }
             };
-            let own = z.start - block.planes.start..z.end - block.planes.start;
-            let input = BoundaryInput { g: &block.g, f2: &block.f2, normal: &block.normal, value_range };
-            let b = mdtf_boundary::trace_block(&input, &p.boundary, block.planes.start, own.clone(), &g_stats)
-                .map_err(at("boundary"))?;
-            let g_own = block.g.z_slab(own);
-            if let Some(out) = block.into_output() {
-                chans.recycle(out);
-            }
+            let (b, g_own) = (b.trace, b.g);
             report.get_or_insert_with(|| ReportAccumulator::new(b.resolved.report_thresholds())).add(
                 mdtf_boundary::ReportInput {
                     hit: b.hit.samples(),
@@ -345,9 +391,6 @@ fn run_slabs(
             counts += b.counts;
             resolved = Some(b.resolved);
             stats.add("g_hit", b.g_hit.samples());
-            for (c, v) in [("g_hit", &b.g_hit), ("hit", &b.hit), ("distance", &b.distance)] {
-                chans.store.put_volume(c, z.start, v).map_err(io("boundary"))?;
-            }
         }
         let (Some(r), Some(report), Some(crossings)) = (resolved, report, crossings) else {
             return Err(fail("boundary")("the volume has no planes".into()));
@@ -359,7 +402,7 @@ fn run_slabs(
         let rdir = dir.join("boundary");
         std::fs::create_dir_all(&rdir).map_err(io("boundary"))?;
         report.finish().write(&rdir).map_err(at("boundary"))?;
-        for c in ["g_prefiltered", "f2_prefiltered"] {
+        for c in ["g_prefiltered", "f2_prefiltered", "dot"] {
             chans.store.remove(c);
         }
         chans.release();
@@ -548,52 +591,4 @@ fn run_slabs(
         ..RunReport::of(opts, input_name, &geo)
     };
     crate::run::finish(&finishing, opts, out, report, &table_names, start, &progress)
-}
-
-/// What a block's tracing reads: g, f'' and the normal on `planes`.
-struct TraceBlock {
-    planes: Range<usize>,
-    g: Volume,
-    f2: Volume,
-    normal: MultiField,
-    /// The derive output's item order, when they came from one (to give its memory back).
-    order: Option<Vec<mdtf_derive::Item>>,
-}
-
-impl TraceBlock {
-    /// The block of a derive output over `planes` holding g, f'' and the normal.
-    fn of(planes: Range<usize>, out: mdtf_derive::DeriveOutput) -> Result<TraceBlock, String> {
-        use mdtf_derive::Item;
-        let order: Vec<Item> = out.items.iter().map(|(i, _)| *i).collect();
-        let (mut g, mut f2, mut normal) = (None, None, None);
-        for (item, mf) in out.items {
-            match item {
-                Item::G => g = Some(mf.into_scalar().map_err(|e| e.to_string())?),
-                Item::F2 => f2 = Some(mf.into_scalar().map_err(|e| e.to_string())?),
-                Item::Normal => normal = Some(mf),
-                _ => {}
-            }
-        }
-        let (Some(g), Some(f2), Some(normal)) = (g, f2, normal) else {
-            return Err("the tracing needs g, f2 and the normal from one derive pass".into());
-        };
-        Ok(TraceBlock { planes, g, f2, normal, order: Some(order) })
-    }
-
-    /// The derive output it came from, for its memory.
-    fn into_output(self) -> Option<mdtf_derive::DeriveOutput> {
-        use mdtf_derive::Item;
-        let order = self.order?;
-        let (mut g, mut f2, mut normal) = (Some(self.g), Some(self.f2), Some(self.normal));
-        let items = order
-            .into_iter()
-            .filter_map(|i| match i {
-                Item::G => g.take().map(|v| (i, MultiField::from(v))),
-                Item::F2 => f2.take().map(|v| (i, MultiField::from(v))),
-                Item::Normal => normal.take().map(|n| (i, n)),
-                _ => None,
-            })
-            .collect();
-        Some(mdtf_derive::DeriveOutput { items })
-    }
 }

@@ -81,6 +81,16 @@ impl SlabChannels {
         if crate::progress::is_set(&self.cancel) { Err("cancelled".into()) } else { Ok(()) }
     }
 
+    /// Planes of the volume.
+    pub fn nz(&self) -> usize {
+        self.nz
+    }
+
+    /// The channels the derive groups make, in their order.
+    pub fn derived_names(&self) -> Vec<String> {
+        self.groups.iter().flat_map(|(_, names)| names.iter().cloned()).collect()
+    }
+
     /// Whether channel `name` is stored or derivable.
     pub fn has(&self, name: &str) -> bool {
         self.store.has(name) || self.groups.iter().any(|(_, names)| names.iter().any(|n| n == name))

@@ -1,8 +1,10 @@
 //! Where a slab-by-slab run keeps its channels between passes: each channel
-//! a file of f32 samples (x-fastest, this machine's byte order: only this
-//! process reads them) in a folder inside the
+//! a file of f32 samples (x-fastest, the writer's byte order: the run's own
+//! processes read them, on machines of one kind) in a folder inside the
 //! run's staging folder, written and read by z-planes. Only the planes a
 //! pass asks for are ever in memory; the files go with the staging folder.
+//! Tasks of a run spread over processes ([`super::remote`]) open the same
+//! folder ([`ChannelStore::open`]) and each writes only its own planes.
 
 use mdtf_volume::{Geometry, Volume};
 use std::collections::BTreeMap;
@@ -27,6 +29,35 @@ impl ChannelStore {
         Ok(ChannelStore { dir, geometry, files: BTreeMap::new() })
     }
 
+    /// The store a run created in `dir` for channels on `geometry`, for a
+    /// task of the run in another process: with the channels `reads` (the
+    /// ones its pass reads; those it writes are created or joined on write,
+    /// and a rerun task must not take its own half-written ones for stored).
+    pub fn open(dir: PathBuf, geometry: Geometry, reads: &[&str]) -> std::io::Result<ChannelStore> {
+        let mut store = ChannelStore { dir, geometry, files: BTreeMap::new() };
+        for name in reads {
+            store.adopt(name)?;
+        }
+        Ok(store)
+    }
+
+    /// Takes in channel `name`, written into the folder by another process.
+    pub fn adopt(&mut self, name: &str) -> std::io::Result<()> {
+        let path = self.dir.join(format!("{name}.f32"));
+        let file = File::options()
+            .read(true)
+            .write(true)
+            .open(&path)
+            .map_err(|e| std::io::Error::new(e.kind(), format!("channel store file {}: {e}", path.display())))?;
+        self.files.insert(name.to_string(), file);
+        Ok(())
+    }
+
+    /// The folder of the store.
+    pub fn dir(&self) -> &std::path::Path {
+        &self.dir
+    }
+
     /// The grid of the channels.
     pub fn geometry(&self) -> &Geometry {
         &self.geometry
@@ -43,12 +74,13 @@ impl ChannelStore {
     }
 
     /// Writes the samples of planes `first..` of channel `name` (whole
-    /// planes), creating the channel on its first write.
+    /// planes), creating the channel on its first write (or taking the file
+    /// another task of the run created).
     pub fn put(&mut self, name: &str, first: usize, samples: &[f32]) -> std::io::Result<()> {
         let offset = (first * self.plane_len() * 4) as u64;
         if !self.files.contains_key(name) {
             let path = self.dir.join(format!("{name}.f32"));
-            let file = File::options().read(true).write(true).create_new(true).open(path)?;
+            let file = File::options().read(true).write(true).create(true).truncate(false).open(path)?;
             self.files.insert(name.to_string(), file);
         }
         let Some(file) = self.files.get_mut(name) else { return Err(missing(name)) };

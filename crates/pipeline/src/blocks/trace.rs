@@ -1,0 +1,122 @@
+//! The work of one slab in the pre-filter and tracing passes, the same
+//! whether the run does it in its own process or hands it to a task
+//! ([`super::remote`]): the slab's planes grown by the pass's halo are read
+//! (or derived), and only the slab's own planes come out.
+
+use super::{SlabChannels, grown};
+use crate::run::{RunError, at, fail};
+use mdtf_bilateral::BilateralParams;
+use mdtf_boundary::{BlockTrace, BoundaryInput, BoundaryParams, VolumeStats};
+use mdtf_volume::{MultiField, Volume};
+use std::ops::Range;
+
+/// Channel `channel` pre-filtered with `params` on the planes of `z`,
+/// from its planes grown by the filter's `halo`.
+pub(super) fn prefilter_slab(
+    chans: &mut SlabChannels,
+    channel: &str,
+    params: &BilateralParams,
+    z: &Range<usize>,
+    halo: usize,
+) -> Result<Volume, RunError> {
+    let read = grown(z, halo, 1, chans.nz());
+    let v = chans.volumes(read.clone(), &[channel]).map_err(fail("prefilter"))?.remove(0).1;
+    let filtered = mdtf_bilateral::run(&v, params).map_err(at("prefilter"))?;
+    Ok(filtered.z_slab(z.start - read.start..z.end - read.start))
+}
+
+/// What a tracing pass reads and how.
+pub(super) struct TraceSetup<'a> {
+    /// The g and f'' traced (the pre-filtered ones, when there are).
+    pub g: &'a str,
+    pub f2: &'a str,
+    /// Read g, f'' and the normal from the store; else derive them (the first derive group).
+    pub stored: bool,
+    pub params: &'a BoundaryParams,
+    pub stats: &'a VolumeStats,
+    /// Planes a ray may reach beyond its voxel's (d_max plus the interpolation's support).
+    pub halo: usize,
+    pub value_range: f64,
+}
+
+/// A slab's tracing and the g it traced, on its own planes.
+pub(super) struct SlabTrace {
+    pub trace: BlockTrace,
+    pub g: Volume,
+}
+
+/// The tracing of the planes of `z`, and the traced g on them.
+pub(super) fn trace_slab(
+    chans: &mut SlabChannels,
+    setup: &TraceSetup,
+    z: &Range<usize>,
+) -> Result<SlabTrace, RunError> {
+    let read = grown(z, setup.halo, 1, chans.nz());
+    let block = if setup.stored {
+        let mut c = chans.volumes(read.clone(), &[setup.g, setup.f2, "nx", "ny", "nz"]).map_err(fail("boundary"))?;
+        let normal = MultiField::from_volumes(c.split_off(2)).map_err(at("boundary"))?;
+        let (f2, g) = (c.remove(1).1, c.remove(0).1);
+        TraceBlock { planes: read.clone(), g, f2, normal, order: None }
+    } else {
+        // the derivatives over the block as derived (its planes beyond `read` are never reached)
+        let (planes, out) = chans.derive_block(read.clone()).map_err(fail("boundary"))?;
+        TraceBlock::of(planes, out).map_err(fail("boundary"))?
+    };
+    let own = z.start - block.planes.start..z.end - block.planes.start;
+    let input = BoundaryInput { g: &block.g, f2: &block.f2, normal: &block.normal, value_range: setup.value_range };
+    let b = mdtf_boundary::trace_block(&input, setup.params, block.planes.start, own.clone(), setup.stats)
+        .map_err(at("boundary"))?;
+    let g_own = block.g.z_slab(own);
+    if let Some(out) = block.into_output() {
+        chans.recycle(out);
+    }
+    Ok(SlabTrace { trace: b, g: g_own })
+}
+
+/// What a block's tracing reads: g, f'' and the normal on `planes`.
+struct TraceBlock {
+    planes: Range<usize>,
+    g: Volume,
+    f2: Volume,
+    normal: MultiField,
+    /// The derive output's item order, when they came from one (to give its memory back).
+    order: Option<Vec<mdtf_derive::Item>>,
+}
+
+impl TraceBlock {
+    /// The block of a derive output over `planes` holding g, f'' and the normal.
+    fn of(planes: Range<usize>, out: mdtf_derive::DeriveOutput) -> Result<TraceBlock, String> {
+        use mdtf_derive::Item;
+        let order: Vec<Item> = out.items.iter().map(|(i, _)| *i).collect();
+        let (mut g, mut f2, mut normal) = (None, None, None);
+        for (item, mf) in out.items {
+            match item {
+                Item::G => g = Some(mf.into_scalar().map_err(|e| e.to_string())?),
+                Item::F2 => f2 = Some(mf.into_scalar().map_err(|e| e.to_string())?),
+                Item::Normal => normal = Some(mf),
+                _ => {}
+            }
+        }
+        let (Some(g), Some(f2), Some(normal)) = (g, f2, normal) else {
+            return Err("the tracing needs g, f2 and the normal from one derive pass".into());
+        };
+        Ok(TraceBlock { planes, g, f2, normal, order: Some(order) })
+    }
+
+    /// The derive output it came from, for its memory.
+    fn into_output(self) -> Option<mdtf_derive::DeriveOutput> {
+        use mdtf_derive::Item;
+        let order = self.order?;
+        let (mut g, mut f2, mut normal) = (Some(self.g), Some(self.f2), Some(self.normal));
+        let items = order
+            .into_iter()
+            .filter_map(|i| match i {
+                Item::G => g.take().map(|v| (i, MultiField::from(v))),
+                Item::F2 => f2.take().map(|v| (i, MultiField::from(v))),
+                Item::Normal => normal.take().map(|n| (i, n)),
+                _ => None,
+            })
+            .collect();
+        Some(mdtf_derive::DeriveOutput { items })
+    }
+}
