@@ -1,12 +1,15 @@
 //! Pipeline files from Python: run one (whole, or slab by slab under a
-//! memory budget) into an output folder, and ask for its plan and halo.
+//! memory budget) into an output folder, ask for its plan and halo, or run
+//! one slab by slab with its heavy passes handed to a Python callable as
+//! tasks (what `mdtf.dask.run` gives to a cluster) and run one such task.
 
 use crate::call::run_released;
 use crate::error::{mdtf_error, value_error};
-use mdtf_pipeline::blocks::SlabSize;
+use mdtf_pipeline::blocks::{SlabJob, SlabSize, SlabTasks};
 use mdtf_pipeline::file::Pipeline;
 use mdtf_pipeline::run::RunOptions;
 use pyo3::prelude::*;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -35,7 +38,7 @@ pub fn run(
 ) -> PyResult<String> {
     let p = load(&pipeline, &overrides)?;
     let cancel = Arc::new(AtomicBool::new(false));
-    let opts = RunOptions { pipeline_path: pipeline, input, output, cancel: Some(cancel.clone()) };
+    let opts = RunOptions { pipeline_path: pipeline, input, output, cancel: Some(cancel.clone()), tasks: None };
     let report = run_released(py, Some(&cancel), || {
         let size = match (memory_budget, slab_planes) {
             (Some(b), _) => Some(SlabSize::Budget(b)),
@@ -66,4 +69,68 @@ pub fn plan(
     let (plan, _, _) = run_released(py, None, || mdtf_pipeline::run::plan(&p, &opts))?.map_err(mdtf_error)?;
     let [x, y, z] = plan.halo;
     Ok((plan.to_string(), (z, y, x)))
+}
+
+/// The tasks of a run handed to a Python callable `submit(job, slabs)`:
+/// `job` the pass as JSON, `slabs` a list of (first, end) z-planes; it
+/// returns once [`slab_task`] has run on every slab (wherever it likes)
+/// and raises if any failed for good.
+struct PythonTasks {
+    submit: Py<PyAny>,
+}
+
+impl std::fmt::Debug for PythonTasks {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("PythonTasks")
+    }
+}
+
+impl SlabTasks for PythonTasks {
+    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
+        let json = serde_json::to_string(job).map_err(|e| e.to_string())?;
+        let slabs: Vec<(usize, usize)> = slabs.iter().map(|z| (z.start, z.end)).collect();
+        Python::attach(|py| self.submit.call1(py, (json, slabs)).map(drop).map_err(|e| format!("a task failed: {e}")))
+    }
+}
+
+/// Runs the pipeline file `pipeline` into `output` as [`run`] does, slab by
+/// slab (slabs of `slab_planes`, or as tall as `memory_budget` bytes allow,
+/// else 64 planes), its derive, pre-filter and tracing passes handed to
+/// `submit(job, slabs)` as tasks (see `mdtf.dask.run`). The outputs are
+/// those of [`run`], byte for byte. Returns run_report.json's text.
+#[pyfunction]
+#[pyo3(signature = (pipeline, output, submit, input=None, overrides=vec![], memory_budget=None, slab_planes=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn run_tasks(
+    py: Python<'_>,
+    pipeline: PathBuf,
+    output: PathBuf,
+    submit: Py<PyAny>,
+    input: Option<PathBuf>,
+    overrides: Vec<String>,
+    memory_budget: Option<u64>,
+    slab_planes: Option<usize>,
+) -> PyResult<String> {
+    let p = load(&pipeline, &overrides)?;
+    let cancel = Arc::new(AtomicBool::new(false));
+    let tasks: Arc<dyn SlabTasks> = Arc::new(PythonTasks { submit });
+    let opts = RunOptions { pipeline_path: pipeline, input, output, cancel: Some(cancel.clone()), tasks: Some(tasks) };
+    let size = match (memory_budget, slab_planes) {
+        (Some(b), _) => SlabSize::Budget(b),
+        (None, h) => SlabSize::Planes(h.unwrap_or(DEFAULT_TASK_PLANES).max(1)),
+    };
+    let report = run_released(py, Some(&cancel), || mdtf_pipeline::blocks::run(&p, &opts, size, &|_| {}, &|_, _| {}))?
+        .map_err(mdtf_error)?;
+    serde_json::to_string_pretty(&report).map_err(mdtf_error)
+}
+
+/// z-planes per task of [`run_tasks`] when neither a budget nor a height is given.
+const DEFAULT_TASK_PLANES: usize = 64;
+
+/// Runs one task of a [`run_tasks`] run: `job` (the pass, as JSON) on the
+/// planes `start..end`, writing them into the run's channel store.
+#[pyfunction]
+pub fn slab_task(py: Python<'_>, job: &str, start: usize, end: usize) -> PyResult<()> {
+    let job: SlabJob = serde_json::from_str(job).map_err(|e| value_error(format!("not a slab job: {e}")))?;
+    run_released(py, None, || mdtf_pipeline::blocks::run_task(&job, start..end))?.map_err(mdtf_error)
 }

@@ -1,11 +1,12 @@
 """mdtf.dask on a 2-worker process cluster: blocks of an OME-Zarr store
 with chunks that do not divide the shape give what the whole-volume calls
-give, bit for bit."""
+give, bit for bit, and whole pipeline runs give ``mdtf run``'s files."""
 
 from __future__ import annotations
 
 import os
 import signal
+import threading
 import time
 from pathlib import Path
 from typing import Iterator
@@ -17,6 +18,9 @@ import mdtf
 
 distributed = pytest.importorskip("distributed", reason="mdtf.dask's tests need dask.distributed")
 import mdtf.dask as mdask  # noqa: E402
+from conftest import cli  # noqa: E402
+
+import dask  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -135,3 +139,81 @@ def test_halos_are_the_stages_reach() -> None:
     assert mdtf._mdtf.kernel_reach((2.0, 1.0, 0.5), "gauss:1.5") == (3, 6, 12)
     # bilateral exact: ceil(2.5 sigma_d / spacing)
     assert mdtf._mdtf.bilateral_reach((1.2, 1.0, 0.8), 1.5, "exact", None) == (4, 4, 5)
+
+
+def _outputs(folder: Path) -> dict[str, bytes]:
+    """Every file a run wrote (relative path -> bytes), but the run report and
+    its page, which hold timings and how the run was cut."""
+    skip = {"run_report.json", "report.html", ".mdtf-output"}
+    return {
+        str(f.relative_to(folder)): f.read_bytes()
+        for f in sorted(folder.rglob("*"))
+        if f.is_file() and str(f.relative_to(folder)) not in skip
+    }
+
+
+@pytest.fixture(scope="module")
+def chunked_store(sphere: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The sphere as an OME-Zarr store of 13 x 17 x 19 chunks (none divides its 48 x 44 x 40)."""
+    vol = mdtf.read(sphere)
+    path = tmp_path_factory.mktemp("chunked") / "sphere.ome.zarr"
+    mdask.to_ome_zarr(mdask.da.from_array(vol.data, chunks=(13, 17, 19)), path, vol.spacing, vol.origin)
+    return path
+
+
+@pytest.mark.parametrize("name", ["slicer-3dtf", "distance-tf"])
+def test_a_pipeline_run_on_the_cluster_writes_mdtf_runs_files(
+    client: distributed.Client, chunked_store: Path, mdtf_bin: Path, pipelines: Path, tmp_path: Path, name: str
+) -> None:
+    pipeline = pipelines / f"{name}.toml"
+    cli(mdtf_bin, "run", pipeline, "--input", chunked_store, "-o", tmp_path / "cli", "--set", "preview=false")
+    report = mdask.run(pipeline, tmp_path / "dask", input=chunked_store, client=client, slab_planes=13, preview=False)
+    assert report["slabs"] == {"planes": 13, "count": 4, "budget": None}
+    want, got = _outputs(tmp_path / "cli"), _outputs(tmp_path / "dask")
+    assert any(f.startswith("pack/") and f.endswith(".raw") for f in want), sorted(want)
+    assert sorted(got) == sorted(want)
+    assert [f for f in want if got[f] != want[f]] == []
+    assert not (tmp_path / "dask" / ".slabs").exists()
+
+
+def test_a_worker_killed_in_a_pipeline_run_changes_nothing(
+    client: distributed.Client, mdtf_bin: Path, pipelines: Path, tmp_path: Path
+) -> None:
+    big = tmp_path / "sphere96.nrrd"
+    cli(mdtf_bin, "synth", "erf-sphere", "--size", "96", "--noise", "2", "-o", big)
+    pipeline = pipelines / "distance-tf.toml"
+    cli(mdtf_bin, "run", pipeline, "--input", big, "-o", tmp_path / "cli", "--set", "preview=false")
+    result: dict[str, object] = {}
+
+    def go() -> None:
+        try:
+            result["report"] = mdask.run(pipeline, tmp_path / "dask", input=big, client=client, slab_planes=6, preview=False)
+        except BaseException as e:  # noqa: BLE001 - handed to the test thread
+            result["error"] = e
+
+    runner = threading.Thread(target=go)
+    runner.start()
+    # once tasks are running, one worker process dies with what it holds and runs
+    deadline = time.monotonic() + 120
+    while not any(client.processing().values()) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert runner.is_alive(), "the run ended before a worker could be killed"
+    victim = next(iter(client.scheduler_info()["workers"]))
+    pid = client.run(os.getpid, workers=[victim])[victim]
+    os.kill(pid, signal.SIGKILL)
+    runner.join(timeout=600)
+    assert "error" not in result, result.get("error")
+    want, got = _outputs(tmp_path / "cli"), _outputs(tmp_path / "dask")
+    assert sorted(got) == sorted(want)
+    assert [f for f in want if got[f] != want[f]] == []
+
+
+def test_a_pipeline_run_without_a_cluster_uses_dasks_scheduler_and_fails_as_mdtf_run(
+    sphere: Path, pipelines: Path, tmp_path: Path
+) -> None:
+    with dask.config.set(scheduler="threads"):
+        report = mdask.run(pipelines / "distance-tf.toml", tmp_path / "out", input=sphere, slab_planes=20, preview=False)
+    assert report["slabs"]["count"] == 3 and report["boundary"]["counts"]["hits"] > 1000
+    with pytest.raises(mdtf.MdtfError, match="boundary.d_max"):
+        mdask.run(pipelines / "distance-tf.toml", tmp_path / "bad", input=sphere, boundary__d_max=-1.0)
+    assert not (tmp_path / "bad").exists()

@@ -1,6 +1,6 @@
 """Type stubs of mdtf's native module (the public API is in mdtf/__init__.py)."""
 
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import numpy.typing as npt
@@ -74,6 +74,16 @@ def run(
     slab_planes: int | None = None,
 ) -> str: ...
 def plan(pipeline: str, input: str | None = None, overrides: list[str] = ...) -> tuple[str, tuple[int, int, int]]: ...
+def run_tasks(
+    pipeline: str,
+    output: str,
+    submit: Callable[[str, list[tuple[int, int]]], None],
+    input: str | None = None,
+    overrides: list[str] = ...,
+    memory_budget: int | None = None,
+    slab_planes: int | None = None,
+) -> str: ...
+def slab_task(job: str, start: int, end: int) -> None: ...
 def kernel_reach(spacing: Triple, kernel: str | None = None) -> tuple[int, int, int]: ...
 def bilateral_reach(spacing: Triple, sigma_d: float = 1.0, mode: str = "exact", k: float | None = None) -> tuple[int, int, int]: ...
 def default_epsilon(span: float, min_spacing: float) -> float: ...

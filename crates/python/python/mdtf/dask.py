@@ -11,8 +11,12 @@ sigma) is reduced over the whole array first, exactly (min and max).
 
 Read an OME-Zarr store with ``mdtf.dask.from_ome_zarr`` and write results
 with ``mdtf.dask.to_ome_zarr`` (each block writes only its own chunks).
-Needs ``dask[array]`` (and ``zarr`` for stores). Whole pipeline runs on a
-cluster (``mdtf run``'s passes as block tasks) are not here yet.
+
+``mdtf.dask.run`` runs a whole pipeline file as ``mdtf run`` does, its
+derive, pre-filter and tracing passes spread over the cluster as one task
+per z-slab; the outputs are ``mdtf run``'s, byte for byte.
+
+Needs ``dask[array]`` (and ``zarr`` for stores, ``distributed`` for a cluster).
 """
 
 from __future__ import annotations
@@ -20,11 +24,11 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from . import SpacingLike, _f32, _mdtf, _triple
+from . import SpacingLike, _f32, _mdtf, _overrides, _triple
 
 try:
     import dask
@@ -33,7 +37,7 @@ try:
 except ImportError as e:  # pragma: no cover - the message is the point
     raise ImportError("mdtf.dask needs dask: pip install 'dask[array]' (and distributed for a cluster)") from e
 
-__all__ = ["derive", "bilateral", "boundary", "lower_median", "from_ome_zarr", "to_ome_zarr", "da"]
+__all__ = ["derive", "bilateral", "boundary", "lower_median", "run", "from_ome_zarr", "to_ome_zarr", "da"]
 
 
 def _value_range(arr: da.Array) -> tuple[float, float]:
@@ -306,3 +310,74 @@ def to_ome_zarr(
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
+
+
+def _slab_task(job: str, start: int, end: int) -> None:
+    """One task of ``run``: ``job``'s pass on the z-planes ``start:end``
+    (a module function, so that workers import it rather than unpickle it)."""
+    _mdtf.slab_task(job, start, end)
+
+
+def _current_client() -> Any:
+    """The ``dask.distributed`` client in use, or None."""
+    try:
+        from distributed import get_client
+    except ImportError:
+        return None
+    try:
+        return get_client()
+    except ValueError:
+        return None
+
+
+def run(
+    pipeline: str | os.PathLike[str],
+    output: str | os.PathLike[str],
+    input: str | os.PathLike[str] | None = None,
+    settings: Mapping[str, Any] | Iterable[str] | None = None,
+    *,
+    client: Any = None,
+    slab_planes: int | None = None,
+    memory_budget: int | None = None,
+    retries: int = 3,
+    **overrides: Any,
+) -> dict[str, Any]:
+    """Runs a pipeline file like ``mdtf.run`` (``mdtf run``), slab by slab,
+    its derive, pre-filter and tracing passes as one task per z-slab on a
+    dask cluster. The outputs in ``output`` are ``mdtf run``'s, byte for
+    byte: every whole-volume reduction (ranges, percentile tails, medians,
+    histograms, the histogram volume's sums) is made by this process from
+    what the tasks stored, in z order.
+
+    The tasks read and write the run's channel store inside the output's
+    staging folder, so ``output`` must be on a file system every worker
+    sees (the cluster's shared disk). A task writes only its own slab's
+    planes: a task lost with its worker is rerun (up to ``retries`` times)
+    with the same result. This process reads the input (any format
+    ``mdtf.read`` takes, OME-Zarr stores included) and writes the pack.
+
+    ``client``: a ``dask.distributed`` client (default: the current one, if
+    any, else dask's default scheduler in this process). ``slab_planes``
+    z-planes per task (default 64), or ``memory_budget`` bytes per task.
+    ``settings`` and keyword overrides as for ``mdtf.run``. Returns the run
+    report (run_report.json)."""
+    client = client if client is not None else _current_client()
+
+    def submit(job: str, slabs: list[tuple[int, int]]) -> None:
+        starts, ends = [a for a, _ in slabs], [b for _, b in slabs]
+        if client is None:
+            dask.compute(*[dask.delayed(_slab_task, pure=False)(job, a, b) for a, b in slabs])
+            return
+        futures = client.map(_slab_task, [job] * len(slabs), starts, ends, pure=False, retries=retries)
+        client.gather(futures)
+
+    text = _mdtf.run_tasks(
+        os.fspath(pipeline),
+        os.fspath(output),
+        submit,
+        None if input is None else os.fspath(input),
+        _overrides(settings, overrides),
+        memory_budget,
+        slab_planes,
+    )
+    return json.loads(text)
