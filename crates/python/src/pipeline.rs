@@ -9,6 +9,7 @@ use mdtf_pipeline::blocks::{SlabJob, SlabSize, SlabTasks};
 use mdtf_pipeline::file::Pipeline;
 use mdtf_pipeline::run::RunOptions;
 use pyo3::prelude::*;
+use pyo3::types::PyCFunction;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -71,12 +72,14 @@ pub fn plan(
     Ok((plan.to_string(), (z, y, x)))
 }
 
-/// The tasks of a run handed to a Python callable `submit(job, slabs)`:
-/// `job` the pass as JSON, `slabs` a list of (first, end) z-planes; it
-/// returns once [`slab_task`] has run on every slab (wherever it likes)
-/// and raises if any failed for good.
+/// The tasks of a run handed to a Python callable `submit(job, slabs,
+/// cancelled)`: `job` the pass as JSON, `slabs` a list of (first, end)
+/// z-planes, `cancelled()` true once the run is interrupted (Ctrl-C); it
+/// returns once [`slab_task`] has run on every slab (wherever it likes) or
+/// the run is cancelled, and raises if a task failed for good.
 struct PythonTasks {
     submit: Py<PyAny>,
+    cancel: Arc<AtomicBool>,
 }
 
 impl std::fmt::Debug for PythonTasks {
@@ -89,7 +92,14 @@ impl SlabTasks for PythonTasks {
     fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
         let json = serde_json::to_string(job).map_err(|e| e.to_string())?;
         let slabs: Vec<(usize, usize)> = slabs.iter().map(|z| (z.start, z.end)).collect();
-        Python::attach(|py| self.submit.call1(py, (json, slabs)).map(drop).map_err(|e| format!("a task failed: {e}")))
+        let cancel = self.cancel.clone();
+        Python::attach(|py| {
+            let cancelled = PyCFunction::new_closure(py, Some(c"cancelled"), None, move |_, _| {
+                cancel.load(std::sync::atomic::Ordering::Relaxed)
+            })?;
+            self.submit.call1(py, (json, slabs, cancelled)).map(drop)
+        })
+        .map_err(|e| format!("a task failed: {e}"))
     }
 }
 
@@ -113,7 +123,7 @@ pub fn run_tasks(
 ) -> PyResult<String> {
     let p = load(&pipeline, &overrides)?;
     let cancel = Arc::new(AtomicBool::new(false));
-    let tasks: Arc<dyn SlabTasks> = Arc::new(PythonTasks { submit });
+    let tasks: Arc<dyn SlabTasks> = Arc::new(PythonTasks { submit, cancel: cancel.clone() });
     let opts = RunOptions { pipeline_path: pipeline, input, output, cancel: Some(cancel.clone()), tasks: Some(tasks) };
     let size = match (memory_budget, slab_planes) {
         (Some(b), _) => SlabSize::Budget(b),

@@ -176,27 +176,38 @@ def test_a_pipeline_run_on_the_cluster_writes_mdtf_runs_files(
     assert not (tmp_path / "dask" / ".slabs").exists()
 
 
+@pytest.fixture(scope="module")
+def sphere96(mdtf_bin: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A noisy 96^3 erf sphere (a run long enough to interrupt)."""
+    path = tmp_path_factory.mktemp("sphere96") / "sphere96.nrrd"
+    cli(mdtf_bin, "synth", "erf-sphere", "--size", "96", "--noise", "2", "-o", path)
+    return path
+
+
+def _once_tasks_run(client: distributed.Client) -> None:
+    """Returns once the cluster is running tasks (or after two minutes)."""
+    deadline = time.monotonic() + 120
+    while not any(client.processing().values()) and time.monotonic() < deadline:
+        time.sleep(0.02)
+
+
 def test_a_worker_killed_in_a_pipeline_run_changes_nothing(
-    client: distributed.Client, mdtf_bin: Path, pipelines: Path, tmp_path: Path
+    client: distributed.Client, sphere96: Path, mdtf_bin: Path, pipelines: Path, tmp_path: Path
 ) -> None:
-    big = tmp_path / "sphere96.nrrd"
-    cli(mdtf_bin, "synth", "erf-sphere", "--size", "96", "--noise", "2", "-o", big)
     pipeline = pipelines / "distance-tf.toml"
-    cli(mdtf_bin, "run", pipeline, "--input", big, "-o", tmp_path / "cli", "--set", "preview=false")
+    cli(mdtf_bin, "run", pipeline, "--input", sphere96, "-o", tmp_path / "cli", "--set", "preview=false")
     result: dict[str, object] = {}
 
     def go() -> None:
         try:
-            result["report"] = mdask.run(pipeline, tmp_path / "dask", input=big, client=client, slab_planes=6, preview=False)
+            result["report"] = mdask.run(pipeline, tmp_path / "dask", input=sphere96, client=client, slab_planes=6, preview=False)
         except BaseException as e:  # noqa: BLE001 - handed to the test thread
             result["error"] = e
 
     runner = threading.Thread(target=go)
     runner.start()
     # once tasks are running, one worker process dies with what it holds and runs
-    deadline = time.monotonic() + 120
-    while not any(client.processing().values()) and time.monotonic() < deadline:
-        time.sleep(0.02)
+    _once_tasks_run(client)
     assert runner.is_alive(), "the run ended before a worker could be killed"
     victim = next(iter(client.scheduler_info()["workers"]))
     pid = client.run(os.getpid, workers=[victim])[victim]
@@ -206,6 +217,23 @@ def test_a_worker_killed_in_a_pipeline_run_changes_nothing(
     want, got = _outputs(tmp_path / "cli"), _outputs(tmp_path / "dask")
     assert sorted(got) == sorted(want)
     assert [f for f in want if got[f] != want[f]] == []
+
+
+def test_ctrl_c_during_a_pipeline_run_drops_its_tasks_and_leaves_nothing(
+    client: distributed.Client, sphere96: Path, pipelines: Path, tmp_path: Path
+) -> None:
+    signalled: list[float] = []
+
+    def interrupt() -> None:
+        _once_tasks_run(client)
+        signalled.append(time.monotonic())
+        os.kill(os.getpid(), signal.SIGINT)
+
+    threading.Thread(target=interrupt, daemon=True).start()
+    with pytest.raises(KeyboardInterrupt):
+        mdask.run(pipelines / "distance-tf.toml", tmp_path / "out", input=sphere96, client=client, slab_planes=4, preview=False)
+    assert signalled and time.monotonic() - signalled[0] < 2.0, "interrupted within two seconds"
+    assert list(tmp_path.iterdir()) == [], "no output and no partial folder"
 
 
 def test_a_pipeline_run_without_a_cluster_uses_dasks_scheduler_and_fails_as_mdtf_run(

@@ -81,7 +81,7 @@ SCRIPT = """
 import sys, time, mdtf
 print("started", flush=True)
 try:
-    mdtf.run(sys.argv[1], sys.argv[2], input__size=256, preview=False, slab_planes=4)
+    mdtf.run(sys.argv[1], sys.argv[2], input__size=384, preview=False, slab_planes=4)
     print("finished", flush=True)
 except KeyboardInterrupt:
     print("interrupted", time.monotonic(), flush=True)
@@ -98,7 +98,14 @@ def test_ctrl_c_during_a_run_raises_keyboard_interrupt_within_a_second(pipelines
     )
     assert child.stdout is not None
     assert child.stdout.readline().strip() == "started"
-    time.sleep(1.0)
+    # the signal comes once the run is going slab by slab (its channel store holds the value:
+    # the phantom is made in one piece before); a 384^3 slab run then takes several seconds
+    # more on any machine, so it is still running
+    deadline = time.monotonic() + 120
+    while not list(tmp_path.rglob("v.f32")) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert list(tmp_path.rglob("v.f32")), "the run began its slabs"
+    time.sleep(0.2)
     sent = time.monotonic()
     child.send_signal(signal.SIGINT)
     stdout, stderr = child.communicate(timeout=60)

@@ -77,7 +77,7 @@ def plan(pipeline: str, input: str | None = None, overrides: list[str] = ...) ->
 def run_tasks(
     pipeline: str,
     output: str,
-    submit: Callable[[str, list[tuple[int, int]]], None],
+    submit: Callable[[str, list[tuple[int, int]], Callable[[], bool]], None],
     input: str | None = None,
     overrides: list[str] = ...,
     memory_budget: int | None = None,

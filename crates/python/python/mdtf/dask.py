@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import os
+import time
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
@@ -363,12 +364,18 @@ def run(
     report (run_report.json)."""
     client = client if client is not None else _current_client()
 
-    def submit(job: str, slabs: list[tuple[int, int]]) -> None:
-        starts, ends = [a for a, _ in slabs], [b for _, b in slabs]
+    def submit(job: str, slabs: list[tuple[int, int]], cancelled: Any) -> None:
         if client is None:
             dask.compute(*[dask.delayed(_slab_task, pure=False)(job, a, b) for a, b in slabs])
             return
+        starts, ends = [a for a, _ in slabs], [b for _, b in slabs]
         futures = client.map(_slab_task, [job] * len(slabs), starts, ends, pure=False, retries=retries)
+        # Ctrl-C in the caller sets cancelled(): the tasks are dropped and the run ends as cancelled
+        while not all(f.done() for f in futures):
+            if cancelled():
+                client.cancel(futures)
+                return
+            time.sleep(0.05)
         client.gather(futures)
 
     text = _mdtf.run_tasks(
