@@ -47,7 +47,6 @@ fn _mdtf(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(stages::quantise, m)?)?;
     m.add_function(wrap_pyfunction!(pipeline::run, m)?)?;
     m.add_function(wrap_pyfunction!(pipeline::plan, m)?)?;
-    m.add_function(wrap_pyfunction!(pipeline::run_tasks, m)?)?;
     m.add_function(wrap_pyfunction!(pipeline::slab_task, m)?)?;
     m.add_function(wrap_pyfunction!(reach::kernel_reach, m)?)?;
     m.add_function(wrap_pyfunction!(reach::bilateral_reach, m)?)?;

@@ -25,9 +25,14 @@ fn load(path: &Path, overrides: &[String]) -> PyResult<Pipeline> {
 /// at the end; a failed or interrupted run leaves nothing), on `input` in
 /// place of the pipeline's. `memory_budget` (bytes) or `slab_planes` run it
 /// slab by slab; with neither, a volume too large for memory goes by slabs
-/// on its own, as `mdtf run` does. Returns run_report.json's text.
+/// on its own, as `mdtf run` does. With `submit`, the run goes slab by slab
+/// (64 planes unless told) and its derive, pre-filter and tracing passes are
+/// handed to `submit(job, slabs, cancelled)` as tasks (see `mdtf.dask.run`
+/// and [`PythonTasks`]); the outputs are the same, byte for byte. Returns
+/// run_report.json's text.
 #[pyfunction]
-#[pyo3(signature = (pipeline, output, input=None, overrides=vec![], memory_budget=None, slab_planes=None))]
+#[pyo3(signature = (pipeline, output, input=None, overrides=vec![], memory_budget=None, slab_planes=None, submit=None))]
+#[allow(clippy::too_many_arguments)]
 pub fn run(
     py: Python<'_>,
     pipeline: PathBuf,
@@ -36,14 +41,18 @@ pub fn run(
     overrides: Vec<String>,
     memory_budget: Option<u64>,
     slab_planes: Option<usize>,
+    submit: Option<Py<PyAny>>,
 ) -> PyResult<String> {
     let p = load(&pipeline, &overrides)?;
     let cancel = Arc::new(AtomicBool::new(false));
-    let opts = RunOptions { pipeline_path: pipeline, input, output, cancel: Some(cancel.clone()), tasks: None };
+    let tasks = submit.map(|submit| Arc::new(PythonTasks { submit, cancel: cancel.clone() }) as Arc<dyn SlabTasks>);
+    let by_tasks = tasks.is_some();
+    let opts = RunOptions { pipeline_path: pipeline, input, output, cancel: Some(cancel.clone()), tasks };
     let report = run_released(py, Some(&cancel), || {
         let size = match (memory_budget, slab_planes) {
             (Some(b), _) => Some(SlabSize::Budget(b)),
             (None, Some(h)) => Some(SlabSize::Planes(h.max(1))),
+            (None, None) if by_tasks => Some(SlabSize::Planes(DEFAULT_TASK_PLANES)),
             (None, None) => mdtf_pipeline::blocks::automatic(&p, &opts).map(|(b, _)| SlabSize::Budget(b)),
         };
         match size {
@@ -54,6 +63,9 @@ pub fn run(
     .map_err(mdtf_error)?;
     serde_json::to_string_pretty(&report).map_err(mdtf_error)
 }
+
+/// z-planes per task of a [`run`] with `submit` when neither a budget nor a height is given.
+const DEFAULT_TASK_PLANES: usize = 64;
 
 /// The plan of the pipeline file on its input (or `input`): its text as
 /// `mdtf run --plan` prints it, and the halo a block needs, (z, y, x) voxels.
@@ -103,41 +115,7 @@ impl SlabTasks for PythonTasks {
     }
 }
 
-/// Runs the pipeline file `pipeline` into `output` as [`run`] does, slab by
-/// slab (slabs of `slab_planes`, or as tall as `memory_budget` bytes allow,
-/// else 64 planes), its derive, pre-filter and tracing passes handed to
-/// `submit(job, slabs)` as tasks (see `mdtf.dask.run`). The outputs are
-/// those of [`run`], byte for byte. Returns run_report.json's text.
-#[pyfunction]
-#[pyo3(signature = (pipeline, output, submit, input=None, overrides=vec![], memory_budget=None, slab_planes=None))]
-#[allow(clippy::too_many_arguments)]
-pub fn run_tasks(
-    py: Python<'_>,
-    pipeline: PathBuf,
-    output: PathBuf,
-    submit: Py<PyAny>,
-    input: Option<PathBuf>,
-    overrides: Vec<String>,
-    memory_budget: Option<u64>,
-    slab_planes: Option<usize>,
-) -> PyResult<String> {
-    let p = load(&pipeline, &overrides)?;
-    let cancel = Arc::new(AtomicBool::new(false));
-    let tasks: Arc<dyn SlabTasks> = Arc::new(PythonTasks { submit, cancel: cancel.clone() });
-    let opts = RunOptions { pipeline_path: pipeline, input, output, cancel: Some(cancel.clone()), tasks: Some(tasks) };
-    let size = match (memory_budget, slab_planes) {
-        (Some(b), _) => SlabSize::Budget(b),
-        (None, h) => SlabSize::Planes(h.unwrap_or(DEFAULT_TASK_PLANES).max(1)),
-    };
-    let report = run_released(py, Some(&cancel), || mdtf_pipeline::blocks::run(&p, &opts, size, &|_| {}, &|_, _| {}))?
-        .map_err(mdtf_error)?;
-    serde_json::to_string_pretty(&report).map_err(mdtf_error)
-}
-
-/// z-planes per task of [`run_tasks`] when neither a budget nor a height is given.
-const DEFAULT_TASK_PLANES: usize = 64;
-
-/// Runs one task of a [`run_tasks`] run: `job` (the pass, as JSON) on the
+/// Runs one task of a [`run`] with `submit`: `job` (the pass, as JSON) on the
 /// planes `start..end`, writing them into the run's channel store.
 #[pyfunction]
 pub fn slab_task(py: Python<'_>, job: &str, start: usize, end: usize) -> PyResult<()> {

@@ -378,13 +378,13 @@ def run(
             time.sleep(0.05)
         client.gather(futures)
 
-    text = _mdtf.run_tasks(
+    text = _mdtf.run(
         os.fspath(pipeline),
         os.fspath(output),
-        submit,
         None if input is None else os.fspath(input),
         _overrides(settings, overrides),
         memory_budget,
         slab_planes,
+        submit,
     )
     return json.loads(text)
