@@ -24,6 +24,12 @@
 //! them; parts on parallel lanes when the budget pays for their counts),
 //! the Fig. 2 report's sums (fed in voxel order) and the crossings.
 //!
+//! The derive, pre-filter and tracing passes can run as tasks elsewhere
+//! ([`RunOptions::tasks`], [`SlabTasks`]; the Python package's
+//! `mdtf.dask.run` gives them to a Dask cluster): the tasks store what they
+//! make ([`run_task`]) and the run reads it back slab by slab for the same
+//! reductions (see the `remote` module).
+//!
 //! Scope: one-field inputs, the slicer-3dtf, distance-tf, peak-finding and
 //! gaussian-tf profiles (with or without a TF file, pre-filter, kept
 //! channels and histograms). Others are refused with the reason, before any work.
