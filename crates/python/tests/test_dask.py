@@ -229,9 +229,16 @@ def test_ctrl_c_during_a_pipeline_run_drops_its_tasks_and_leaves_nothing(
         signalled.append(time.monotonic())
         os.kill(os.getpid(), signal.SIGINT)
 
-    threading.Thread(target=interrupt, daemon=True).start()
-    with pytest.raises(KeyboardInterrupt):
-        mdask.run(pipelines / "distance-tf.toml", tmp_path / "out", input=sphere96, client=client, slab_planes=4, preview=False)
+    # Python's own Ctrl-C handler, even under a background job that ignores SIGINT
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        threading.Thread(target=interrupt, daemon=True).start()
+        with pytest.raises(KeyboardInterrupt):
+            mdask.run(
+                pipelines / "distance-tf.toml", tmp_path / "out", input=sphere96, client=client, slab_planes=4, preview=False
+            )
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert signalled and time.monotonic() - signalled[0] < 2.0, "interrupted within two seconds"
     assert list(tmp_path.iterdir()) == [], "no output and no partial folder"
 

@@ -77,8 +77,10 @@ def test_the_gil_is_released_during_a_call() -> None:
     assert during > 80 and longest < 0.1, f"{during} ticks in {len(calls)} calls, longest gap {longest:.3f} s"
 
 
+# Python's own Ctrl-C handler, even when started from a background job that ignores SIGINT
 SCRIPT = """
-import sys, time, mdtf
+import signal, sys, time, mdtf
+signal.signal(signal.SIGINT, signal.default_int_handler)
 print("started", flush=True)
 try:
     mdtf.run(sys.argv[1], sys.argv[2], input__size=384, preview=False, slab_planes=4)

@@ -254,6 +254,8 @@ fn run_slabs(
     let tasks = opts.tasks.as_deref();
     let store_dir = store.dir().to_path_buf();
     let job = |pass: SlabPass| SlabJob { store: store_dir.clone(), geometry: geo.clone(), pass };
+    // the derive stage's time includes its tasks'
+    let derive_start = Instant::now();
     if let Some(tasks) = tasks {
         // the tasks store every derived channel; the passes below read them instead of deriving
         progress.stage("derive (tasks)")?;
@@ -274,7 +276,6 @@ fn run_slabs(
     let mut smallest_inv_g = f32::INFINITY;
     if !summarised.is_empty() {
         progress.stage("derive")?;
-        let t = Instant::now();
         for (k, z) in slabs.iter().enumerate() {
             progress.slab(k + 1, slabs.len())?;
             for (name, v) in chans.volumes(z.clone(), &summarised).map_err(fail("derive"))? {
@@ -290,7 +291,7 @@ fn run_slabs(
             }
         }
         chans.release();
-        stages.done("derive", t, n, vec![]);
+        stages.done("derive", derive_start, n, vec![]);
     }
 
     // pre-filter and tracing
