@@ -27,21 +27,27 @@ pub(super) fn prefilter_slab(
 
 /// What a tracing pass reads and how.
 pub(super) struct TraceSetup<'a> {
-    /// The g and f'' traced (the pre-filtered ones, when there are).
+    /// The g traced (the pre-filtered one, when there is).
     pub g: &'a str,
+    /// The f'' traced (likewise).
     pub f2: &'a str,
     /// Read g, f'' and the normal from the store; else derive them (the first derive group).
     pub stored: bool,
+    /// The tracing's parameters.
     pub params: &'a BoundaryParams,
+    /// The whole volume's statistics behind the tracing's defaults.
     pub stats: &'a VolumeStats,
     /// Planes a ray may reach beyond its voxel's (d_max plus the interpolation's support).
     pub halo: usize,
+    /// Value range (max - min) of the input, value units.
     pub value_range: f64,
 }
 
 /// A slab's tracing and the g it traced, on its own planes.
 pub(super) struct SlabTrace {
+    /// The tracing's outputs and counts.
     pub trace: BlockTrace,
+    /// The g traced, on the slab's planes (for the Fig. 2 report).
     pub g: Volume,
 }
 
