@@ -74,7 +74,10 @@ def test_the_gil_is_released_during_a_call() -> None:
         inside = [x for x in ticks if start <= x <= end]
         during += len(inside)
         longest = max(longest, float(np.diff([start, *inside, end]).max()))
-    assert during > 80 and longest < 0.1, f"{during} ticks in {len(calls)} calls, longest gap {longest:.3f} s"
+    # a held GIL gives no tick inside any call and a gap as long as the call (0.5 s at least
+    # in all); a released one ticks every millisecond, with gaps only where a loaded machine
+    # leaves the thread unscheduled
+    assert during > 80 and longest < 0.3, f"{during} ticks in {len(calls)} calls, longest gap {longest:.3f} s"
 
 
 # Python's own Ctrl-C handler, even when started from a background job that ignores SIGINT
