@@ -355,7 +355,8 @@ def run(
     sees (the cluster's shared disk). A task writes only its own slab's
     planes: a task lost with its worker is rerun (up to ``retries`` times)
     with the same result. This process reads the input (any format
-    ``mdtf.read`` takes, OME-Zarr stores included) and writes the pack.
+    ``mdtf.read`` takes, OME-Zarr stores included; a dask array: write it
+    with ``to_ome_zarr`` first) and writes the pack.
 
     ``client``: a ``dask.distributed`` client (default: the current one, if
     any, else dask's default scheduler in this process). ``slab_planes``
