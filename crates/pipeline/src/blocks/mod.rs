@@ -252,22 +252,15 @@ fn run_slabs(
         groups.push(derive(vec![mdtf_derive::Item::Normal]));
     }
     let tasks = opts.tasks.as_deref();
-    let store_dir = store.dir().to_path_buf();
-    let job = |pass: SlabPass| SlabJob { store: store_dir.clone(), geometry: geo.clone(), pass };
     // the derive stage's time includes its tasks'
     let derive_start = Instant::now();
     if let Some(tasks) = tasks {
         // the tasks store every derived channel; the passes below read them instead of deriving
         progress.stage("derive (tasks)")?;
         let pass = SlabPass::Derive { groups: groups.clone(), kernel_reach: plan.reach.kernel[2] };
-        tasks.run(&job(pass), &slabs).map_err(fail("derive"))?;
+        remote::run_pass(tasks, pass, &mut store, &slabs)?;
     }
     let mut chans = SlabChannels::new(store, groups, plan.reach.kernel[2], nz).cancelled_by(opts.cancel.clone());
-    if tasks.is_some() {
-        for c in chans.derived_names() {
-            chans.store.adopt(&c).map_err(io("derive"))?;
-        }
-    }
     let summarised: Vec<&str> = ["g", "f2", "inv_g"].into_iter().filter(|c| chans.has(c)).collect();
     // the first radix pass of g's median (the tracing's noise floor, the (v, 1/g) axis,
     // gaussian-tf's default), taken as this pass derives g
@@ -314,10 +307,7 @@ fn run_slabs(
                 .into();
             if let Some(tasks) = tasks {
                 let pass = SlabPass::Prefilter { filters: filters.clone(), halo };
-                tasks.run(&job(pass), &slabs).map_err(fail("prefilter"))?;
-                for f in &filters {
-                    chans.store.adopt(&f.output).map_err(io("prefilter"))?;
-                }
+                remote::run_pass(tasks, pass, &mut chans.store, &slabs)?;
             }
             for f in &filters {
                 for (k, z) in slabs.iter().enumerate() {
@@ -359,10 +349,7 @@ fn run_slabs(
                 halo: setup.halo,
                 value_range,
             };
-            tasks.run(&job(pass), &slabs).map_err(fail("boundary"))?;
-            for c in remote::TRACED {
-                chans.store.adopt(c).map_err(io("boundary"))?;
-            }
+            remote::run_pass(tasks, pass, &mut chans.store, &slabs)?;
         }
         let mut report: Option<ReportAccumulator> = None;
         let mut crossings: Option<mdtf_boundary::Crossings> = None;

@@ -9,6 +9,7 @@
 //! slab by slab, in z order, for its reductions, exactly as it would have
 //! made them itself: the outputs are the single-process run's bit for bit.
 
+use super::slab_channels::made_by;
 use super::trace::{SlabTrace, TraceSetup, prefilter_slab, trace_slab};
 use super::{ChannelStore, SlabChannels};
 use crate::run::{RunError, at, fail};
@@ -97,7 +98,46 @@ pub struct TracePartial {
 }
 
 /// The channels the tracing stores for each slab.
-pub(super) const TRACED: [&str; 4] = ["g_hit", "hit", "distance", "dot"];
+const TRACED: [&str; 4] = ["g_hit", "hit", "distance", "dot"];
+
+impl SlabPass {
+    /// The run's stage this pass belongs to (its errors name it).
+    fn stage(&self) -> &'static str {
+        match self {
+            SlabPass::Derive { .. } => "derive",
+            SlabPass::Prefilter { .. } => "prefilter",
+            SlabPass::Trace { .. } => "boundary",
+        }
+    }
+
+    /// The channels its tasks store.
+    fn outputs(&self) -> Vec<String> {
+        match self {
+            SlabPass::Derive { groups, .. } => {
+                groups.iter().flat_map(|d| d.items.iter()).flat_map(|&i| made_by(i)).collect()
+            }
+            SlabPass::Prefilter { filters, .. } => filters.iter().map(|f| f.output.clone()).collect(),
+            SlabPass::Trace { .. } => TRACED.map(String::from).to_vec(),
+        }
+    }
+}
+
+/// Runs `pass` as `tasks` over `slabs` of the volume of `store`, then takes
+/// the channels they stored into `store`.
+pub(super) fn run_pass(
+    tasks: &dyn SlabTasks,
+    pass: SlabPass,
+    store: &mut ChannelStore,
+    slabs: &[Range<usize>],
+) -> Result<(), RunError> {
+    let (stage, outputs) = (pass.stage(), pass.outputs());
+    let job = SlabJob { store: store.dir().to_path_buf(), geometry: store.geometry().clone(), pass };
+    tasks.run(&job, slabs).map_err(fail(stage))?;
+    for c in &outputs {
+        store.adopt(c).map_err(at(stage))?;
+    }
+    Ok(())
+}
 
 /// Where the tracing task of the slab from plane `first` leaves its [`TracePartial`].
 fn partial_path(store: &Path, first: usize) -> PathBuf {
@@ -114,7 +154,7 @@ pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<(), RunError> {
     match &job.pass {
         SlabPass::Derive { groups, kernel_reach } => {
             let mut chans = SlabChannels::new(open(&["v"])?, groups.clone(), *kernel_reach, nz);
-            let names = chans.derived_names();
+            let names = job.pass.outputs();
             let names: Vec<&str> = names.iter().map(String::as_str).collect();
             for (name, v) in chans.volumes(z.clone(), &names).map_err(fail("derive"))? {
                 chans.store.put_volume(&name, z.start, &v).map_err(at("derive"))?;

@@ -37,7 +37,7 @@ pub struct SlabChannels {
 }
 
 /// The channels derive item `item` makes.
-fn made_by(item: Item) -> Vec<String> {
+pub(super) fn made_by(item: Item) -> Vec<String> {
     match item {
         Item::Normal => ["nx", "ny", "nz"].map(String::from).to_vec(),
         other => vec![other.name().to_string()],
@@ -84,11 +84,6 @@ impl SlabChannels {
     /// Planes of the volume.
     pub fn nz(&self) -> usize {
         self.nz
-    }
-
-    /// The channels the derive groups make, in their order.
-    pub fn derived_names(&self) -> Vec<String> {
-        self.groups.iter().flat_map(|(_, names)| names.iter().cloned()).collect()
     }
 
     /// Whether channel `name` is stored or derivable.

@@ -335,14 +335,21 @@ def run(
     and keyword arguments with ``__`` for the dot
     (``input__size=64``). ``memory_budget`` (bytes) or ``slab_planes`` run
     it slab by slab. Returns the run report (run_report.json)."""
-    text = _mdtf.run(
-        os.fspath(pipeline),
-        os.fspath(output),
-        None if input is None else os.fspath(input),
-        _overrides(settings, overrides),
-        memory_budget,
-        slab_planes,
-    )
+    return _run(pipeline, output, input, _overrides(settings, overrides), memory_budget, slab_planes)
+
+
+def _run(
+    pipeline: str | os.PathLike[str],
+    output: str | os.PathLike[str],
+    input: str | os.PathLike[str] | None,
+    overrides: list[str],
+    memory_budget: int | None,
+    slab_planes: int | None,
+    submit: Any = None,
+) -> dict[str, Any]:
+    """``run``, and ``mdtf.dask.run`` with its ``submit`` of the tasks: the run report."""
+    path = None if input is None else os.fspath(input)
+    text = _mdtf.run(os.fspath(pipeline), os.fspath(output), path, overrides, memory_budget, slab_planes, submit)
     return json.loads(text)
 
 

@@ -29,7 +29,7 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from . import SpacingLike, _f32, _mdtf, _overrides, _triple
+from . import SpacingLike, _f32, _mdtf, _overrides, _run, _triple
 
 try:
     import dask
@@ -379,13 +379,4 @@ def run(
             time.sleep(0.05)
         client.gather(futures)
 
-    text = _mdtf.run(
-        os.fspath(pipeline),
-        os.fspath(output),
-        None if input is None else os.fspath(input),
-        _overrides(settings, overrides),
-        memory_budget,
-        slab_planes,
-        submit,
-    )
-    return json.loads(text)
+    return _run(pipeline, output, input, _overrides(settings, overrides), memory_budget, slab_planes, submit)
