@@ -319,6 +319,11 @@ def _slab_task(job: str, start: int, end: int) -> None:
     _mdtf.slab_task(job, start, end)
 
 
+def _executing(dask_worker: Any) -> int:
+    """How many tasks a worker is running (for ``client.run``)."""
+    return len(dask_worker.state.executing)
+
+
 def _current_client() -> Any:
     """The ``dask.distributed`` client in use, or None."""
     try:
@@ -375,6 +380,11 @@ def run(
         while not all(f.done() for f in futures):
             if cancelled():
                 client.cancel(futures)
+                # a task already running cannot be stopped: the run removes its store only after
+                # them, or one could write into the folder while it is being removed
+                deadline = time.monotonic() + 120
+                while any(client.run(_executing).values()) and time.monotonic() < deadline:
+                    time.sleep(0.05)
                 return
             time.sleep(0.05)
         client.gather(futures)
