@@ -1,0 +1,571 @@
+//! The passes of a slab-by-slab run, in the order they run, over the state
+//! they hand on ([`SlabPasses`]): input, derive, pre-filter, tracing, kept
+//! volumes, then histograms and pack together, then the pack's tables.
+//! Each pass visits the slabs in z order, so the reductions it feeds merge
+//! in the same order whatever the slab height.
+
+use super::remote::{self, Prefilter, SlabPass, SlabTasks};
+use super::trace::{self, SlabTrace, TraceSetup};
+use super::{ChannelStore, SlabChannels, SlabSize, medians, open_source};
+use super::{fit_slabs, reductions, slabs};
+use crate::file::Pipeline;
+use crate::hist_files::Written;
+use crate::plan::Plan;
+use crate::progress::Progress;
+use crate::report::{BoundarySummary, Stages};
+use crate::run::{RunError, RunOptions, at, fail};
+use mdtf_boundary::{Crossings, ReportAccumulator, ResolvedParams, TraceCounts};
+use mdtf_derive::{DeriveParams, Item, Kernel};
+use mdtf_histogram::{ChannelStats, Histogram};
+use mdtf_pack::{PackParams, PackWriter, Profile, TfFile};
+use mdtf_volume::{Geometry, KeyBuckets, Volume};
+use reductions::{SlabHistograms, Stats, g_stats};
+use std::collections::BTreeMap;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// An I/O error of the pass `stage`.
+fn io(stage: &'static str) -> impl Fn(std::io::Error) -> RunError {
+    at::<std::io::Error>(stage)
+}
+
+/// What a slab-by-slab run hands from pass to pass.
+pub(super) struct SlabPasses<'a> {
+    p: &'a Pipeline,
+    opts: &'a RunOptions,
+    /// The pipeline file's folder (relative paths in it start there).
+    base: PathBuf,
+    /// The staging output folder.
+    pub(super) dir: PathBuf,
+    pub(super) geo: Geometry,
+    plan: Plan,
+    pub(super) slabs: Vec<Range<usize>>,
+    /// Planes per slab (the last may hold fewer).
+    pub(super) height: usize,
+    /// Lanes counting the histogram volume (see [`super::fit_slabs`]).
+    hvol_lanes: usize,
+    /// The histograms ask for the histogram volume.
+    pub(super) hvol_asked: bool,
+    /// The histogram volume is counted: asked for, or the default TF's source.
+    hvol_needed: bool,
+    tf: Option<TfFile>,
+    /// The input's name in the figures, the manifest and the report.
+    pub(super) input_name: String,
+    pub(super) progress: Progress<'a>,
+    pub(super) stages: Stages,
+    stats: Stats,
+    pub(super) warnings: Vec<String>,
+    tasks: Option<&'a dyn SlabTasks>,
+}
+
+/// What the derive pass found.
+pub(super) struct Derived {
+    kernel: Kernel,
+    /// The first radix pass of g's median, when g was derived.
+    g_buckets: Option<KeyBuckets>,
+    /// The smallest positive 1/g (infinite without one).
+    smallest_inv_g: f32,
+}
+
+/// What the tracing found.
+#[derive(Default)]
+pub(super) struct Traced {
+    pub(super) boundary: Option<BoundarySummary>,
+    /// The tracing's largest distance, voxels (the distance code range).
+    d_max: Option<f64>,
+}
+
+impl<'a> SlabPasses<'a> {
+    /// The input pass: opens the input, plans the run and sizes its slabs
+    /// (`size`), and copies the value slab by slab into a channel store in
+    /// `dir`, taking its statistics.
+    pub(super) fn read_input(
+        p: &'a Pipeline,
+        opts: &'a RunOptions,
+        size: SlabSize,
+        dir: &Path,
+        progress: Progress<'a>,
+    ) -> Result<(SlabPasses<'a>, ChannelStore), RunError> {
+        let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
+        progress.stage("input")?;
+        let t = Instant::now();
+        let (mut source, input_name, warnings) = open_source(p, opts, &base)?;
+        let geo = source.geometry().clone();
+        let nz = geo.dims[2];
+        let plan = Plan::resolve(p, &[], &geo).map_err(at("plan"))?;
+        let tf = crate::inputs::read_tf(p, &base)?;
+        let hvol_asked = p.histogram.as_ref().is_some_and(|h| h.hvol);
+        let hvol_needed = hvol_asked || tf.is_none();
+        let threads = rayon::current_num_threads();
+        let (height, hvol_lanes) = match size {
+            SlabSize::Budget(b) => fit_slabs(b, &geo, &plan, hvol_needed, threads).map_err(fail("plan"))?,
+            SlabSize::Planes(h) => (h.clamp(1, nz.max(1)), threads),
+        };
+        let slabs = slabs(nz, height);
+        progress.stage(&format!("input: {} slabs of {height} planes", slabs.len()))?;
+        let mut store = ChannelStore::create(dir.join(".slabs"), geo.clone()).map_err(at("input"))?;
+        let mut stats = Stats::new(&["v", "g", "f2", "g_hit", "g_prefiltered", "inv_g"], geo.voxel_count());
+        for (k, z) in slabs.iter().enumerate() {
+            progress.slab(k + 1, slabs.len())?;
+            let v = source.read(z.clone())?;
+            stats.add("v", v.samples());
+            store.put_volume("v", z.start, &v).map_err(io("input"))?;
+        }
+        let mut stages = Stages::default();
+        stages.done("input", t, geo.voxel_count(), vec![]);
+        let run = SlabPasses {
+            p,
+            opts,
+            base,
+            dir: dir.to_path_buf(),
+            geo,
+            plan,
+            slabs,
+            height,
+            hvol_lanes,
+            hvol_asked,
+            hvol_needed,
+            tf,
+            input_name,
+            progress,
+            stages,
+            stats,
+            warnings,
+            tasks: opts.tasks.as_deref(),
+        };
+        Ok((run, store))
+    }
+
+    /// The input's finite value range, value units.
+    pub(super) fn finite_range(&self) -> Option<[f64; 2]> {
+        self.stats.range("v").map(|(lo, hi)| [lo as f64, hi as f64])
+    }
+
+    /// max - min of the input's finite values (0 without any).
+    fn value_range(&self) -> f64 {
+        self.finite_range().map_or(0.0, |[lo, hi]| hi - lo)
+    }
+
+    /// The derive pass. The derivatives are remade from the stored value by
+    /// every later pass that reads them, in the whole run's groups (the
+    /// normals on their own when it defers them); this pass takes their
+    /// statistics. With tasks, the tasks store every derived channel and the
+    /// later passes read them instead.
+    pub(super) fn derive(&mut self, mut store: ChannelStore) -> Result<(SlabChannels, Derived), RunError> {
+        let kernel = self.p.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL);
+        let groups = self.derive_groups(kernel);
+        let derive_start = Instant::now();
+        if let Some(tasks) = self.tasks {
+            self.progress.stage("derive (tasks)")?;
+            let pass = SlabPass::Derive { groups: groups.clone(), kernel_reach: self.plan.reach.kernel[2] };
+            remote::run_pass(tasks, pass, &mut store, &self.slabs)?;
+        }
+        let nz = self.geo.dims[2];
+        let mut chans =
+            SlabChannels::new(store, groups, self.plan.reach.kernel[2], nz).cancelled_by(self.opts.cancel.clone());
+        let summarised: Vec<&str> = ["g", "f2", "inv_g"].into_iter().filter(|c| chans.has(c)).collect();
+        // the first radix pass of g's median (the tracing's noise floor, the (v, 1/g) axis,
+        // gaussian-tf's default), taken as this pass derives g
+        let mut g_buckets = summarised.contains(&"g").then(KeyBuckets::new);
+        // the smallest positive 1/g, whose multiple is the top of its code range
+        let mut smallest_inv_g = f32::INFINITY;
+        if !summarised.is_empty() {
+            self.progress.stage("derive")?;
+            for (k, z) in self.slabs.iter().enumerate() {
+                self.progress.slab(k + 1, self.slabs.len())?;
+                for (name, v) in chans.volumes(z.clone(), &summarised).map_err(fail("derive"))? {
+                    self.stats.add(&name, v.samples());
+                    match name.as_str() {
+                        "g" => g_buckets.iter_mut().for_each(|b| b.add(v.samples())),
+                        "inv_g" => {
+                            smallest_inv_g = crate::pack_inputs::smallest_positive(v.samples()).min(smallest_inv_g)
+                        }
+                        _ => {}
+                    }
+                }
+            }
+            chans.release();
+            // its time includes its tasks'
+            self.stages.done("derive", derive_start, self.geo.voxel_count(), vec![]);
+        }
+        Ok((chans, Derived { kernel, g_buckets, smallest_inv_g }))
+    }
+
+    /// The derive groups of the whole run: the plan's items (with g and f''
+    /// for the default TF's histogram volume, which the whole run derives
+    /// on its own from the value), then the deferred normals.
+    fn derive_groups(&self, kernel: Kernel) -> Vec<DeriveParams> {
+        let span = self.stats.range("v").map_or(0.0, |(lo, hi)| hi - lo);
+        let derive = |items: Vec<Item>| DeriveParams {
+            items,
+            kernel,
+            epsilon: Some(mdtf_derive::default_epsilon(span, self.geo.min_spacing())),
+            ..Default::default()
+        };
+        let mut groups = vec![derive(self.plan.derive.clone())];
+        if self.hvol_needed {
+            for item in [Item::G, Item::F2] {
+                if !groups[0].items.contains(&item) {
+                    groups[0].items.push(item);
+                }
+            }
+        }
+        if self.plan.defer_normals {
+            groups.push(derive(vec![Item::Normal]));
+        }
+        groups
+    }
+
+    /// The pre-filter (when planned) and tracing passes, when the plan traces.
+    pub(super) fn trace(&mut self, chans: &mut SlabChannels, derived: &Derived) -> Result<Traced, RunError> {
+        if !self.plan.trace {
+            return Ok(Traced::default());
+        }
+        let (g, f2) = match (self.plan.prefilter, &self.p.prefilter) {
+            (true, Some(pf)) => {
+                self.prefilter(chans, pf)?;
+                ("g_prefiltered", "f2_prefiltered")
+            }
+            _ => ("g", "f2"),
+        };
+        self.progress.stage("boundary")?;
+        let t = Instant::now();
+        let traced_buckets = derived.g_buckets.as_ref().filter(|_| g == "g");
+        let l_min = self.geo.min_spacing();
+        let value_range = self.value_range();
+        let stats = g_stats(chans, g, traced_buckets, &self.slabs, value_range, l_min, &self.stats)?;
+        let setup = TraceSetup {
+            g,
+            f2,
+            stored: self.plan.prefilter || self.tasks.is_some(),
+            params: &self.p.boundary,
+            stats: &stats,
+            halo: self.plan.reach.trace[2],
+            value_range,
+        };
+        if let Some(tasks) = self.tasks {
+            let pass = SlabPass::Trace {
+                g: g.into(),
+                f2: f2.into(),
+                params: self.p.boundary.clone(),
+                stats,
+                halo: setup.halo,
+                value_range,
+            };
+            remote::run_pass(tasks, pass, &mut chans.store, &self.slabs)?;
+        }
+        let mut sums = TraceSums::default();
+        for (k, z) in self.slabs.iter().enumerate() {
+            self.progress.slab(k + 1, self.slabs.len())?;
+            let slab = match self.tasks {
+                Some(_) => remote::stored_trace(chans, g, z)?,
+                None => {
+                    let t = trace::trace_slab(chans, &setup, z)?;
+                    for (c, v) in [("g_hit", &t.trace.g_hit), ("hit", &t.trace.hit), ("distance", &t.trace.distance)] {
+                        chans.store.put_volume(c, z.start, v).map_err(io("boundary"))?;
+                    }
+                    t
+                }
+            };
+            self.stats.add("g_hit", slab.trace.g_hit.samples());
+            sums.add(slab);
+        }
+        let traced = self.finish_trace(sums)?;
+        for c in ["g_prefiltered", "f2_prefiltered", "dot"] {
+            chans.store.remove(c);
+        }
+        chans.release();
+        let outputs = vec!["boundary/boundary_report.csv".into(), "boundary/boundary_report.png".into()];
+        self.stages.done("boundary", t, self.geo.voxel_count(), outputs);
+        Ok(traced)
+    }
+
+    /// The pre-filter pass: g and f'' filtered into the store, their statistics taken.
+    fn prefilter(&mut self, chans: &mut SlabChannels, pf: &mdtf_bilateral::BilateralParams) -> Result<(), RunError> {
+        self.progress.stage("prefilter")?;
+        let t = Instant::now();
+        let halo = self.plan.reach.prefilter[2];
+        let filters: Vec<Prefilter> = [("g", "g_prefiltered"), ("f2", "f2_prefiltered")]
+            .map(|(c, out)| {
+                let range = self.stats.range(c).map_or(0.0, |(lo, hi)| (hi - lo) as f64);
+                let params = crate::boundary_chain::prefilter_params(pf, range);
+                Prefilter { input: c.into(), output: out.into(), params }
+            })
+            .into();
+        if let Some(tasks) = self.tasks {
+            let pass = SlabPass::Prefilter { filters: filters.clone(), halo };
+            remote::run_pass(tasks, pass, &mut chans.store, &self.slabs)?;
+        }
+        for f in &filters {
+            for (k, z) in self.slabs.iter().enumerate() {
+                self.progress.slab(k + 1, self.slabs.len())?;
+                let own = match self.tasks {
+                    Some(_) => chans.store.volume(&f.output, z.clone()).map_err(io("prefilter"))?,
+                    None => {
+                        let own = trace::prefilter_slab(chans, &f.input, &f.params, z, halo)?;
+                        chans.store.put_volume(&f.output, z.start, &own).map_err(io("prefilter"))?;
+                        own
+                    }
+                };
+                self.stats.add(&f.output, own.samples());
+            }
+        }
+        chans.release();
+        self.stages.done("prefilter", t, self.geo.voxel_count(), vec![]);
+        Ok(())
+    }
+
+    /// The tracing's summary and its Fig. 2 report (written), from the slabs' sums.
+    fn finish_trace(&mut self, sums: TraceSums) -> Result<Traced, RunError> {
+        let TraceSums { report: Some(report), crossings: Some(crossings), counts, resolved: Some(r) } = sums else {
+            return Err(fail("boundary")("the volume has no planes".into()));
+        };
+        let (lost, lost_warnings) = crossings.lost(&r);
+        self.warnings.extend(lost_warnings.iter().map(|w| format!("boundary: {w}")));
+        let rdir = self.dir.join("boundary");
+        std::fs::create_dir_all(&rdir).map_err(io("boundary"))?;
+        report.finish().write(&rdir).map_err(at("boundary"))?;
+        Ok(Traced { d_max: Some(r.d_max), boundary: Some(BoundarySummary { resolved: r, counts, lost }) })
+    }
+
+    /// The kept channels, written slab by slab as volumes.
+    pub(super) fn keep(&mut self, chans: &mut SlabChannels) -> Result<(), RunError> {
+        if self.p.keep.is_empty() {
+            return Ok(());
+        }
+        self.progress.stage("keep")?;
+        let t = Instant::now();
+        let kdir = self.dir.join("volumes");
+        std::fs::create_dir_all(&kdir).map_err(io("keep"))?;
+        let mut written = Vec::new();
+        for c in &self.p.keep {
+            if !chans.has(c) {
+                return Err(fail("keep")(format!("no channel '{c}' was computed")));
+            }
+            let name = self.p.keep_format.file_name(c);
+            let f32 = mdtf_volume::SampleType::F32;
+            mdtf_volume::write_slabs(&kdir.join(&name), &self.geo, f32, &self.slabs, &mut |z| {
+                chans.samples(c, z).map_err(std::io::Error::other)
+            })
+            .map_err(at("keep"))?;
+            written.push(format!("volumes/{name}"));
+        }
+        self.stages.done("keep", t, self.geo.voxel_count(), written);
+        Ok(())
+    }
+
+    /// The pack's code ranges: the whole run's rule; the channels it leaves
+    /// to the pack's own measure (the value) get their finite range here,
+    /// since no slab sees the whole channel.
+    fn pack_params(&self, derived: &Derived, traced: &Traced) -> Result<PackParams, RunError> {
+        let profile = self.p.pack.profile;
+        let mut ranges = BTreeMap::new();
+        for c in &profile.channels(&[]) {
+            let whole = || self.stats.0.get(c.as_str()).cloned().unwrap_or_else(|| ChannelStats::new((0.0, 0.0), 0));
+            let r = match crate::pack_inputs::range_of(c, whole, traced.d_max).map_err(at("pack"))? {
+                Some(r) => Some(r),
+                None if c == "inv_g" && derived.smallest_inv_g.is_finite() => {
+                    Some(crate::pack_inputs::inv_g_range(derived.smallest_inv_g))
+                }
+                None if matches!(c.as_str(), "nx" | "ny" | "nz") => None,
+                None => self.stats.range(c).map(|(lo, hi)| [lo as f64, hi as f64]),
+            };
+            if let Some(r) = r {
+                ranges.insert(c.clone(), r);
+            }
+        }
+        Ok(PackParams { profile, ranges, fields: vec![], dtype: None, nifti: false })
+    }
+
+    /// The pack (with the histograms counted in the same pass): its
+    /// textures, tables, manifest and figures; the names of the tables and
+    /// the boundaries the histogram volume shows.
+    pub(super) fn pack(
+        &mut self,
+        chans: &mut SlabChannels,
+        derived: &Derived,
+        traced: &Traced,
+    ) -> Result<(Vec<String>, Vec<mdtf_histogram::DetectedBoundary>), RunError> {
+        let params = self.pack_params(derived, traced)?;
+        let pdir = self.dir.join("pack");
+        std::fs::create_dir_all(&pdir).map_err(io("pack"))?;
+        let sources = BTreeMap::new();
+        let mut writer = PackWriter::new(&pdir, &params, self.geo.clone(), &sources);
+        let started = Instant::now();
+        let hists = self.histograms_and_textures(chans, derived, &params, &mut writer)?;
+        self.finish_pack(chans, derived, &params, writer, hists, started)
+    }
+
+    /// One pass over the slabs that counts every histogram and quantises
+    /// every texture, so each slab's channels are made once; its time is
+    /// the pack stage's (the histogram stage's is writing the histogram
+    /// files, which this writes too).
+    fn histograms_and_textures(
+        &mut self,
+        chans: &mut SlabChannels,
+        derived: &Derived,
+        params: &PackParams,
+        writer: &mut PackWriter,
+    ) -> Result<Written, RunError> {
+        let counting = self.p.histogram.is_some() || self.hvol_needed;
+        self.progress.stage(if counting { "histogram and pack" } else { "pack" })?;
+        let lanes = self.hvol_needed.then_some(self.hvol_lanes);
+        let n = self.geo.voxel_count();
+        let mut histograms = match counting {
+            true => {
+                let g_buckets = derived.g_buckets.as_ref();
+                Some(SlabHistograms::new(self.p, chans, &self.stats, &self.slabs, n, lanes, g_buckets)?)
+            }
+            false => None,
+        };
+        let layouts = mdtf_pack::texture_layouts(params);
+        let mut read: Vec<&str> = histograms.as_ref().map(SlabHistograms::channels).unwrap_or_default();
+        for c in layouts.iter().flat_map(|l| l.components.iter().flatten()) {
+            if !read.contains(&c.as_str()) {
+                read.push(c);
+            }
+        }
+        let mut counting_failed = None;
+        let (progress, height, count) = (&self.progress, self.height, self.slabs.len());
+        let written = writer.add_slabs(&layouts, &self.slabs, &mut |z| {
+            progress.report_slab(z.end.div_ceil(height), count);
+            let slab = chans
+                .volumes(z.clone(), &read)
+                .map_err(|e| mdtf_pack::PackError::Io(mdtf_volume::VolumeError::Fields(e)))?;
+            if let Some(h) = &mut histograms
+                && let Err(e) = h.add(z.start, &slab)
+            {
+                counting_failed = Some(e);
+                return Err(mdtf_pack::PackError::Geometry("the histograms could not count a slab".into()));
+            }
+            Ok(slab)
+        });
+        if let Some(e) = counting_failed {
+            return Err(e);
+        }
+        written.map_err(at("pack"))?;
+        chans.release();
+        match histograms {
+            Some(h) => self.write_histograms(h),
+            None => Ok(Written::default()),
+        }
+    }
+
+    /// The histogram files (when the pipeline asks for histograms), and
+    /// the histogram volume the default TF reads.
+    fn write_histograms(&mut self, h: SlabHistograms) -> Result<Written, RunError> {
+        let t = Instant::now();
+        let mut counted = h.finish()?;
+        // the default TF's histogram volume is an output only when the histograms ask for it
+        let default_hvol = if self.hvol_asked { None } else { counted.hvol.take() };
+        let mut hists = Written::default();
+        if self.p.histogram.is_some() {
+            let hdir = self.dir.join("histogram");
+            std::fs::create_dir_all(&hdir).map_err(io("histogram"))?;
+            hists = crate::hist_files::write(&hdir, counted, &self.input_name, &mut self.warnings)
+                .map_err(fail("histogram"))?;
+            self.stages.done("histogram", t, self.geo.voxel_count(), hists.outputs.clone());
+        }
+        if default_hvol.is_some() {
+            hists.hvol = default_hvol;
+        }
+        Ok(hists)
+    }
+
+    /// The pack's lookup tables, manifest, Gaussians and TF figures, after
+    /// its textures (`writer`, started at `started`).
+    fn finish_pack(
+        &mut self,
+        chans: &mut SlabChannels,
+        derived: &Derived,
+        params: &PackParams,
+        writer: PackWriter,
+        hists: Written,
+        started: Instant,
+    ) -> Result<(Vec<String>, Vec<mdtf_histogram::DetectedBoundary>), RunError> {
+        let Written { arches, figure_hists, hvol, boundaries, .. } = hists;
+        let profile = params.profile;
+        // the tables read the channels' names and grid (their data only without a histogram volume)
+        let stubs: Vec<(String, Volume)> =
+            profile.channels(&[]).into_iter().map(|c| (c, Volume::zeros(self.geo.z_slab(0..1)))).collect();
+        let alpha = self.p.pack.alpha.unwrap_or(mdtf_boundary::AlphaMap::Linear { a: 1.0, dc: None });
+        let tf = self.tf.as_ref();
+        let luts = crate::pack_inputs::luts(profile, tf, &alpha, &stubs, &params.ranges, hvol.as_ref(), derived.kernel)
+            .map_err(at("pack"))?;
+        let provenance = crate::inputs::provenance(self.p, self.opts, &self.base, &self.input_name);
+        writer.finish(&luts, provenance).map_err(at("pack"))?;
+        if profile == Profile::GaussianTf {
+            self.write_gaussians(chans, derived, hvol.as_ref())?;
+        }
+        let mut outputs: Vec<String> = vec!["pack/manifest.json".into()];
+        if !figure_hists.is_empty() {
+            let hists: Vec<&Histogram> = figure_hists.iter().collect();
+            let hdir = self.dir.join("histogram");
+            let written = crate::figures::write_tf_figures(&hdir, &luts, &hists, &self.input_name, &arches)
+                .map_err(at("pack"))?;
+            outputs.extend(written.into_iter().map(|f| format!("histogram/{f}")));
+        }
+        self.stages.done("pack", started, self.geo.voxel_count(), outputs);
+        Ok((luts.into_iter().map(|l| l.name).collect(), boundaries))
+    }
+
+    /// gaussian-tf's primitives: the TF file's, else a TGTF at each boundary
+    /// the histogram volume shows, else the paper's median default.
+    fn write_gaussians(
+        &self,
+        chans: &mut SlabChannels,
+        derived: &Derived,
+        hvol: Option<&mdtf_histogram::HistogramVolume>,
+    ) -> Result<(), RunError> {
+        let gaussians = match (self.tf.as_ref(), hvol) {
+            (Some(tf), _) => tf.gaussians(),
+            (None, Some(hv)) => {
+                let arches = crate::pack_inputs::arches_from(&mdtf_histogram::detect_boundaries(hv));
+                match arches.is_empty() {
+                    false => crate::gaussians::boundary_tgtfs(&arches, &self.geo),
+                    true => vec![
+                        medians::median_tgtf(chans, &self.slabs, derived.g_buckets.as_ref()).map_err(fail("pack"))?,
+                    ],
+                }
+            }
+            (None, None) => return Err(fail("pack")("the default Gaussians need the histogram volume".into())),
+        };
+        let json = serde_json::to_string_pretty(&gaussians).map_err(at("pack"))?;
+        let file = self.dir.join("pack").join("gaussians.json");
+        mdtf_volume::write_file_atomically(&file, |w| w.write_all(json.as_bytes())).map_err(at("pack"))
+    }
+}
+
+/// The tracing's whole-volume sums, fed slab by slab in z order.
+#[derive(Default)]
+struct TraceSums {
+    /// The Fig. 2 report's sums, fed in voxel order.
+    report: Option<ReportAccumulator>,
+    crossings: Option<Crossings>,
+    counts: TraceCounts,
+    /// The thresholds the tracing resolved (the same for every slab).
+    resolved: Option<ResolvedParams>,
+}
+
+impl TraceSums {
+    /// Adds the next slab's tracing.
+    fn add(&mut self, slab: SlabTrace) {
+        let SlabTrace { trace: b, g } = slab;
+        self.report.get_or_insert_with(|| ReportAccumulator::new(b.resolved.report_thresholds())).add(
+            mdtf_boundary::ReportInput {
+                hit: b.hit.samples(),
+                dot: b.dot.samples(),
+                distance: b.distance.samples(),
+                g: g.samples(),
+                g_hit: b.g_hit.samples(),
+            },
+        );
+        match &mut self.crossings {
+            Some(c) => c.merge(&b.crossings),
+            None => self.crossings = Some(b.crossings),
+        }
+        self.counts += b.counts;
+        self.resolved = Some(b.resolved);
+    }
+}
