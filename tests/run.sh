@@ -15,7 +15,7 @@
 #   target/real-data, or $MDTF_REAL_DATA, exported as MDTF_REAL_DATA;
 # - cargo test --workspace;
 # - the Python package: `pip install ./crates/python` (maturin's PEP 517
-#   backend; here the dev profile at opt-level 2, which reuses the tests'
+#   backend; here the dev profile, which reuses the tests'
 #   compiled dependencies and runs the mdtf crates optimised) into that
 #   environment, then its pytest tests against the mdtf command.
 set -euo pipefail
@@ -106,7 +106,7 @@ cargo test --workspace --locked "$@"
 
 say "python package (pip install ./crates/python; pytest crates/python/tests)"
 cargo build --locked --quiet -p mdtf-cli --bin mdtf
-CARGO_PROFILE_DEV_OPT_LEVEL=2 MATURIN_PEP517_ARGS="--profile dev --locked" "$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
+MATURIN_PEP517_ARGS="--profile dev --locked" "$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
   --force-reinstall --no-deps ./crates/python \
   || die "pip could not build and install the Python package (crates/python)"
 MDTF_BIN="$PWD/target/debug/mdtf" "$venv/bin/python" -m pytest -q -p no:cacheprovider crates/python/tests
