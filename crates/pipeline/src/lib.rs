@@ -31,4 +31,5 @@ pub(crate) mod progress;
 pub mod report;
 pub mod report_page;
 pub mod run;
+pub mod stages;
 pub mod validate;

@@ -3,8 +3,8 @@
 //! (`mdtf.dask` builds its overlaps and passes from these).
 
 use crate::error::{parse_choice, value_error};
-use mdtf_bilateral::BilateralParams;
-use mdtf_derive::{Item, Kernel};
+use mdtf_pipeline::stages::bilateral::BilateralParams;
+use mdtf_pipeline::stages::derive::{Item, Kernel};
 use pyo3::prelude::*;
 
 /// mdtf's (x, y, z) as Python's (z, y, x).
@@ -17,7 +17,8 @@ fn zyx([x, y, z]: [usize; 3]) -> (usize, usize, usize) {
 #[pyfunction]
 #[pyo3(signature = (spacing, kernel=None))]
 pub fn kernel_reach(spacing: [f64; 3], kernel: Option<&str>) -> PyResult<(usize, usize, usize)> {
-    let kernel = kernel.map_or(Ok(mdtf_derive::DEFAULT_KERNEL), |k| k.parse::<Kernel>().map_err(value_error))?;
+    let kernel = kernel
+        .map_or(Ok(mdtf_pipeline::stages::derive::DEFAULT_KERNEL), |k| k.parse::<Kernel>().map_err(value_error))?;
     let [sz, sy, sx] = spacing;
     Ok(zyx([sx, sy, sz].map(|s| kernel.axis_taps(s).radius())))
 }
@@ -34,14 +35,14 @@ pub fn bilateral_reach(spacing: [f64; 3], sigma_d: f64, mode: &str, k: Option<f6
         ..defaults
     };
     let [sz, sy, sx] = spacing;
-    Ok(zyx(mdtf_bilateral::box_radius([sx, sy, sz], &params)))
+    Ok(zyx(mdtf_pipeline::stages::bilateral::box_radius([sx, sy, sz], &params)))
 }
 
 /// derive's default epsilon for one field whose finite values span `span`
 /// on a grid of smallest spacing `min_spacing` (value units per world unit).
 #[pyfunction]
 pub fn default_epsilon(span: f32, min_spacing: f64) -> f32 {
-    mdtf_derive::default_epsilon(span, min_spacing)
+    mdtf_pipeline::stages::derive::default_epsilon(span, min_spacing)
 }
 
 /// The arrays derive returns for `items` of one field, in order (the keys of
@@ -64,7 +65,8 @@ pub fn derive_components(items: Vec<String>) -> PyResult<Vec<String>> {
 #[pyfunction]
 pub fn trace_reach(spacing: [f64; 3], d_max: f64) -> (usize, usize, usize) {
     let [sz, sy, sx] = spacing;
-    zyx(mdtf_pipeline::channel::Reach::new(mdtf_derive::DEFAULT_KERNEL, [0; 3], d_max, [sx, sy, sz]).trace)
+    zyx(mdtf_pipeline::channel::Reach::new(mdtf_pipeline::stages::derive::DEFAULT_KERNEL, [0; 3], d_max, [sx, sy, sz])
+        .trace)
 }
 
 /// The tracing's thresholds for a whole volume of `shape` (z, y, x): `median_g` (its lower median
@@ -86,10 +88,12 @@ pub fn boundary_thresholds(
     tolerance: Option<f64>,
 ) -> PyResult<(f64, f64, f64, f64, f64)> {
     let geo = crate::convert::geometry(shape, spacing, [0.0; 3])?;
-    let defaults = mdtf_boundary::BoundaryParams::default();
+    let defaults = mdtf_pipeline::stages::boundary::BoundaryParams::default();
     let tolerance = tolerance.unwrap_or(defaults.tolerance);
-    let params = mdtf_boundary::BoundaryParams { g_min, g_hit_min, step, d_max, tolerance, ..defaults };
-    let floor = mdtf_boundary::noise_floor_of_median(median_g, value_range, geo.min_spacing());
-    let r = mdtf_boundary::resolve(&params, &geo, value_range, floor).map_err(crate::error::mdtf_error)?;
+    let params =
+        mdtf_pipeline::stages::boundary::BoundaryParams { g_min, g_hit_min, step, d_max, tolerance, ..defaults };
+    let floor = mdtf_pipeline::stages::boundary::noise_floor_of_median(median_g, value_range, geo.min_spacing());
+    let r = mdtf_pipeline::stages::boundary::resolve(&params, &geo, value_range, floor)
+        .map_err(crate::error::mdtf_error)?;
     Ok((r.g_min, r.g_hit_min, r.step, r.d_max, tolerance))
 }

@@ -6,12 +6,12 @@
 use crate::call::run_released;
 use crate::convert::{array, geometry, view};
 use crate::error::{mdtf_error, parse_choice, value_error};
-use mdtf_bilateral::BilateralParams;
-use mdtf_boundary::BoundaryParams;
-use mdtf_derive::{DeriveParams, FieldView, FieldsView, Item, Kernel};
-use mdtf_histogram::{Axis, AxisSpec, count};
-use mdtf_pack::Dtype;
 use mdtf_pipeline::boundary_chain::{self, BoundaryChainParams};
+use mdtf_pipeline::stages::bilateral::BilateralParams;
+use mdtf_pipeline::stages::boundary::BoundaryParams;
+use mdtf_pipeline::stages::derive::{DeriveParams, FieldView, FieldsView, Item, Kernel};
+use mdtf_pipeline::stages::histogram::{Axis, AxisSpec, count};
+use mdtf_pipeline::stages::pack::Dtype;
 use ndarray::{Array3, ArrayView3, Zip};
 use numpy::{IntoPyArray, PyArrayDyn, PyReadonlyArray3, PyUntypedArray};
 use pyo3::prelude::*;
@@ -19,7 +19,7 @@ use pyo3::types::PyDict;
 
 /// The derivative kernel named `kernel` (None: derive's default).
 fn kernel(kernel: Option<&str>) -> PyResult<Kernel> {
-    kernel.map_or(Ok(mdtf_derive::DEFAULT_KERNEL), |k| k.parse::<Kernel>().map_err(value_error))
+    kernel.map_or(Ok(mdtf_pipeline::stages::derive::DEFAULT_KERNEL), |k| k.parse::<Kernel>().map_err(value_error))
 }
 
 /// Views of named (z, y, x) arrays, checked to share one shape.
@@ -57,8 +57,8 @@ pub fn derive<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let items = items.iter().map(|s| s.parse::<Item>().map_err(value_error)).collect::<PyResult<Vec<_>>>()?;
     let border = match border {
-        Some(b) => parse_choice("border", b, mdtf_derive::BORDER_NAMES)?,
-        None => mdtf_derive::Border::default(),
+        Some(b) => parse_choice("border", b, mdtf_pipeline::stages::derive::BORDER_NAMES)?,
+        None => mdtf_pipeline::stages::derive::Border::default(),
     };
     let params = DeriveParams { items, kernel: self::kernel(kernel)?, border, epsilon };
     let views = views(&fields)?;
@@ -68,7 +68,7 @@ pub fn derive<'py>(
     let out = run_released(py, None, || {
         let samples: Vec<FieldView> =
             views.iter().map(|(n, v)| FieldView { name: n, samples: v.as_slice().unwrap_or(&[]) }).collect();
-        mdtf_derive::run_view(&FieldsView::new(&geo, samples)?, &params, None, &|_, _| {})
+        mdtf_pipeline::stages::derive::run_view(&FieldsView::new(&geo, samples)?, &params, None, &|_, _| {})
     })?
     .map_err(mdtf_error)?;
     let d = PyDict::new(py);
@@ -108,8 +108,10 @@ pub fn bilateral<'py>(
     };
     let v = view("values", &values)?;
     let geo = geometry(shape(&v), spacing, [0.0; 3])?;
-    let out = run_released(py, None, || mdtf_bilateral::run_on(&geo, v.as_slice().unwrap_or(&[]), &params))?
-        .map_err(mdtf_error)?;
+    let out = run_released(py, None, || {
+        mdtf_pipeline::stages::bilateral::run_on(&geo, v.as_slice().unwrap_or(&[]), &params)
+    })?
+    .map_err(mdtf_error)?;
     Ok(array(py, out))
 }
 
@@ -215,7 +217,7 @@ pub fn histogram<'py>(
     {
         return Err(value_error("mask: must be a C-contiguous boolean array of the channels' shape"));
     }
-    let h = run_released(py, None, || -> Result<_, mdtf_histogram::HistogramError> {
+    let h = run_released(py, None, || -> Result<_, mdtf_pipeline::stages::histogram::HistogramError> {
         let samples: Vec<&[f32]> = views.iter().map(|v| v.as_slice().unwrap_or(&[])).collect();
         let resolved: Vec<Axis> = axes
             .iter()
@@ -249,7 +251,7 @@ pub fn quantise<'py>(
     name: &str,
 ) -> PyResult<(Bound<'py, PyUntypedArray>, f64, f64)> {
     let dtype: Dtype = parse_choice("dtype", dtype, "u8, u16, f16, f32")?;
-    let decode = mdtf_pack::decode_for(name, min, max, dtype, signed).map_err(mdtf_error)?;
+    let decode = mdtf_pipeline::stages::pack::decode_for(name, min, max, dtype, signed).map_err(mdtf_error)?;
     let v = view("values", &values)?;
     let codes = run_released(py, None, || {
         let mut codes = Array3::<u32>::zeros(v.dim());

@@ -372,10 +372,10 @@ pub struct PreviewArgs {
     #[arg(long, value_name = "AZ,EL", allow_hyphen_values = true)]
     pub view: Option<String>,
     /// Image size in pixels (square).
-    #[arg(long, default_value_t = mdtf_preview::Camera::default().size)]
+    #[arg(long, default_value_t = mdtf_pipeline::stages::preview::Camera::default().size)]
     pub size: usize,
     /// Sample spacing along rays, voxels (0.01 to 16).
-    #[arg(long, default_value_t = mdtf_preview::Camera::default().step)]
+    #[arg(long, default_value_t = mdtf_pipeline::stages::preview::Camera::default().step)]
     pub step: f64,
     /// Between-sample classification: gaussian-tf integrates the primitives along each segment
     /// analytically (eq. 11), peak-finding classifies at the TF peak crossed between samples;

@@ -5,9 +5,9 @@
 use super::{InputArgs, OutFormat};
 use crate::values::named;
 use clap::{Args, ValueEnum};
-use mdtf_bilateral::{BilateralParams, Mode, RangeUnits};
-use mdtf_boundary::BoundaryParams;
-use mdtf_derive::{Border, Kernel};
+use mdtf_pipeline::stages::bilateral::{BilateralParams, Mode, RangeUnits};
+use mdtf_pipeline::stages::boundary::BoundaryParams;
+use mdtf_pipeline::stages::derive::{Border, Kernel};
 use std::path::PathBuf;
 
 /// `mdtf derive`.
@@ -47,7 +47,7 @@ pub struct DeriveArgs {
     #[arg(long, value_delimiter = ',', default_value = "g,f2", value_name = "ITEMS")]
     pub items: Vec<String>,
     /// Kernel family: central4, central, bspline3, catmull-rom, gauss:SIGMA.
-    #[arg(long, default_value_t = mdtf_derive::DEFAULT_KERNEL, value_name = "K")]
+    #[arg(long, default_value_t = mdtf_pipeline::stages::derive::DEFAULT_KERNEL, value_name = "K")]
     pub kernel: Kernel,
     /// Border policy: `clamp` (repeat the edge, ITK's; the default), `mirror`, or `wrap` (periodic).
     #[arg(long, value_parser = named::<Border>, value_name = "B")]

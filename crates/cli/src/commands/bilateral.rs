@@ -4,7 +4,7 @@ use crate::args::BilateralArgs;
 use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result};
-use mdtf_bilateral::{BilateralParams, range_sigma, run as filter};
+use mdtf_pipeline::stages::bilateral::{BilateralParams, range_sigma, run as filter};
 use mdtf_volume::{MultiField, WriteOptions, write};
 use std::time::Instant;
 

@@ -4,9 +4,9 @@ use crate::args::BoundaryArgs;
 use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
-use mdtf_bilateral::BilateralParams;
-use mdtf_boundary::{AlphaMap, BoundaryInput, BoundaryOutput, BoundaryParams};
 use mdtf_pipeline::boundary_chain::{self, BoundaryChainParams};
+use mdtf_pipeline::stages::bilateral::BilateralParams;
+use mdtf_pipeline::stages::boundary::{AlphaMap, BoundaryInput, BoundaryOutput, BoundaryParams};
 use mdtf_volume::{Inputs, MultiField, OutputFolder, Volume, WriteOptions, write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -77,7 +77,7 @@ pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
             let (gv, f2v) = progress.step("reading", || -> Result<_> { Ok((scalar(g, args)?, scalar(f2, args)?)) })?;
             let nv = read_input(normal, &args.read, &read_options(&args.read))?.0;
             let input = BoundaryInput { g: &gv, f2: &f2v, normal: &nv, value_range: args.value_range.unwrap_or(255.0) };
-            let out = progress.step("tracing", || mdtf_boundary::run(&input, &p))?;
+            let out = progress.step("tracing", || mdtf_pipeline::stages::boundary::run(&input, &p))?;
             (out, gv)
         }
         _ => bail!("give either a value volume, or all of --g, --f2 and --normal"),

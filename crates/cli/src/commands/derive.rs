@@ -4,7 +4,7 @@ use crate::args::DeriveArgs;
 use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
-use mdtf_derive::{DeriveParams, Item, run_with_progress};
+use mdtf_pipeline::stages::derive::{DeriveParams, Item, run_with_progress};
 use mdtf_volume::{Inputs, MultiField, OutputFolder, WriteOptions, write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;

@@ -3,7 +3,7 @@
 use crate::progress::Progress;
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
-use mdtf_export::{Target, export};
+use mdtf_pipeline::stages::export::{Target, export};
 use std::path::PathBuf;
 
 /// `mdtf export`.

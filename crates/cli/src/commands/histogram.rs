@@ -4,12 +4,12 @@ use crate::args::{HistogramArgs, ScaleArg};
 use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
-use mdtf_derive::DeriveParams;
-use mdtf_histogram::{
-    Axis, AxisSpec, HvolParams, Scale, count, hit_mask, write_histogram, write_hvol, write_stretched,
-};
 use mdtf_pipeline::boundary_chain::BoundaryChainParams;
 use mdtf_pipeline::channels;
+use mdtf_pipeline::stages::derive::DeriveParams;
+use mdtf_pipeline::stages::histogram::{
+    Axis, AxisSpec, HvolParams, Scale, count, hit_mask, write_histogram, write_hvol, write_stretched,
+};
 use mdtf_volume::{Inputs, MultiField, OutputFolder, Volume};
 use std::path::{Path, PathBuf};
 
@@ -118,7 +118,10 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
     }
     if args.hvol {
         let p = HvolParams { g_thresh: args.g_thresh, tent_width: args.tent_width, ..HvolParams::default() };
-        let d = DeriveParams { kernel: kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL), ..DeriveParams::default() };
+        let d = DeriveParams {
+            kernel: kernel.unwrap_or(mdtf_pipeline::stages::derive::DEFAULT_KERNEL),
+            ..DeriveParams::default()
+        };
         // g and f'' are derived slice by slice and counted as they come, never stored whole
         let value;
         let values = if input.fields.len() == 1 {
@@ -129,7 +132,7 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
         };
         let hv = progress
             .step("histogram volume", || mdtf_pipeline::hvol_streamed::histogram_volume_derived(values, &d, &p))?;
-        let arches = mdtf_pipeline::figures::boundary_arches(&mdtf_histogram::detect_boundaries(&hv));
+        let arches = mdtf_pipeline::figures::boundary_arches(&mdtf_pipeline::stages::histogram::detect_boundaries(&hv));
         write_hvol(out, &hv, &title, &arches)?;
         progress.note(&format!("histogram volume: sigma {:.4} world units, g_thresh {:.4}", hv.sigma, hv.g_thresh));
     }

@@ -12,7 +12,7 @@ use std::fmt::Write;
 pub fn run(args: &InfoArgs, progress: &Progress) -> Result<()> {
     let ext = args.input.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     if ext == "vtu" || ext == "vtk" {
-        let m = progress.step("reading", || mdtf_tetra::mesh_summary(&args.input))?;
+        let m = progress.step("reading", || mdtf_pipeline::stages::tetra::mesh_summary(&args.input))?;
         progress.clear();
         print!("{}", describe_mesh(&args.input.display().to_string(), &m));
         return Ok(());
@@ -25,7 +25,7 @@ pub fn run(args: &InfoArgs, progress: &Progress) -> Result<()> {
     Ok(())
 }
 
-fn describe_mesh(name: &str, m: &mdtf_tetra::MeshSummary) -> String {
+fn describe_mesh(name: &str, m: &mdtf_pipeline::stages::tetra::MeshSummary) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "file:        {name}");
     let _ = writeln!(s, "format:      VTK unstructured grid");

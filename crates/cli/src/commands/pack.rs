@@ -4,9 +4,11 @@ use crate::args::PackArgs;
 use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
-use mdtf_boundary::AlphaMap;
-use mdtf_pack::{Dtype, MANIFEST_SCHEMA, PackParams, Profile, Provenance, pack, parse_tf, sha256_file};
 use mdtf_pipeline::boundary_chain::BoundaryChainParams;
+use mdtf_pipeline::stages::boundary::AlphaMap;
+use mdtf_pipeline::stages::pack::{
+    Dtype, MANIFEST_SCHEMA, PackParams, Profile, Provenance, pack, parse_tf, sha256_file,
+};
 use mdtf_pipeline::{channels, gaussians, pack_inputs};
 use mdtf_volume::{Inputs, OutputFolder, Volume};
 use std::collections::BTreeMap;
@@ -51,15 +53,16 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         ranges.insert(name.to_string(), [a.trim().parse::<f64>()?, b.trim().parse::<f64>()?]);
     }
     // a value volume is traced with the default d_max; stage outputs leave the measured one
-    let d_max =
-        (!input.is_dir()).then(|| chans.first().map(|(_, v)| mdtf_boundary::default_d_max(&v.geometry))).flatten();
+    let d_max = (!input.is_dir())
+        .then(|| chans.first().map(|(_, v)| mdtf_pipeline::stages::boundary::default_d_max(&v.geometry)))
+        .flatten();
     let ranges = pack_inputs::ranges(&chans, &ranges, d_max)?;
     let provenance = Provenance {
         mdtf_version: env!("CARGO_PKG_VERSION").into(),
         input: Some(input.display().to_string()),
         input_sha256: if input.is_file() { sha256_file(input).ok() } else { None },
         stages: serde_json::json!({ "pack": { "profile": profile.to_string(), "ranges": ranges },
-            "derive": { "kernel": args.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL).to_string() } }),
+            "derive": { "kernel": args.kernel.unwrap_or(mdtf_pipeline::stages::derive::DEFAULT_KERNEL).to_string() } }),
     };
     let tf = match &args.tf {
         Some(p) => {
@@ -69,7 +72,7 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         None => None,
     };
     let alpha: AlphaMap = args.alpha.parse().map_err(anyhow::Error::msg)?;
-    let kernel = args.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL);
+    let kernel = args.kernel.unwrap_or(mdtf_pipeline::stages::derive::DEFAULT_KERNEL);
     let luts = progress
         .step("lookup tables", || pack_inputs::luts(profile, tf.as_ref(), &alpha, &chans, &ranges, None, kernel))?;
     let dtype = match args.dtype.as_deref() {

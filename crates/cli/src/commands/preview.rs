@@ -3,7 +3,7 @@
 use crate::args::{IntegrationArg, PreviewArgs};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
-use mdtf_preview::{Camera, preview};
+use mdtf_pipeline::stages::preview::{Camera, preview};
 
 /// Parses the view and renders.
 pub fn run(args: &PreviewArgs, progress: &Progress) -> Result<()> {

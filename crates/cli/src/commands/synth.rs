@@ -4,7 +4,7 @@ use crate::args::{OutType, Phantom, SynthArgs};
 use crate::input::{parse_size, parse_spacing, parse_triple, sample_type};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
-use mdtf_datagen::{MultiFieldPhantom, RadialPhantom, add_gaussian_noise, erf_sphere, min_extent};
+use mdtf_pipeline::stages::datagen::{MultiFieldPhantom, RadialPhantom, add_gaussian_noise, erf_sphere, min_extent};
 use mdtf_volume::{
     Format, Geometry, Inputs, MultiField, OutputFolder, SampleType, Volume, WriteOptions, write, write_volume,
 };

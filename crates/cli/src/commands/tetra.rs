@@ -4,8 +4,8 @@ use crate::args::TetraArgs;
 use crate::input::{parse_size, read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result};
-use mdtf_pack::{Provenance, TetTable, parse_tf, sha256_file};
-use mdtf_tetra::{MeshReport, TetMesh, TetraParams, read_mesh, tetrahedralise, write_pack};
+use mdtf_pipeline::stages::pack::{Provenance, TetTable, parse_tf, sha256_file};
+use mdtf_pipeline::stages::tetra::{MeshReport, TetMesh, TetraParams, read_mesh, tetrahedralise, write_pack};
 use mdtf_volume::{Inputs, OutputFolder};
 
 /// Reads or meshes the input, computes everything, writes the pack folder atomically.
@@ -60,7 +60,7 @@ pub fn run(args: &TetraArgs, progress: &Progress) -> Result<()> {
         progress.note(&format!("{}: {summary}", source.display()));
     }
     let out = progress.step("gradients, cells and tables", || {
-        mdtf_tetra::run_with_progress(&mesh, &params, tf.as_ref(), &|step| progress.message(step))
+        mdtf_pipeline::stages::tetra::run_with_progress(&mesh, &params, tf.as_ref(), &|step| progress.message(step))
     })?;
 
     let provenance = Provenance {
