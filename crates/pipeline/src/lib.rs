@@ -33,3 +33,4 @@ pub mod report_page;
 pub mod run;
 pub mod stages;
 pub mod validate;
+mod whole;

@@ -1,0 +1,495 @@
+//! The passes of a whole-volume run, in the order they run, over the
+//! channels they share ([`WholeRun`]): derive, pre-filter and tracing, kept
+//! volumes, histograms, pack. Every channel lives in the run once; each pass
+//! borrows what it reads, frees what the plan says no later pass reads, and
+//! the pack takes the rest at the end.
+
+use crate::error::{RunError, at, fail};
+use crate::file::Pipeline;
+use crate::hist_files::{Counted, Written};
+use crate::plan::{Plan, Step};
+use crate::progress::Progress;
+use crate::report::{BoundarySummary, Stages};
+use crate::run::RunOptions;
+use mdtf_boundary::{AlphaMap, BoundaryInput};
+use mdtf_derive::{DeriveParams, Item, Kernel};
+use mdtf_histogram::{Axis, AxisSpec, Histogram, HvolParams, count, histogram_volume, hit_mask};
+use mdtf_pack::{GaussianPrimitive, Lut, PackParams, PackWriter, Profile, Provenance, TfFile};
+use mdtf_volume::{Geometry, MultiField, Volume, WriteOptions, write_file_atomically};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// A whole-volume run between its input and its end.
+pub(crate) struct WholeRun<'a> {
+    p: &'a Pipeline,
+    /// The pipeline file's folder (relative paths in it start there).
+    base: PathBuf,
+    /// The staging output folder.
+    dir: PathBuf,
+    geo: Geometry,
+    plan: Plan,
+    /// The input's field names (empty for one field).
+    pub(crate) fields: Vec<String>,
+    kernel: Kernel,
+    /// The input's name in the figures, the manifest and the report.
+    pub(crate) input_name: String,
+    pub(crate) progress: Progress<'a>,
+    pub(crate) stages: Stages,
+    pub(crate) warnings: Vec<String>,
+    /// The channels made so far and still read, by name.
+    chans: BTreeMap<String, Volume>,
+    /// The normal, until the tracing has read it.
+    normal: Option<MultiField>,
+    /// The value as derive's input; its volume moves into the channels, or
+    /// stays here while the deferred normals still need it.
+    value: MultiField,
+    /// A several-field input, until its fields move into the channels.
+    input: Option<MultiField>,
+    /// The input value's finite range, value units.
+    pub(crate) finite_range: Option<[f64; 2]>,
+}
+
+/// What the tracing resolved and found.
+#[derive(Default)]
+pub(crate) struct Traced {
+    pub(crate) boundary: Option<BoundarySummary>,
+    /// The tracing's largest distance, voxels (the distance code range).
+    d_max: Option<f64>,
+}
+
+/// What the pack stage leaves for the report.
+pub(crate) struct Packed {
+    /// The pack's lookup tables, by name (the preview reads them).
+    pub(crate) table_names: Vec<String>,
+    /// The boundaries the histogram volume shows.
+    pub(crate) boundaries: Vec<mdtf_histogram::DetectedBoundary>,
+    /// Whether the histograms built a histogram volume.
+    pub(crate) hvol_built: bool,
+}
+
+impl<'a> WholeRun<'a> {
+    /// The run of `p` on the `input` it read (with its name and the
+    /// reader's warnings, as [`crate::inputs::load_input`] gives them; read
+    /// from `started` on), planned as `plan`, writing into the staging
+    /// folder `dir`: records the input stage.
+    pub(crate) fn new(
+        p: &'a Pipeline,
+        opts: &RunOptions,
+        plan: Plan,
+        (input, input_name, warnings): (MultiField, String, Vec<String>),
+        started: Instant,
+        dir: PathBuf,
+        progress: Progress<'a>,
+    ) -> Result<WholeRun<'a>, RunError> {
+        let geo = input.geometry.clone();
+        let mut stages = Stages::default();
+        stages.done("input", started, geo.voxel_count(), vec![]);
+        let fields = plan.fields.clone();
+        let (value, input) = if fields.is_empty() {
+            (input.into_scalar().map_err(at("input"))?, None)
+        } else {
+            let value = input.field_volume(0).ok_or_else(|| fail("input")("no fields".into()))?;
+            (value, Some(input))
+        };
+        Ok(WholeRun {
+            p,
+            base: opts.pipeline_path.parent().map(PathBuf::from).unwrap_or_default(),
+            dir,
+            finite_range: value.finite_range().map(|(lo, hi)| [lo as f64, hi as f64]),
+            geo,
+            fields,
+            plan,
+            kernel: p.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
+            input_name,
+            progress,
+            stages,
+            warnings,
+            chans: BTreeMap::new(),
+            normal: None,
+            // the value volume goes into derive as a one-field MultiField and comes back out: no copy
+            value: MultiField::from(value),
+            input,
+        })
+    }
+
+    fn needs(&self, c: &str) -> bool {
+        self.plan.wants(c)
+    }
+
+    fn voxels(&self) -> usize {
+        self.geo.voxel_count()
+    }
+
+    /// The derive stage (only the items the later stages use): the value's
+    /// derivatives, then those of all fields together; the input's fields
+    /// and the value then move into the channels the plan wants.
+    pub(crate) fn derive(&mut self) -> Result<(), RunError> {
+        let items = self.plan.derive.clone();
+        if !items.is_empty() {
+            self.progress.stage("derive")?;
+            let t = Instant::now();
+            let d = DeriveParams { items, kernel: self.kernel, ..Default::default() };
+            let out = mdtf_derive::run(&self.value, &d).map_err(at("derive"))?;
+            for (item, mf) in out.items {
+                match item {
+                    Item::Normal => self.normal = Some(mf),
+                    other => {
+                        let v = mf.into_scalar().map_err(at("derive"))?;
+                        self.chans.insert(other.name().to_string(), v);
+                    }
+                }
+            }
+            self.stages.done("derive", t, self.voxels(), vec![]);
+        }
+        let multi_items = self.plan.derive_fields.clone();
+        if let Some(mf) = &self.input
+            && !multi_items.is_empty()
+        {
+            self.progress.stage("derive (multi-field)")?;
+            let t = Instant::now();
+            let d = DeriveParams { items: multi_items, kernel: self.kernel, ..Default::default() };
+            let out = mdtf_derive::run(mf, &d).map_err(at("derive"))?;
+            for (item, m) in out.items {
+                self.chans.insert(item.name().into(), m.into_scalar().map_err(at("derive"))?);
+            }
+            self.stages.done("derive (multi-field)", t, self.voxels(), vec![]);
+        }
+        // the input's fields move into the channels once the multi-field derive is done with them
+        if let Some(mf) = self.input.take() {
+            for f in mf.fields {
+                if self.needs(&f.name) {
+                    self.chans.insert(f.name, Volume { geometry: self.geo.clone(), data: f.data });
+                }
+            }
+        }
+        if self.needs("v") && !self.chans.contains_key("v") {
+            let field = self.value.fields.remove(0);
+            self.chans.insert("v".into(), Volume { geometry: self.geo.clone(), data: field.data });
+        }
+        if !self.plan.defer_normals {
+            // nothing reads the value volume from here on unless it is a channel
+            self.value.fields.clear();
+        }
+        Ok(())
+    }
+
+    /// The pre-filter and the tracing, when planned; then the normals join
+    /// the channels the plan wants.
+    pub(crate) fn trace(&mut self) -> Result<Traced, RunError> {
+        let value_range = self.finite_range.map_or(0.0, |[lo, hi]| hi - lo);
+        let traced = if self.plan.trace { self.prefilter_and_trace(value_range)? } else { Traced::default() };
+        for (c, v) in self.normal.take().map(MultiField::into_volumes).unwrap_or_default() {
+            if self.needs(&c) {
+                self.chans.insert(c, v);
+            }
+        }
+        Ok(traced)
+    }
+
+    fn prefilter_and_trace(&mut self, value_range: f64) -> Result<Traced, RunError> {
+        let n = self.voxels();
+        let (Some(g0), Some(f20), Some(nm)) = (self.chans.get("g"), self.chans.get("f2"), self.normal.as_ref()) else {
+            return Err(fail("boundary")("derivatives missing".into()));
+        };
+        let filtered = match &self.p.prefilter {
+            Some(pf) => {
+                self.progress.stage("prefilter")?;
+                let t = Instant::now();
+                let filter = |v: &Volume| crate::boundary_chain::prefilter(v, pf).map_err(at("prefilter"));
+                let pair = (filter(g0)?, filter(f20)?);
+                self.stages.done("prefilter", t, n, vec![]);
+                Some(pair)
+            }
+            None => None,
+        };
+        let (g, f2) = match &filtered {
+            Some((g, f2)) => (g, f2),
+            None => (g0, f20),
+        };
+        self.progress.stage("boundary")?;
+        let t = Instant::now();
+        let out = mdtf_boundary::run(&BoundaryInput { g, f2, normal: nm, value_range }, &self.p.boundary)
+            .map_err(at("boundary"))?;
+        self.warnings.extend(out.warnings.iter().map(|w| format!("boundary: {w}")));
+        let traced = Traced {
+            d_max: Some(out.resolved.d_max),
+            boundary: Some(BoundarySummary { resolved: out.resolved, counts: out.counts, lost: out.lost.clone() }),
+        };
+        let report = out.report(g);
+        let rdir = self.dir.join("boundary");
+        std::fs::create_dir_all(&rdir).map_err(at("boundary"))?;
+        report.write(&rdir).map_err(at("boundary"))?;
+        drop(filtered);
+        for (c, v) in [("g_hit", out.g_hit), ("hit", out.hit), ("distance", out.distance)] {
+            if self.needs(c) {
+                self.chans.insert(c.into(), v);
+            }
+        }
+        // derived only for the tracing: free them now
+        for c in self.plan.freed_after(Step::Trace) {
+            self.chans.remove(&c.name(&self.fields));
+        }
+        let outputs = vec!["boundary/boundary_report.csv".into(), "boundary/boundary_report.png".into()];
+        self.stages.done("boundary", t, n, outputs);
+        Ok(traced)
+    }
+
+    /// The kept channels, written as volumes.
+    pub(crate) fn keep(&mut self) -> Result<(), RunError> {
+        if self.p.keep.is_empty() {
+            return Ok(());
+        }
+        self.progress.stage("keep")?;
+        let t = Instant::now();
+        let kdir = self.dir.join("volumes");
+        std::fs::create_dir_all(&kdir).map_err(at("keep"))?;
+        let mut written = Vec::new();
+        for c in &self.p.keep {
+            let v = self.chans.get(c).ok_or_else(|| fail("keep")(format!("no channel '{c}' was computed")))?;
+            let name = self.p.keep_format.file_name(c);
+            mdtf_volume::write_volume(&kdir.join(&name), v, &WriteOptions::default(), &[]).map_err(at("keep"))?;
+            written.push(format!("volumes/{name}"));
+        }
+        self.stages.done("keep", t, self.voxels(), written);
+        Ok(())
+    }
+
+    /// The histograms, when asked for (the histogram volume is kept for the
+    /// pack's default opacity; it comes first so that the boundaries it
+    /// shows are drawn on the others), and the field pairs' joint
+    /// histograms, which the Gaussian TF figures draw over.
+    pub(crate) fn histograms(&mut self) -> Result<(Written, Vec<Histogram>), RunError> {
+        let Some(h) = &self.p.histogram else { return Ok((Written::default(), Vec::new())) };
+        self.progress.stage("histogram")?;
+        let t = Instant::now();
+        let hdir = self.dir.join("histogram");
+        std::fs::create_dir_all(&hdir).map_err(at("histogram"))?;
+        let err = |e: String| fail("histogram")(e);
+        let mut counted = self.count(h)?;
+        counted.voxels = self.voxels();
+        let mut hists = crate::hist_files::write(&hdir, counted, &self.input_name, &mut self.warnings).map_err(err)?;
+        let mut field_pair_hists = Vec::new();
+        if h.joint && !self.fields.is_empty() {
+            let (written, pairs) =
+                crate::figures::write_field_pair_histograms(&self.fields, &self.chans, &hdir, &self.input_name)
+                    .map_err(err)?;
+            hists.outputs.extend(written);
+            field_pair_hists = pairs;
+        }
+        self.stages.done("histogram", t, self.voxels(), hists.outputs.clone());
+        Ok((hists, field_pair_hists))
+    }
+
+    /// The counts the histogram section `h` asks for.
+    fn count(&self, h: &crate::file::HistogramSection) -> Result<Counted, RunError> {
+        let get = |c: &str| self.chans.get(c);
+        let (Some(v), Some(g)) = (get("v"), get("g")) else {
+            return Err(fail("histogram")("v and g missing".into()));
+        };
+        let axis =
+            |name: &str, data: &Volume| AxisSpec::qbert(name).resolve(name, data.samples()).map_err(at("histogram"));
+        let axes: Vec<Axis> = vec![axis("v", v)?, axis("g", g)?];
+        let mut counted = Counted::default();
+        if h.hvol
+            && let Some(f2) = get("f2")
+        {
+            counted.hvol = Some(
+                histogram_volume(v.samples(), g.samples(), f2.samples(), v.plane_len(), &HvolParams::default())
+                    .map_err(at("histogram"))?,
+            );
+        }
+        if h.joint {
+            counted.joint = Some(count(&[v.samples(), g.samples()], axes.clone(), None).map_err(at("histogram"))?);
+            // peak finding's TF domain: (v, 1/g); for several fields 1/g is of
+            // their normalised ||G||, so its axis comes from the gradient it inverts
+            let inverted: Option<Vec<f32>> = (!self.fields.is_empty())
+                .then(|| get("inv_g").map(|i| i.samples().iter().map(|&x| 1.0 / x).collect()))
+                .flatten();
+            if let Some(inv_g) = get("inv_g")
+                && let Some(ia) = Axis::inverse_gradient(inverted.as_deref().unwrap_or(g.samples()), 256)
+            {
+                // several fields: the value is the first field, named as the pack's TF axis names it
+                let mut va = axes[0].clone();
+                if let Some(first) = self.fields.first() {
+                    va.name = first.clone();
+                }
+                counted.inv_g =
+                    Some(count(&[v.samples(), inv_g.samples()], vec![va, ia], None).map_err(at("histogram"))?);
+            }
+        }
+        if h.stretched
+            && let (Some(g_hit), Some(hit)) = (get("g_hit"), get("hit"))
+        {
+            let traced = hit_mask(hit.samples());
+            let normal = count(&[v.samples(), g.samples()], axes.clone(), Some(&traced)).map_err(at("histogram"))?;
+            let mut sa = axes.clone();
+            sa[1].name = "g_hit".into();
+            let stretched = count(&[v.samples(), g_hit.samples()], sa, Some(&traced)).map_err(at("histogram"))?;
+            counted.stretched = Some((normal, stretched));
+        }
+        Ok(counted)
+    }
+
+    /// The pack (for meshes: the tetra stage, which writes the pack itself),
+    /// from the histograms' outputs `hists` and `field_pair_hists`.
+    pub(crate) fn pack(
+        &mut self,
+        opts: &RunOptions,
+        traced: &Traced,
+        hists: Written,
+        field_pair_hists: &[Histogram],
+    ) -> Result<Packed, RunError> {
+        let Written { boundaries, arches, figure_hists, hvol, .. } = hists;
+        let profile = self.p.pack.profile;
+        let stage = if profile == Profile::ProjectedTetrahedra { "tetra + pack" } else { "pack" };
+        self.progress.stage(stage)?;
+        let t = Instant::now();
+        let tf = crate::inputs::read_tf(self.p, &self.base)?;
+        let pdir = self.dir.join("pack");
+        std::fs::create_dir_all(&pdir).map_err(at("pack"))?;
+        let provenance = crate::inputs::provenance(self.p, opts, &self.base, &self.input_name);
+        let mut table_names = Vec::new();
+        let mut outputs: Vec<String> = vec!["pack/manifest.json".into()];
+        let hvol = hvol.as_ref();
+        if profile == Profile::ProjectedTetrahedra {
+            self.pack_mesh(tf.as_ref(), hvol, provenance)?;
+            outputs.push("pack/gaussians.json".into());
+        } else {
+            let (luts, gaussians) = self.pack_textures(tf.as_ref(), hvol, traced, provenance)?;
+            table_names = luts.iter().map(|l| l.name.clone()).collect();
+            let hdir = self.dir.join("histogram");
+            if !figure_hists.is_empty() {
+                let hists: Vec<&Histogram> = figure_hists.iter().collect();
+                let written = crate::figures::write_tf_figures(&hdir, &luts, &hists, &self.input_name, &arches)
+                    .map_err(at("pack"))?;
+                outputs.extend(written.into_iter().map(|f| format!("histogram/{f}")));
+            }
+            if let Some(g) = &gaussians {
+                write_gaussians(&pdir, g)?;
+                let written =
+                    crate::figures::write_gaussian_figures(&hdir, g, field_pair_hists, &self.fields, &self.input_name)
+                        .map_err(at("pack"))?;
+                outputs.extend(written.into_iter().map(|f| format!("histogram/{f}")));
+            }
+        }
+        self.stages.done(stage, t, self.voxels(), outputs);
+        Ok(Packed { table_names, boundaries, hvol_built: hvol.is_some() })
+    }
+
+    /// The mesh pack: the value tetrahedralised, its tables, and the (s, g)
+    /// TF the preview draws and a renderer can start from: the TF file's
+    /// Gaussians, else a TGTF at each boundary found (as gaussian-tf's default).
+    fn pack_mesh(
+        &mut self,
+        tf: Option<&TfFile>,
+        hvol: Option<&mdtf_histogram::HistogramVolume>,
+        provenance: Provenance,
+    ) -> Result<(), RunError> {
+        let pdir = self.dir.join("pack");
+        let value = self.chans.get("v").ok_or_else(|| fail("pack")("no value volume".into()))?;
+        let mesh = mdtf_tetra::tetrahedralise(value, self.p.tetra.tets, "v").map_err(at("pack"))?;
+        let out = mdtf_tetra::run(&mesh, &self.p.tetra, tf).map_err(at("pack"))?;
+        self.warnings.extend(out.notes.iter().map(|n| format!("tetra: {n}")));
+        let report = mdtf_tetra::MeshReport::default();
+        mdtf_tetra::write_pack(&pdir, &mesh, &report, &out, Some(&self.geo), provenance).map_err(at("pack"))?;
+        drop(mesh);
+        let value_and_g: Vec<(String, Volume)> =
+            ["v", "g"].into_iter().filter_map(|c| self.chans.remove(c).map(|v| (c.to_string(), v))).collect();
+        let tf_gaussians = tf.filter(|t| !t.gaussians().is_empty());
+        let g = crate::gaussians::gaussians(tf_gaussians, None, &value_and_g, &["v".into()], "g", (hvol, self.kernel))
+            .map_err(fail("pack"))?;
+        write_gaussians(&pdir, &g)
+    }
+
+    /// The pack's textures and tables from the channels, which move into it
+    /// (it is the last stage to read them): its lookup tables and, for
+    /// gaussian-tf, its Gaussians (made before the textures free the channels).
+    fn pack_textures(
+        &mut self,
+        tf: Option<&TfFile>,
+        hvol: Option<&mdtf_histogram::HistogramVolume>,
+        traced: &Traced,
+        provenance: Provenance,
+    ) -> Result<(Vec<Lut>, Option<Vec<GaussianPrimitive>>), RunError> {
+        let profile = self.p.pack.profile;
+        let pdir = self.dir.join("pack");
+        let mut pack_chans: Vec<(String, Volume)> =
+            profile.channels(&self.fields).into_iter().filter_map(|c| self.chans.remove(&c).map(|v| (c, v))).collect();
+        let ranges = crate::pack_inputs::ranges(&pack_chans, &BTreeMap::new(), traced.d_max).map_err(at("pack"))?;
+        let alpha = self.p.pack.alpha.unwrap_or(AlphaMap::Linear { a: 1.0, dc: None });
+        let luts = crate::pack_inputs::luts(profile, tf, &alpha, &pack_chans, &ranges, hvol, self.kernel)
+            .map_err(at("pack"))?;
+        let gaussians = self.gaussians(tf, hvol, &pack_chans)?;
+        let params = PackParams { profile, ranges, fields: self.fields.clone(), dtype: None, nifti: self.p.pack.nifti };
+        let sources = BTreeMap::new();
+        let layouts = mdtf_pack::texture_layouts(&params);
+        let mut writer = PackWriter::new(&pdir, &params, self.geo.clone(), &sources);
+        let mut normals_pending = self.plan.defer_normals;
+        for (i, layout) in layouts.iter().enumerate() {
+            let uses = |l: &mdtf_pack::TextureLayout, c: &str| l.components.iter().flatten().any(|x| x == c);
+            if normals_pending && ["nx", "ny", "nz"].iter().any(|c| uses(layout, c)) {
+                // the value volume is in the pack's channels, the others, or still in derive's input
+                let taken = pack_chans.iter().position(|(c, _)| c == "v").map(|k| pack_chans.remove(k).1);
+                let value = match taken.or_else(|| self.chans.remove("v")) {
+                    Some(v) => MultiField::from(v),
+                    None => MultiField { geometry: self.geo.clone(), fields: std::mem::take(&mut self.value.fields) },
+                };
+                pack_chans.extend(derive_normals(&value, self.kernel)?);
+                if layouts[i..].iter().any(|l| uses(l, "v")) {
+                    pack_chans.push(("v".into(), value.into_scalar().map_err(at("pack"))?));
+                }
+                normals_pending = false;
+            }
+            writer
+                .add(layout, &|c: &str| pack_chans.iter().find(|(n, _)| n == c).map(|(_, v)| v))
+                .map_err(at("pack"))?;
+            // free what no later texture reads (the value stays while the normals are still to make)
+            pack_chans.retain(|(c, _)| layouts[i + 1..].iter().any(|l| uses(l, c)) || (normals_pending && c == "v"));
+        }
+        writer.finish(&luts, provenance).map_err(at("pack"))?;
+        Ok((luts, gaussians))
+    }
+
+    /// gaussian-tf's primitives (None for the other profiles) from the
+    /// pack's channels `pack_chans`: the TF file's, else fitted to the mask,
+    /// else a TGTF at each boundary found.
+    fn gaussians(
+        &self,
+        tf: Option<&TfFile>,
+        hvol: Option<&mdtf_histogram::HistogramVolume>,
+        pack_chans: &[(String, Volume)],
+    ) -> Result<Option<Vec<GaussianPrimitive>>, RunError> {
+        if self.p.pack.profile != Profile::GaussianTf {
+            return Ok(None);
+        }
+        let err = |e: String| fail("pack")(e);
+        let mask = match &self.p.pack.gtf_from_mask {
+            Some(m) => {
+                let path = self.base.join(m);
+                let v = mdtf_volume::read_scalar(&path, &mdtf_volume::ReadOptions::default())
+                    .map_err(|e| err(format!("gtf_from_mask {}: {e}", path.display())))?;
+                Some(v)
+            }
+            None => None,
+        };
+        let (axes, gradient) =
+            if self.fields.is_empty() { (vec!["v".to_string()], "g") } else { (self.fields.clone(), "gnorm") };
+        let g = crate::gaussians::gaussians(tf, mask.as_ref(), pack_chans, &axes, gradient, (hvol, self.kernel))
+            .map_err(err)?;
+        Ok(Some(g))
+    }
+}
+
+/// Writes `g` as the pack's gaussians.json, atomically.
+fn write_gaussians(pdir: &std::path::Path, g: &[GaussianPrimitive]) -> Result<(), RunError> {
+    let json = serde_json::to_string_pretty(g).map_err(at("pack"))?;
+    write_file_atomically(&pdir.join("gaussians.json"), |w| w.write_all(json.as_bytes())).map_err(at("pack"))
+}
+
+/// The unit normals (nx, ny, nz) of a one-field `value`, named.
+fn derive_normals(value: &MultiField, kernel: Kernel) -> Result<Vec<(String, Volume)>, RunError> {
+    let d = DeriveParams { items: vec![Item::Normal], kernel, ..Default::default() };
+    let out = mdtf_derive::run(value, &d).map_err(at("derive"))?;
+    Ok(out.items.into_iter().flat_map(|(_, mf)| mf.into_volumes()).collect())
+}
