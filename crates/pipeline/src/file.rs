@@ -126,6 +126,13 @@ pub struct PackSection {
     pub nifti: bool,
 }
 
+impl PackSection {
+    /// The alpha map of distance: the pipeline's, else linear in distance (a = 1).
+    pub fn alpha_map(&self) -> AlphaMap {
+        self.alpha.unwrap_or(AlphaMap::Linear { a: 1.0, dc: None })
+    }
+}
+
 /// The file format of kept channels (`keep_format`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 pub enum KeepFormat {

@@ -103,6 +103,13 @@ pub fn gaussians(
     Ok(vec![median_tgtf(centre, &ranges)])
 }
 
+/// Writes `g` as `gaussians.json` in the pack folder `pdir`, atomically.
+pub fn write(pdir: &std::path::Path, g: &[GaussianPrimitive]) -> Result<(), mdtf_volume::VolumeError> {
+    mdtf_volume::write_file_atomically(&pdir.join("gaussians.json"), |w| {
+        serde_json::to_writer_pretty(w, g).map_err(std::io::Error::other)
+    })
+}
+
 /// The paper's default triangular GTF, white and opaque at its centre: the
 /// centre is each field's median over the voxels whose gradient exceeds
 /// twice the gradient's median (over all voxels when fewer than 1 % do);

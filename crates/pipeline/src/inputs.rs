@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 /// the input (or builds the phantom) to learn its fields and grid, and
 /// writes nothing.
 pub fn plan(p: &Pipeline, opts: &RunOptions) -> Result<(Plan, String, Geometry), RunError> {
-    let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let base = opts.base();
     let (input, name, _) = load_input(p, opts, &base)?;
     let fields: Vec<String> = input.fields.iter().map(|f| f.name.clone()).collect();
     let plan = Plan::resolve(p, &fields, &input.geometry).map_err(at("plan"))?;

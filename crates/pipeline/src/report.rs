@@ -108,6 +108,15 @@ pub struct BoundarySummary {
     pub lost: Vec<mdtf_boundary::LostBoundary>,
 }
 
+/// What a run's tracing resolved and found (empty when it does not trace).
+#[derive(Default)]
+pub(crate) struct Traced {
+    /// The report's boundary section.
+    pub(crate) boundary: Option<BoundarySummary>,
+    /// The tracing's largest distance, voxels (the distance code range).
+    pub(crate) d_max: Option<f64>,
+}
+
 /// Peak resident set size of this process in MiB (VmHWM), 0 where unknown.
 pub(crate) fn peak_mib() -> f64 {
     std::fs::read_to_string("/proc/self/status")

@@ -39,6 +39,11 @@ pub struct RunOptions {
 }
 
 impl RunOptions {
+    /// The folder relative paths in the pipeline file start from (the file's own).
+    pub fn base(&self) -> PathBuf {
+        self.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default()
+    }
+
     /// Whether [`RunOptions::cancel`] is set.
     pub fn is_cancelled(&self) -> bool {
         crate::progress::is_set(&self.cancel)
@@ -48,7 +53,7 @@ impl RunOptions {
 /// Runs `p`; `on_stage(name)` is called as each stage starts.
 pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<RunReport, RunError> {
     let start = Instant::now();
-    let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let base = opts.base();
     let out = OutputFolder::begin(&opts.output, &run_inputs(p, opts, &base)).map_err(at("output"))?;
     let progress = Progress::new(opts, on_stage, &|_, _| {});
     progress.stage("input")?;
@@ -65,7 +70,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
     let (hists, field_pair_hists) = run.histograms()?;
     let packed = run.pack(opts, &traced, hists, &field_pair_hists)?;
     let report = RunReport {
-        fields: run.fields,
+        fields: run.fields().to_vec(),
         value_range: run.finite_range,
         warnings: run.warnings,
         boundary: traced.boundary,
@@ -75,6 +80,25 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<R
         ..RunReport::of(opts, run.input_name, &geo)
     };
     finish(p, opts, out, report, &packed.table_names, start, &run.progress)
+}
+
+/// Writes the channels `p` keeps into the staging folder's `volumes/`,
+/// each by `write(channel, file)` (None: the run did not make that
+/// channel); the files written, relative to `dir`.
+pub(crate) fn write_kept<W>(p: &Pipeline, dir: &Path, mut write: W) -> Result<Vec<String>, RunError>
+where
+    W: FnMut(&str, &Path) -> Option<Result<(), RunError>>,
+{
+    let kdir = dir.join("volumes");
+    std::fs::create_dir_all(&kdir).map_err(at("keep"))?;
+    p.keep
+        .iter()
+        .map(|c| {
+            let name = p.keep_format.file_name(c);
+            write(c, &kdir.join(&name)).ok_or_else(|| fail("keep")(format!("no channel '{c}' was computed")))??;
+            Ok(format!("volumes/{name}"))
+        })
+        .collect()
 }
 
 /// The end of every run: the preview and the contact sheet (when asked for
@@ -120,7 +144,7 @@ pub(crate) fn finish(
     let json = serde_json::to_string_pretty(&report).map_err(at("report"))?;
     write_file_atomically(&dir.join("run_report.json"), |w| w.write_all(json.as_bytes())).map_err(at("report"))?;
     write_report_page(&report, dir).map_err(fail("report"))?;
-    let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let base = opts.base();
     out.publish(&run_inputs(p, opts, &base)).map_err(at("output"))?;
     Ok(report)
 }

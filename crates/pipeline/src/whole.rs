@@ -9,13 +9,13 @@ use crate::file::Pipeline;
 use crate::hist_files::{Counted, Written};
 use crate::plan::{Plan, Step};
 use crate::progress::Progress;
-use crate::report::{BoundarySummary, Stages};
+use crate::report::{BoundarySummary, Stages, Traced};
 use crate::run::RunOptions;
-use mdtf_boundary::{AlphaMap, BoundaryInput};
+use mdtf_boundary::BoundaryInput;
 use mdtf_derive::{DeriveParams, Item, Kernel};
 use mdtf_histogram::{Axis, AxisSpec, Histogram, HvolParams, count, histogram_volume, hit_mask};
 use mdtf_pack::{GaussianPrimitive, Lut, PackParams, PackWriter, Profile, Provenance, TfFile};
-use mdtf_volume::{Geometry, MultiField, Volume, WriteOptions, write_file_atomically};
+use mdtf_volume::{Geometry, MultiField, Volume, WriteOptions};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -29,8 +29,6 @@ pub(crate) struct WholeRun<'a> {
     dir: PathBuf,
     geo: Geometry,
     plan: Plan,
-    /// The input's field names (empty for one field).
-    pub(crate) fields: Vec<String>,
     kernel: Kernel,
     /// The input's name in the figures, the manifest and the report.
     pub(crate) input_name: String,
@@ -48,14 +46,6 @@ pub(crate) struct WholeRun<'a> {
     input: Option<MultiField>,
     /// The input value's finite range, value units.
     pub(crate) finite_range: Option<[f64; 2]>,
-}
-
-/// What the tracing resolved and found.
-#[derive(Default)]
-pub(crate) struct Traced {
-    pub(crate) boundary: Option<BoundarySummary>,
-    /// The tracing's largest distance, voxels (the distance code range).
-    d_max: Option<f64>,
 }
 
 /// What the pack stage leaves for the report.
@@ -85,8 +75,7 @@ impl<'a> WholeRun<'a> {
         let geo = input.geometry.clone();
         let mut stages = Stages::default();
         stages.done("input", started, geo.voxel_count(), vec![]);
-        let fields = plan.fields.clone();
-        let (value, input) = if fields.is_empty() {
+        let (value, input) = if plan.fields.is_empty() {
             (input.into_scalar().map_err(at("input"))?, None)
         } else {
             let value = input.field_volume(0).ok_or_else(|| fail("input")("no fields".into()))?;
@@ -94,11 +83,10 @@ impl<'a> WholeRun<'a> {
         };
         Ok(WholeRun {
             p,
-            base: opts.pipeline_path.parent().map(PathBuf::from).unwrap_or_default(),
+            base: opts.base(),
             dir,
             finite_range: value.finite_range().map(|(lo, hi)| [lo as f64, hi as f64]),
             geo,
-            fields,
             plan,
             kernel: p.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
             input_name,
@@ -111,6 +99,11 @@ impl<'a> WholeRun<'a> {
             value: MultiField::from(value),
             input,
         })
+    }
+
+    /// The input's field names (empty for one field).
+    pub(crate) fn fields(&self) -> &[String] {
+        &self.plan.fields
     }
 
     fn needs(&self, c: &str) -> bool {
@@ -228,7 +221,7 @@ impl<'a> WholeRun<'a> {
         }
         // derived only for the tracing: free them now
         for c in self.plan.freed_after(Step::Trace) {
-            self.chans.remove(&c.name(&self.fields));
+            self.chans.remove(&c.name(&self.plan.fields));
         }
         let outputs = vec!["boundary/boundary_report.csv".into(), "boundary/boundary_report.png".into()];
         self.stages.done("boundary", t, n, outputs);
@@ -242,15 +235,11 @@ impl<'a> WholeRun<'a> {
         }
         self.progress.stage("keep")?;
         let t = Instant::now();
-        let kdir = self.dir.join("volumes");
-        std::fs::create_dir_all(&kdir).map_err(at("keep"))?;
-        let mut written = Vec::new();
-        for c in &self.p.keep {
-            let v = self.chans.get(c).ok_or_else(|| fail("keep")(format!("no channel '{c}' was computed")))?;
-            let name = self.p.keep_format.file_name(c);
-            mdtf_volume::write_volume(&kdir.join(&name), v, &WriteOptions::default(), &[]).map_err(at("keep"))?;
-            written.push(format!("volumes/{name}"));
-        }
+        let chans = &self.chans;
+        let written = crate::run::write_kept(self.p, &self.dir, |c, file| {
+            let v = chans.get(c)?;
+            Some(mdtf_volume::write_volume(file, v, &WriteOptions::default(), &[]).map_err(at("keep")))
+        })?;
         self.stages.done("keep", t, self.voxels(), written);
         Ok(())
     }
@@ -266,13 +255,12 @@ impl<'a> WholeRun<'a> {
         let hdir = self.dir.join("histogram");
         std::fs::create_dir_all(&hdir).map_err(at("histogram"))?;
         let err = |e: String| fail("histogram")(e);
-        let mut counted = self.count(h)?;
-        counted.voxels = self.voxels();
+        let counted = self.count(h)?;
         let mut hists = crate::hist_files::write(&hdir, counted, &self.input_name, &mut self.warnings).map_err(err)?;
         let mut field_pair_hists = Vec::new();
-        if h.joint && !self.fields.is_empty() {
+        if h.joint && !self.plan.fields.is_empty() {
             let (written, pairs) =
-                crate::figures::write_field_pair_histograms(&self.fields, &self.chans, &hdir, &self.input_name)
+                crate::figures::write_field_pair_histograms(&self.plan.fields, &self.chans, &hdir, &self.input_name)
                     .map_err(err)?;
             hists.outputs.extend(written);
             field_pair_hists = pairs;
@@ -290,7 +278,7 @@ impl<'a> WholeRun<'a> {
         let axis =
             |name: &str, data: &Volume| AxisSpec::qbert(name).resolve(name, data.samples()).map_err(at("histogram"));
         let axes: Vec<Axis> = vec![axis("v", v)?, axis("g", g)?];
-        let mut counted = Counted::default();
+        let mut counted = Counted { voxels: self.voxels(), ..Default::default() };
         if h.hvol
             && let Some(f2) = get("f2")
         {
@@ -303,7 +291,7 @@ impl<'a> WholeRun<'a> {
             counted.joint = Some(count(&[v.samples(), g.samples()], axes.clone(), None).map_err(at("histogram"))?);
             // peak finding's TF domain: (v, 1/g); for several fields 1/g is of
             // their normalised ||G||, so its axis comes from the gradient it inverts
-            let inverted: Option<Vec<f32>> = (!self.fields.is_empty())
+            let inverted: Option<Vec<f32>> = (!self.plan.fields.is_empty())
                 .then(|| get("inv_g").map(|i| i.samples().iter().map(|&x| 1.0 / x).collect()))
                 .flatten();
             if let Some(inv_g) = get("inv_g")
@@ -311,7 +299,7 @@ impl<'a> WholeRun<'a> {
             {
                 // several fields: the value is the first field, named as the pack's TF axis names it
                 let mut va = axes[0].clone();
-                if let Some(first) = self.fields.first() {
+                if let Some(first) = self.plan.fields.first() {
                     va.name = first.clone();
                 }
                 counted.inv_g =
@@ -366,10 +354,15 @@ impl<'a> WholeRun<'a> {
                 outputs.extend(written.into_iter().map(|f| format!("histogram/{f}")));
             }
             if let Some(g) = &gaussians {
-                write_gaussians(&pdir, g)?;
-                let written =
-                    crate::figures::write_gaussian_figures(&hdir, g, field_pair_hists, &self.fields, &self.input_name)
-                        .map_err(at("pack"))?;
+                crate::gaussians::write(&pdir, g).map_err(at("pack"))?;
+                let written = crate::figures::write_gaussian_figures(
+                    &hdir,
+                    g,
+                    field_pair_hists,
+                    &self.plan.fields,
+                    &self.input_name,
+                )
+                .map_err(at("pack"))?;
                 outputs.extend(written.into_iter().map(|f| format!("histogram/{f}")));
             }
         }
@@ -399,7 +392,7 @@ impl<'a> WholeRun<'a> {
         let tf_gaussians = tf.filter(|t| !t.gaussians().is_empty());
         let g = crate::gaussians::gaussians(tf_gaussians, None, &value_and_g, &["v".into()], "g", (hvol, self.kernel))
             .map_err(fail("pack"))?;
-        write_gaussians(&pdir, &g)
+        crate::gaussians::write(&pdir, &g).map_err(at("pack"))
     }
 
     /// The pack's textures and tables from the channels, which move into it
@@ -414,14 +407,18 @@ impl<'a> WholeRun<'a> {
     ) -> Result<(Vec<Lut>, Option<Vec<GaussianPrimitive>>), RunError> {
         let profile = self.p.pack.profile;
         let pdir = self.dir.join("pack");
-        let mut pack_chans: Vec<(String, Volume)> =
-            profile.channels(&self.fields).into_iter().filter_map(|c| self.chans.remove(&c).map(|v| (c, v))).collect();
+        let mut pack_chans: Vec<(String, Volume)> = profile
+            .channels(&self.plan.fields)
+            .into_iter()
+            .filter_map(|c| self.chans.remove(&c).map(|v| (c, v)))
+            .collect();
         let ranges = crate::pack_inputs::ranges(&pack_chans, &BTreeMap::new(), traced.d_max).map_err(at("pack"))?;
-        let alpha = self.p.pack.alpha.unwrap_or(AlphaMap::Linear { a: 1.0, dc: None });
+        let alpha = self.p.pack.alpha_map();
         let luts = crate::pack_inputs::luts(profile, tf, &alpha, &pack_chans, &ranges, hvol, self.kernel)
             .map_err(at("pack"))?;
         let gaussians = self.gaussians(tf, hvol, &pack_chans)?;
-        let params = PackParams { profile, ranges, fields: self.fields.clone(), dtype: None, nifti: self.p.pack.nifti };
+        let params =
+            PackParams { profile, ranges, fields: self.plan.fields.clone(), dtype: None, nifti: self.p.pack.nifti };
         let sources = BTreeMap::new();
         let layouts = mdtf_pack::texture_layouts(&params);
         let mut writer = PackWriter::new(&pdir, &params, self.geo.clone(), &sources);
@@ -473,18 +470,15 @@ impl<'a> WholeRun<'a> {
             }
             None => None,
         };
-        let (axes, gradient) =
-            if self.fields.is_empty() { (vec!["v".to_string()], "g") } else { (self.fields.clone(), "gnorm") };
+        let (axes, gradient) = if self.plan.fields.is_empty() {
+            (vec!["v".to_string()], "g")
+        } else {
+            (self.plan.fields.clone(), "gnorm")
+        };
         let g = crate::gaussians::gaussians(tf, mask.as_ref(), pack_chans, &axes, gradient, (hvol, self.kernel))
             .map_err(err)?;
         Ok(Some(g))
     }
-}
-
-/// Writes `g` as the pack's gaussians.json, atomically.
-fn write_gaussians(pdir: &std::path::Path, g: &[GaussianPrimitive]) -> Result<(), RunError> {
-    let json = serde_json::to_string_pretty(g).map_err(at("pack"))?;
-    write_file_atomically(&pdir.join("gaussians.json"), |w| w.write_all(json.as_bytes())).map_err(at("pack"))
 }
 
 /// The unit normals (nx, ny, nz) of a one-field `value`, named.

@@ -108,8 +108,7 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
     let params = PackParams { profile, ranges, fields, dtype, nifti: args.nifti };
     let m = progress.step("packing", || pack(&chans, &params, &luts, folder.path(), provenance, &BTreeMap::new()))?;
     if let Some(g) = &gaussians {
-        let json = serde_json::to_string_pretty(g)?;
-        mdtf_volume::write_file_atomically(&folder.path().join("gaussians.json"), |w| w.write_all(json.as_bytes()))?;
+        mdtf_pipeline::gaussians::write(folder.path(), g)?;
     }
     folder.publish(&inputs)?;
     progress.note(&format!(

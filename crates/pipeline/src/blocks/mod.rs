@@ -84,7 +84,7 @@ pub fn unsupported(p: &Pipeline, fields: usize) -> Option<String> {
 /// file read by planes (its header tells the grid without reading the
 /// samples) and its profile runs by slabs. None otherwise.
 pub fn automatic(p: &Pipeline, opts: &RunOptions) -> Option<(u64, Geometry)> {
-    let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let base = opts.base();
     if unsupported(p, 1).is_some() {
         return None;
     }
@@ -183,7 +183,7 @@ fn run_slabs(
     if let Some(why) = unsupported(p, 1) {
         return Err(fail("plan")(why));
     }
-    let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let base = opts.base();
     let out = OutputFolder::begin(&opts.output, &crate::inputs::run_inputs(p, opts, &base)).map_err(at("output"))?;
     let progress = Progress::new(opts, on_stage, on_slab);
     let (mut run, store) = SlabPasses::read_input(p, opts, size, out.path(), progress)?;

@@ -12,7 +12,7 @@ use crate::file::Pipeline;
 use crate::hist_files::Written;
 use crate::plan::Plan;
 use crate::progress::Progress;
-use crate::report::{BoundarySummary, Stages};
+use crate::report::{BoundarySummary, Stages, Traced};
 use crate::run::{RunError, RunOptions, at, fail};
 use mdtf_boundary::{Crossings, ReportAccumulator, ResolvedParams, TraceCounts};
 use mdtf_derive::{DeriveParams, Item, Kernel};
@@ -68,14 +68,6 @@ pub(super) struct Derived {
     smallest_inv_g: f32,
 }
 
-/// What the tracing found.
-#[derive(Default)]
-pub(super) struct Traced {
-    pub(super) boundary: Option<BoundarySummary>,
-    /// The tracing's largest distance, voxels (the distance code range).
-    d_max: Option<f64>,
-}
-
 impl<'a> SlabPasses<'a> {
     /// The input pass: opens the input, plans the run and sizes its slabs
     /// (`size`), and copies the value slab by slab into a channel store in
@@ -87,7 +79,7 @@ impl<'a> SlabPasses<'a> {
         dir: &Path,
         progress: Progress<'a>,
     ) -> Result<(SlabPasses<'a>, ChannelStore), RunError> {
-        let base = opts.pipeline_path.parent().map(Path::to_path_buf).unwrap_or_default();
+        let base = opts.base();
         progress.stage("input")?;
         let t = Instant::now();
         let (mut source, input_name, warnings) = open_source(p, opts, &base)?;
@@ -336,21 +328,15 @@ impl<'a> SlabPasses<'a> {
         }
         self.progress.stage("keep")?;
         let t = Instant::now();
-        let kdir = self.dir.join("volumes");
-        std::fs::create_dir_all(&kdir).map_err(io("keep"))?;
-        let mut written = Vec::new();
-        for c in &self.p.keep {
+        let (geo, slabs) = (&self.geo, &self.slabs);
+        let written = crate::run::write_kept(self.p, &self.dir, |c, file| {
             if !chans.has(c) {
-                return Err(fail("keep")(format!("no channel '{c}' was computed")));
+                return None;
             }
-            let name = self.p.keep_format.file_name(c);
             let f32 = mdtf_volume::SampleType::F32;
-            mdtf_volume::write_slabs(&kdir.join(&name), &self.geo, f32, &self.slabs, &mut |z| {
-                chans.samples(c, z).map_err(std::io::Error::other)
-            })
-            .map_err(at("keep"))?;
-            written.push(format!("volumes/{name}"));
-        }
+            let mut slab = |z| chans.samples(c, z).map_err(std::io::Error::other);
+            Some(mdtf_volume::write_slabs(file, geo, f32, slabs, &mut slab).map_err(at("keep")))
+        })?;
         self.stages.done("keep", t, self.geo.voxel_count(), written);
         Ok(())
     }
@@ -489,7 +475,7 @@ impl<'a> SlabPasses<'a> {
         // the tables read the channels' names and grid (their data only without a histogram volume)
         let stubs: Vec<(String, Volume)> =
             profile.channels(&[]).into_iter().map(|c| (c, Volume::zeros(self.geo.z_slab(0..1)))).collect();
-        let alpha = self.p.pack.alpha.unwrap_or(mdtf_boundary::AlphaMap::Linear { a: 1.0, dc: None });
+        let alpha = self.p.pack.alpha_map();
         let tf = self.tf.as_ref();
         let luts = crate::pack_inputs::luts(profile, tf, &alpha, &stubs, &params.ranges, hvol.as_ref(), derived.kernel)
             .map_err(at("pack"))?;
@@ -531,9 +517,7 @@ impl<'a> SlabPasses<'a> {
             }
             (None, None) => return Err(fail("pack")("the default Gaussians need the histogram volume".into())),
         };
-        let json = serde_json::to_string_pretty(&gaussians).map_err(at("pack"))?;
-        let file = self.dir.join("pack").join("gaussians.json");
-        mdtf_volume::write_file_atomically(&file, |w| w.write_all(json.as_bytes())).map_err(at("pack"))
+        crate::gaussians::write(&self.dir.join("pack"), &gaussians).map_err(at("pack"))
     }
 }
 
