@@ -40,6 +40,7 @@
 //! output is bit-identical for any thread count.
 
 mod alpha;
+mod exact_sum;
 mod lost;
 mod report;
 mod sample;
@@ -368,17 +369,38 @@ pub struct BlockTrace {
     pub resolved: ResolvedParams,
 }
 
-/// Traces the planes `planes` of a block (a z-slab of g, f'' and normal
-/// whose first plane is plane `first_plane` of the whole volume). Ray
-/// positions are in the whole volume's voxel coordinates and the defaults
-/// come from `stats`, so every traced voxel whose ray stays inside the block
-/// (those at least the plan's halo from its cut faces) gets the whole-volume
-/// run's bits. `input.value_range` is not read (`stats` has it).
+/// Where a block lies in the whole volume and which of its voxels to trace:
+/// a box of g, f'' and normal cut from the whole grid (z-slab, strip of
+/// rows, or both) whose first voxel is voxel `first` of the whole volume,
+/// and the rows and planes of the block (its own coordinates) to trace.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BlockPlace {
+    /// The block's first voxel in the whole volume's (x, y, z) indices.
+    pub first: [usize; 3],
+    /// The block's rows (y) to trace, in the block's own indices.
+    pub rows: std::ops::Range<usize>,
+    /// The block's planes (z) to trace, in the block's own indices.
+    pub planes: std::ops::Range<usize>,
+}
+
+impl BlockPlace {
+    /// Every voxel of a block (a z-slab of full planes) whose first plane
+    /// is plane `first_plane` of the whole volume, with `dims` its grid.
+    pub fn z_slab(first_plane: usize, dims: [usize; 3]) -> BlockPlace {
+        BlockPlace { first: [0, 0, first_plane], rows: 0..dims[1], planes: 0..dims[2] }
+    }
+}
+
+/// Traces the rows and planes `place` names of a block of g, f'' and
+/// normal (see [`BlockPlace`]). Ray positions are in the whole volume's
+/// voxel coordinates and the defaults come from `stats`, so every traced
+/// voxel whose ray stays inside the block (those at least the plan's halo
+/// from its cut faces) gets the whole-volume run's bits. The outputs hold
+/// the traced rows and planes only.
 pub fn trace_block(
     input: &BoundaryInput,
     params: &BoundaryParams,
-    first_plane: usize,
-    planes: std::ops::Range<usize>,
+    place: &BlockPlace,
     stats: &VolumeStats,
 ) -> Result<BlockTrace, BoundaryError> {
     let geo = &input.g.geometry;
@@ -399,17 +421,17 @@ pub fn trace_block(
             input.normal.fields.len()
         )));
     }
-    if planes.start > planes.end || planes.end > geo.dims[2] {
-        return Err(BoundaryError::Geometry(format!(
-            "planes {planes:?} to trace are not within the block's {} planes",
-            geo.dims[2]
-        )));
+    let BlockPlace { first, rows, planes } = place;
+    for (what, r, n) in [("rows", rows, geo.dims[1]), ("planes", planes, geo.dims[2])] {
+        if r.start > r.end || r.end > n {
+            return Err(BoundaryError::Geometry(format!("{what} {r:?} to trace are not within the block's {n} {what}")));
+        }
     }
     let r = resolve(params, geo, stats.value_range, stats.noise_floor)?;
-    fn grid(v: &Array3<f32>, dims: [usize; 3], first_plane: usize) -> Grid<'_> {
-        Grid::at(v.as_slice().unwrap_or(&[]), dims, [0, 0, first_plane])
+    fn grid(v: &Array3<f32>, dims: [usize; 3], first: [usize; 3]) -> Grid<'_> {
+        Grid::at(v.as_slice().unwrap_or(&[]), dims, first)
     }
-    let grid = |v| grid(v, geo.dims, first_plane);
+    let grid = |v| grid(v, geo.dims, *first);
     let fields = Fields {
         g: grid(&input.g.data),
         f2: grid(&input.f2.data),
@@ -424,8 +446,8 @@ pub fn trace_block(
         g_hit_min: r.g_hit_min as f32,
         g_probe: r.g_min.min(r.noise_floor) as f32,
     };
-    let plane = geo.dims[0] * geo.dims[1];
-    let out_geo = geo.z_slab(planes.clone());
+    let plane = geo.dims[0] * rows.len();
+    let out_geo = geo.z_slab(planes.clone()).y_rows(rows.clone());
     let mut distance = Volume::zeros(out_geo.clone());
     let mut g_hit = Volume::zeros(out_geo.clone());
     let mut hit = Volume::zeros(out_geo.clone());
@@ -446,7 +468,7 @@ pub fn trace_block(
             .map(|(k, (((d, gh), h), dt))| {
                 let mut hist = lost::CrossingHistogram::new(stats.g_max);
                 let out = trace::PlaneOut { distance: d, g_hit: gh, hit: h, dot: dt, crossings: &mut hist };
-                (trace_plane(&fields, &settings, planes.start + k, out), hist)
+                (trace_plane(&fields, &settings, planes.start + k, rows.clone(), out), hist)
             })
             .collect();
         for (c, h) in per_plane {
@@ -471,9 +493,9 @@ pub fn run_block(
     first_plane: usize,
 ) -> Result<BoundaryOutput, BoundaryError> {
     let stats = VolumeStats::of(input.g, input.value_range);
-    let planes = 0..input.g.geometry.dims[2];
+    let place = BlockPlace::z_slab(first_plane, input.g.geometry.dims);
     let BlockTrace { distance, g_hit, hit, dot, counts, crossings, resolved: r } =
-        trace_block(input, params, first_plane, planes, &stats)?;
+        trace_block(input, params, &place, &stats)?;
     let hit_mask = |f: &dyn Fn(f32) -> f32| {
         let data =
             ndarray::Zip::from(&distance.data).and(&hit.data).map_collect(|&d, &h| if h == 1.0 { f(d) } else { 0.0 });

@@ -10,6 +10,7 @@
 //! log10(1 - dot) in quarter decades. The paper's binning is the CSV's
 //! second table.
 
+use crate::exact_sum::ExactSum;
 use mdtf_volume::{PngColour, VolumeError, write_file_atomically};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -68,12 +69,12 @@ pub struct Report {
     pub thresholds: ReportThresholds,
 }
 
-/// Per-bin sums while counting.
-#[derive(Clone, Copy, Default)]
+/// Per-bin sums while counting (exact, so any order of voxels gives the same bits).
+#[derive(Clone, Default)]
 struct Sums {
     voxels: u64,
-    distance: f64,
-    g: f64,
+    distance: ExactSum,
+    g: ExactSum,
 }
 
 /// The per-voxel volumes the report reads, as flat samples.
@@ -97,13 +98,13 @@ fn log_bin(dot: f64) -> usize {
 }
 
 /// The report's sums over the voxels seen so far: feed it the blocks of a
-/// slab-by-slab run in voxel order and it finishes into the report of the
-/// whole volume, bit for bit (the sums run in the same order).
+/// slab-by-slab run in any order and it finishes into the report of the
+/// whole volume, bit for bit (its sums are exact, see [`ExactSum`]).
 #[derive(Clone)]
 pub struct ReportAccumulator {
     log: Vec<Sums>,
     paper: Vec<Sums>,
-    sum_dot: f64,
+    sum_dot: ExactSum,
     hits: u64,
     outliers: u64,
     thresholds: ReportThresholds,
@@ -115,7 +116,7 @@ impl ReportAccumulator {
         ReportAccumulator {
             log: vec![Sums::default(); LOG_BINS],
             paper: vec![Sums::default(); 201],
-            sum_dot: 0.0,
+            sum_dot: ExactSum::default(),
             hits: 0,
             outliers: 0,
             thresholds,
@@ -129,19 +130,19 @@ impl ReportAccumulator {
             if input.hit[i] != 1.0 {
                 continue;
             }
-            let (g, g_hit) = (input.g[i] as f64, input.g_hit[i] as f64);
-            if g < thresholds.g_min || g_hit < thresholds.g_hit_min {
+            let (g, g_hit) = (input.g[i], input.g_hit[i]);
+            if (g as f64) < thresholds.g_min || (g_hit as f64) < thresholds.g_hit_min {
                 self.outliers += 1;
                 continue;
             }
-            let dot = input.dot[i] as f64;
-            let p = ((dot * 100.0).round().clamp(-100.0, 100.0) as i32 + 100) as usize;
-            for s in [&mut self.log[log_bin(dot)], &mut self.paper[p]] {
+            let dot = input.dot[i];
+            let p = ((dot as f64 * 100.0).round().clamp(-100.0, 100.0) as i32 + 100) as usize;
+            for s in [&mut self.log[log_bin(dot as f64)], &mut self.paper[p]] {
                 s.voxels += 1;
-                s.distance += input.distance[i] as f64;
-                s.g += g;
+                s.distance.add(input.distance[i]);
+                s.g.add(g);
             }
-            self.sum_dot += dot;
+            self.sum_dot.add(dot);
             self.hits += 1;
         }
     }
@@ -178,8 +179,8 @@ impl Report {
                         voxels: s.voxels,
                         percent,
                         cumulative_percent: cumulative,
-                        mean_distance: s.distance / s.voxels as f64,
-                        mean_g: s.g / s.voxels as f64,
+                        mean_distance: s.distance.value() / s.voxels as f64,
+                        mean_g: s.g.value() / s.voxels as f64,
                     }
                 })
                 .collect()
@@ -192,7 +193,7 @@ impl Report {
         Report {
             bins: table(&log, &log_edges),
             paper_bins: table(&paper, &paper_edges),
-            mean_dot: sum_dot / total,
+            mean_dot: sum_dot.value() / total,
             hits,
             outliers,
             thresholds,

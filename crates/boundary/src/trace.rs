@@ -66,16 +66,24 @@ pub(crate) struct PlaneOut<'a> {
     pub crossings: &'a mut crate::lost::CrossingHistogram,
 }
 
-/// Traces every voxel of z-slice `k` with g >= g_probe, writes those with
+/// Traces every voxel of rows `rows` of z-slice `k` with g >= g_probe
+/// (`out` holds those rows), writes those with
 /// g >= g_min into `out` (the others get distance [`crate::NO_BOUNDARY`]
 /// and 0 elsewhere), counts the hit codes and the crossings' g. Compiled for AVX-512 and AVX2 as well as the baseline, picked at
 /// run time; no FMA, so every path gives the same bits.
 #[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+avx2", "x86_64+avx2"))]
-pub(crate) fn trace_plane(f: &Fields, s: &TraceSettings, k: usize, out: PlaneOut) -> crate::TraceCounts {
+pub(crate) fn trace_plane(
+    f: &Fields,
+    s: &TraceSettings,
+    k: usize,
+    rows: std::ops::Range<usize>,
+    out: PlaneOut,
+) -> crate::TraceCounts {
     let [nx, ny, _] = f.g.dims;
-    let plane = &f.g.data[k * nx * ny..(k + 1) * nx * ny];
+    // the traced rows of the plane; `o` indexes them and the outputs alike
+    let plane = &f.g.data[(k * ny + rows.start) * nx..(k * ny + rows.end) * nx];
     out.distance.fill(crate::NO_BOUNDARY);
-    let mut counts = crate::TraceCounts { not_traced: (nx * ny) as u64, ..Default::default() };
+    let mut counts = crate::TraceCounts { not_traced: plane.len() as u64, ..Default::default() };
     let mut store = |o: usize, t: Trace| {
         out.distance[o] = t.distance;
         out.g_hit[o] = t.g_hit;
@@ -93,9 +101,9 @@ pub(crate) fn trace_plane(f: &Fields, s: &TraceSettings, k: usize, out: PlaneOut
     // independent of each other there, so their cache misses overlap
     // instead of waiting behind each ray's stepping.
     let mut crossings: Vec<(usize, Crossing)> = Vec::new();
-    for j in 0..ny {
+    for j in rows.clone() {
         for i in 0..nx {
-            let o = j * nx + i;
+            let o = (j - rows.start) * nx + i;
             if plane[o] >= s.g_probe {
                 match march(f, s, i, j, k) {
                     Ok(c) => crossings.push((o, c)),

@@ -243,6 +243,50 @@ fn same_bits_with_one_and_two_threads() {
 }
 
 #[test]
+fn a_block_cut_in_y_and_z_traces_its_voxels_as_the_whole_volume_does() {
+    use mdtf_boundary::{BlockPlace, VolumeStats, trace_block};
+    let geo = Geometry::new([40, 44, 36], [1.0, 0.8, 1.2]);
+    let ph = RadialPhantom::tooth(geo, 1.5);
+    let d = derive(&ph.volume());
+    let params = BoundaryParams { d_max: Some(4.0), ..BoundaryParams::default() };
+    let whole = trace(&d, &params);
+    let stats = VolumeStats::of(&d.g, 255.0);
+    // the halo a ray and the tricubic support at its hit need: d_max in voxels plus 2
+    let halo = |spacing: f64| (4.0 / spacing).ceil() as usize + 2;
+    let (rows, planes) = (14..23usize, 11..19usize);
+    let (y0, y1) = (rows.start - halo(0.8), rows.end + halo(0.8));
+    let (z0, z1) = (planes.start - halo(1.2), planes.end + halo(1.2));
+    assert!(y0 > 0 && y1 < 44 && z0 > 0 && z1 < 36, "the cut faces lie inside the volume");
+    let cut = |v: &Volume| {
+        let data = ndarray::Array3::from_shape_fn((z1 - z0, y1 - y0, 40), |(k, j, i)| v.data[[z0 + k, y0 + j, i]]);
+        Volume::new(v.geometry.z_slab(z0..z1).y_rows(y0..y1), data).unwrap()
+    };
+    let normal = MultiField::from_volumes(
+        (0..3).map(|i| (format!("n{i}"), cut(&d.normal.field_volume(i).unwrap()))).collect(),
+    )
+    .unwrap();
+    let (g, f2) = (cut(&d.g), cut(&d.f2));
+    let place = BlockPlace { first: [0, y0, z0], rows: rows.start - y0..rows.end - y0, planes: planes.start - z0..planes.end - z0 };
+    let input = BoundaryInput { g: &g, f2: &f2, normal: &normal, value_range: 255.0 };
+    let block = trace_block(&input, &params, &place, &stats).unwrap();
+    assert_eq!(block.distance.geometry.dims, [40, rows.len(), planes.len()]);
+    let mut hits = 0;
+    for (name, b, w) in [
+        ("distance", &block.distance, &whole.distance),
+        ("g_hit", &block.g_hit, &whole.g_hit),
+        ("dot", &block.dot, &whole.dot),
+        ("hit", &block.hit, &whole.hit),
+    ] {
+        for ((k, j, i), p) in b.data.indexed_iter() {
+            let q = w.data[[planes.start + k, rows.start + j, i]];
+            assert_eq!(p.to_bits(), q.to_bits(), "{name} at ({i}, {j}, {k}): {p} vs {q}");
+        }
+        hits += b.data.iter().filter(|&&h| name == "hit" && h == 1.0).count();
+    }
+    assert!(hits > 100, "the block holds traced boundary voxels ({hits})");
+}
+
+#[test]
 fn bad_input_is_refused() {
     let ph = erf_sphere(Geometry::new([24; 3], [1.0; 3]), 7.0, 1.5, 0.0, 255.0, None);
     let d = derive(&ph.volume());

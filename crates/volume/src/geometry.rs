@@ -44,6 +44,20 @@ impl Geometry {
         geometry
     }
 
+    /// The grid of rows `y` (clamped to the grid) of every plane, where they
+    /// lie in this one: the geometry of a strip of rows of a blocked run.
+    pub fn y_rows(&self, y: std::ops::Range<usize>) -> Geometry {
+        let ny = self.dims[1];
+        let (y0, y1) = (y.start.min(ny), y.end.min(ny).max(y.start.min(ny)));
+        let mut geometry = self.clone();
+        geometry.dims[1] = y1 - y0;
+        let shift = y0 as f64 * geometry.spacing[1];
+        for a in 0..3 {
+            geometry.origin[a] += shift * geometry.directions[1][a];
+        }
+        geometry
+    }
+
     /// Number of voxels.
     pub fn voxel_count(&self) -> usize {
         self.dims.iter().product()

@@ -209,4 +209,24 @@ mod tests {
         assert_eq!(v.z_slab(4..9).geometry.dims[2], 1, "clamped to the grid");
         assert_eq!(v.z_slab(7..9).geometry.dims[2], 0);
     }
+
+    #[test]
+    fn a_strip_of_rows_lies_where_the_grid_has_those_rows() {
+        let mut geometry = Geometry::new([3, 6, 2], [0.5, 0.7, 1.5]).with_origin([10.0, -4.0, 2.0]);
+        let (c, s) = (0.6_f64, 0.8_f64);
+        geometry.directions = [[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]];
+        let strip = geometry.z_slab(1..2).y_rows(2..5);
+        assert_eq!(strip.dims, [3, 3, 1]);
+        let world = |g: &Geometry, ijk: [f64; 3]| {
+            let m = g.world_from_voxel();
+            [0, 1, 2].map(|r| m[r][0] * ijk[0] + m[r][1] * ijk[1] + m[r][2] * ijk[2] + m[r][3])
+        };
+        // voxel (2, 1, 0) of the strip is voxel (2, 3, 1) of the grid: -0.7 * 0.8 * 3 + ... by hand
+        let (a, b) = (world(&strip, [2.0, 1.0, 0.0]), world(&geometry, [2.0, 3.0, 1.0]));
+        let by_hand = [10.0 + 2.0 * 0.5 * c - 3.0 * 0.7 * s, -4.0 + 2.0 * 0.5 * s + 3.0 * 0.7 * c, 2.0 + 1.5];
+        for r in 0..3 {
+            assert!((a[r] - b[r]).abs() < 1e-12 && (a[r] - by_hand[r]).abs() < 1e-12, "{a:?} {b:?} {by_hand:?}");
+        }
+        assert_eq!(geometry.y_rows(5..9).dims[1], 1, "clamped to the grid");
+    }
 }

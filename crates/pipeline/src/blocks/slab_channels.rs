@@ -86,6 +86,11 @@ impl SlabChannels {
         self.nz
     }
 
+    /// Rows of each plane.
+    pub fn ny(&self) -> usize {
+        self.store.geometry().dims[1]
+    }
+
     /// Whether channel `name` is stored or derivable.
     pub fn has(&self, name: &str) -> bool {
         self.store.has(name) || self.groups.iter().any(|(_, names)| names.iter().any(|n| n == name))

@@ -70,8 +70,8 @@ pub(super) fn trace_slab(
     };
     let own = z.start - block.planes.start..z.end - block.planes.start;
     let input = BoundaryInput { g: &block.g, f2: &block.f2, normal: &block.normal, value_range: setup.value_range };
-    let b = mdtf_boundary::trace_block(&input, setup.params, block.planes.start, own.clone(), setup.stats)
-        .map_err(at("boundary"))?;
+    let place = mdtf_boundary::BlockPlace { first: [0, 0, block.planes.start], rows: 0..chans.ny(), planes: own.clone() };
+    let b = mdtf_boundary::trace_block(&input, setup.params, &place, setup.stats).map_err(at("boundary"))?;
     let g_own = block.g.z_slab(own);
     if let Some(out) = block.into_output() {
         chans.recycle(out);
