@@ -68,7 +68,13 @@ mod tests {
         let mut values: Vec<f32> = (0..10_000)
             .map(|i| {
                 let x = ((i * 7919) % 10_007) as f32 / 10_007.0;
-                if i % 3 == 0 { x * 1e7 } else if i % 3 == 1 { -x * 1e-6 } else { x }
+                if i % 3 == 0 {
+                    x * 1e7
+                } else if i % 3 == 1 {
+                    -x * 1e-6
+                } else {
+                    x
+                }
             })
             .collect();
         values.extend([1e-40, -3e-41, 0.0, -0.0]);

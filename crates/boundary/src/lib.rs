@@ -424,7 +424,9 @@ pub fn trace_block(
     let BlockPlace { first, rows, planes } = place;
     for (what, r, n) in [("rows", rows, geo.dims[1]), ("planes", planes, geo.dims[2])] {
         if r.start > r.end || r.end > n {
-            return Err(BoundaryError::Geometry(format!("{what} {r:?} to trace are not within the block's {n} {what}")));
+            return Err(BoundaryError::Geometry(format!(
+                "{what} {r:?} to trace are not within the block's {n} {what}"
+            )));
         }
     }
     let r = resolve(params, geo, stats.value_range, stats.noise_floor)?;

@@ -261,12 +261,15 @@ fn a_block_cut_in_y_and_z_traces_its_voxels_as_the_whole_volume_does() {
         let data = ndarray::Array3::from_shape_fn((z1 - z0, y1 - y0, 40), |(k, j, i)| v.data[[z0 + k, y0 + j, i]]);
         Volume::new(v.geometry.z_slab(z0..z1).y_rows(y0..y1), data).unwrap()
     };
-    let normal = MultiField::from_volumes(
-        (0..3).map(|i| (format!("n{i}"), cut(&d.normal.field_volume(i).unwrap()))).collect(),
-    )
-    .unwrap();
+    let normal =
+        MultiField::from_volumes((0..3).map(|i| (format!("n{i}"), cut(&d.normal.field_volume(i).unwrap()))).collect())
+            .unwrap();
     let (g, f2) = (cut(&d.g), cut(&d.f2));
-    let place = BlockPlace { first: [0, y0, z0], rows: rows.start - y0..rows.end - y0, planes: planes.start - z0..planes.end - z0 };
+    let place = BlockPlace {
+        first: [0, y0, z0],
+        rows: rows.start - y0..rows.end - y0,
+        planes: planes.start - z0..planes.end - z0,
+    };
     let input = BoundaryInput { g: &g, f2: &f2, normal: &normal, value_range: 255.0 };
     let block = trace_block(&input, &params, &place, &stats).unwrap();
     assert_eq!(block.distance.geometry.dims, [40, rows.len(), planes.len()]);

@@ -126,8 +126,15 @@ fn the_shipped_pipelines_give_the_same_files_slab_by_slab() {
     for name in ["slicer-3dtf", "distance-tf", "peak-finding", "gaussian-tf"] {
         // gaussian-tf ships on the three-field phantom; slabs take one field
         let p = shipped(name, &["input.size=64", "input.phantom=\"shells\""]);
-        let sizes =
-            [SlabSize::Planes(1), SlabSize::Planes(7), SlabSize::Planes(33), SlabSize::Budget(EIGHT_SLAB_BUDGET)];
+        let sizes = [
+            SlabSize::Planes(1),
+            SlabSize::Planes(7),
+            SlabSize::Planes(33),
+            SlabSize::Budget(EIGHT_SLAB_BUDGET),
+            // the tracing in strips of rows, as a budget too small for its halo on whole planes makes it
+            SlabSize::Strips { planes: 7, rows: 5 },
+            SlabSize::Strips { planes: 1, rows: 33 },
+        ];
         let compared = assert_slab_runs_equal_the_whole(name, &p, None, &sizes);
         assert!(compared >= 15, "{name}: {compared} files compared");
     }
@@ -153,7 +160,7 @@ fn the_budget_sets_the_slab_height_and_a_budget_too_small_is_refused_before_any_
 }
 
 #[test]
-fn an_anisotropic_noisy_file_read_by_planes_gives_the_same_files_with_the_prefilter_on() {
+fn an_anisotropic_noisy_file_read_by_planes_gives_the_same_files_with_and_without_the_prefilter() {
     // the tooth phantom on 1 x 0.8 x 1.3 mm voxels, noisy, stored as u16 NRRD (read by planes)
     let geo = Geometry::new([44, 40, 50], [1.0, 0.8, 1.3]);
     let mut v = mdtf_datagen::RadialPhantom::tooth(geo, 1.5).volume();
@@ -173,6 +180,11 @@ fn an_anisotropic_noisy_file_read_by_planes_gives_the_same_files_with_the_prefil
     let gz = dir.path().join("tooth-gz.nrrd");
     write_volume(&gz, &v, &WriteOptions { ty: SampleType::U16, gzip: true }, &[]).unwrap();
     let slicer = parse("[histogram]\njoint = true\nhvol = true\n[pack]\nprofile = \"slicer-3dtf\"\n", &[]).unwrap();
+    // without the pre-filter the tracing derives its channels and may go by strips of rows
+    let no_prefilter = parse(&text.replace("[prefilter]\nsigma_d = 1.0\nsigma_r = 0.1\n", ""), &[]).unwrap();
+    assert!(no_prefilter.prefilter.is_none());
+    let strips = [SlabSize::Strips { planes: 6, rows: 7 }, SlabSize::Strips { planes: 11, rows: 1 }];
+    assert_slab_runs_equal_the_whole("distance-tf", &no_prefilter, Some(input.clone()), &strips);
     assert_slab_runs_equal_the_whole("slicer-3dtf", &slicer, Some(gz), &[SlabSize::Planes(7)]);
 }
 

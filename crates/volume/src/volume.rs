@@ -75,6 +75,16 @@ impl Volume {
         let data = self.data.slice_axis(ndarray::Axis(0), ndarray::Slice::from(z0..z1)).to_owned();
         Volume { geometry, data }
     }
+
+    /// A copy of rows `y` (clamped to the grid) of every plane, placed in
+    /// the world where they are in this volume: a strip of a blocked run.
+    pub fn y_rows(&self, y: std::ops::Range<usize>) -> Volume {
+        let ny = self.geometry.dims[1];
+        let (y0, y1) = (y.start.min(ny), y.end.min(ny).max(y.start.min(ny)));
+        let geometry = self.geometry.y_rows(y0..y1);
+        let data = self.data.slice_axis(ndarray::Axis(1), ndarray::Slice::from(y0..y1)).to_owned();
+        Volume { geometry, data }
+    }
 }
 
 /// One named field of a [`MultiField`].
@@ -228,5 +238,9 @@ mod tests {
             assert!((a[r] - b[r]).abs() < 1e-12 && (a[r] - by_hand[r]).abs() < 1e-12, "{a:?} {b:?} {by_hand:?}");
         }
         assert_eq!(geometry.y_rows(5..9).dims[1], 1, "clamped to the grid");
+        let data = Array3::from_shape_fn((2, 6, 3), |(k, j, i)| (100 * k + 10 * j + i) as f32);
+        let v = Volume::new(geometry.clone(), data).unwrap();
+        let rows = v.y_rows(2..5);
+        assert_eq!((rows.geometry.clone(), rows.data[[1, 2, 1]]), (geometry.y_rows(2..5), 141.0));
     }
 }

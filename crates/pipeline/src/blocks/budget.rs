@@ -1,6 +1,9 @@
 //! How many z-planes a slab of a slab-by-slab run may hold under a memory
 //! budget: the largest height whose costliest pass (derive, pre-filter,
-//! tracing, pack), with its halo, fits beside the fixed costs.
+//! tracing, pack), with its halo, fits beside the fixed costs. The tracing,
+//! whose halo (d_max and the interpolation's support) is the widest, may
+//! cut its slabs into strips of rows as well ([`fit_trace`]) when whole
+//! planes with that halo do not fit.
 
 use crate::plan::Plan;
 use mdtf_volume::{Geometry, human_bytes};
@@ -12,8 +15,10 @@ const BASE_BYTES: u64 = 48 << 20;
 const HVOL_BYTES: u64 = 64 << 20;
 
 /// f32 planes each pass holds per plane of its slab (`h`) and of its halo
-/// read on both sides (`halo`), counted from what it reads, makes and copies.
-fn pass_planes(h: u64, plan: &Plan) -> u64 {
+/// read on both sides (`halo`), counted from what it reads, makes and copies;
+/// the tracing's only when it reads whole planes (`trace_whole_planes`; else
+/// [`fit_trace`] sizes its blocks on their own).
+fn pass_planes(h: u64, plan: &Plan, trace_whole_planes: bool) -> u64 {
     let k = plan.reach.kernel[2] as u64;
     // derive reads at least a kernel's width of planes
     let read = (h + 2 * k).max(2 * k + 1);
@@ -24,7 +29,7 @@ fn pass_planes(h: u64, plan: &Plan) -> u64 {
     let t = plan.reach.trace[2] as u64;
     // the value and its five derivatives over the block grown by the kernel; distance, g_hit,
     // hit, dot and the report's g over the slab
-    let trace = if plan.trace { 6 * (h + 2 * t + 2 * k) + 5 * h } else { 0 };
+    let trace = if plan.trace && trace_whole_planes { 6 * (h + 2 * t + 2 * k) + 5 * h } else { 0 };
     // the histograms and the textures from one pass: a derive's planes, the slab's channels
     // copied out (the value and up to five derived) and one texture's bytes at a time
     let pack = 8 * read + 7 * h;
@@ -36,18 +41,21 @@ fn pass_planes(h: u64, plan: &Plan) -> u64 {
 /// `budget`: a lane per thread (`threads`) when their counts still leave
 /// slabs at least 3/4 as tall as one lane does, else one lane, so a tight
 /// budget buys taller slabs (less halo) rather than parallel counting.
+/// With `trace_in_strips` the tracing's cost is left to [`fit_trace`].
 pub fn fit_slabs(
     budget: u64,
     geometry: &Geometry,
     plan: &Plan,
     hvol: bool,
     threads: usize,
+    trace_in_strips: bool,
 ) -> Result<(usize, usize), String> {
+    let height = |lanes| slab_height_with(budget, geometry, plan, lanes, !trace_in_strips);
     if !hvol {
-        return Ok((slab_height(budget, geometry, plan, 0)?, 0));
+        return Ok((height(0)?, 0));
     }
-    let one = slab_height(budget, geometry, plan, 1)?;
-    match slab_height(budget, geometry, plan, threads.max(1)) {
+    let one = height(1)?;
+    match height(threads.max(1)) {
         Ok(h) if 4 * h >= 3 * one => Ok((h, threads.max(1))),
         _ => Ok((one, 1)),
     }
@@ -55,11 +63,23 @@ pub fn fit_slabs(
 
 /// The tallest slab (planes, at most the volume's) whose passes fit in
 /// `budget` bytes with the plan's halos and `hvol_lanes` histogram-volume
-/// counts (0: no histogram volume), or why none does.
+/// counts (0: no histogram volume), the tracing's on whole planes, or why
+/// none does.
 pub fn slab_height(budget: u64, geometry: &Geometry, plan: &Plan, hvol_lanes: usize) -> Result<usize, String> {
+    slab_height_with(budget, geometry, plan, hvol_lanes, true)
+}
+
+/// [`slab_height`], the tracing counted only with `trace_whole_planes`.
+fn slab_height_with(
+    budget: u64,
+    geometry: &Geometry,
+    plan: &Plan,
+    hvol_lanes: usize,
+    trace_whole_planes: bool,
+) -> Result<usize, String> {
     let plane_bytes = (geometry.dims[0] * geometry.dims[1] * 4) as u64;
     let fixed = BASE_BYTES + HVOL_BYTES * hvol_lanes as u64;
-    let cost = |h: u64| fixed + pass_planes(h, plan) * plane_bytes;
+    let cost = |h: u64| fixed + pass_planes(h, plan, trace_whole_planes) * plane_bytes;
     let nz = geometry.dims[2] as u64;
     if cost(1) > budget {
         return Err(format!(
@@ -77,6 +97,79 @@ pub fn slab_height(budget: u64, geometry: &Geometry, plan: &Plan, hvol_lanes: us
         if cost(mid) <= budget { lo = mid } else { hi = mid - 1 }
     }
     Ok(lo as usize)
+}
+
+/// How the tracing pass cuts the volume: z-slabs of `planes` planes, each
+/// visited in strips of `rows` rows (all of them: whole planes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TraceBlocks {
+    /// Planes per slab (the last may hold fewer).
+    pub planes: usize,
+    /// Rows per strip (the last may hold fewer).
+    pub rows: usize,
+}
+
+/// Bytes the tracing holds for a block of `h` planes and `r` rows: the
+/// value and its five derivatives over the block grown by the halo and the
+/// kernel's support; distance, g_hit, hit, dot and the report's g over the block.
+fn trace_bytes(h: usize, r: usize, geometry: &Geometry, plan: &Plan) -> u64 {
+    let [nx, ny, nz] = geometry.dims;
+    let (t, k) = (plan.reach.trace, plan.reach.kernel);
+    let planes = (h + 2 * t[2] + 2 * k[2]).min(nz.max(h));
+    let rows = if r >= ny { ny } else { (r + 2 * t[1] + 2 * k[1]).min(ny) };
+    4 * nx as u64 * (6 * planes * rows + 5 * h * r) as u64
+}
+
+/// The tracing's blocks within `budget`: whole planes in the other passes'
+/// slabs of `planes` when they fit; else strips of rows, in slabs of up to
+/// `2 threads` planes (the tracing spreads a block's planes over the
+/// threads; at least 8), each strip as tall as fits, at least twice its
+/// halo so that remaking the derivatives of its halo rows costs at most as
+/// much as its own. Strips only when `strips_allowed` (the tracing derives
+/// its channels; it reads stored ones by whole planes).
+pub fn fit_trace(
+    budget: u64,
+    geometry: &Geometry,
+    plan: &Plan,
+    planes: usize,
+    threads: usize,
+    strips_allowed: bool,
+) -> Result<TraceBlocks, String> {
+    let [_, ny, nz] = geometry.dims;
+    let fits = |h: usize, r: usize| BASE_BYTES + trace_bytes(h, r, geometry, plan) <= budget;
+    if !plan.trace || !strips_allowed || fits(planes, ny) {
+        return Ok(TraceBlocks { planes, rows: ny });
+    }
+    let tallest_strip = |h: usize| {
+        // bytes grow with r: the tallest that fits, by bisection
+        let (mut lo, mut hi) = (1usize, ny.max(1));
+        while lo < hi {
+            let mid = (lo + hi).div_ceil(2);
+            if fits(h, mid) { lo = mid } else { hi = mid - 1 }
+        }
+        fits(h, lo).then_some(lo)
+    };
+    let wanted_rows = ny.min(2 * (plan.reach.trace[1] + plan.reach.kernel[1]));
+    let preferred = (2 * threads).clamp(8, 64).min(nz.max(1));
+    let mut lowest = None;
+    for h in (1..=preferred).rev() {
+        if let Some(r) = tallest_strip(h) {
+            if r >= wanted_rows {
+                return Ok(TraceBlocks { planes: h, rows: r });
+            }
+            lowest = Some(TraceBlocks { planes: h, rows: r });
+        }
+    }
+    lowest.ok_or_else(|| {
+        format!(
+            "a memory budget of {} is too small for the tracing of planes of {} x {}: a block of one plane and one \
+             row with its halo needs {}",
+            human_bytes(budget as u128),
+            geometry.dims[0],
+            ny,
+            human_bytes((BASE_BYTES + trace_bytes(1, 1, geometry, plan)) as u128)
+        )
+    })
 }
 
 /// Peak memory of a whole-volume run per voxel, bytes, as measured at 256^3
@@ -116,25 +209,50 @@ mod tests {
         let plane = 256 * 256 * 4;
         let budget = 256u64 << 20;
         let h = slab_height(budget, &geo, &plan, 0).unwrap() as u64;
-        assert!(BASE_BYTES + pass_planes(h, &plan) * plane <= budget);
-        assert!(BASE_BYTES + pass_planes(h + 1, &plan) * plane > budget);
+        assert!(BASE_BYTES + pass_planes(h, &plan, true) * plane <= budget);
+        assert!(BASE_BYTES + pass_planes(h + 1, &plan, true) * plane > budget);
         // the tracing's value and derivatives over its halo-grown block, and its outputs, are counted
         let (t, k) = (plan.reach.trace[2] as u64, plan.reach.kernel[2] as u64);
-        assert!(pass_planes(h, &plan) >= 6 * (h + 2 * t + 2 * k) + 5 * h);
+        assert!(pass_planes(h, &plan, true) >= 6 * (h + 2 * t + 2 * k) + 5 * h);
         assert_eq!(slabs(10, 4), vec![0..4, 4..8, 8..10]);
         let e = slab_height(1 << 20, &geo, &plan, 0).unwrap_err();
         assert!(e.contains("too small") && e.contains("1.0 MiB"), "{e}");
         assert_eq!(slab_height(1 << 40, &geo, &plan, 1).unwrap(), 256, "a large budget: one slab");
         // each histogram-volume lane's counts come off the slabs' share
         let h2 = slab_height(budget, &geo, &plan, 2).unwrap() as u64;
-        assert!(BASE_BYTES + 2 * HVOL_BYTES + pass_planes(h2, &plan) * plane <= budget);
-        assert!(BASE_BYTES + 2 * HVOL_BYTES + pass_planes(h2 + 1, &plan) * plane > budget);
+        assert!(BASE_BYTES + 2 * HVOL_BYTES + pass_planes(h2, &plan, true) * plane <= budget);
+        assert!(BASE_BYTES + 2 * HVOL_BYTES + pass_planes(h2 + 1, &plan, true) * plane > budget);
         // lanes when they cost little height, one lane when they would cost much
         let big = 2u64 << 30;
-        assert_eq!(fit_slabs(big, &geo, &plan, true, 2).unwrap().1, 2);
-        let tight = BASE_BYTES + 2 * HVOL_BYTES + pass_planes(4, &plan) * plane;
-        assert_eq!(fit_slabs(tight, &geo, &plan, true, 2).unwrap(), (slab_height(tight, &geo, &plan, 1).unwrap(), 1));
-        assert_eq!(fit_slabs(budget, &geo, &plan, false, 2).unwrap(), (h as usize, 0));
+        assert_eq!(fit_slabs(big, &geo, &plan, true, 2, false).unwrap().1, 2);
+        let tight = BASE_BYTES + 2 * HVOL_BYTES + pass_planes(4, &plan, true) * plane;
+        assert_eq!(
+            fit_slabs(tight, &geo, &plan, true, 2, false).unwrap(),
+            (slab_height(tight, &geo, &plan, 1).unwrap(), 1)
+        );
+        assert_eq!(fit_slabs(budget, &geo, &plan, false, 2, false).unwrap(), (h as usize, 0));
+    }
+
+    #[test]
+    fn the_tracing_goes_by_strips_of_rows_only_when_whole_planes_do_not_fit() {
+        let geo = Geometry::new([1024; 3], [1.0; 3]);
+        let text = "[derive]\nkernel = \"central4\"\n[pack]\nprofile = \"distance-tf\"\n";
+        let plan = Plan::resolve(&parse(text, &[]).unwrap(), &[], &geo).unwrap();
+        let gib = 1u64 << 30;
+        // 1 GiB: the other passes' slabs fit, the tracing's halo on whole planes does not
+        let (h, _) = fit_slabs(gib, &geo, &plan, true, 2, true).unwrap();
+        assert!(slab_height(gib, &geo, &plan, 1).is_err(), "whole planes with the tracing's halo do not fit");
+        let b = fit_trace(gib, &geo, &plan, h, 2, true).unwrap();
+        assert!(b.rows < 1024 && b.planes >= 1, "{b:?}");
+        assert!(BASE_BYTES + trace_bytes(b.planes, b.rows, &geo, &plan) <= gib, "{b:?}");
+        // the strips are as tall as fits, and at least twice their halo
+        assert!(BASE_BYTES + trace_bytes(b.planes, b.rows + 1, &geo, &plan) > gib);
+        assert!(b.rows >= 2 * (plan.reach.trace[1] + plan.reach.kernel[1]), "{b:?}");
+        // with room, or when strips are not allowed, whole planes in the other passes' slabs
+        assert_eq!(fit_trace(64 * gib, &geo, &plan, 9, 2, true).unwrap(), TraceBlocks { planes: 9, rows: 1024 });
+        assert_eq!(fit_trace(gib, &geo, &plan, h, 2, false).unwrap(), TraceBlocks { planes: h, rows: 1024 });
+        let e = fit_trace(50 << 20, &geo, &plan, 1, 2, true).unwrap_err();
+        assert!(e.contains("too small") && e.contains("tracing"), "{e}");
     }
 
     #[test]

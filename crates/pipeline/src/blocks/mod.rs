@@ -11,7 +11,11 @@
 //! the store; the derivatives are remade from the stored value by each pass
 //! that reads them ([`SlabChannels`]: on this machine's page cache that is
 //! cheaper than writing them), the tracing's overlapping blocks sliding so
-//! that each plane is derived about once.
+//! that each plane is derived about once. When whole planes grown by the
+//! tracing's halo do not fit the budget (1024^2 planes in 1 GiB), the
+//! tracing visits each slab in strips of rows ([`fit_trace`]), strip by
+//! strip and down z within each, so the sliding still holds; its sums are
+//! exact, so the order of the blocks does not show in the report.
 //!
 //! The passes: input (the value's statistics); derive (the statistics of
 //! g, f'' and 1/g, and the first radix pass of g's median); pre-filter;
@@ -43,7 +47,7 @@ mod slab_channels;
 mod store;
 mod trace;
 
-pub use budget::{automatic_budget, fit_slabs, slab_height, slabs};
+pub use budget::{TraceBlocks, automatic_budget, fit_slabs, fit_trace, slab_height, slabs};
 pub use remote::{Prefilter, SlabJob, SlabPass, SlabTasks, TracePartial, run_task};
 pub use slab_channels::SlabChannels;
 pub use store::ChannelStore;
@@ -155,6 +159,15 @@ pub enum SlabSize {
     Budget(u64),
     /// This many z-planes (at least 1; for tests and benchmarks).
     Planes(usize),
+    /// Slabs of `planes` z-planes (at least 1), the tracing's cut in strips
+    /// of `rows` rows as well (for tests and benchmarks of the strips a
+    /// tight budget makes).
+    Strips {
+        /// Planes per slab.
+        planes: usize,
+        /// Rows per strip of the tracing.
+        rows: usize,
+    },
 }
 
 /// Runs `p` slab by slab, slabs of `size`; `on_stage(name)` is called as
@@ -203,7 +216,7 @@ fn run_slabs(
             count: run.slabs.len(),
             budget: match size {
                 SlabSize::Budget(b) => Some(b),
-                SlabSize::Planes(_) => None,
+                SlabSize::Planes(_) | SlabSize::Strips { .. } => None,
             },
         }),
         ..RunReport::of(opts, run.input_name.clone(), &run.geo)

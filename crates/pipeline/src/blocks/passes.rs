@@ -7,7 +7,7 @@
 use super::remote::{self, Prefilter, SlabPass, SlabTasks};
 use super::trace::{self, SlabTrace, TraceSetup};
 use super::{ChannelStore, SlabChannels, SlabSize, medians, open_source};
-use super::{fit_slabs, reductions, slabs};
+use super::{TraceBlocks, fit_slabs, fit_trace, reductions, slabs};
 use crate::file::Pipeline;
 use crate::hist_files::Written;
 use crate::plan::Plan;
@@ -43,6 +43,8 @@ pub(super) struct SlabPasses<'a> {
     pub(super) slabs: Vec<Range<usize>>,
     /// Planes per slab (the last may hold fewer).
     pub(super) height: usize,
+    /// How the tracing pass cuts the volume.
+    pub(super) trace_blocks: TraceBlocks,
     /// Lanes counting the histogram volume (see [`super::fit_slabs`]).
     hvol_lanes: usize,
     /// The histograms ask for the histogram volume.
@@ -90,9 +92,23 @@ impl<'a> SlabPasses<'a> {
         let hvol_asked = p.histogram.as_ref().is_some_and(|h| h.hvol);
         let hvol_needed = hvol_asked || tf.is_none();
         let threads = rayon::current_num_threads();
-        let (height, hvol_lanes) = match size {
-            SlabSize::Budget(b) => fit_slabs(b, &geo, &plan, hvol_needed, threads).map_err(fail("plan"))?,
-            SlabSize::Planes(h) => (h.clamp(1, nz.max(1)), threads),
+        // the tracing cuts strips of rows when it derives its channels (it reads stored ones by planes)
+        let strips = !plan.prefilter && opts.tasks.is_none();
+        let ny = geo.dims[1];
+        let (height, hvol_lanes, trace_blocks) = match size {
+            SlabSize::Budget(b) => {
+                let (h, lanes) = fit_slabs(b, &geo, &plan, hvol_needed, threads, strips).map_err(fail("plan"))?;
+                (h, lanes, fit_trace(b, &geo, &plan, h, threads, strips).map_err(fail("plan"))?)
+            }
+            SlabSize::Planes(h) => {
+                let h = h.clamp(1, nz.max(1));
+                (h, threads, TraceBlocks { planes: h, rows: ny })
+            }
+            SlabSize::Strips { planes, rows } => {
+                let h = planes.clamp(1, nz.max(1));
+                let rows = if strips { rows.clamp(1, ny.max(1)) } else { ny };
+                (h, threads, TraceBlocks { planes: h, rows })
+            }
         };
         let slabs = slabs(nz, height);
         progress.stage(&format!("input: {} slabs of {height} planes", slabs.len()))?;
@@ -115,6 +131,7 @@ impl<'a> SlabPasses<'a> {
             plan,
             slabs,
             height,
+            trace_blocks,
             hvol_lanes,
             hvol_asked,
             hvol_needed,
@@ -234,6 +251,7 @@ impl<'a> SlabPasses<'a> {
             params: &self.p.boundary,
             stats: &stats,
             halo: self.plan.reach.trace[2],
+            halo_rows: self.plan.reach.trace[1],
             value_range,
         };
         if let Some(tasks) = self.tasks {
@@ -248,20 +266,30 @@ impl<'a> SlabPasses<'a> {
             remote::run_pass(tasks, pass, &mut chans.store, &self.slabs)?;
         }
         let mut sums = TraceSums::default();
-        for (k, z) in self.slabs.iter().enumerate() {
-            self.progress.slab(k + 1, self.slabs.len())?;
-            let slab = match self.tasks {
-                Some(_) => remote::stored_trace(chans, g, z)?,
-                None => {
-                    let t = trace::trace_slab(chans, &setup, z)?;
-                    for (c, v) in [("g_hit", &t.trace.g_hit), ("hit", &t.trace.hit), ("distance", &t.trace.distance)] {
-                        chans.store.put_volume(c, z.start, v).map_err(io("boundary"))?;
+        let (strips, tslabs) = self.trace_strips_and_slabs();
+        if strips.len() > 1 {
+            let TraceBlocks { planes, rows } = self.trace_blocks;
+            let what = format!("boundary: {} blocks of {planes} planes x {rows} rows", strips.len() * tslabs.len());
+            self.progress.stage(&what)?;
+        }
+        for (s, rows) in strips.iter().enumerate() {
+            for (k, z) in tslabs.iter().enumerate() {
+                self.progress.slab(s * tslabs.len() + k + 1, strips.len() * tslabs.len())?;
+                let slab = match self.tasks {
+                    Some(_) => remote::stored_trace(chans, g, z)?,
+                    None => {
+                        let t = trace::trace_slab(chans, &setup, z, rows)?;
+                        for (c, v) in
+                            [("g_hit", &t.trace.g_hit), ("hit", &t.trace.hit), ("distance", &t.trace.distance)]
+                        {
+                            chans.store.put_rows(c, z.start, rows.clone(), v).map_err(io("boundary"))?;
+                        }
+                        t
                     }
-                    t
-                }
-            };
-            self.stats.add("g_hit", slab.trace.g_hit.samples());
-            sums.add(slab);
+                };
+                self.stats.add("g_hit", slab.trace.g_hit.samples());
+                sums.add(slab);
+            }
         }
         let traced = self.finish_trace(sums)?;
         for c in ["g_prefiltered", "f2_prefiltered", "dot"] {
@@ -271,6 +299,17 @@ impl<'a> SlabPasses<'a> {
         let outputs = vec!["boundary/boundary_report.csv".into(), "boundary/boundary_report.png".into()];
         self.stages.done("boundary", t, self.geo.voxel_count(), outputs);
         Ok(traced)
+    }
+
+    /// The tracing's strips of rows (one of every row without strips) and
+    /// its slabs: strip by strip, down z within each, so that each block
+    /// hands its derivatives on to the next.
+    fn trace_strips_and_slabs(&self) -> (Vec<Range<usize>>, Vec<Range<usize>>) {
+        let [_, ny, nz] = self.geo.dims;
+        match self.tasks {
+            Some(_) => (std::iter::once(0..ny).collect(), self.slabs.clone()),
+            None => (slabs(ny, self.trace_blocks.rows), slabs(nz, self.trace_blocks.planes)),
+        }
     }
 
     /// The pre-filter pass: g and f'' filtered into the store, their statistics taken.

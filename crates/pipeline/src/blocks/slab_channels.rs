@@ -21,19 +21,39 @@ pub struct SlabChannels {
     pub store: ChannelStore,
     /// The derive passes, each with the channels it makes.
     groups: Vec<(DeriveParams, Vec<String>)>,
-    /// Planes the kernel reads on each side.
+    /// Planes (and rows: a kernel's support is the same along every axis) the kernel reads on each side.
     kernel_reach: usize,
     nz: usize,
-    /// The last block derived whole and its planes, for the next (see [`SlabChannels::derive_block`]).
-    recycled: Option<(Range<usize>, DeriveOutput)>,
-    /// The planes of the last block [`SlabChannels::derive_block`] handed out.
-    last_block: Range<usize>,
+    /// The last block derived whole and where it lies, for the next (see [`SlabChannels::derive_block`]).
+    recycled: Option<(BlockRange, DeriveOutput)>,
+    /// Where the last block [`SlabChannels::derive_block`] handed out lies.
+    last_block: BlockRange,
     /// Each group's last output, whose memory its next derivation reuses.
     previous: Vec<Option<DeriveOutput>>,
     /// Memory of the last value block read for it.
     value_buffer: Vec<f32>,
     /// When set, every read fails: a cancelled run stops in the middle of a pass.
     cancel: Option<Arc<AtomicBool>>,
+}
+
+/// Where a block of a blocked pass lies: its planes and rows in the whole volume.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BlockRange {
+    /// Planes (z).
+    pub planes: Range<usize>,
+    /// Rows (y) of each plane.
+    pub rows: Range<usize>,
+}
+
+impl BlockRange {
+    /// Whether a block derived over `self` can hand its exact planes on to
+    /// `next`: as tall, the same rows, starting inside it further along z.
+    fn slides_to(&self, next: &BlockRange) -> bool {
+        self.rows == next.rows
+            && self.planes.len() == next.planes.len()
+            && self.planes.start < next.planes.start
+            && next.planes.start < self.planes.end
+    }
 }
 
 /// The channels derive item `item` makes.
@@ -64,7 +84,7 @@ impl SlabChannels {
             kernel_reach,
             nz,
             recycled: None,
-            last_block: 0..0,
+            last_block: BlockRange { planes: 0..0, rows: 0..0 },
             previous,
             value_buffer: Vec::new(),
             cancel: None,
@@ -108,7 +128,7 @@ impl SlabChannels {
             let d = d.clone();
             let k = self.kernel_reach;
             let read = grown(&z, k, 2 * k + 1, self.nz);
-            let value = self.value(read.clone())?;
+            let value = self.value_planes(read.clone())?;
             let out = mdtf_derive::run_with_progress(&value, &d, self.previous[g].take(), &|_, _| {})
                 .map_err(|e| format!("derive: {e}"))?;
             self.keep_value(value);
@@ -132,25 +152,30 @@ impl SlabChannels {
             .collect()
     }
 
-    /// The first derive pass's output over planes `z` grown by the kernel's
-    /// support (clamped to the volume), and that grown range: exact on the
-    /// planes of `z` (and wherever the growth reached the volume's faces),
-    /// not beyond. For a pass that reads only `z`'s planes of it, this avoids
-    /// copying them out; hand the output back with
-    /// [`SlabChannels::recycle`] and the next block of the same height is
-    /// derived into its memory, as is the value read for it (fresh memory
-    /// page-faults, which costs as much as the derivation). When the next
-    /// block overlaps it (blocks grown by a halo), the planes the last one
-    /// had exact are moved to their new place and only the others are
-    /// derived: they are the same samples a derivation would give.
-    pub fn derive_block(&mut self, z: Range<usize>) -> Result<(Range<usize>, DeriveOutput), String> {
+    /// The first derive pass's output over rows `rows` of planes `z`, both
+    /// grown by the kernel's support (clamped to the volume), and those
+    /// grown ranges (planes, rows): exact on `z`'s planes and `rows`' rows
+    /// (and wherever the growth reached the volume's faces), not beyond.
+    /// For a pass that reads only those of it, this avoids copying them
+    /// out; hand the output back with [`SlabChannels::recycle`] and the
+    /// next block of the same size is derived into its memory, as is the
+    /// value read for it (fresh memory page-faults, which costs as much as
+    /// the derivation). When the next block has the same rows and overlaps
+    /// it in z (blocks grown by a halo, visited in z order), the planes the
+    /// last one had exact are moved to their new place and only the others
+    /// are derived: they are the same samples a derivation would give.
+    pub fn derive_block(&mut self, z: Range<usize>, rows: Range<usize>) -> Result<(BlockRange, DeriveOutput), String> {
         let Some((d, _)) = self.groups.first() else { return Err("nothing is derived".into()) };
         let k = self.kernel_reach;
-        let read = grown(&z, k, 2 * k + 1, self.nz);
+        let ny = self.ny();
+        let read = BlockRange {
+            planes: grown(&z, k, 2 * k + 1, self.nz),
+            rows: if rows.len() == ny { rows } else { grown(&rows, k, 2 * k + 1, ny) },
+        };
         let d = d.clone();
-        let value = self.value(read.clone())?;
+        let value = self.value(&read)?;
         let out = match self.recycled.take() {
-            Some((last, mut out)) if last.len() == read.len() && last.start < read.start && read.start < last.end => {
+            Some((last, mut out)) if last.slides_to(&read) => {
                 let kept = self.slide(&last, &read, &mut out);
                 mdtf_derive::run_keeping(&value, &d, out, kept)
             }
@@ -163,18 +188,19 @@ impl SlabChannels {
     }
 
     /// Moves the planes of `out` (derived over `last`) that are exact there
-    /// and lie in `read` (as tall, further along z) to their place in
-    /// `read`; returns where they now are, in `read`'s planes.
-    fn slide(&self, last: &Range<usize>, read: &Range<usize>, out: &mut DeriveOutput) -> Range<usize> {
+    /// and lie in `read` (as tall, the same rows, further along z) to their
+    /// place in `read`; returns where they now are, in `read`'s planes.
+    fn slide(&self, last: &BlockRange, read: &BlockRange, out: &mut DeriveOutput) -> Range<usize> {
         let k = self.kernel_reach;
+        let (last, read_planes) = (&last.planes, &read.planes);
         // exact planes of the last block: all but a kernel's reach from a cut (not a volume face)
         let exact_start = if last.start == 0 { 0 } else { last.start + k };
         let exact_end = if last.end == self.nz { last.end } else { last.end - k };
-        let (from, to) = (exact_start.max(read.start), exact_end.min(read.end));
+        let (from, to) = (exact_start.max(read_planes.start), exact_end.min(read_planes.end));
         if from >= to {
             return 0..0;
         }
-        let plane = self.store.plane_len();
+        let plane = self.store.geometry().dims[0] * read.rows.len();
         let mut fields: Vec<&mut [f32]> = Vec::new();
         for (_, mf) in &mut out.items {
             for f in &mut mf.fields {
@@ -185,17 +211,26 @@ impl SlabChannels {
             }
         }
         for data in fields {
-            data.copy_within((from - last.start) * plane..(to - last.start) * plane, (from - read.start) * plane);
+            data.copy_within(
+                (from - last.start) * plane..(to - last.start) * plane,
+                (from - read_planes.start) * plane,
+            );
         }
-        from - read.start..to - read.start
+        from - read_planes.start..to - read_planes.start
     }
 
-    /// The stored value on planes `z`, read into the memory of the last one.
-    fn value(&mut self, z: Range<usize>) -> Result<MultiField, String> {
+    /// The stored value on planes `z` (every row), read into the memory of the last one.
+    fn value_planes(&mut self, z: Range<usize>) -> Result<MultiField, String> {
+        let rows = 0..self.ny();
+        self.value(&BlockRange { planes: z, rows })
+    }
+
+    /// The stored value on a block, read into the memory of the last one.
+    fn value(&mut self, block: &BlockRange) -> Result<MultiField, String> {
         self.check()?;
         let mut buffer = std::mem::take(&mut self.value_buffer);
-        self.store.samples_into("v", z.clone(), &mut buffer).map_err(|e| e.to_string())?;
-        let geometry = self.store.geometry().z_slab(z);
+        self.store.rows_into("v", block.planes.clone(), block.rows.clone(), &mut buffer).map_err(|e| e.to_string())?;
+        let geometry = self.store.geometry().z_slab(block.planes.clone()).y_rows(block.rows.clone());
         Ok(MultiField::from(Volume::from_samples(geometry, buffer).map_err(|e| e.to_string())?))
     }
 

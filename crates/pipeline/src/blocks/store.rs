@@ -77,7 +77,11 @@ impl ChannelStore {
     /// planes), creating the channel on its first write (or taking the file
     /// another task of the run created).
     pub fn put(&mut self, name: &str, first: usize, samples: &[f32]) -> std::io::Result<()> {
-        let offset = (first * self.plane_len() * 4) as u64;
+        self.write_at(name, (first * self.plane_len() * 4) as u64, samples)
+    }
+
+    /// Writes `samples` at byte `offset` of channel `name`'s file, creating it on the first write.
+    fn write_at(&mut self, name: &str, offset: u64, samples: &[f32]) -> std::io::Result<()> {
         if !self.files.contains_key(name) {
             let path = self.dir.join(format!("{name}.f32"));
             let file = File::options().read(true).write(true).create(true).truncate(false).open(path)?;
@@ -91,6 +95,45 @@ impl ChannelStore {
     /// Writes a volume of planes `first..` of channel `name`.
     pub fn put_volume(&mut self, name: &str, first: usize, v: &Volume) -> std::io::Result<()> {
         self.put(name, first, v.samples())
+    }
+
+    /// Writes `v`, rows `rows` of planes `first..` of channel `name` (a
+    /// strip of a blocked pass), creating the channel on its first write.
+    pub fn put_rows(&mut self, name: &str, first: usize, rows: Range<usize>, v: &Volume) -> std::io::Result<()> {
+        let [nx, ny, _] = self.geometry.dims;
+        if rows.start == 0 && rows.end == ny {
+            return self.put_volume(name, first, v);
+        }
+        let chunk = nx * rows.len();
+        for (k, plane) in v.samples().chunks(chunk.max(1)).enumerate() {
+            let offset = (((first + k) * ny + rows.start) * nx * 4) as u64;
+            self.write_at(name, offset, plane)?;
+        }
+        Ok(())
+    }
+
+    /// Rows `rows` of planes `z` of channel `name` into `samples` (resized;
+    /// its memory reused), planes clamped to the grid.
+    pub fn rows_into(
+        &mut self,
+        name: &str,
+        z: Range<usize>,
+        rows: Range<usize>,
+        samples: &mut Vec<f32>,
+    ) -> std::io::Result<()> {
+        let [nx, ny, nz] = self.geometry.dims;
+        if rows.start == 0 && rows.end == ny {
+            return self.samples_into(name, z, samples);
+        }
+        let (z0, z1) = (z.start.min(nz), z.end.min(nz).max(z.start.min(nz)));
+        let chunk = nx * rows.len();
+        samples.resize((z1 - z0) * chunk, 0.0);
+        let Some(file) = self.files.get_mut(name) else { return Err(missing(name)) };
+        for (k, plane) in samples.chunks_mut(chunk.max(1)).enumerate() {
+            file.seek(SeekFrom::Start((((z0 + k) * ny + rows.start) * nx * 4) as u64))?;
+            file.read_exact(bytemuck::cast_slice_mut(plane))?;
+        }
+        Ok(())
     }
 
     /// The samples of planes `z` (clamped to the grid) of channel `name`.
@@ -154,6 +197,17 @@ mod tests {
         assert_eq!(v.samples(), &all[6..18]);
         assert_eq!(v.geometry, geo.z_slab(1..3));
         assert!(s.samples("f2", 0..1).is_err());
+        // a strip of rows 1..2 of planes 2..5, written over the planes, reads back
+        let strip: Vec<f32> = (0..9).map(|i| 100.0 + i as f32).collect();
+        s.put_rows("g", 2, 1..2, &Volume::from_samples(geo.z_slab(2..5).y_rows(1..2), strip.clone()).unwrap()).unwrap();
+        let mut back = Vec::new();
+        s.rows_into("g", 2..5, 1..2, &mut back).unwrap();
+        assert_eq!(back, strip);
+        s.rows_into("g", 0..5, 0..1, &mut back).unwrap();
+        let first_rows: Vec<f32> = (0..5).flat_map(|k| all[6 * k..6 * k + 3].to_vec()).collect();
+        assert_eq!(back, first_rows, "the other rows are as written first");
+        let whole = s.samples("g", 0..5).unwrap();
+        assert_eq!(&whole[21..24], &strip[3..6], "plane 3's row 1 holds the strip's second plane");
         s.remove("g");
         assert!(!s.has("g") && !dir.path().join("store/g.f32").exists());
         s.clear();

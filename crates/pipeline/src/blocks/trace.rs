@@ -3,6 +3,7 @@
 //! ([`super::remote`]): the slab's planes grown by the pass's halo are read
 //! (or derived), and only the slab's own planes come out.
 
+use super::slab_channels::BlockRange;
 use super::{SlabChannels, grown};
 use crate::run::{RunError, at, fail};
 use mdtf_bilateral::BilateralParams;
@@ -39,49 +40,66 @@ pub(super) struct TraceSetup<'a> {
     pub stats: &'a VolumeStats,
     /// Planes a ray may reach beyond its voxel's (d_max plus the interpolation's support).
     pub halo: usize,
+    /// Rows a ray may reach beyond its voxel's, likewise.
+    pub halo_rows: usize,
     /// Value range (max - min) of the input, value units.
     pub value_range: f64,
 }
 
-/// A slab's tracing and the g it traced, on its own planes.
+/// A block's tracing and the g it traced, on its own rows and planes.
 pub(super) struct SlabTrace {
     /// The tracing's outputs and counts.
     pub trace: BlockTrace,
-    /// The g traced, on the slab's planes (for the Fig. 2 report).
+    /// The g traced, on the block's own rows and planes (for the Fig. 2 report).
     pub g: Volume,
 }
 
-/// The tracing of the planes of `z`, and the traced g on them.
+/// The tracing of rows `rows` of the planes of `z` (every row, or a strip
+/// of them when the store's channels are derived here, not read), and the
+/// traced g on them.
 pub(super) fn trace_slab(
     chans: &mut SlabChannels,
     setup: &TraceSetup,
     z: &Range<usize>,
+    rows: &Range<usize>,
 ) -> Result<SlabTrace, RunError> {
     let read = grown(z, setup.halo, 1, chans.nz());
+    let all_rows = rows.len() == chans.ny();
     let block = if setup.stored {
+        if !all_rows {
+            return Err(fail("boundary")("a tracing of stored channels reads whole planes".into()));
+        }
         let mut c = chans.volumes(read.clone(), &[setup.g, setup.f2, "nx", "ny", "nz"]).map_err(fail("boundary"))?;
         let normal = MultiField::from_volumes(c.split_off(2)).map_err(at("boundary"))?;
         let (f2, g) = (c.remove(1).1, c.remove(0).1);
-        TraceBlock { planes: read.clone(), g, f2, normal, order: None }
+        let at = BlockRange { planes: read.clone(), rows: rows.clone() };
+        TraceBlock { at, g, f2, normal, order: None }
     } else {
-        // the derivatives over the block as derived (its planes beyond `read` are never reached)
-        let (planes, out) = chans.derive_block(read.clone()).map_err(fail("boundary"))?;
-        TraceBlock::of(planes, out).map_err(fail("boundary"))?
+        // the derivatives over the block as derived (its planes and rows beyond the halo are never reached)
+        let read_rows = if all_rows { rows.clone() } else { grown(rows, setup.halo_rows, 1, chans.ny()) };
+        let (at, out) = chans.derive_block(read.clone(), read_rows).map_err(fail("boundary"))?;
+        TraceBlock::of(at, out).map_err(fail("boundary"))?
     };
-    let own = z.start - block.planes.start..z.end - block.planes.start;
+    let own_planes = z.start - block.at.planes.start..z.end - block.at.planes.start;
+    let own_rows = rows.start - block.at.rows.start..rows.end - block.at.rows.start;
     let input = BoundaryInput { g: &block.g, f2: &block.f2, normal: &block.normal, value_range: setup.value_range };
-    let place = mdtf_boundary::BlockPlace { first: [0, 0, block.planes.start], rows: 0..chans.ny(), planes: own.clone() };
+    let place = mdtf_boundary::BlockPlace {
+        first: [0, block.at.rows.start, block.at.planes.start],
+        rows: own_rows.clone(),
+        planes: own_planes.clone(),
+    };
     let b = mdtf_boundary::trace_block(&input, setup.params, &place, setup.stats).map_err(at("boundary"))?;
-    let g_own = block.g.z_slab(own);
+    let g_own = block.g.z_slab(own_planes);
+    let g_own = if all_rows { g_own } else { g_own.y_rows(own_rows) };
     if let Some(out) = block.into_output() {
         chans.recycle(out);
     }
     Ok(SlabTrace { trace: b, g: g_own })
 }
 
-/// What a block's tracing reads: g, f'' and the normal on `planes`.
+/// What a block's tracing reads: g, f'' and the normal on the block `at`.
 struct TraceBlock {
-    planes: Range<usize>,
+    at: BlockRange,
     g: Volume,
     f2: Volume,
     normal: MultiField,
@@ -90,8 +108,8 @@ struct TraceBlock {
 }
 
 impl TraceBlock {
-    /// The block of a derive output over `planes` holding g, f'' and the normal.
-    fn of(planes: Range<usize>, out: mdtf_derive::DeriveOutput) -> Result<TraceBlock, String> {
+    /// The block of a derive output over `at` holding g, f'' and the normal.
+    fn of(at: BlockRange, out: mdtf_derive::DeriveOutput) -> Result<TraceBlock, String> {
         use mdtf_derive::Item;
         let order: Vec<Item> = out.items.iter().map(|(i, _)| *i).collect();
         let (mut g, mut f2, mut normal) = (None, None, None);
@@ -106,7 +124,7 @@ impl TraceBlock {
         let (Some(g), Some(f2), Some(normal)) = (g, f2, normal) else {
             return Err("the tracing needs g, f2 and the normal from one derive pass".into());
         };
-        Ok(TraceBlock { planes, g, f2, normal, order: Some(order) })
+        Ok(TraceBlock { at, g, f2, normal, order: Some(order) })
     }
 
     /// The derive output it came from, for its memory.
