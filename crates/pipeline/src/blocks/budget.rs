@@ -31,8 +31,9 @@ fn pass_planes(h: u64, plan: &Plan, trace_whole_planes: bool) -> u64 {
     // hit, dot and the report's g over the slab
     let trace = if plan.trace && trace_whole_planes { 6 * (h + 2 * t + 2 * k) + 5 * h } else { 0 };
     // the histograms and the textures from one pass: a derive's planes, the slab's channels
-    // copied out (the value and up to five derived) and one texture's bytes at a time
-    let pack = 8 * read + 7 * h;
+    // copied out (at most eight: distance-tf reads v, g, three normals, g_hit, hit and distance)
+    // and one texture's bytes at a time
+    let pack = 8 * read + 9 * h;
     derive.max(prefilter).max(trace).max(pack)
 }
 
@@ -111,13 +112,16 @@ pub struct TraceBlocks {
 
 /// Bytes the tracing holds for a block of `h` planes and `r` rows: the
 /// value and its five derivatives over the block grown by the halo and the
-/// kernel's support; distance, g_hit, hit, dot and the report's g over the block.
+/// kernel's support, and one more such block for what the whole process
+/// holds besides (measured: the peak of a 1024^3 run in strips exceeds the
+/// six by about a block); distance, g_hit, hit, dot and the report's g
+/// over the block.
 fn trace_bytes(h: usize, r: usize, geometry: &Geometry, plan: &Plan) -> u64 {
     let [nx, ny, nz] = geometry.dims;
     let (t, k) = (plan.reach.trace, plan.reach.kernel);
     let planes = (h + 2 * t[2] + 2 * k[2]).min(nz.max(h));
     let rows = if r >= ny { ny } else { (r + 2 * t[1] + 2 * k[1]).min(ny) };
-    4 * nx as u64 * (6 * planes * rows + 5 * h * r) as u64
+    4 * nx as u64 * (7 * planes * rows + 5 * h * r) as u64
 }
 
 /// The tracing's blocks within `budget`: whole planes in the other passes'
