@@ -179,6 +179,9 @@ impl<'a> SlabPasses<'a> {
         let mut g_buckets = summarised.contains(&"g").then(KeyBuckets::new);
         // the smallest positive 1/g, whose multiple is the top of its code range
         let mut smallest_inv_g = f32::INFINITY;
+        // g waits on disk for the second radix pass of its median before the tracing: reading
+        // it back costs less than deriving every slab again (it goes once the median is known)
+        let keep_g = self.median_reads_stored_g() && g_buckets.is_some();
         if !summarised.is_empty() {
             self.progress.stage("derive")?;
             for (k, z) in self.slabs.iter().enumerate() {
@@ -186,7 +189,12 @@ impl<'a> SlabPasses<'a> {
                 for (name, v) in chans.volumes(z.clone(), &summarised).map_err(fail("derive"))? {
                     self.stats.add(&name, v.samples());
                     match name.as_str() {
-                        "g" => g_buckets.iter_mut().for_each(|b| b.add(v.samples())),
+                        "g" => {
+                            g_buckets.iter_mut().for_each(|b| b.add(v.samples()));
+                            if keep_g {
+                                chans.store.put_volume("g", z.start, &v).map_err(io("derive"))?;
+                            }
+                        }
                         "inv_g" => {
                             smallest_inv_g = crate::pack_inputs::smallest_positive(v.samples()).min(smallest_inv_g)
                         }
@@ -199,6 +207,13 @@ impl<'a> SlabPasses<'a> {
             self.stages.done("derive", derive_start, self.geo.voxel_count(), vec![]);
         }
         Ok((chans, Derived { kernel, g_buckets, smallest_inv_g }))
+    }
+
+    /// Whether the derive pass stores g for the second pass of its median,
+    /// the tracing's noise floor (the tracing of g itself, not of the
+    /// pre-filtered g, and in this process: tasks store every channel).
+    fn median_reads_stored_g(&self) -> bool {
+        self.plan.trace && !self.plan.prefilter && self.tasks.is_none()
     }
 
     /// The derive groups of the whole run: the plan's items (with g and f''
@@ -244,6 +259,9 @@ impl<'a> SlabPasses<'a> {
         let l_min = self.geo.min_spacing();
         let value_range = self.value_range();
         let stats = g_stats(chans, g, traced_buckets, &self.slabs, value_range, l_min, &self.stats)?;
+        if self.median_reads_stored_g() {
+            chans.store.remove("g");
+        }
         let setup = TraceSetup {
             g,
             f2,
