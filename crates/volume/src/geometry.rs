@@ -33,27 +33,25 @@ impl Geometry {
     /// The grid of planes `z` (clamped to the grid) where they lie in this
     /// one: the geometry of a z-slab of a slab-by-slab run.
     pub fn z_slab(&self, z: std::ops::Range<usize>) -> Geometry {
-        let nz = self.dims[2];
-        let (z0, z1) = (z.start.min(nz), z.end.min(nz).max(z.start.min(nz)));
-        let mut geometry = self.clone();
-        geometry.dims[2] = z1 - z0;
-        let shift = z0 as f64 * geometry.spacing[2];
-        for a in 0..3 {
-            geometry.origin[a] += shift * geometry.directions[2][a];
-        }
-        geometry
+        self.part(2, z)
     }
 
     /// The grid of rows `y` (clamped to the grid) of every plane, where they
     /// lie in this one: the geometry of a strip of rows of a blocked run.
     pub fn y_rows(&self, y: std::ops::Range<usize>) -> Geometry {
-        let ny = self.dims[1];
-        let (y0, y1) = (y.start.min(ny), y.end.min(ny).max(y.start.min(ny)));
+        self.part(1, y)
+    }
+
+    /// The grid of indices `r` (clamped to the grid) along `axis` (0 = x,
+    /// 1 = y, 2 = z), where they lie in this one.
+    pub(crate) fn part(&self, axis: usize, r: std::ops::Range<usize>) -> Geometry {
+        let n = self.dims[axis];
+        let (a, b) = (r.start.min(n), r.end.min(n).max(r.start.min(n)));
         let mut geometry = self.clone();
-        geometry.dims[1] = y1 - y0;
-        let shift = y0 as f64 * geometry.spacing[1];
-        for a in 0..3 {
-            geometry.origin[a] += shift * geometry.directions[1][a];
+        geometry.dims[axis] = b - a;
+        let shift = a as f64 * geometry.spacing[axis];
+        for c in 0..3 {
+            geometry.origin[c] += shift * geometry.directions[axis][c];
         }
         geometry
     }

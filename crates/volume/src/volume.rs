@@ -69,20 +69,22 @@ impl Volume {
     /// A copy of the planes `z` (a z-slab, clamped to the grid), placed in the
     /// world where they are in this volume: the block a slab-by-slab run reads.
     pub fn z_slab(&self, z: std::ops::Range<usize>) -> Volume {
-        let nz = self.geometry.dims[2];
-        let (z0, z1) = (z.start.min(nz), z.end.min(nz).max(z.start.min(nz)));
-        let geometry = self.geometry.z_slab(z0..z1);
-        let data = self.data.slice_axis(ndarray::Axis(0), ndarray::Slice::from(z0..z1)).to_owned();
-        Volume { geometry, data }
+        self.part(2, z)
     }
 
     /// A copy of rows `y` (clamped to the grid) of every plane, placed in
     /// the world where they are in this volume: a strip of a blocked run.
     pub fn y_rows(&self, y: std::ops::Range<usize>) -> Volume {
-        let ny = self.geometry.dims[1];
-        let (y0, y1) = (y.start.min(ny), y.end.min(ny).max(y.start.min(ny)));
-        let geometry = self.geometry.y_rows(y0..y1);
-        let data = self.data.slice_axis(ndarray::Axis(1), ndarray::Slice::from(y0..y1)).to_owned();
+        self.part(1, y)
+    }
+
+    /// A copy of indices `r` (clamped to the grid) along grid `axis` (0 = x, 1 = y, 2 = z), placed where they lie.
+    fn part(&self, axis: usize, r: std::ops::Range<usize>) -> Volume {
+        let n = self.geometry.dims[axis];
+        let (a, b) = (r.start.min(n), r.end.min(n).max(r.start.min(n)));
+        let geometry = self.geometry.part(axis, a..b);
+        // the array's axes are (z, y, x)
+        let data = self.data.slice_axis(ndarray::Axis(2 - axis), ndarray::Slice::from(a..b)).to_owned();
         Volume { geometry, data }
     }
 }
