@@ -14,6 +14,12 @@ const BASE_BYTES: u64 = 48 << 20;
 /// untouched pages cost nothing, but on real data most are touched).
 const HVOL_BYTES: u64 = 64 << 20;
 
+/// Block-sized f32 arrays the tracing holds: the value and its five
+/// derivatives over the block grown by the halo and the kernel's support,
+/// and one more for what the process holds besides (measured: the peak of a
+/// 1024^3 run in strips exceeds the six by about a block).
+const TRACE_BLOCK_ARRAYS: u64 = 7;
+
 /// f32 planes each pass holds per plane of its slab (`h`) and of its halo
 /// read on both sides (`halo`), counted from what it reads, makes and copies;
 /// the tracing's only when it reads whole planes (`trace_whole_planes`; else
@@ -29,7 +35,7 @@ fn pass_planes(h: u64, plan: &Plan, trace_whole_planes: bool) -> u64 {
     let t = plan.reach.trace[2] as u64;
     // the value and its five derivatives over the block grown by the kernel; distance, g_hit,
     // hit, dot and the report's g over the slab
-    let trace = if plan.trace && trace_whole_planes { 6 * (h + 2 * t + 2 * k) + 5 * h } else { 0 };
+    let trace = if plan.trace && trace_whole_planes { TRACE_BLOCK_ARRAYS * (h + 2 * t + 2 * k) + 5 * h } else { 0 };
     // the histograms and the textures from one pass: a derive's planes, the slab's channels
     // copied out (at most eight: distance-tf reads v, g, three normals, g_hit, hit and distance)
     // and one texture's bytes at a time
@@ -110,18 +116,15 @@ pub struct TraceBlocks {
     pub rows: usize,
 }
 
-/// Bytes the tracing holds for a block of `h` planes and `r` rows: the
-/// value and its five derivatives over the block grown by the halo and the
-/// kernel's support, and one more such block for what the whole process
-/// holds besides (measured: the peak of a 1024^3 run in strips exceeds the
-/// six by about a block); distance, g_hit, hit, dot and the report's g
-/// over the block.
+/// Bytes the tracing holds for a block of `h` planes and `r` rows:
+/// [`TRACE_BLOCK_ARRAYS`] over the block grown by the halo and the kernel's
+/// support; distance, g_hit, hit, dot and the report's g over the block.
 fn trace_bytes(h: usize, r: usize, geometry: &Geometry, plan: &Plan) -> u64 {
     let [nx, ny, nz] = geometry.dims;
     let (t, k) = (plan.reach.trace, plan.reach.kernel);
     let planes = (h + 2 * t[2] + 2 * k[2]).min(nz.max(h));
     let rows = if r >= ny { ny } else { (r + 2 * t[1] + 2 * k[1]).min(ny) };
-    4 * nx as u64 * (7 * planes * rows + 5 * h * r) as u64
+    4 * nx as u64 * (TRACE_BLOCK_ARRAYS as usize * planes * rows + 5 * h * r) as u64
 }
 
 /// The tracing's blocks within `budget`: whole planes in the other passes'

@@ -93,7 +93,7 @@ impl<'a> SlabPasses<'a> {
         let hvol_needed = hvol_asked || tf.is_none();
         let threads = rayon::current_num_threads();
         // the tracing cuts strips of rows when it derives its channels (it reads stored ones by planes)
-        let strips = !plan.prefilter && opts.tasks.is_none();
+        let strips = tracing_derives(&plan, opts.tasks.as_deref());
         let ny = geo.dims[1];
         let (height, hvol_lanes, trace_blocks) = match size {
             SlabSize::Budget(b) => {
@@ -213,7 +213,7 @@ impl<'a> SlabPasses<'a> {
     /// the tracing's noise floor (the tracing of g itself, not of the
     /// pre-filtered g, and in this process: tasks store every channel).
     fn median_reads_stored_g(&self) -> bool {
-        self.plan.trace && !self.plan.prefilter && self.tasks.is_none()
+        self.plan.trace && tracing_derives(&self.plan, self.tasks)
     }
 
     /// The derive groups of the whole run: the plan's items (with g and f''
@@ -265,7 +265,7 @@ impl<'a> SlabPasses<'a> {
         let setup = TraceSetup {
             g,
             f2,
-            stored: self.plan.prefilter || self.tasks.is_some(),
+            stored: !tracing_derives(&self.plan, self.tasks),
             params: &self.p.boundary,
             stats: &stats,
             halo: self.plan.reach.trace[2],
@@ -320,14 +320,12 @@ impl<'a> SlabPasses<'a> {
     }
 
     /// The tracing's strips of rows (one of every row without strips) and
-    /// its slabs: strip by strip, down z within each, so that each block
-    /// hands its derivatives on to the next.
+    /// its slabs (the other passes' when it reads stored channels): strip by
+    /// strip, down z within each, so that each block hands its derivatives
+    /// on to the next.
     fn trace_strips_and_slabs(&self) -> (Vec<Range<usize>>, Vec<Range<usize>>) {
         let [_, ny, nz] = self.geo.dims;
-        match self.tasks {
-            Some(_) => (std::iter::once(0..ny).collect(), self.slabs.clone()),
-            None => (slabs(ny, self.trace_blocks.rows), slabs(nz, self.trace_blocks.planes)),
-        }
+        (slabs(ny, self.trace_blocks.rows), slabs(nz, self.trace_blocks.planes))
     }
 
     /// The pre-filter pass: g and f'' filtered into the store, their statistics taken.
@@ -576,6 +574,13 @@ impl<'a> SlabPasses<'a> {
         };
         crate::gaussians::write(&self.dir.join("pack"), &gaussians).map_err(at("pack"))
     }
+}
+
+/// Whether the tracing derives g, f'' and the normal from the stored value
+/// (and may then go by strips of rows); else it reads them stored, by whole
+/// planes: the pre-filtered ones, or every channel its tasks stored.
+fn tracing_derives(plan: &Plan, tasks: Option<&dyn SlabTasks>) -> bool {
+    !plan.prefilter && tasks.is_none()
 }
 
 /// The tracing's whole-volume sums, fed slab by slab in z order.

@@ -167,11 +167,7 @@ impl SlabChannels {
     pub fn derive_block(&mut self, z: Range<usize>, rows: Range<usize>) -> Result<(BlockRange, DeriveOutput), String> {
         let Some((d, _)) = self.groups.first() else { return Err("nothing is derived".into()) };
         let k = self.kernel_reach;
-        let ny = self.ny();
-        let read = BlockRange {
-            planes: grown(&z, k, 2 * k + 1, self.nz),
-            rows: if rows.len() == ny { rows } else { grown(&rows, k, 2 * k + 1, ny) },
-        };
+        let read = BlockRange { planes: grown(&z, k, 2 * k + 1, self.nz), rows: grown(&rows, k, 2 * k + 1, self.ny()) };
         let d = d.clone();
         let value = self.value(&read)?;
         let out = match self.recycled.take() {

@@ -76,7 +76,7 @@ pub(super) fn trace_slab(
         TraceBlock { at, g, f2, normal, order: None }
     } else {
         // the derivatives over the block as derived (its planes and rows beyond the halo are never reached)
-        let read_rows = if all_rows { rows.clone() } else { grown(rows, setup.halo_rows, 1, chans.ny()) };
+        let read_rows = grown(rows, setup.halo_rows, 1, chans.ny());
         let (at, out) = chans.derive_block(read.clone(), read_rows).map_err(fail("boundary"))?;
         TraceBlock::of(at, out).map_err(fail("boundary"))?
     };
