@@ -22,6 +22,7 @@ use crate::count::{Histogram, SparseCounts, check_size, for_each_run};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
+use std::sync::atomic::{AtomicU32, Ordering};
 
 /// Parameters of the histogram volume.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -112,6 +113,15 @@ impl HvolAxes {
     fn list(&self) -> Vec<Axis> {
         vec![self.v.clone(), self.g.clone(), self.h.clone()]
     }
+
+    fn binners(&self) -> [Binner; 3] {
+        [self.v.binner(), self.g.binner(), self.h.binner()]
+    }
+
+    /// Index steps of the (v, g, f'') bins: v fastest.
+    fn strides(&self) -> [u32; 3] {
+        [1, self.v.bins as u32, (self.v.bins * self.g.bins) as u32]
+    }
 }
 
 /// Counts and sums of a histogram volume over the voxels one task has seen:
@@ -122,21 +132,19 @@ pub struct HvolAccumulator {
     binners: [Binner; 3],
     strides: [u32; 3],
     counts: SparseCounts,
-    /// Sums per fixed part, in the order the parts were first seen.
-    parts: Vec<(usize, Sums)>,
+    sums: PartSums,
 }
 
 impl HvolAccumulator {
     /// An empty accumulator over `axes`, for volumes of `voxels` voxels.
     pub fn new(axes: &HvolAxes, voxels: usize) -> Result<HvolAccumulator, HistogramError> {
         let total_bins = check_size(voxels, &axes.list())?;
-        let (nv, ng) = (axes.v.bins, axes.g.bins);
         Ok(HvolAccumulator {
             axes: axes.clone(),
-            binners: [axes.v.binner(), axes.g.binner(), axes.h.binner()],
-            strides: [1, nv as u32, (nv * ng) as u32],
+            binners: axes.binners(),
+            strides: axes.strides(),
             counts: SparseCounts::new(total_bins),
-            parts: Vec::new(),
+            sums: PartSums::default(),
         })
     }
 
@@ -145,16 +153,9 @@ impl HvolAccumulator {
     /// added in the same pieces and order for the sums to keep their bits;
     /// which task adds them does not matter.
     pub fn add(&mut self, part: usize, v: &[f32], g: &[f32], h: &[f32]) {
-        let (nv, ng) = (self.axes.v.bins, self.axes.g.bins);
-        let at = match self.parts.iter().position(|(p, _)| *p == part) {
-            Some(at) => at,
-            None => {
-                self.parts.push((part, Sums::new(nv, ng)));
-                self.parts.len() - 1
-            }
-        };
-        let n = v.len().min(g.len()).min(h.len());
-        count_and_sum(&[v, g, h], &self.binners, &self.strides, 0..n, &mut self.counts, &mut self.parts[at].1);
+        let sums = self.sums.of(part, &self.axes);
+        let counts = &mut self.counts;
+        count_and_sum(&[v, g, h], &self.binners, &self.strides, &mut |bin, n| counts.add(bin as usize, n), sums);
     }
 
     /// Adds z-slice `k` of a volume of `slices` slices (its v, g and f''
@@ -173,41 +174,82 @@ impl HvolAccumulator {
         let Some(first) = tasks.next() else {
             return Err(HistogramError::Degenerate("no voxels were counted".into()));
         };
-        let HvolAccumulator { axes, mut counts, mut parts, .. } = first;
+        let HvolAccumulator { axes, mut counts, sums, .. } = first;
+        let mut parts = vec![sums];
         for t in tasks {
             counts.merge(&t.counts);
-            parts.extend(t.parts);
+            parts.push(t.sums);
         }
-        parts.sort_by_key(|(p, _)| *p);
-        let (nv, ng) = (axes.v.bins, axes.g.bins);
-        let mut sums = Sums::new(nv, ng);
-        for (_, p) in &parts {
-            sums.merge(p);
-        }
+        let sums = PartSums::merged(parts, &axes);
         let hist = Histogram { axes: axes.list(), counts: counts.counts };
         derive_tables(hist, axes, sums, params)
     }
 }
 
+/// The sums of the fixed parts one task holds, each part's in its own
+/// [`Sums`] (parts are merged in part order at the end, so the bits do not
+/// depend on which task held which part).
+#[derive(Default)]
+struct PartSums(Vec<(usize, Sums)>);
+
+impl PartSums {
+    /// The sums of part `part`, made empty on its first use.
+    fn of(&mut self, part: usize, axes: &HvolAxes) -> &mut Sums {
+        let at = match self.0.iter().position(|(p, _)| *p == part) {
+            Some(at) => at,
+            None => {
+                self.0.push((part, Sums::new(axes.v.bins, axes.g.bins)));
+                self.0.len() - 1
+            }
+        };
+        &mut self.0[at].1
+    }
+
+    /// The sums of every task's parts, added in part order.
+    fn merged(tasks: Vec<PartSums>, axes: &HvolAxes) -> Sums {
+        let mut parts: Vec<(usize, Sums)> = tasks.into_iter().flat_map(|t| t.0).collect();
+        parts.sort_by_key(|(p, _)| *p);
+        let mut sums = Sums::new(axes.v.bins, axes.g.bins);
+        for (_, p) in &parts {
+            sums.merge(p);
+        }
+        sums
+    }
+}
+
 /// A histogram volume fed slab by slab (runs of whole z-slices, in order),
 /// counted in parallel over the fixed parts a slab spans: each part always
-/// goes to the same lane, which adds its slices in order, so the result
-/// equals [`histogram_volume`]'s bit for bit whatever the slabs and lanes.
+/// goes to the same lane, which adds its slices in order, so the sums equal
+/// [`histogram_volume`]'s bit for bit whatever the slabs and lanes. The
+/// lanes add to one array of counts (integer adds, exact in any order), so
+/// a lane costs only its parts' sums.
 pub struct HvolBySlabs {
-    lanes: Vec<HvolAccumulator>,
+    axes: HvolAxes,
+    binners: [Binner; 3],
+    strides: [u32; 3],
+    /// Voxels per (v, g, f'') bin, from every lane at once.
+    counts: Vec<AtomicU32>,
+    lanes: Vec<PartSums>,
     parts: Vec<Range<usize>>,
     plane: usize,
 }
 
 impl HvolBySlabs {
     /// An empty histogram volume over `axes` for a volume of `slices`
-    /// z-slices of `plane` voxels, counted on `lanes` accumulators (at most
-    /// [`HVOL_PARTS`]; each holds its own counts, up to 4 bytes a bin).
+    /// z-slices of `plane` voxels, counted on `lanes` parallel lanes (at
+    /// most [`HVOL_PARTS`]); the counts take 4 bytes a bin, whatever the lanes.
     pub fn new(axes: &HvolAxes, plane: usize, slices: usize, lanes: usize) -> Result<HvolBySlabs, HistogramError> {
-        let lanes = (0..lanes.clamp(1, HVOL_PARTS))
-            .map(|_| HvolAccumulator::new(axes, plane * slices))
-            .collect::<Result<_, _>>()?;
-        Ok(HvolBySlabs { lanes, parts: fixed_parts(slices), plane })
+        let bins = check_size(plane * slices, &axes.list())?;
+        Ok(HvolBySlabs {
+            axes: axes.clone(),
+            binners: axes.binners(),
+            strides: axes.strides(),
+            // calloc memory: a page of counts costs memory only once a voxel is counted in it
+            counts: bytemuck::zeroed_vec(bins),
+            lanes: (0..lanes.clamp(1, HVOL_PARTS)).map(|_| PartSums::default()).collect(),
+            parts: fixed_parts(slices),
+            plane,
+        })
     }
 
     /// Adds the slab of z-slices from `first` on: its v, g and f'' samples,
@@ -224,12 +266,20 @@ impl HvolBySlabs {
         }
         let slab = first..first + n / plane;
         let count = self.lanes.len();
-        let parts = &self.parts;
-        self.lanes.par_iter_mut().enumerate().for_each(|(lane, acc)| {
+        let (axes, binners, strides, counts, parts) =
+            (&self.axes, &self.binners, &self.strides, &self.counts, &self.parts);
+        let add = |bin: u32, n: u32| {
+            if let Some(c) = counts.get(bin as usize) {
+                c.fetch_add(n, Ordering::Relaxed);
+            }
+        };
+        self.lanes.par_iter_mut().enumerate().for_each(|(lane, sums)| {
+            let mut add = add;
             for (p, part) in parts.iter().enumerate().filter(|(p, _)| p % count == lane) {
                 for k in part.start.max(slab.start)..part.end.min(slab.end) {
                     let at = (k - first) * plane..(k - first + 1) * plane;
-                    acc.add(p, &v[at.clone()], &g[at.clone()], &h[at]);
+                    let slice = [&v[at.clone()], &g[at.clone()], &h[at]];
+                    count_and_sum(&slice, binners, strides, &mut add, sums.of(p, axes));
                 }
             }
         });
@@ -238,7 +288,10 @@ impl HvolBySlabs {
 
     /// The histogram volume of every slab added.
     pub fn finish(self, params: &HvolParams) -> Result<HistogramVolume, HistogramError> {
-        HvolAccumulator::finish(self.lanes, params)
+        let sums = PartSums::merged(self.lanes, &self.axes);
+        // in place: the same memory, now plain counts
+        let counts = self.counts.into_iter().map(AtomicU32::into_inner).collect();
+        derive_tables(Histogram { axes: self.axes.list(), counts }, self.axes, sums, params)
     }
 }
 
@@ -362,20 +415,20 @@ fn derive_tables(
     })
 }
 
-/// Counts the voxels of `range` into `counts` (bin index v + nv (g + ng f''))
-/// and adds their sums to `s`, a run of voxels in one bin at a time.
+/// Counts the voxels, `count(bin, voxels)` for each run of voxels in one
+/// bin (index v + nv (g + ng f'')), and adds the run's sums to `s`.
 #[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+avx2", "x86_64+avx2"))]
 fn count_and_sum(
     channels: &[&[f32]; 3],
     binners: &[Binner; 3],
     strides: &[u32; 3],
-    range: std::ops::Range<usize>,
-    counts: &mut SparseCounts,
+    count: &mut impl FnMut(u32, u32),
     s: &mut Sums,
 ) {
     let (g, h) = (channels[1], channels[2]);
-    for_each_run(channels, binners, strides, None, range, |bin, voxels| {
-        counts.add(bin as usize, voxels.len() as u32);
+    let n = channels.iter().map(|c| c.len()).min().unwrap_or(0);
+    for_each_run(channels, binners, strides, None, 0..n, |bin, voxels| {
+        count(bin, voxels.len() as u32);
         s.add(Run { bin, count: voxels.len() as u64, g: sum(&g[voxels.clone()]), h: sum(&h[voxels]) });
     });
 }

@@ -275,7 +275,7 @@ impl<'a> PackWriter<'a> {
         &mut self,
         layouts: &[TextureLayout],
         slabs: &[Range<usize>],
-        slab: &mut dyn FnMut(Range<usize>) -> Result<Vec<(String, Volume)>, PackError>,
+        slab: &mut (dyn FnMut(Range<usize>) -> Result<Vec<(String, Volume)>, PackError> + Send),
     ) -> Result<(), PackError> {
         let nz = self.encoder.geometry.dims[2];
         let covered = slabs.first().is_some_and(|s| s.start == 0)
@@ -298,18 +298,29 @@ impl<'a> PackWriter<'a> {
             .iter()
             .map(|layout| AtomicWriter::create(&self.dir.join(format!("{}.raw", layout.name))))
             .collect::<Result<Vec<_>, _>>()?;
-        let mut bytes = Vec::new();
-        for z in slabs {
+        let this = &*self;
+        // a slab's channels are made and quantised while the slab before is written
+        let mut make = |k: usize| -> Result<Vec<Vec<u8>>, PackError> {
+            let z = &slabs[k];
             let chans = slab(z.clone())?;
-            for ((layout, decodes), file) in layouts.iter().zip(&decodes).zip(&mut files) {
-                let p = self.slab_of(layout, decodes, z, &chans)?;
-                bytes.resize(p.plane_bytes() * z.len(), 0);
+            let mut textures = Vec::with_capacity(layouts.len());
+            for (layout, decodes) in layouts.iter().zip(&decodes) {
+                let p = this.slab_of(layout, decodes, z, &chans)?;
+                let mut bytes = vec![0; p.plane_bytes() * z.len()];
                 p.encode_planes(0, &mut bytes);
+                textures.push(bytes);
+            }
+            Ok(textures)
+        };
+        let mut write = |textures: Vec<Vec<u8>>| -> Result<(), PackError> {
+            for ((layout, file), bytes) in layouts.iter().zip(&mut files).zip(textures) {
                 file.write_all(&bytes).map_err(|cause| {
-                    PackError::Io(VolumeError::Io { path: self.dir.join(format!("{}.raw", layout.name)), cause })
+                    PackError::Io(VolumeError::Io { path: this.dir.join(format!("{}.raw", layout.name)), cause })
                 })?;
             }
-        }
+            Ok(())
+        };
+        mdtf_volume::overlapped(slabs.len(), &mut |_| Ok(()), &mut make, &mut write)?;
         for (layout, file) in layouts.iter().zip(files) {
             file.publish()?;
             self.textures.push(write_header(self.dir, &self.encoder.geometry, layout, None)?);

@@ -10,14 +10,18 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// A run's progress callbacks and its cancel flag ([`RunOptions::cancel`]).
 pub(crate) struct Progress<'a> {
     opts: &'a RunOptions,
-    on_stage: &'a dyn Fn(&str),
-    on_slab: &'a dyn Fn(usize, usize),
+    on_stage: &'a (dyn Fn(&str) + Sync),
+    on_slab: &'a (dyn Fn(usize, usize) + Sync),
 }
 
 impl<'a> Progress<'a> {
     /// Progress of a run of `opts`: `on_stage(name)` as each stage or pass
     /// starts, `on_slab(k, slabs)` as it starts its slab k (from 1).
-    pub(crate) fn new(opts: &'a RunOptions, on_stage: &'a dyn Fn(&str), on_slab: &'a dyn Fn(usize, usize)) -> Self {
+    pub(crate) fn new(
+        opts: &'a RunOptions,
+        on_stage: &'a (dyn Fn(&str) + Sync),
+        on_slab: &'a (dyn Fn(usize, usize) + Sync),
+    ) -> Self {
         Progress { opts, on_stage, on_slab }
     }
 

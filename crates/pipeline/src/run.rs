@@ -51,7 +51,7 @@ impl RunOptions {
 }
 
 /// Runs `p`; `on_stage(name)` is called as each stage starts.
-pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &dyn Fn(&str)) -> Result<RunReport, RunError> {
+pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &(dyn Fn(&str) + Sync)) -> Result<RunReport, RunError> {
     let start = Instant::now();
     let base = opts.base();
     let out = OutputFolder::begin(&opts.output, &run_inputs(p, opts, &base)).map_err(at("output"))?;

@@ -27,6 +27,7 @@ mod nifti_io;
 pub mod nrrd;
 pub mod ome_zarr;
 pub mod output;
+mod overlap;
 mod planes;
 mod png_out;
 mod range;
@@ -42,6 +43,7 @@ pub use io::{Format, WriteOptions, read, read_scalar, read_with_info, write, wri
 pub use limits::{available_memory, human_bytes, parse_size};
 pub use nifti_io::{read_nifti, read_nifti_with_info, write_nifti, write_nifti_slabs};
 pub use output::{AtomicWriter, Inputs, OutputFolder, write_file_atomically};
+pub use overlap::overlapped;
 pub use planes::PlaneReader;
 pub use png_out::{PngColour, register_figure_font, write_png};
 pub use range::{

@@ -101,7 +101,7 @@ impl SampleLayout {
 /// A file's samples as a stream positioned at the first one.
 pub(crate) struct SampleStream {
     /// The bytes from the first sample on (decompressed when `compressed`).
-    pub src: Box<dyn Read>,
+    pub src: Box<dyn Read + Send>,
     /// How they are laid out.
     pub layout: SampleLayout,
     /// Whether the file stores them gzip-compressed.
@@ -219,7 +219,7 @@ fn finish_fields(
 
 /// Opens a file for reading, transparently un-gzipping it when it starts
 /// with the gzip magic bytes. Returns the reader and whether it is compressed.
-pub fn open_maybe_gz(path: &Path) -> Result<(Box<dyn Read>, bool)> {
+pub fn open_maybe_gz(path: &Path) -> Result<(Box<dyn Read + Send>, bool)> {
     let file = std::fs::File::open(path).map_err(|e| VolumeError::io(path, e))?;
     let len = file.metadata().map_err(|e| VolumeError::io(path, e))?.len();
     if len == 0 {

@@ -10,8 +10,8 @@ use mdtf_volume::{Geometry, human_bytes};
 
 /// What the process holds whatever the slab: code, thread stacks, figures (bytes).
 const BASE_BYTES: u64 = 48 << 20;
-/// The histogram volume's counts on one lane (256^3 u32, at most; the
-/// untouched pages cost nothing, but on real data most are touched).
+/// The histogram volume's counts (256^3 u32, at most), one array whatever
+/// its lanes ([`mdtf_histogram::HvolBySlabs`]).
 const HVOL_BYTES: u64 = 64 << 20;
 
 /// Block-sized f32 arrays the tracing holds: the value and its five
@@ -19,6 +19,11 @@ const HVOL_BYTES: u64 = 64 << 20;
 /// and one more for what the process holds besides (measured: the peak of a
 /// 1024^3 run in strips exceeds the six by about a block).
 const TRACE_BLOCK_ARRAYS: u64 = 7;
+
+/// f32 arrays over a block's own voxels the tracing holds: distance, g_hit,
+/// hit, dot and the report's g, of two blocks (one is made while the one
+/// before is written).
+const TRACE_OUTPUTS: u64 = 10;
 
 /// f32 planes each pass holds per plane of its slab (`h`) and of its halo
 /// read on both sides (`halo`), counted from what it reads, makes and copies;
@@ -28,52 +33,43 @@ fn pass_planes(h: u64, plan: &Plan, trace_whole_planes: bool) -> u64 {
     let k = plan.reach.kernel[2] as u64;
     // derive reads at least a kernel's width of planes
     let read = (h + 2 * k).max(2 * k + 1);
-    // the value, five outputs (g, f'', three normals), the derive's own scratch; the interiors copied out
-    let derive = 8 * read + 5 * h;
+    // the value, five outputs (g, f'', three normals), the derive's own scratch; the interiors
+    // copied out, of two slabs (one is derived while the one before is summarised)
+    let derive = 8 * read + 10 * h;
     let pf = plan.reach.prefilter[2] as u64;
     let prefilter = if plan.prefilter { 4 * (h + 2 * pf) + 2 * h } else { 0 };
     let t = plan.reach.trace[2] as u64;
-    // the value and its five derivatives over the block grown by the kernel; distance, g_hit,
-    // hit, dot and the report's g over the slab
-    let trace = if plan.trace && trace_whole_planes { TRACE_BLOCK_ARRAYS * (h + 2 * t + 2 * k) + 5 * h } else { 0 };
+    // the value and its five derivatives over the block grown by the kernel, and its outputs
+    let trace = match plan.trace && trace_whole_planes {
+        true => TRACE_BLOCK_ARRAYS * (h + 2 * t + 2 * k) + TRACE_OUTPUTS * h,
+        false => 0,
+    };
     // the histograms and the textures from one pass: a derive's planes, the slab's channels
     // copied out (at most eight: distance-tf reads v, g, three normals, g_hit, hit and distance)
-    // and one texture's bytes at a time
-    let pack = 8 * read + 9 * h;
+    // and the textures' bytes of two slabs, one quantised while the other is written (at most
+    // 8 bytes a voxel: two f32 planes a plane)
+    let pack = 8 * read + 12 * h;
     derive.max(prefilter).max(trace).max(pack)
 }
 
-/// The slab height and the histogram volume's lanes (see
-/// [`mdtf_histogram::HvolBySlabs`]; 0 without one) of a run within
-/// `budget`: a lane per thread (`threads`) when their counts still leave
-/// slabs at least 3/4 as tall as one lane does, else one lane, so a tight
-/// budget buys taller slabs (less halo) rather than parallel counting.
-/// With `trace_in_strips` the tracing's cost is left to [`fit_trace`].
+/// The slab height of a run within `budget`, with the histogram volume's
+/// counts when `hvol`. With `trace_in_strips` the tracing's cost is left to
+/// [`fit_trace`].
 pub fn fit_slabs(
     budget: u64,
     geometry: &Geometry,
     plan: &Plan,
     hvol: bool,
-    threads: usize,
     trace_in_strips: bool,
-) -> Result<(usize, usize), String> {
-    let height = |lanes| slab_height_with(budget, geometry, plan, lanes, !trace_in_strips);
-    if !hvol {
-        return Ok((height(0)?, 0));
-    }
-    let one = height(1)?;
-    match height(threads.max(1)) {
-        Ok(h) if 4 * h >= 3 * one => Ok((h, threads.max(1))),
-        _ => Ok((one, 1)),
-    }
+) -> Result<usize, String> {
+    slab_height_with(budget, geometry, plan, hvol, !trace_in_strips)
 }
 
 /// The tallest slab (planes, at most the volume's) whose passes fit in
-/// `budget` bytes with the plan's halos and `hvol_lanes` histogram-volume
-/// counts (0: no histogram volume), the tracing's on whole planes, or why
-/// none does.
-pub fn slab_height(budget: u64, geometry: &Geometry, plan: &Plan, hvol_lanes: usize) -> Result<usize, String> {
-    slab_height_with(budget, geometry, plan, hvol_lanes, true)
+/// `budget` bytes with the plan's halos and the histogram volume's counts
+/// when `hvol`, the tracing's on whole planes, or why none does.
+pub fn slab_height(budget: u64, geometry: &Geometry, plan: &Plan, hvol: bool) -> Result<usize, String> {
+    slab_height_with(budget, geometry, plan, hvol, true)
 }
 
 /// [`slab_height`], the tracing counted only with `trace_whole_planes`.
@@ -81,11 +77,11 @@ fn slab_height_with(
     budget: u64,
     geometry: &Geometry,
     plan: &Plan,
-    hvol_lanes: usize,
+    hvol: bool,
     trace_whole_planes: bool,
 ) -> Result<usize, String> {
     let plane_bytes = (geometry.dims[0] * geometry.dims[1] * 4) as u64;
-    let fixed = BASE_BYTES + HVOL_BYTES * hvol_lanes as u64;
+    let fixed = BASE_BYTES + if hvol { HVOL_BYTES } else { 0 };
     let cost = |h: u64| fixed + pass_planes(h, plan, trace_whole_planes) * plane_bytes;
     let nz = geometry.dims[2] as u64;
     if cost(1) > budget {
@@ -118,13 +114,13 @@ pub struct TraceBlocks {
 
 /// Bytes the tracing holds for a block of `h` planes and `r` rows:
 /// [`TRACE_BLOCK_ARRAYS`] over the block grown by the halo and the kernel's
-/// support; distance, g_hit, hit, dot and the report's g over the block.
+/// support, and [`TRACE_OUTPUTS`] over the block.
 fn trace_bytes(h: usize, r: usize, geometry: &Geometry, plan: &Plan) -> u64 {
     let [nx, ny, nz] = geometry.dims;
     let (t, k) = (plan.reach.trace, plan.reach.kernel);
     let planes = (h + 2 * t[2] + 2 * k[2]).min(nz.max(h));
     let rows = if r >= ny { ny } else { (r + 2 * t[1] + 2 * k[1]).min(ny) };
-    4 * nx as u64 * (TRACE_BLOCK_ARRAYS as usize * planes * rows + 5 * h * r) as u64
+    4 * nx as u64 * (TRACE_BLOCK_ARRAYS * (planes * rows) as u64 + TRACE_OUTPUTS * (h * r) as u64)
 }
 
 /// The tracing's blocks within `budget`: whole planes in the other passes'
@@ -215,29 +211,22 @@ mod tests {
         let plan = Plan::resolve(&parse(text, &[]).unwrap(), &[], &geo).unwrap();
         let plane = 256 * 256 * 4;
         let budget = 256u64 << 20;
-        let h = slab_height(budget, &geo, &plan, 0).unwrap() as u64;
+        let h = slab_height(budget, &geo, &plan, false).unwrap() as u64;
         assert!(BASE_BYTES + pass_planes(h, &plan, true) * plane <= budget);
         assert!(BASE_BYTES + pass_planes(h + 1, &plan, true) * plane > budget);
         // the tracing's value and derivatives over its halo-grown block, and its outputs, are counted
         let (t, k) = (plan.reach.trace[2] as u64, plan.reach.kernel[2] as u64);
         assert!(pass_planes(h, &plan, true) >= 6 * (h + 2 * t + 2 * k) + 5 * h);
         assert_eq!(slabs(10, 4), vec![0..4, 4..8, 8..10]);
-        let e = slab_height(1 << 20, &geo, &plan, 0).unwrap_err();
+        let e = slab_height(1 << 20, &geo, &plan, false).unwrap_err();
         assert!(e.contains("too small") && e.contains("1.0 MiB"), "{e}");
-        assert_eq!(slab_height(1 << 40, &geo, &plan, 1).unwrap(), 256, "a large budget: one slab");
-        // each histogram-volume lane's counts come off the slabs' share
-        let h2 = slab_height(budget, &geo, &plan, 2).unwrap() as u64;
-        assert!(BASE_BYTES + 2 * HVOL_BYTES + pass_planes(h2, &plan, true) * plane <= budget);
-        assert!(BASE_BYTES + 2 * HVOL_BYTES + pass_planes(h2 + 1, &plan, true) * plane > budget);
-        // lanes when they cost little height, one lane when they would cost much
-        let big = 2u64 << 30;
-        assert_eq!(fit_slabs(big, &geo, &plan, true, 2, false).unwrap().1, 2);
-        let tight = BASE_BYTES + 2 * HVOL_BYTES + pass_planes(4, &plan, true) * plane;
-        assert_eq!(
-            fit_slabs(tight, &geo, &plan, true, 2, false).unwrap(),
-            (slab_height(tight, &geo, &plan, 1).unwrap(), 1)
-        );
-        assert_eq!(fit_slabs(budget, &geo, &plan, false, 2, false).unwrap(), (h as usize, 0));
+        assert_eq!(slab_height(1 << 40, &geo, &plan, true).unwrap(), 256, "a large budget: one slab");
+        // the histogram volume's counts come off the slabs' share, once whatever its lanes
+        let h2 = slab_height(budget, &geo, &plan, true).unwrap() as u64;
+        assert!(BASE_BYTES + HVOL_BYTES + pass_planes(h2, &plan, true) * plane <= budget);
+        assert!(BASE_BYTES + HVOL_BYTES + pass_planes(h2 + 1, &plan, true) * plane > budget);
+        assert_eq!(fit_slabs(budget, &geo, &plan, true, false).unwrap(), h2 as usize);
+        assert_eq!(fit_slabs(budget, &geo, &plan, false, false).unwrap(), h as usize);
     }
 
     #[test]
@@ -247,8 +236,8 @@ mod tests {
         let plan = Plan::resolve(&parse(text, &[]).unwrap(), &[], &geo).unwrap();
         let gib = 1u64 << 30;
         // 1 GiB: the other passes' slabs fit, the tracing's halo on whole planes does not
-        let (h, _) = fit_slabs(gib, &geo, &plan, true, 2, true).unwrap();
-        assert!(slab_height(gib, &geo, &plan, 1).is_err(), "whole planes with the tracing's halo do not fit");
+        let h = fit_slabs(gib, &geo, &plan, true, true).unwrap();
+        assert!(slab_height(gib, &geo, &plan, true).is_err(), "whole planes with the tracing's halo do not fit");
         let b = fit_trace(gib, &geo, &plan, h, 2, true).unwrap();
         assert!(b.rows < 1024 && b.planes >= 1, "{b:?}");
         assert!(BASE_BYTES + trace_bytes(b.planes, b.rows, &geo, &plan) <= gib, "{b:?}");

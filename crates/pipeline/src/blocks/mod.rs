@@ -25,8 +25,14 @@
 //! ranges and the percentile tails ([`ChannelStats`]), medians (radix
 //! selects over the slabs), histogram counts, the histogram volume's sums
 //! (per fixed part of the slices, fed slice by slice, as the whole run sums
-//! them; parts on parallel lanes when the budget pays for their counts),
-//! the Fig. 2 report's sums (fed in voxel order) and the crossings.
+//! them; parts on parallel lanes that share one array of counts), the
+//! Fig. 2 report's sums (fed in voxel order) and the crossings.
+//!
+//! In the input, derive, tracing and pack passes a slab's outputs are
+//! written (and summarised) while the next slab is made
+//! ([`mdtf_volume::overlapped`]): the copies into the page cache run on one
+//! thread, and would otherwise leave the other lanes idle. The budget counts
+//! the two slabs' outputs that this keeps alive.
 //!
 //! The derive, pre-filter and tracing passes can run as tasks elsewhere
 //! ([`RunOptions::tasks`], [`SlabTasks`]; the Python package's
@@ -50,7 +56,7 @@ mod trace;
 pub use budget::{TraceBlocks, automatic_budget, fit_slabs, fit_trace, slab_height, slabs};
 pub use remote::{Prefilter, SlabJob, SlabPass, SlabTasks, TracePartial, run_task};
 pub use slab_channels::SlabChannels;
-pub use store::ChannelStore;
+pub use store::{ChannelStore, StoreWriter};
 
 use crate::file::Pipeline;
 use crate::progress::{Progress, cancelled};
@@ -177,8 +183,8 @@ pub fn run(
     p: &Pipeline,
     opts: &RunOptions,
     size: SlabSize,
-    on_stage: &dyn Fn(&str),
-    on_slab: &dyn Fn(usize, usize),
+    on_stage: &(dyn Fn(&str) + Sync),
+    on_slab: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<RunReport, RunError> {
     // a cancelled run fails wherever it noticed (a slab's read fails first): it ends as cancelled
     run_slabs(p, opts, size, on_stage, on_slab).map_err(|e| if opts.is_cancelled() { cancelled() } else { e })
@@ -189,8 +195,8 @@ fn run_slabs(
     p: &Pipeline,
     opts: &RunOptions,
     size: SlabSize,
-    on_stage: &dyn Fn(&str),
-    on_slab: &dyn Fn(usize, usize),
+    on_stage: &(dyn Fn(&str) + Sync),
+    on_slab: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<RunReport, RunError> {
     let start = Instant::now();
     if let Some(why) = unsupported(p, 1) {

@@ -18,7 +18,7 @@ use mdtf_boundary::{Crossings, ReportAccumulator, ResolvedParams, TraceCounts};
 use mdtf_derive::{DeriveParams, Item, Kernel};
 use mdtf_histogram::{ChannelStats, Histogram};
 use mdtf_pack::{PackParams, PackWriter, Profile, TfFile};
-use mdtf_volume::{Geometry, KeyBuckets, Volume};
+use mdtf_volume::{Geometry, KeyBuckets, Volume, overlapped};
 use reductions::{SlabHistograms, Stats, g_stats};
 use std::collections::BTreeMap;
 use std::ops::Range;
@@ -45,8 +45,6 @@ pub(super) struct SlabPasses<'a> {
     pub(super) height: usize,
     /// How the tracing pass cuts the volume.
     pub(super) trace_blocks: TraceBlocks,
-    /// Lanes counting the histogram volume (see [`super::fit_slabs`]).
-    hvol_lanes: usize,
     /// The histograms ask for the histogram volume.
     pub(super) hvol_asked: bool,
     /// The histogram volume is counted: asked for, or the default TF's source.
@@ -95,31 +93,36 @@ impl<'a> SlabPasses<'a> {
         // the tracing cuts strips of rows when it derives its channels (it reads stored ones by planes)
         let strips = tracing_derives(&plan, opts.tasks.as_deref());
         let ny = geo.dims[1];
-        let (height, hvol_lanes, trace_blocks) = match size {
+        let (height, trace_blocks) = match size {
             SlabSize::Budget(b) => {
-                let (h, lanes) = fit_slabs(b, &geo, &plan, hvol_needed, threads, strips).map_err(fail("plan"))?;
-                (h, lanes, fit_trace(b, &geo, &plan, h, threads, strips).map_err(fail("plan"))?)
+                let h = fit_slabs(b, &geo, &plan, hvol_needed, strips).map_err(fail("plan"))?;
+                (h, fit_trace(b, &geo, &plan, h, threads, strips).map_err(fail("plan"))?)
             }
             SlabSize::Planes(h) => {
                 let h = h.clamp(1, nz.max(1));
-                (h, threads, TraceBlocks { planes: h, rows: ny })
+                (h, TraceBlocks { planes: h, rows: ny })
             }
             SlabSize::Strips { planes, rows } => {
                 let h = planes.clamp(1, nz.max(1));
                 let rows = if strips { rows.clamp(1, ny.max(1)) } else { ny };
-                (h, threads, TraceBlocks { planes: h, rows })
+                (h, TraceBlocks { planes: h, rows })
             }
         };
         let slabs = slabs(nz, height);
         progress.stage(&format!("input: {} slabs of {height} planes", slabs.len()))?;
         let mut store = ChannelStore::create(dir.join(".slabs"), geo.clone()).map_err(at("input"))?;
         let mut stats = Stats::new(&["v", "g", "f2", "g_hit", "g_prefiltered", "inv_g"], geo.voxel_count());
-        for (k, z) in slabs.iter().enumerate() {
-            progress.slab(k + 1, slabs.len())?;
-            let v = source.read(z.clone())?;
-            stats.add("v", v.samples());
-            store.put_volume("v", z.start, &v).map_err(io("input"))?;
-        }
+        let mut writer = store.writer(&["v"]).map_err(io("input"))?;
+        // a slab is read while the one before is summarised and stored
+        overlapped(
+            slabs.len(),
+            &mut |k| progress.slab(k + 1, slabs.len()),
+            &mut |k| Ok((slabs[k].start, source.read(slabs[k].clone())?)),
+            &mut |(first, v)| {
+                stats.add("v", v.samples());
+                writer.put_volume("v", first, &v).map_err(io("input"))
+            },
+        )?;
         let mut stages = Stages::default();
         stages.done("input", t, geo.voxel_count(), vec![]);
         let run = SlabPasses {
@@ -132,7 +135,6 @@ impl<'a> SlabPasses<'a> {
             slabs,
             height,
             trace_blocks,
-            hvol_lanes,
             hvol_asked,
             hvol_needed,
             tf,
@@ -184,24 +186,32 @@ impl<'a> SlabPasses<'a> {
         let keep_g = self.median_reads_stored_g() && g_buckets.is_some();
         if !summarised.is_empty() {
             self.progress.stage("derive")?;
-            for (k, z) in self.slabs.iter().enumerate() {
-                self.progress.slab(k + 1, self.slabs.len())?;
-                for (name, v) in chans.volumes(z.clone(), &summarised).map_err(fail("derive"))? {
-                    self.stats.add(&name, v.samples());
-                    match name.as_str() {
-                        "g" => {
-                            g_buckets.iter_mut().for_each(|b| b.add(v.samples()));
-                            if keep_g {
-                                chans.store.put_volume("g", z.start, &v).map_err(io("derive"))?;
+            let mut writer = chans.store.writer(if keep_g { &["g"] } else { &[] }).map_err(io("derive"))?;
+            let (slabs, stats, progress) = (&self.slabs, &mut self.stats, &self.progress);
+            // a slab is derived while the one before is summarised (and its g stored)
+            overlapped(
+                slabs.len(),
+                &mut |k| progress.slab(k + 1, slabs.len()),
+                &mut |k| Ok((slabs[k].start, chans.volumes(slabs[k].clone(), &summarised).map_err(fail("derive"))?)),
+                &mut |(first, volumes)| {
+                    for (name, v) in volumes {
+                        stats.add(&name, v.samples());
+                        match name.as_str() {
+                            "g" => {
+                                g_buckets.iter_mut().for_each(|b| b.add(v.samples()));
+                                if keep_g {
+                                    writer.put_volume("g", first, &v).map_err(io("derive"))?;
+                                }
                             }
+                            "inv_g" => {
+                                smallest_inv_g = crate::pack_inputs::smallest_positive(v.samples()).min(smallest_inv_g)
+                            }
+                            _ => {}
                         }
-                        "inv_g" => {
-                            smallest_inv_g = crate::pack_inputs::smallest_positive(v.samples()).min(smallest_inv_g)
-                        }
-                        _ => {}
                     }
-                }
-            }
+                    Ok(())
+                },
+            )?;
             chans.release();
             // its time includes its tasks'
             self.stages.done("derive", derive_start, self.geo.voxel_count(), vec![]);
@@ -290,25 +300,35 @@ impl<'a> SlabPasses<'a> {
             let what = format!("boundary: {} blocks of {planes} planes x {rows} rows", strips.len() * tslabs.len());
             self.progress.stage(&what)?;
         }
-        for (s, rows) in strips.iter().enumerate() {
-            for (k, z) in tslabs.iter().enumerate() {
-                self.progress.slab(s * tslabs.len() + k + 1, strips.len() * tslabs.len())?;
-                let slab = match self.tasks {
-                    Some(_) => remote::stored_trace(chans, g, z)?,
-                    None => {
-                        let t = trace::trace_slab(chans, &setup, z, rows)?;
-                        for (c, v) in
-                            [("g_hit", &t.trace.g_hit), ("hit", &t.trace.hit), ("distance", &t.trace.distance)]
-                        {
-                            chans.store.put_rows(c, z.start, rows.clone(), v).map_err(io("boundary"))?;
-                        }
-                        t
-                    }
-                };
-                self.stats.add("g_hit", slab.trace.g_hit.samples());
-                sums.add(slab);
+        let blocks: Vec<(Range<usize>, Range<usize>)> =
+            strips.iter().flat_map(|rows| tslabs.iter().map(move |z| (rows.clone(), z.clone()))).collect();
+        let outputs = ["g_hit", "hit", "distance"];
+        let mut writer = match self.tasks {
+            Some(_) => None,
+            None => Some(chans.store.writer(&outputs).map_err(io("boundary"))?),
+        };
+        let (progress, tasks, stats) = (&self.progress, self.tasks.is_some(), &mut self.stats);
+        // a block is traced while the one before is written and summed
+        let mut make = |k: usize| {
+            let (rows, z) = &blocks[k];
+            match tasks {
+                true => remote::stored_trace(chans, g, z),
+                false => trace::trace_slab(chans, &setup, z, rows),
             }
-        }
+        };
+        let mut take = |(k, slab): (usize, SlabTrace)| {
+            let (rows, z) = &blocks[k];
+            if let Some(w) = &mut writer {
+                for (c, v) in outputs.iter().zip([&slab.trace.g_hit, &slab.trace.hit, &slab.trace.distance]) {
+                    w.put_rows(c, z.start, rows.clone(), v).map_err(io("boundary"))?;
+                }
+            }
+            stats.add("g_hit", slab.trace.g_hit.samples());
+            sums.add(slab);
+            Ok(())
+        };
+        let n = blocks.len();
+        overlapped(n, &mut |k| progress.slab(k + 1, n), &mut |k| Ok((k, make(k)?)), &mut take)?;
         let traced = self.finish_trace(sums)?;
         for c in ["g_prefiltered", "f2_prefiltered", "dot"] {
             chans.store.remove(c);
@@ -451,12 +471,11 @@ impl<'a> SlabPasses<'a> {
     ) -> Result<Written, RunError> {
         let counting = self.p.histogram.is_some() || self.hvol_needed;
         self.progress.stage(if counting { "histogram and pack" } else { "pack" })?;
-        let lanes = self.hvol_needed.then_some(self.hvol_lanes);
         let n = self.geo.voxel_count();
         let mut histograms = match counting {
             true => {
                 let g_buckets = derived.g_buckets.as_ref();
-                Some(SlabHistograms::new(self.p, chans, &self.stats, &self.slabs, n, lanes, g_buckets)?)
+                Some(SlabHistograms::new(self.p, chans, &self.stats, &self.slabs, n, self.hvol_needed, g_buckets)?)
             }
             false => None,
         };

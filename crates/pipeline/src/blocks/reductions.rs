@@ -92,8 +92,8 @@ pub(super) struct SlabHistograms {
 }
 
 impl SlabHistograms {
-    /// Empty histograms of `p` (with the histogram volume, counted on this
-    /// many lanes, when `hvol_lanes` is given) over the axes of `stats`, for
+    /// Empty histograms of `p` (with the histogram volume when `hvol`,
+    /// counted on a lane per thread) over the axes of `stats`, for
     /// the `slabs` of a volume of `n` voxels. Peak finding's (v, 1/g) axis
     /// takes its own passes over `chans` (one fewer with `g_buckets`, the
     /// first radix pass over g).
@@ -103,7 +103,7 @@ impl SlabHistograms {
         stats: &Stats,
         slabs: &[Range<usize>],
         n: usize,
-        hvol_lanes: Option<usize>,
+        hvol: bool,
         g_buckets: Option<&KeyBuckets>,
     ) -> Result<SlabHistograms, RunError> {
         let err = at::<mdtf_histogram::HistogramError>("histogram");
@@ -114,17 +114,18 @@ impl SlabHistograms {
         stretched_axes[1].name = "g_hit".into();
         let bins = HvolParams::default().bins;
         let nz = slabs.last().map_or(0, |z| z.end);
-        let hvol = match hvol_lanes {
-            Some(lanes) => {
+        let hvol = match hvol {
+            true => {
                 let axes = HvolAxes {
                     v: stats.axis(&HvolAxes::spec("v", bins[0]), "v")?,
                     g: stats.axis(&HvolAxes::spec("g", bins[1]), "g")?,
                     h: stats.axis(&HvolAxes::spec("f2", bins[2]), "f2")?,
                 };
                 let plane = n / nz.max(1);
+                let lanes = rayon::current_num_threads();
                 Some(HvolBySlabs::new(&axes, plane, nz, lanes).map_err(err)?)
             }
-            None => None,
+            false => None,
         };
         let inv_g_axes = match joint && chans.has("inv_g") {
             true => medians::inverse_gradient_axis(chans, slabs, g_buckets)

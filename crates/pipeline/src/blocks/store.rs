@@ -82,11 +82,7 @@ impl ChannelStore {
 
     /// Writes `samples` at byte `offset` of channel `name`'s file, creating it on the first write.
     fn write_at(&mut self, name: &str, offset: u64, samples: &[f32]) -> std::io::Result<()> {
-        if !self.files.contains_key(name) {
-            let path = self.dir.join(format!("{name}.f32"));
-            let file = File::options().read(true).write(true).create(true).truncate(false).open(path)?;
-            self.files.insert(name.to_string(), file);
-        }
+        self.create_channel(name)?;
         let Some(file) = self.files.get_mut(name) else { return Err(missing(name)) };
         file.seek(SeekFrom::Start(offset))?;
         file.write_all(bytemuck::cast_slice(samples))
@@ -100,14 +96,31 @@ impl ChannelStore {
     /// Writes `v`, rows `rows` of planes `first..` of channel `name` (a
     /// strip of a blocked pass), creating the channel on its first write.
     pub fn put_rows(&mut self, name: &str, first: usize, rows: Range<usize>, v: &Volume) -> std::io::Result<()> {
-        let [nx, ny, _] = self.geometry.dims;
-        if rows.start == 0 && rows.end == ny {
-            return self.put_volume(name, first, v);
+        self.create_channel(name)?;
+        let Some(file) = self.files.get_mut(name) else { return Err(missing(name)) };
+        write_rows(file, &self.geometry, first, rows, v)
+    }
+
+    /// A writer of channels `names` (created here when new) that works
+    /// beside this store's reads: a pass hands it one block's outputs while
+    /// it makes the next block's.
+    pub fn writer(&mut self, names: &[&str]) -> std::io::Result<StoreWriter> {
+        let mut files = BTreeMap::new();
+        for name in names {
+            self.create_channel(name)?;
+            // its own handle: its own position in the file
+            let file = File::options().write(true).open(self.dir.join(format!("{name}.f32")))?;
+            files.insert(name.to_string(), file);
         }
-        let chunk = nx * rows.len();
-        for (k, plane) in v.samples().chunks(chunk.max(1)).enumerate() {
-            let offset = (((first + k) * ny + rows.start) * nx * 4) as u64;
-            self.write_at(name, offset, plane)?;
+        Ok(StoreWriter { geometry: self.geometry.clone(), files })
+    }
+
+    /// Creates channel `name`'s file, or takes the one another task of the run created.
+    fn create_channel(&mut self, name: &str) -> std::io::Result<()> {
+        if !self.files.contains_key(name) {
+            let path = self.dir.join(format!("{name}.f32"));
+            let file = File::options().read(true).write(true).create(true).truncate(false).open(path)?;
+            self.files.insert(name.to_string(), file);
         }
         Ok(())
     }
@@ -174,6 +187,45 @@ impl ChannelStore {
         self.files.clear();
         let _ = std::fs::remove_dir_all(&self.dir);
     }
+}
+
+/// Writes channels of a [`ChannelStore`] on handles of their own (see [`ChannelStore::writer`]).
+pub struct StoreWriter {
+    geometry: Geometry,
+    files: BTreeMap<String, File>,
+}
+
+impl StoreWriter {
+    /// [`ChannelStore::put_volume`], for one of the writer's channels.
+    pub fn put_volume(&mut self, name: &str, first: usize, v: &Volume) -> std::io::Result<()> {
+        self.put_rows(name, first, 0..self.geometry.dims[1], v)
+    }
+
+    /// [`ChannelStore::put_rows`], for one of the writer's channels.
+    pub fn put_rows(&mut self, name: &str, first: usize, rows: Range<usize>, v: &Volume) -> std::io::Result<()> {
+        let Some(file) = self.files.get_mut(name) else { return Err(missing(name)) };
+        write_rows(file, &self.geometry, first, rows, v)
+    }
+}
+
+/// Writes `v`, rows `rows` of planes `first..` of a channel on `geometry`, into its `file`.
+fn write_rows(
+    file: &mut File,
+    geometry: &Geometry,
+    first: usize,
+    rows: Range<usize>,
+    v: &Volume,
+) -> std::io::Result<()> {
+    let [nx, ny, _] = geometry.dims;
+    if rows.start == 0 && rows.end == ny {
+        file.seek(SeekFrom::Start((first * nx * ny * 4) as u64))?;
+        return file.write_all(bytemuck::cast_slice(v.samples()));
+    }
+    for (k, plane) in v.samples().chunks((nx * rows.len()).max(1)).enumerate() {
+        file.seek(SeekFrom::Start((((first + k) * ny + rows.start) * nx * 4) as u64))?;
+        file.write_all(bytemuck::cast_slice(plane))?;
+    }
+    Ok(())
 }
 
 fn missing(name: &str) -> std::io::Error {

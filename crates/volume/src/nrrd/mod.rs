@@ -66,7 +66,7 @@ struct DataStart {
     geometry: Geometry,
     /// The file the samples are in (the header itself when attached).
     data_path: PathBuf,
-    data: Box<dyn BufRead>,
+    data: Box<dyn BufRead + Send>,
 }
 
 fn open_data(path: &Path) -> Result<DataStart> {
@@ -79,7 +79,7 @@ fn open_data(path: &Path) -> Result<DataStart> {
     let (layout, geometry) = layout_and_geometry(path, &h)?;
 
     // Attached data continue in the same file; detached data live beside the header.
-    let (data_path, mut data): (PathBuf, Box<dyn BufRead>) = match &h.data_file {
+    let (data_path, mut data): (PathBuf, Box<dyn BufRead + Send>) = match &h.data_file {
         None => (path.to_path_buf(), Box::new(reader)),
         Some(name) => {
             if name.starts_with("LIST") || name.contains('%') {
@@ -112,7 +112,7 @@ pub(crate) fn open_samples(path: &Path) -> Result<Option<(SampleStream, Geometry
         return Ok(None);
     }
     let gzip = h.encoding == Encoding::Gzip;
-    let mut src: Box<dyn Read> =
+    let mut src: Box<dyn Read + Send> =
         if gzip { Box::new(flate2::bufread::MultiGzDecoder::new(data)) } else { Box::new(data) };
     skip_bytes(&data_path, &mut src, h.byte_skip.max(0) as u64, &layout, gzip)?;
     Ok(Some((SampleStream { src, layout, compressed: gzip }, geometry)))
@@ -141,7 +141,7 @@ fn skip_bytes(path: &Path, src: &mut dyn Read, n: u64, layout: &SampleLayout, gz
 
 fn read_raw_encoded(
     path: &Path,
-    mut data: Box<dyn BufRead>,
+    mut data: Box<dyn BufRead + Send>,
     h: &NrrdHeader,
     layout: &SampleLayout,
     opts: &ReadOptions,
@@ -168,7 +168,11 @@ fn read_raw_encoded(
 }
 
 /// Parses ascii samples; returns them as little-endian f32 bytes and the layout that decodes them.
-fn read_ascii(path: &Path, mut data: Box<dyn BufRead>, layout: &SampleLayout) -> Result<(Vec<u8>, SampleLayout)> {
+fn read_ascii(
+    path: &Path,
+    mut data: Box<dyn BufRead + Send>,
+    layout: &SampleLayout,
+) -> Result<(Vec<u8>, SampleLayout)> {
     let mut text = String::new();
     data.read_to_string(&mut text).map_err(|e| VolumeError::io(path, e))?;
     let n = (layout.byte_len() / layout.ty.size() as u64) as usize;
