@@ -132,3 +132,11 @@ mod tests {
         assert!(parse_triple("1,nan,1", "--origin").is_err());
     }
 }
+
+/// The transfer function file `path` names (`--tf`), parsed; None without one.
+pub fn read_tf(path: Option<&Path>) -> Result<Option<mdtf_pipeline::stages::pack::TfFile>> {
+    let Some(p) = path else { return Ok(None) };
+    let text = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
+    let tf = mdtf_pipeline::stages::pack::parse_tf(&text).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?;
+    Ok(Some(tf))
+}

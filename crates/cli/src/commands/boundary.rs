@@ -57,31 +57,7 @@ pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
         _ => None,
     };
     let start = Instant::now();
-    let (out, g) = match (&args.input, &args.g, &args.f2, &args.normal) {
-        (Some(input), None, None, None) => {
-            let value = progress.step("reading", || scalar(input, args))?;
-            let chain = BoundaryChainParams {
-                kernel: args.kernel,
-                prefilter: args.prefilter.as_deref().map(prefilter).transpose()?,
-                boundary: p,
-            };
-            let r = progress.step("deriving and tracing", || boundary_chain::run(&value, &chain))?;
-            (r.boundary, r.g)
-        }
-        (None, Some(g), Some(f2), Some(normal)) => {
-            if args.kernel.is_some() || args.prefilter.is_some() {
-                bail!(
-                    "--kernel and --prefilter apply when deriving from a value volume, not to given --g/--f2/--normal"
-                );
-            }
-            let (gv, f2v) = progress.step("reading", || -> Result<_> { Ok((scalar(g, args)?, scalar(f2, args)?)) })?;
-            let nv = read_input(normal, &args.read, &read_options(&args.read))?.0;
-            let input = BoundaryInput { g: &gv, f2: &f2v, normal: &nv, value_range: args.value_range.unwrap_or(255.0) };
-            let out = progress.step("tracing", || mdtf_pipeline::stages::boundary::run(&input, &p))?;
-            (out, gv)
-        }
-        _ => bail!("give either a value volume, or all of --g, --f2 and --normal"),
-    };
+    let (out, g) = trace(args, p, progress)?;
     let seconds = start.elapsed().as_secs_f64();
     let report_dir = match (&report_folder, &report_inside) {
         (Some(f), _) => Some(f.path().to_path_buf()),
@@ -96,21 +72,56 @@ pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
     for w in &out.warnings {
         progress.note(&format!("warning: {w}"));
     }
-    let c = out.counts;
-    progress.note(&format!(
+    progress.note(&summary(&out, seconds));
+    Ok(())
+}
+
+/// The tracing and the g it traced: the whole chain from a value volume,
+/// or the tracing alone on given g, f'' and normal.
+fn trace(args: &BoundaryArgs, p: BoundaryParams, progress: &Progress) -> Result<(BoundaryOutput, Volume)> {
+    match (&args.input, &args.g, &args.f2, &args.normal) {
+        (Some(input), None, None, None) => {
+            let value = progress.step("reading", || scalar(input, args))?;
+            let chain = BoundaryChainParams {
+                kernel: args.kernel,
+                prefilter: args.prefilter.as_deref().map(prefilter).transpose()?,
+                boundary: p,
+            };
+            let r = progress.step("deriving and tracing", || boundary_chain::run(&value, &chain))?;
+            Ok((r.boundary, r.g))
+        }
+        (None, Some(g), Some(f2), Some(normal)) => {
+            if args.kernel.is_some() || args.prefilter.is_some() {
+                bail!(
+                    "--kernel and --prefilter apply when deriving from a value volume, not to given --g/--f2/--normal"
+                );
+            }
+            let (gv, f2v) = progress.step("reading", || -> Result<_> { Ok((scalar(g, args)?, scalar(f2, args)?)) })?;
+            let nv = read_input(normal, &args.read, &read_options(&args.read))?.0;
+            let input = BoundaryInput { g: &gv, f2: &f2v, normal: &nv, value_range: args.value_range.unwrap_or(255.0) };
+            let out = progress.step("tracing", || mdtf_pipeline::stages::boundary::run(&input, &p))?;
+            Ok((out, gv))
+        }
+        _ => bail!("give either a value volume, or all of --g, --f2 and --normal"),
+    }
+}
+
+/// What the tracing of `out` found, in `seconds`, for the closing note.
+fn summary(out: &BoundaryOutput, seconds: f64) -> String {
+    let (c, r) = (&out.counts, &out.resolved);
+    format!(
         "traced {} voxels in {seconds:.2} s: {} boundaries kept, {} rejected (g at the hit < {:.3}), {} without a zero crossing within {:.3}; \
          {} below g_min {:.3} not traced (noise floor {:.3})",
         c.traced(),
         c.hits,
         c.rejected,
-        out.resolved.g_hit_min,
+        r.g_hit_min,
         c.no_crossing,
-        out.resolved.d_max,
+        r.d_max,
         c.not_traced,
-        out.resolved.g_min,
-        out.resolved.noise_floor
-    ));
-    Ok(())
+        r.g_min,
+        r.noise_floor
+    )
 }
 
 fn write_outputs(

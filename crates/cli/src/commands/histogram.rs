@@ -35,6 +35,46 @@ fn spec_for(args: &HistogramArgs, i: usize, name: &str) -> Result<AxisSpec> {
 
 /// Computes and writes the requested histograms.
 pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
+    check_axes(args)?;
+    let scale = if args.scale == ScaleArg::Linear { Scale::Linear } else { Scale::Log };
+    let given: Vec<&Path> =
+        [Some(&args.input), args.mask.as_ref()].into_iter().flatten().map(PathBuf::as_path).collect();
+    let inputs = Inputs::of(&given);
+    let folder = OutputFolder::begin(&args.output, &inputs)?;
+    let (input, _) = progress.step("reading", || read_input(&args.input, &args.read, &read_options(&args.read)))?;
+    let mut wanted: Vec<String> = args.axes.clone();
+    for extra in [&["v", "g"][..], &["g_hit", "hit"][..]].into_iter().filter(|_| args.stretched).flatten() {
+        if !wanted.iter().any(|w| w == extra) {
+            wanted.push(extra.to_string());
+        }
+    }
+    let chans = progress.step("computing channels", || {
+        channels::compute(&input, &wanted, &BoundaryChainParams { kernel: args.kernel, ..Default::default() })
+    })?;
+    let counted = Counting {
+        args,
+        chans,
+        mask: read_mask(args, &input)?,
+        title: args
+            .input
+            .file_name()
+            .map_or_else(|| args.input.display().to_string(), |n| n.to_string_lossy().into_owned()),
+        scale,
+        out: folder.path(),
+    };
+    counted.joint(progress)?;
+    if args.stretched {
+        counted.stretched()?;
+    }
+    if args.hvol {
+        counted.histogram_volume(&input, progress)?;
+    }
+    folder.publish(&inputs)?;
+    Ok(())
+}
+
+/// Refuses 0 or more than 3 axes, and lists of bins or ranges that are neither one nor one per axis.
+fn check_axes(args: &HistogramArgs) -> Result<()> {
     if args.axes.is_empty() || args.axes.len() > 3 {
         bail!("--axes: give 1 to 3 channels, got {}", args.axes.len());
     }
@@ -47,85 +87,89 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
             );
         }
     }
-    let scale = if args.scale == ScaleArg::Linear { Scale::Linear } else { Scale::Log };
-    let given: Vec<&Path> =
-        [Some(&args.input), args.mask.as_ref()].into_iter().flatten().map(PathBuf::as_path).collect();
-    let inputs = Inputs::of(&given);
-    let folder = OutputFolder::begin(&args.output, &inputs)?;
-    let out = folder.path();
-    let (input, _) = progress.step("reading", || read_input(&args.input, &args.read, &read_options(&args.read)))?;
-    let kernel = args.kernel;
-    let mut wanted: Vec<String> = args.axes.clone();
-    for extra in [&["v", "g"][..], &["g_hit", "hit"][..]].into_iter().filter(|_| args.stretched).flatten() {
-        if !wanted.iter().any(|w| w == extra) {
-            wanted.push(extra.to_string());
-        }
+    Ok(())
+}
+
+/// The voxels `--mask` keeps (its nonzero ones), on the input's grid.
+fn read_mask(args: &HistogramArgs, input: &MultiField) -> Result<Option<Vec<bool>>> {
+    let Some(p) = &args.mask else { return Ok(None) };
+    let m = read_input(p, &args.read, &read_options(&args.read))?.0.into_scalar()?;
+    if !m.geometry.same_grid(&input.geometry) {
+        bail!("--mask {} is on another grid than the input", p.display());
     }
-    let chans = progress.step("computing channels", || {
-        channels::compute(&input, &wanted, &BoundaryChainParams { kernel, ..Default::default() })
-    })?;
-    let get = |n: &str| chans.iter().find(|(c, _)| c == n).map(|(_, v)| v);
-    let mask: Option<Vec<bool>> = match &args.mask {
-        Some(p) => {
-            let m = read_input(p, &args.read, &read_options(&args.read))?.0.into_scalar()?;
-            if !m.geometry.same_grid(&input.geometry) {
-                bail!("--mask {} is on another grid than the input", p.display());
+    Ok(Some(m.samples().iter().map(|&x| x != 0.0).collect()))
+}
+
+/// What the histograms of one command count and where they go.
+struct Counting<'a> {
+    args: &'a HistogramArgs,
+    /// The channels the axes (and the stretched pair) read.
+    chans: Vec<(String, Volume)>,
+    mask: Option<Vec<bool>>,
+    /// The input's file name, the figures' title.
+    title: String,
+    scale: Scale,
+    out: &'a Path,
+}
+
+impl Counting<'_> {
+    fn get(&self, name: &str) -> Option<&Volume> {
+        self.chans.iter().find(|(c, _)| c == name).map(|(_, v)| v)
+    }
+
+    /// The axes of channels `names`, with the command's bins and ranges.
+    fn axes_of(&self, names: &[String]) -> Result<Vec<Axis>> {
+        let axis = |(i, n): (usize, &String)| {
+            let data = self.get(n).map(Volume::samples).unwrap_or(&[]);
+            spec_for(self.args, i, n)?.resolve(n, data).map_err(anyhow::Error::from)
+        };
+        names.iter().enumerate().map(axis).collect()
+    }
+
+    /// The histogram of `--axes` (and its 2D projections when it has three), with its picture.
+    fn joint(&self, progress: &Progress) -> Result<()> {
+        let axes = self.axes_of(&self.args.axes)?;
+        let data: Vec<&[f32]> = self.args.axes.iter().filter_map(|n| self.get(n).map(Volume::samples)).collect();
+        let h = progress.step("counting", || count(&data, axes, self.mask.as_deref()))?;
+        write_histogram(self.out, &h, self.scale, &self.title)?;
+        if h.axes.len() == 3 {
+            for (a, b) in [(0, 1), (0, 2), (1, 2)] {
+                write_histogram(self.out, &h.project(a, b), self.scale, &self.title)?;
             }
-            Some(m.samples().iter().map(|&x| x != 0.0).collect())
         }
-        None => None,
-    };
-
-    let axes_of = |names: &[String]| -> Result<Vec<Axis>> {
-        names
-            .iter()
-            .enumerate()
-            .map(|(i, n)| {
-                let data = get(n).map(Volume::samples).unwrap_or(&[]);
-                spec_for(args, i, n)?.resolve(n, data).map_err(anyhow::Error::from)
-            })
-            .collect()
-    };
-    let axes = axes_of(&args.axes)?;
-    let title =
-        args.input.file_name().map_or_else(|| args.input.display().to_string(), |n| n.to_string_lossy().into_owned());
-    let data: Vec<&[f32]> = args.axes.iter().filter_map(|n| get(n).map(Volume::samples)).collect();
-    let h = progress.step("counting", || count(&data, axes, mask.as_deref()))?;
-    write_histogram(out, &h, scale, &title)?;
-    if h.axes.len() == 3 {
-        for (a, b) in [(0, 1), (0, 2), (1, 2)] {
-            write_histogram(out, &h.project(a, b), scale, &title)?;
-        }
+        progress.note(&format!("{}: {} voxels counted", h.describe(self.scale), h.total()));
+        Ok(())
     }
-    progress.note(&format!("{}: {} voxels counted", h.describe(scale), h.total()));
 
-    if args.stretched {
-        let (v, g, g_hit, hit) = (get("v"), get("g"), get("g_hit"), get("hit"));
+    /// The (v, g) histogram of the traced voxels beside their (v, g_hit) one.
+    fn stretched(&self) -> Result<()> {
+        let (v, g, g_hit, hit) = (self.get("v"), self.get("g"), self.get("g_hit"), self.get("hit"));
         let (Some(v), Some(g), Some(g_hit), Some(hit)) = (v, g, g_hit, hit) else {
             bail!("stretched histogram: missing channels")
         };
         let mut traced = hit_mask(hit.samples());
-        if let Some(m) = &mask {
+        if let Some(m) = &self.mask {
             traced.iter_mut().zip(m).for_each(|(t, &m)| *t &= m);
         }
-        let names = ["v".to_string(), "g".to_string()];
-        let shared = axes_of(&names)?;
+        let shared = self.axes_of(&["v".to_string(), "g".to_string()])?;
         let normal = count(&[v.samples(), g.samples()], shared.clone(), Some(&traced))?;
         let mut stretched_axes = shared;
         stretched_axes[1].name = "g_hit".into();
         let stretched = count(&[v.samples(), g_hit.samples()], stretched_axes, Some(&traced))?;
-        write_stretched(out, &normal, &stretched, scale, &title, &[])?;
+        write_stretched(self.out, &normal, &stretched, self.scale, &self.title, &[])?;
+        Ok(())
     }
-    if args.hvol {
+
+    /// The histogram volume of the input's (first field's) value, with g
+    /// and f'' derived slice by slice and counted as they come, never stored whole.
+    fn histogram_volume(&self, input: &MultiField, progress: &Progress) -> Result<()> {
+        let args = self.args;
         let p = HvolParams { g_thresh: args.g_thresh, tent_width: args.tent_width, ..HvolParams::default() };
-        let d = DeriveParams {
-            kernel: kernel.unwrap_or(mdtf_pipeline::stages::derive::DEFAULT_KERNEL),
-            ..DeriveParams::default()
-        };
-        // g and f'' are derived slice by slice and counted as they come, never stored whole
+        let kernel = args.kernel.unwrap_or(mdtf_pipeline::stages::derive::DEFAULT_KERNEL);
+        let d = DeriveParams { kernel, ..DeriveParams::default() };
         let value;
         let values = if input.fields.len() == 1 {
-            &input
+            input
         } else {
             value = MultiField::from(input.field_volume(0).context("the input has no fields")?);
             &value
@@ -133,9 +177,8 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
         let hv = progress
             .step("histogram volume", || mdtf_pipeline::hvol_streamed::histogram_volume_derived(values, &d, &p))?;
         let arches = mdtf_pipeline::figures::boundary_arches(&mdtf_pipeline::stages::histogram::detect_boundaries(&hv));
-        write_hvol(out, &hv, &title, &arches)?;
+        write_hvol(self.out, &hv, &self.title, &arches)?;
         progress.note(&format!("histogram volume: sigma {:.4} world units, g_thresh {:.4}", hv.sigma, hv.g_thresh));
+        Ok(())
     }
-    folder.publish(&inputs)?;
-    Ok(())
 }

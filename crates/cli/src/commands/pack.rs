@@ -1,13 +1,13 @@
 //! `mdtf pack`: quantised textures and manifest.
 
 use crate::args::PackArgs;
-use crate::input::{read_input, read_options};
+use crate::input::{read_input, read_options, read_tf};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
 use mdtf_pipeline::boundary_chain::BoundaryChainParams;
 use mdtf_pipeline::stages::boundary::AlphaMap;
 use mdtf_pipeline::stages::pack::{
-    Dtype, MANIFEST_SCHEMA, PackParams, Profile, Provenance, pack, parse_tf, sha256_file,
+    Dtype, GaussianPrimitive, MANIFEST_SCHEMA, PackParams, Profile, Provenance, TfFile, pack, sha256_file,
 };
 use mdtf_pipeline::{channels, gaussians, pack_inputs};
 use mdtf_volume::{Inputs, OutputFolder, Volume};
@@ -38,86 +38,113 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         .collect();
     let inputs = Inputs::of(&given);
     let folder = OutputFolder::begin(output, &inputs)?;
-    let (chans, fields) = progress.step("reading channels", || -> Result<ChannelsAndFields> {
-        if input.is_dir() {
-            let names = profile.channels(&[]);
-            Ok((from_folder(input, &names, args)?, Vec::new()))
-        } else {
-            from_value(input, profile, args)
-        }
-    })?;
-    let mut ranges = BTreeMap::new();
-    for r in &args.range {
-        let (name, span) = r.split_once('=').with_context(|| format!("--range: expected NAME=MIN:MAX, got '{r}'"))?;
-        let (a, b) = span.split_once(':').with_context(|| format!("--range: expected NAME=MIN:MAX, got '{r}'"))?;
-        ranges.insert(name.to_string(), [a.trim().parse::<f64>()?, b.trim().parse::<f64>()?]);
-    }
-    // a value volume is traced with the default d_max; stage outputs leave the measured one
-    let d_max = (!input.is_dir())
-        .then(|| chans.first().map(|(_, v)| mdtf_pipeline::stages::boundary::default_d_max(&v.geometry)))
-        .flatten();
-    let ranges = pack_inputs::ranges(&chans, &ranges, d_max)?;
-    let provenance = Provenance {
-        mdtf_version: env!("CARGO_PKG_VERSION").into(),
-        input: Some(input.display().to_string()),
-        input_sha256: if input.is_file() { sha256_file(input).ok() } else { None },
-        stages: serde_json::json!({ "pack": { "profile": profile.to_string(), "ranges": ranges },
-            "derive": { "kernel": args.kernel.unwrap_or(mdtf_pipeline::stages::derive::DEFAULT_KERNEL).to_string() } }),
-    };
-    let tf = match &args.tf {
-        Some(p) => {
-            let text = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
-            Some(parse_tf(&text).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?)
-        }
-        None => None,
-    };
+    let (chans, fields, d_max) = read_channels(input, profile, args, progress)?;
+    let ranges = pack_inputs::ranges(&chans, &given_ranges(args)?, d_max)?;
+    let provenance = provenance(input, profile, &ranges, args);
+    let tf = read_tf(args.tf.as_deref())?;
     let alpha: AlphaMap = args.alpha.parse().map_err(anyhow::Error::msg)?;
     let kernel = args.kernel.unwrap_or(mdtf_pipeline::stages::derive::DEFAULT_KERNEL);
     let luts = progress
         .step("lookup tables", || pack_inputs::luts(profile, tf.as_ref(), &alpha, &chans, &ranges, None, kernel))?;
-    let dtype = match args.dtype.as_deref() {
+    let gaussians = gaussians_of(args, profile, tf.as_ref(), &chans, &fields, progress)?;
+    let params = PackParams { profile, ranges, fields, dtype: dtype(args)?, nifti: args.nifti };
+    let m = progress.step("packing", || pack(&chans, &params, &luts, folder.path(), provenance, &BTreeMap::new()))?;
+    if let Some(g) = &gaussians {
+        mdtf_pipeline::gaussians::write(folder.path(), g)?;
+    }
+    folder.publish(&inputs)?;
+    let names: Vec<&str> = m.textures.iter().map(|t| t.name.as_str()).collect();
+    let (count, listed) = (names.len(), names.join(", "));
+    progress.note(&format!("packed {count} textures ({listed}) and manifest.json into {}", output.display()));
+    Ok(())
+}
+
+/// The channels the profile packs, from a folder of stage outputs or made
+/// from a value volume; a multi-field input's field names; the tracing's
+/// d_max when the channels were made here (stage outputs leave theirs to
+/// the distance's measured range).
+fn read_channels(
+    input: &Path,
+    profile: Profile,
+    args: &PackArgs,
+    progress: &Progress,
+) -> Result<(Vec<(String, Volume)>, Vec<String>, Option<f64>)> {
+    if input.is_dir() {
+        let chans = progress.step("reading channels", || from_folder(input, &profile.channels(&[]), args))?;
+        return Ok((chans, Vec::new(), None));
+    }
+    let (chans, fields) = progress.step("computing channels", || from_value(input, profile, args))?;
+    let d_max = chans.first().map(|(_, v)| mdtf_pipeline::stages::boundary::default_d_max(&v.geometry));
+    Ok((chans, fields, d_max))
+}
+
+/// The code ranges `--range NAME=MIN:MAX` gives, by channel.
+fn given_ranges(args: &PackArgs) -> Result<BTreeMap<String, [f64; 2]>> {
+    let mut ranges = BTreeMap::new();
+    for r in &args.range {
+        let bad = || format!("--range: expected NAME=MIN:MAX, got '{r}'");
+        let (name, span) = r.split_once('=').with_context(bad)?;
+        let (a, b) = span.split_once(':').with_context(bad)?;
+        ranges.insert(name.to_string(), [a.trim().parse::<f64>()?, b.trim().parse::<f64>()?]);
+    }
+    Ok(ranges)
+}
+
+/// The manifest's provenance: the input (with its checksum when a file), the profile, ranges and kernel.
+fn provenance(input: &Path, profile: Profile, ranges: &BTreeMap<String, [f64; 2]>, args: &PackArgs) -> Provenance {
+    let kernel = args.kernel.unwrap_or(mdtf_pipeline::stages::derive::DEFAULT_KERNEL);
+    Provenance {
+        mdtf_version: env!("CARGO_PKG_VERSION").into(),
+        input: Some(input.display().to_string()),
+        input_sha256: if input.is_file() { sha256_file(input).ok() } else { None },
+        stages: serde_json::json!({ "pack": { "profile": profile.to_string(), "ranges": ranges },
+            "derive": { "kernel": kernel.to_string() } }),
+    }
+}
+
+/// The texture sample type `--dtype` asks for (None: the profile's).
+fn dtype(args: &PackArgs) -> Result<Option<Dtype>> {
+    Ok(match args.dtype.as_deref() {
         None => None,
         Some("u8") => Some(Dtype::U8),
         Some("u16") => Some(Dtype::U16),
         Some("f16") => Some(Dtype::F16),
         Some("f32") => Some(Dtype::F32),
         Some(other) => bail!("--dtype: unknown type '{other}' (u8, u16, f16, f32)"),
-    };
-    let gaussians = if profile == Profile::GaussianTf {
-        let mask = match &args.gtf_from_mask {
-            Some(m) => Some(
-                read_input(m, &args.read, &read_options(&args.read))?
-                    .0
-                    .into_scalar()
-                    .with_context(|| format!("--gtf-from-mask {} must hold one field", m.display()))?,
-            ),
-            None => None,
-        };
-        let (axes, gradient) = if fields.is_empty() { (vec!["v".to_string()], "g") } else { (fields.clone(), "gnorm") };
-        let primitives = progress.step("Gaussian primitives", || {
-            gaussians::gaussians(tf.as_ref(), mask.as_ref(), &chans, &axes, gradient, (None, kernel))
-                .map_err(anyhow::Error::msg)
-        })?;
-        Some(primitives)
-    } else {
+    })
+}
+
+/// gaussian-tf's primitives (the TF's, else fitted to `--gtf-from-mask`,
+/// else the default); None for the other profiles, which refuse a mask.
+fn gaussians_of(
+    args: &PackArgs,
+    profile: Profile,
+    tf: Option<&TfFile>,
+    chans: &[(String, Volume)],
+    fields: &[String],
+    progress: &Progress,
+) -> Result<Option<Vec<GaussianPrimitive>>> {
+    if profile != Profile::GaussianTf {
         if args.gtf_from_mask.is_some() {
             bail!("--gtf-from-mask applies to --profile gaussian-tf");
         }
-        None
-    };
-    let params = PackParams { profile, ranges, fields, dtype, nifti: args.nifti };
-    let m = progress.step("packing", || pack(&chans, &params, &luts, folder.path(), provenance, &BTreeMap::new()))?;
-    if let Some(g) = &gaussians {
-        mdtf_pipeline::gaussians::write(folder.path(), g)?;
+        return Ok(None);
     }
-    folder.publish(&inputs)?;
-    progress.note(&format!(
-        "packed {} textures ({}) and manifest.json into {}",
-        m.textures.len(),
-        m.textures.iter().map(|t| t.name.as_str()).collect::<Vec<_>>().join(", "),
-        output.display()
-    ));
-    Ok(())
+    let mask = match &args.gtf_from_mask {
+        Some(m) => Some(
+            read_input(m, &args.read, &read_options(&args.read))?
+                .0
+                .into_scalar()
+                .with_context(|| format!("--gtf-from-mask {} must hold one field", m.display()))?,
+        ),
+        None => None,
+    };
+    let kernel = args.kernel.unwrap_or(mdtf_pipeline::stages::derive::DEFAULT_KERNEL);
+    let (axes, gradient) = if fields.is_empty() { (vec!["v".to_string()], "g") } else { (fields.to_vec(), "gnorm") };
+    let primitives = progress.step("Gaussian primitives", || {
+        gaussians::gaussians(tf, mask.as_ref(), chans, &axes, gradient, (None, kernel)).map_err(anyhow::Error::msg)
+    })?;
+    Ok(Some(primitives))
 }
 
 /// Channels of a value volume computed in process; a multi-field input's field names are the fields.

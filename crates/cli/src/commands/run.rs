@@ -4,8 +4,10 @@ use crate::args::RunArgs;
 use crate::progress::Progress;
 use anyhow::{Context, Result};
 use mdtf_pipeline::blocks::SlabSize;
-use mdtf_pipeline::file::parse;
-use mdtf_pipeline::run::{RunOptions, plan as plan_pipeline, run as run_pipeline};
+use mdtf_pipeline::file::{Pipeline, parse};
+use mdtf_pipeline::run::{RunOptions, RunReport, plan as plan_pipeline, run as run_pipeline};
+use std::sync::Mutex;
+use std::time::Instant;
 
 /// Parses the pipeline, runs it, prints the stage table.
 pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
@@ -24,70 +26,93 @@ pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
         return Ok(());
     }
     if args.plan {
-        let (plan, input, geo) = plan_pipeline(&pipeline, &opts)?;
-        let [nx, ny, nz] = geo.dims;
-        let [sx, sy, sz] = geo.spacing;
-        println!("plan of {} on {input} ({nx} x {ny} x {nz}, spacing {sx} x {sy} x {sz})", args.pipeline.display());
-        println!("{plan}");
-        return Ok(());
+        return print_plan(args, &pipeline, &opts);
     }
-    // one line per stage: the spinner names the running stage, and each stage
-    // gets its own finished line with its wall time when the next one starts
-    let current: std::sync::Mutex<Option<(String, std::time::Instant)>> = std::sync::Mutex::new(None);
-    let finish = |next: Option<&str>| {
-        let mut cur = current.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some((name, start)) = cur.take() {
-            progress.line(&format!("  {name} ({:.2} s)", start.elapsed().as_secs_f64()));
-        }
-        if let Some(n) = next {
-            progress.message(&format!("running: {n}"));
-            *cur = Some((n.to_string(), std::time::Instant::now()));
-        }
-    };
-    let on_stage = |stage: &str| finish(Some(stage));
-    let slabs = match (args.memory_budget, args.slab_planes) {
-        (Some(b), _) => Some(SlabSize::Budget(b)),
-        (None, Some(h)) => Some(SlabSize::Planes(h.max(1))),
-        // a volume whose whole run would not fit goes by slabs on its own
-        (None, None) => mdtf_pipeline::blocks::automatic(&pipeline, &opts).map(|(budget, geo)| {
-            progress.note(&format!(
-                "{} x {} x {} voxels do not fit in memory at once: running slab by slab within {} \
-                 (--memory-budget sets it)",
-                geo.dims[0],
-                geo.dims[1],
-                geo.dims[2],
-                mdtf_volume::human_bytes(budget as u128)
-            ));
-            SlabSize::Budget(budget)
-        }),
-    };
-    let report = match slabs {
-        Some(size) => {
-            let on_slab = |k: usize, slabs: usize| {
-                let cur = current.lock().unwrap_or_else(|e| e.into_inner());
-                if let Some((name, _)) = cur.as_ref() {
-                    progress.message(&format!("running: {name}, slab {k} of {slabs}"));
-                }
-            };
-            mdtf_pipeline::blocks::run(&pipeline, &opts, size, &on_stage, &on_slab)
-        }
+    let lines = StageLines { progress, current: Mutex::new(None) };
+    let on_stage = |stage: &str| lines.next(Some(stage));
+    let report = match slab_size(args, &pipeline, &opts, progress) {
+        Some(size) => mdtf_pipeline::blocks::run(&pipeline, &opts, size, &on_stage, &|k, n| lines.slab(k, n)),
         None => run_pipeline(&pipeline, &opts, &on_stage),
     };
-    finish(None);
+    lines.next(None);
     let report = report?;
     for w in &report.warnings {
         progress.note(&format!("warning: {w}"));
     }
-    let mut table = format!("{:<22} {:>9} {:>12} {:>10}\n", "stage", "seconds", "Mvoxel/s", "peak MiB");
-    for s in &report.stages {
-        table += &format!("{:<22} {:>9.3} {:>12.1} {:>10.0}\n", s.stage, s.seconds, s.mvoxel_per_s, s.peak_mib);
-    }
-    table += &format!("{:<22} {:>9.3}\n", "total", report.total_seconds);
-    progress.note(&table);
+    progress.note(&stage_table(&report));
     progress.note(&format!(
         "wrote {} ({}; report.html to open in a browser, run_report.json)",
         args.output.display(),
         report.input
     ));
     Ok(())
+}
+
+/// Prints the plan of the run (`--plan`): what it would do, writing nothing.
+fn print_plan(args: &RunArgs, pipeline: &Pipeline, opts: &RunOptions) -> Result<()> {
+    let (plan, input, geo) = plan_pipeline(pipeline, opts)?;
+    let [nx, ny, nz] = geo.dims;
+    let [sx, sy, sz] = geo.spacing;
+    println!("plan of {} on {input} ({nx} x {ny} x {nz}, spacing {sx} x {sy} x {sz})", args.pipeline.display());
+    println!("{plan}");
+    Ok(())
+}
+
+/// The slabs of the run: `--memory-budget`, `--slab-planes`, or a budget
+/// of their own when the whole volume would not fit in memory (said in a
+/// note); None for a whole-volume run.
+fn slab_size(args: &RunArgs, pipeline: &Pipeline, opts: &RunOptions, progress: &Progress) -> Option<SlabSize> {
+    match (args.memory_budget, args.slab_planes) {
+        (Some(b), _) => Some(SlabSize::Budget(b)),
+        (None, Some(h)) => Some(SlabSize::Planes(h.max(1))),
+        (None, None) => mdtf_pipeline::blocks::automatic(pipeline, opts).map(|(budget, geo)| {
+            let [nx, ny, nz] = geo.dims;
+            progress.note(&format!(
+                "{nx} x {ny} x {nz} voxels do not fit in memory at once: running slab by slab within {} \
+                 (--memory-budget sets it)",
+                mdtf_volume::human_bytes(budget as u128)
+            ));
+            SlabSize::Budget(budget)
+        }),
+    }
+}
+
+/// One line per stage: the spinner names the running stage (and slab), and
+/// each stage gets its own finished line with its wall time when the next
+/// one starts.
+struct StageLines<'a> {
+    progress: &'a Progress,
+    /// The running stage and when it started.
+    current: Mutex<Option<(String, Instant)>>,
+}
+
+impl StageLines<'_> {
+    /// Ends the running stage's line and starts `next`'s (None: the run ended).
+    fn next(&self, next: Option<&str>) {
+        let mut cur = self.current.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((name, start)) = cur.take() {
+            self.progress.line(&format!("  {name} ({:.2} s)", start.elapsed().as_secs_f64()));
+        }
+        if let Some(n) = next {
+            self.progress.message(&format!("running: {n}"));
+            *cur = Some((n.to_string(), Instant::now()));
+        }
+    }
+
+    /// Shows that the running stage starts its slab `k` of `slabs`.
+    fn slab(&self, k: usize, slabs: usize) {
+        let cur = self.current.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((name, _)) = cur.as_ref() {
+            self.progress.message(&format!("running: {name}, slab {k} of {slabs}"));
+        }
+    }
+}
+
+/// The run's stages with their seconds, throughput and peak memory, and the total.
+fn stage_table(report: &RunReport) -> String {
+    let mut table = format!("{:<22} {:>9} {:>12} {:>10}\n", "stage", "seconds", "Mvoxel/s", "peak MiB");
+    for s in &report.stages {
+        table += &format!("{:<22} {:>9.3} {:>12.1} {:>10.0}\n", s.stage, s.seconds, s.mvoxel_per_s, s.peak_mib);
+    }
+    table + &format!("{:<22} {:>9.3}\n", "total", report.total_seconds)
 }

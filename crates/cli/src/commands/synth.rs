@@ -8,84 +8,112 @@ use mdtf_pipeline::stages::datagen::{MultiFieldPhantom, RadialPhantom, add_gauss
 use mdtf_volume::{
     Format, Geometry, Inputs, MultiField, OutputFolder, SampleType, Volume, WriteOptions, write, write_volume,
 };
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Generates the phantom and, if asked, its truth.
 pub fn run(args: &SynthArgs, progress: &Progress) -> Result<()> {
     let format = Format::from_path(&args.output).with_context(|| {
         format!("{}: unknown extension (use .nii, .nii.gz, .nrrd, .nhdr, .mha or .mhd)", args.output.display())
     })?;
-    let dims = parse_size(&args.size, "--size")?;
-    let spacing = parse_spacing(&args.spacing, "--spacing")?;
-    let origin = parse_triple(&args.origin, "--origin")?;
-    if !(args.sigma.is_finite() && args.sigma > 0.0) {
-        bail!("--sigma must be positive (world units), got {}", args.sigma);
-    }
-    let geometry = Geometry::new(dims, spacing).with_origin(origin);
+    let geometry = geometry(args)?;
     let opts = WriteOptions { ty: sample_type(args.out_type), gzip: args.gzip };
     let truth_folder = args.truth.as_deref().map(|d| OutputFolder::begin(d, &Inputs::new())).transpose()?;
-    let truth_dir = truth_folder.as_ref().map(OutputFolder::path);
-    let truth_path = |dir: &Path, name: &str| -> PathBuf { dir.join(format!("{name}{}", format.extension())) };
-    let write_truth = |name: &str, mf: MultiField| -> Result<()> {
-        if let Some(dir) = truth_dir {
-            let p = truth_path(dir, name);
-            write(&p, &mf, &WriteOptions { ty: SampleType::F32, gzip: args.gzip }, &[])
-                .context("cannot write the truth")?;
-        }
-        Ok(())
-    };
-
+    let truth = Truth { dir: truth_folder.as_ref().map(OutputFolder::path), extension: format.extension(), args };
     match args.phantom {
-        Phantom::ErfSphere | Phantom::Shells => {
-            let ph = if args.phantom == Phantom::ErfSphere {
-                let radius = args.radius.unwrap_or(0.3 * min_extent(&geometry));
-                if !(radius.is_finite() && radius > 0.0) {
-                    bail!("--radius must be positive (world units), got {radius}");
-                }
-                let centre = args.centre.as_deref().map(|c| parse_triple(c, "--centre")).transpose()?;
-                erf_sphere(geometry, radius, args.sigma, args.vmin, args.vmax, centre)
-            } else {
-                RadialPhantom::tooth(geometry, args.sigma)
-            };
-            let mut vol = progress.step("generating", || ph.volume());
-            add_noise(&mut vol, args)?;
-            quantise(&mut vol, args.out_type);
-            progress
-                .step("writing", || write_volume(&args.output, &vol, &opts, &[]))
-                .context("cannot write the output")?;
-            if truth_dir.is_some() {
-                let t = progress.step("computing truth", || ph.truth());
-                progress.step("writing truth", || -> Result<()> {
-                    for (name, v) in [("v", t.v), ("g", t.g), ("f2", t.f2), ("x", t.x), ("p", t.p)] {
-                        write_truth(name, MultiField::from(v))?;
-                    }
-                    write_truth("normal", t.normal)
-                })?;
-            }
-        }
-        Phantom::Multifield => {
-            let ph = MultiFieldPhantom::new(geometry, args.sigma);
-            let mut mf = progress.step("generating", || ph.volume());
-            if truth_dir.is_some() {
-                // Truth belongs to the noise-free fields' ranges.
-                let t = progress.step("computing truth", || ph.truth(&mf));
-                write_truth("jacobian", t.jacobian)?;
-                write_truth("gnorm", MultiField::from(t.gnorm))?;
-            }
-            for (n, f) in mf.fields.iter_mut().enumerate() {
-                let mut v = Volume { geometry: ph.geometry.clone(), data: std::mem::take(&mut f.data) };
-                add_noise_seeded(&mut v, args, n as u64)?;
-                quantise(&mut v, args.out_type);
-                f.data = v.data;
-            }
-            progress.step("writing", || write(&args.output, &mf, &opts, &[])).context("cannot write the output")?;
-        }
+        Phantom::ErfSphere | Phantom::Shells => radial(args, geometry, &opts, &truth, progress)?,
+        Phantom::Multifield => multifield(args, geometry, &opts, &truth, progress)?,
     }
     progress.note(&format!("wrote {}", args.output.display()));
     if let (Some(folder), Some(shown)) = (truth_folder, &args.truth) {
         folder.publish(&Inputs::new())?;
         progress.note(&format!("wrote analytic truth into {}", shown.display()));
     }
+    Ok(())
+}
+
+/// The grid `--size`, `--spacing` and `--origin` give (with `--sigma` checked).
+fn geometry(args: &SynthArgs) -> Result<Geometry> {
+    let dims = parse_size(&args.size, "--size")?;
+    let spacing = parse_spacing(&args.spacing, "--spacing")?;
+    let origin = parse_triple(&args.origin, "--origin")?;
+    if !(args.sigma.is_finite() && args.sigma > 0.0) {
+        bail!("--sigma must be positive (world units), got {}", args.sigma);
+    }
+    Ok(Geometry::new(dims, spacing).with_origin(origin))
+}
+
+/// Where the analytic truth goes (`--truth`), when asked for.
+struct Truth<'a> {
+    /// The staging folder of the truth; None: not asked for.
+    dir: Option<&'a Path>,
+    /// The output's file extension, which the truth files take too.
+    extension: &'a str,
+    args: &'a SynthArgs,
+}
+
+impl Truth<'_> {
+    /// Writes truth volume `name` as f32 (nothing when the truth is not asked for).
+    fn write(&self, name: &str, mf: MultiField) -> Result<()> {
+        if let Some(dir) = self.dir {
+            let p = dir.join(format!("{name}{}", self.extension));
+            write(&p, &mf, &WriteOptions { ty: SampleType::F32, gzip: self.args.gzip }, &[])
+                .context("cannot write the truth")?;
+        }
+        Ok(())
+    }
+}
+
+/// The erf sphere or the nested shells, with v, g, f'', x, p and the normal as truth.
+fn radial(args: &SynthArgs, geometry: Geometry, opts: &WriteOptions, truth: &Truth, progress: &Progress) -> Result<()> {
+    let ph = if args.phantom == Phantom::ErfSphere {
+        let radius = args.radius.unwrap_or(0.3 * min_extent(&geometry));
+        if !(radius.is_finite() && radius > 0.0) {
+            bail!("--radius must be positive (world units), got {radius}");
+        }
+        let centre = args.centre.as_deref().map(|c| parse_triple(c, "--centre")).transpose()?;
+        erf_sphere(geometry, radius, args.sigma, args.vmin, args.vmax, centre)
+    } else {
+        RadialPhantom::tooth(geometry, args.sigma)
+    };
+    let mut vol = progress.step("generating", || ph.volume());
+    add_noise(&mut vol, args)?;
+    quantise(&mut vol, args.out_type);
+    progress.step("writing", || write_volume(&args.output, &vol, opts, &[])).context("cannot write the output")?;
+    if truth.dir.is_some() {
+        let t = progress.step("computing truth", || ph.truth());
+        progress.step("writing truth", || -> Result<()> {
+            for (name, v) in [("v", t.v), ("g", t.g), ("f2", t.f2), ("x", t.x), ("p", t.p)] {
+                truth.write(name, MultiField::from(v))?;
+            }
+            truth.write("normal", t.normal)
+        })?;
+    }
+    Ok(())
+}
+
+/// Three overlapping erf spheres as three fields, with the Jacobian and ||G|| as truth.
+fn multifield(
+    args: &SynthArgs,
+    geometry: Geometry,
+    opts: &WriteOptions,
+    truth: &Truth,
+    progress: &Progress,
+) -> Result<()> {
+    let ph = MultiFieldPhantom::new(geometry, args.sigma);
+    let mut mf = progress.step("generating", || ph.volume());
+    if truth.dir.is_some() {
+        // Truth belongs to the noise-free fields' ranges.
+        let t = progress.step("computing truth", || ph.truth(&mf));
+        truth.write("jacobian", t.jacobian)?;
+        truth.write("gnorm", MultiField::from(t.gnorm))?;
+    }
+    for (n, f) in mf.fields.iter_mut().enumerate() {
+        let mut v = Volume { geometry: ph.geometry.clone(), data: std::mem::take(&mut f.data) };
+        add_noise_seeded(&mut v, args, n as u64)?;
+        quantise(&mut v, args.out_type);
+        f.data = v.data;
+    }
+    progress.step("writing", || write(&args.output, &mf, opts, &[])).context("cannot write the output")?;
     Ok(())
 }
 
