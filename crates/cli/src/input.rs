@@ -116,6 +116,14 @@ pub fn read_input(path: &Path, args: &InputArgs, opts: &ReadOptions) -> Result<(
     Ok((MultiField::from(v), info))
 }
 
+/// The transfer function file `path` names (`--tf`), parsed; None without one.
+pub fn read_tf(path: Option<&Path>) -> Result<Option<mdtf_pipeline::stages::pack::TfFile>> {
+    let Some(p) = path else { return Ok(None) };
+    let text = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
+    let tf = mdtf_pipeline::stages::pack::parse_tf(&text).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?;
+    Ok(Some(tf))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -131,12 +139,4 @@ mod tests {
         assert!(parse_spacing("1,0,1", "--spacing").is_err());
         assert!(parse_triple("1,nan,1", "--origin").is_err());
     }
-}
-
-/// The transfer function file `path` names (`--tf`), parsed; None without one.
-pub fn read_tf(path: Option<&Path>) -> Result<Option<mdtf_pipeline::stages::pack::TfFile>> {
-    let Some(p) = path else { return Ok(None) };
-    let text = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
-    let tf = mdtf_pipeline::stages::pack::parse_tf(&text).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?;
-    Ok(Some(tf))
 }

@@ -38,7 +38,7 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         .collect();
     let inputs = Inputs::of(&given);
     let folder = OutputFolder::begin(output, &inputs)?;
-    let (chans, fields, d_max) = read_channels(input, profile, args, progress)?;
+    let ((chans, fields), d_max) = read_channels(input, profile, args, progress)?;
     let ranges = pack_inputs::ranges(&chans, &given_ranges(args)?, d_max)?;
     let provenance = provenance(input, profile, &ranges, args);
     let tf = read_tf(args.tf.as_deref())?;
@@ -68,14 +68,14 @@ fn read_channels(
     profile: Profile,
     args: &PackArgs,
     progress: &Progress,
-) -> Result<(Vec<(String, Volume)>, Vec<String>, Option<f64>)> {
+) -> Result<(ChannelsAndFields, Option<f64>)> {
     if input.is_dir() {
         let chans = progress.step("reading channels", || from_folder(input, &profile.channels(&[]), args))?;
-        return Ok((chans, Vec::new(), None));
+        return Ok(((chans, Vec::new()), None));
     }
     let (chans, fields) = progress.step("computing channels", || from_value(input, profile, args))?;
     let d_max = chans.first().map(|(_, v)| mdtf_pipeline::stages::boundary::default_d_max(&v.geometry));
-    Ok((chans, fields, d_max))
+    Ok(((chans, fields), d_max))
 }
 
 /// The code ranges `--range NAME=MIN:MAX` gives, by channel.
