@@ -181,11 +181,13 @@ fn an_anisotropic_noisy_file_read_by_planes_gives_the_same_files_with_and_withou
     let gz = dir.path().join("tooth-gz.nrrd");
     write_volume(&gz, &v, &WriteOptions { ty: SampleType::U16, gzip: true }, &[]).unwrap();
     let slicer = parse("[histogram]\njoint = true\nhvol = true\n[pack]\nprofile = \"slicer-3dtf\"\n", &[]).unwrap();
-    // without the pre-filter the tracing derives its channels and may go by strips of rows
+    // the tracing by strips of rows, deriving its channels, or with the pre-filter reading the
+    // filtered g and f'' over each strip from the store
     let no_prefilter = parse(&text.replace("[prefilter]\nsigma_d = 1.0\nsigma_r = 0.1\n", ""), &[]).unwrap();
     assert!(no_prefilter.prefilter.is_none());
     let strips = [SlabSize::Strips { planes: 6, rows: 7 }, SlabSize::Strips { planes: 11, rows: 1 }];
     assert_slab_runs_equal_the_whole("distance-tf", &no_prefilter, Some(input.clone()), &strips);
+    assert_slab_runs_equal_the_whole("distance-tf", &p, Some(input.clone()), &strips);
     assert_slab_runs_equal_the_whole("slicer-3dtf", &slicer, Some(gz), &[SlabSize::Planes(7)]);
 }
 

@@ -14,8 +14,10 @@
 //! that each plane is derived about once. When whole planes grown by the
 //! tracing's halo do not fit the budget (1024^2 planes in 1 GiB), the
 //! tracing visits each slab in strips of rows ([`fit_trace`]), strip by
-//! strip and down z within each, so the sliding still holds; its sums are
-//! exact, so the order of the blocks does not show in the report.
+//! strip and down z within each, so the sliding still holds (with the
+//! pre-filter, the filtered g and f'' are read from the store over each
+//! block); its sums are exact, so the order of the blocks does not show in
+//! the report.
 //!
 //! The passes: input (the value's statistics); derive (the statistics of
 //! g, f'' and 1/g, and the first radix pass of g's median); pre-filter;

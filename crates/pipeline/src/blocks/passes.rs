@@ -90,8 +90,8 @@ impl<'a> SlabPasses<'a> {
         let hvol_asked = p.histogram.as_ref().is_some_and(|h| h.hvol);
         let hvol_needed = hvol_asked || tf.is_none();
         let threads = rayon::current_num_threads();
-        // the tracing cuts strips of rows when it derives its channels (it reads stored ones by planes)
-        let strips = tracing_derives(&plan, opts.tasks.as_deref());
+        // the tracing cuts strips of rows unless its tasks stored every channel by whole planes
+        let strips = opts.tasks.is_none();
         let ny = geo.dims[1];
         let (height, trace_blocks) = match size {
             SlabSize::Budget(b) => {
@@ -223,7 +223,7 @@ impl<'a> SlabPasses<'a> {
     /// the tracing's noise floor (the tracing of g itself, not of the
     /// pre-filtered g, and in this process: tasks store every channel).
     fn median_reads_stored_g(&self) -> bool {
-        self.plan.trace && tracing_derives(&self.plan, self.tasks)
+        self.plan.trace && !self.plan.prefilter && self.tasks.is_none()
     }
 
     /// The derive groups of the whole run: the plan's items (with g and f''
@@ -275,7 +275,7 @@ impl<'a> SlabPasses<'a> {
         let setup = TraceSetup {
             g,
             f2,
-            stored: !tracing_derives(&self.plan, self.tasks),
+            stored: self.tasks.is_some(),
             params: &self.p.boundary,
             stats: &stats,
             halo: self.plan.reach.trace[2],
@@ -593,13 +593,6 @@ impl<'a> SlabPasses<'a> {
         };
         crate::gaussians::write(&self.dir.join("pack"), &gaussians).map_err(at("pack"))
     }
-}
-
-/// Whether the tracing derives g, f'' and the normal from the stored value
-/// (and may then go by strips of rows); else it reads them stored, by whole
-/// planes: the pre-filtered ones, or every channel its tasks stored.
-fn tracing_derives(plan: &Plan, tasks: Option<&dyn SlabTasks>) -> bool {
-    !plan.prefilter && tasks.is_none()
 }
 
 /// The tracing's whole-volume sums, fed slab by slab in z order.

@@ -4,7 +4,7 @@
 //! (or derived), and only the slab's own planes come out.
 
 use super::slab_channels::BlockRange;
-use super::{SlabChannels, grown};
+use super::{ChannelStore, SlabChannels, grown};
 use crate::run::{RunError, at, fail};
 use mdtf_bilateral::BilateralParams;
 use mdtf_boundary::{BlockTrace, BoundaryInput, BoundaryParams, VolumeStats};
@@ -32,7 +32,10 @@ pub(super) struct TraceSetup<'a> {
     pub g: &'a str,
     /// The f'' traced (likewise).
     pub f2: &'a str,
-    /// Read g, f'' and the normal from the store; else derive them (the first derive group).
+    /// Read g, f'' and the normal from the store by whole planes (a task's
+    /// tracing: its run stored every channel); else derive them over the
+    /// block (the first derive group), then read g and f'' from the store
+    /// when they are the pre-filtered ones (`g` is not "g").
     pub stored: bool,
     /// The tracing's parameters.
     pub params: &'a BoundaryParams,
@@ -77,8 +80,12 @@ pub(super) fn trace_slab(
     } else {
         // the derivatives over the block as derived (its planes and rows beyond the halo are never reached)
         let read_rows = grown(rows, setup.halo_rows, 1, chans.ny());
-        let (at, out) = chans.derive_block(read.clone(), read_rows).map_err(fail("boundary"))?;
-        TraceBlock::of(at, out).map_err(fail("boundary"))?
+        let (place, out) = chans.derive_block(read.clone(), read_rows).map_err(fail("boundary"))?;
+        let block = TraceBlock::of(place, out).map_err(fail("boundary"))?;
+        match setup.g == "g" {
+            true => block,
+            false => block.with_stored(&mut chans.store, setup.g, setup.f2).map_err(at("boundary"))?,
+        }
     };
     let own_planes = z.start - block.at.planes.start..z.end - block.at.planes.start;
     let own_rows = rows.start - block.at.rows.start..rows.end - block.at.rows.start;
@@ -125,6 +132,20 @@ impl TraceBlock {
             return Err("the tracing needs g, f2 and the normal from one derive pass".into());
         };
         Ok(TraceBlock { at, g, f2, normal, order: Some(order) })
+    }
+
+    /// The block with g and f'' replaced by the store's channels `g` and
+    /// `f2` over it (the pre-filtered ones), read into the same memory.
+    fn with_stored(self, store: &mut ChannelStore, g: &str, f2: &str) -> std::io::Result<TraceBlock> {
+        let TraceBlock { at, g: derived_g, f2: derived_f2, normal, order } = self;
+        let mut over_block = |name: &str, v: Volume| {
+            let geometry = v.geometry.clone();
+            let mut samples = v.data.into_raw_vec_and_offset().0;
+            store.rows_into(name, at.planes.clone(), at.rows.clone(), &mut samples)?;
+            Volume::from_samples(geometry, samples).map_err(std::io::Error::other)
+        };
+        let (g, f2) = (over_block(g, derived_g)?, over_block(f2, derived_f2)?);
+        Ok(TraceBlock { at, g, f2, normal, order })
     }
 
     /// The derive output it came from, for its memory.
