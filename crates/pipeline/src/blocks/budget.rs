@@ -10,9 +10,10 @@ use mdtf_volume::{Geometry, human_bytes};
 
 /// What the process holds whatever the slab: code, thread stacks, figures (bytes).
 const BASE_BYTES: u64 = 48 << 20;
-/// The histogram volume's counts (256^3 u32, at most), one array whatever
-/// its lanes ([`mdtf_histogram::HvolBySlabs`]).
-const HVOL_BYTES: u64 = 64 << 20;
+/// The histogram volume ([`mdtf_histogram::HvolBySlabs`]): its counts
+/// (256^3 u32 at most, one array whatever its lanes) and the sums of its 16
+/// fixed parts (three 8-byte sums on each of 256^2 (v, g) bins).
+const HVOL_BYTES: u64 = (64 << 20) + 16 * 3 * 8 * 256 * 256;
 
 /// Block-sized f32 arrays the tracing holds: the value and its five
 /// derivatives over the block grown by the halo and the kernel's support,

@@ -125,7 +125,10 @@ impl SlabChannels {
             if !names.iter().any(|n| !self.store.has(n) && made.iter().any(|m| m == n)) {
                 continue;
             }
-            let d = d.clone();
+            // only the items asked for: an item alone has the bits it has among others
+            // (derive's fused loop equals its general pass), and the others cost time
+            let mut d = d.clone();
+            d.items.retain(|&i| made_by(i).iter().any(|m| names.contains(&m.as_str())));
             let k = self.kernel_reach;
             let read = grown(&z, k, 2 * k + 1, self.nz);
             let value = self.value_planes(read.clone())?;
