@@ -5,25 +5,31 @@
 
 /// Makes blocks 0..`n` in order with `make(k)`, handing each to `take` (in
 /// the same order) while the next is made, on the pool's other lanes;
-/// `start(k)` is called on the calling thread before block k is made (the
-/// progress). At most two blocks are alive at once: the one taken and the
-/// one made. The first error of any stops the loop.
+/// `start(k)` is called before block k is made (the progress). At most two
+/// blocks are alive at once: the one taken and the one made. The first
+/// error stops the loop. The whole loop is one task of the pool, so every
+/// block is made on the same thread and its memory comes from and goes back
+/// to one heap (made on any of the pool's threads, each would keep a heap of
+/// freed blocks of its own, and the process would hold about twice its
+/// blocks' memory).
 pub fn overlapped<T: Send, E: Send>(
     n: usize,
-    start: &mut dyn FnMut(usize) -> Result<(), E>,
+    start: &mut (dyn FnMut(usize) -> Result<(), E> + Send),
     make: &mut (dyn FnMut(usize) -> Result<T, E> + Send),
     take: &mut (dyn FnMut(T) -> Result<(), E> + Send),
 ) -> Result<(), E> {
-    let mut pending: Option<T> = None;
-    for k in 0..n {
-        start(k)?;
-        let last = pending.take();
-        // the take is stolen by an idle lane while `make` runs here (rayon's join)
-        let (made, taken) = rayon::join(|| make(k), || last.map_or(Ok(()), &mut *take));
-        taken?;
-        pending = Some(made?);
-    }
-    pending.map_or(Ok(()), take)
+    rayon::scope(|_| {
+        let mut pending: Option<T> = None;
+        for k in 0..n {
+            start(k)?;
+            let last = pending.take();
+            // `make` runs on this thread; the take is stolen by an idle lane
+            let (made, taken) = rayon::join(|| make(k), || last.map_or(Ok(()), &mut *take));
+            taken?;
+            pending = Some(made?);
+        }
+        pending.map_or(Ok(()), &mut *take)
+    })
 }
 
 #[cfg(test)]
@@ -55,9 +61,28 @@ mod tests {
             },
             &mut |_| Ok(()),
         );
-        assert!(e.is_err() && made == vec![0, 1, 2], "{made:?}");
-        let e =
-            overlapped(5, &mut |_| Ok(()), &mut Ok, &mut |t| if t == 1 { Err("write 1".to_string()) } else { Ok(()) });
+        assert_eq!(e, Err("block 2".to_string()));
+        assert_eq!(made, vec![0, 1, 2]);
+        // a failed take stops the making within a block or two
+        let mut made = 0;
+        let e = overlapped(
+            50,
+            &mut |_| Ok(()),
+            &mut |k| {
+                made += 1;
+                Ok(k)
+            },
+            &mut |t| if t == 1 { Err("write 1".to_string()) } else { Ok(()) },
+        );
         assert_eq!(e, Err("write 1".to_string()));
+        assert_eq!(made, 3, "block 1 is taken while block 2 is made");
+        // every block is made on one thread
+        let mut threads = std::collections::HashSet::new();
+        let mut record = |_| {
+            threads.insert(std::thread::current().id());
+            Ok::<_, String>(())
+        };
+        overlapped(20, &mut |_| Ok(()), &mut record, &mut |_| Ok(())).unwrap();
+        assert_eq!(threads.len(), 1);
     }
 }
