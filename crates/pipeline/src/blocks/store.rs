@@ -260,6 +260,16 @@ mod tests {
         assert_eq!(back, first_rows, "the other rows are as written first");
         let whole = s.samples("g", 0..5).unwrap();
         assert_eq!(&whole[21..24], &strip[3..6], "plane 3's row 1 holds the strip's second plane");
+        // a writer's channels, written on its own handles while the store reads others, read back
+        let mut w = s.writer(&["f2"]).unwrap();
+        w.put_volume("f2", 3, &Volume::from_samples(geo.z_slab(3..5), all[18..].to_vec()).unwrap()).unwrap();
+        assert_eq!(s.samples("g", 0..1).unwrap(), &all[..6]);
+        w.put_rows("f2", 0, 1..2, &Volume::from_samples(geo.z_slab(0..3).y_rows(1..2), strip.clone()).unwrap())
+            .unwrap();
+        s.rows_into("f2", 0..3, 1..2, &mut back).unwrap();
+        assert_eq!(back, strip);
+        assert_eq!(s.samples("f2", 3..5).unwrap(), &all[18..]);
+        assert!(w.put_volume("g", 0, &v).is_err(), "only the writer's own channels");
         s.remove("g");
         assert!(!s.has("g") && !dir.path().join("store/g.f32").exists());
         s.clear();
