@@ -30,8 +30,10 @@ pub struct SlabChannels {
     last_block: BlockRange,
     /// Each group's last output, whose memory its next derivation reuses.
     previous: Vec<Option<DeriveOutput>>,
-    /// Memory of the last value block read for it.
+    /// Memory of the last value block read, holding its samples.
     value_buffer: Vec<f32>,
+    /// Where the block in `value_buffer` lies (empty: it holds none).
+    value_block: BlockRange,
     /// When set, every read fails: a cancelled run stops in the middle of a pass.
     cancel: Option<Arc<AtomicBool>>,
 }
@@ -87,6 +89,7 @@ impl SlabChannels {
             last_block: BlockRange { planes: 0..0, rows: 0..0 },
             previous,
             value_buffer: Vec::new(),
+            value_block: BlockRange { planes: 0..0, rows: 0..0 },
             cancel: None,
         }
     }
@@ -225,15 +228,37 @@ impl SlabChannels {
     }
 
     /// The stored value on a block, read into the memory of the last one.
+    /// When the block slides along z from the last (the same rows), the
+    /// planes they share are moved, and only the new ones read.
     fn value(&mut self, block: &BlockRange) -> Result<MultiField, String> {
         self.check()?;
         let mut buffer = std::mem::take(&mut self.value_buffer);
-        self.store.rows_into("v", block.planes.clone(), block.rows.clone(), &mut buffer).map_err(|e| e.to_string())?;
-        let geometry = self.store.geometry().z_slab(block.planes.clone()).y_rows(block.rows.clone());
-        Ok(MultiField::from(Volume::from_samples(geometry, buffer).map_err(|e| e.to_string())?))
+        let last = std::mem::replace(&mut self.value_block, BlockRange { planes: 0..0, rows: 0..0 });
+        let plane = self.store.geometry().dims[0] * block.rows.len();
+        let (planes, rows) = (&block.planes, &block.rows);
+        let shared = last.rows == *rows
+            && last.planes.start <= planes.start
+            && planes.start < last.planes.end
+            && last.planes.end <= planes.end
+            && buffer.len() == last.planes.len() * plane;
+        let io = |e: std::io::Error| e.to_string();
+        if shared {
+            let kept = last.planes.end - planes.start;
+            buffer.copy_within((planes.start - last.planes.start) * plane.., 0);
+            buffer.resize(planes.len() * plane, 0.0);
+            let new_planes = last.planes.end..planes.end;
+            self.store.rows_into_slice("v", new_planes, rows.clone(), &mut buffer[kept * plane..]).map_err(io)?;
+        } else {
+            self.store.rows_into("v", planes.clone(), rows.clone(), &mut buffer).map_err(io)?;
+        }
+        let geometry = self.store.geometry().z_slab(planes.clone()).y_rows(rows.clone());
+        let value = Volume::from_samples(geometry, buffer).map_err(|e| e.to_string())?;
+        self.value_block = block.clone();
+        Ok(MultiField::from(value))
     }
 
-    /// Keeps the memory of a value read by [`SlabChannels::value`] for the next read.
+    /// Keeps the memory of a value read by [`SlabChannels::value`] (and its
+    /// samples, for a next block that shares planes with it).
     fn keep_value(&mut self, value: MultiField) {
         self.value_buffer =
             value.fields.into_iter().next().map(|f| f.data.into_raw_vec_and_offset().0).unwrap_or_default();
@@ -244,6 +269,7 @@ impl SlabChannels {
         self.recycled = None;
         self.previous.iter_mut().for_each(|p| *p = None);
         self.value_buffer = Vec::new();
+        self.value_block = BlockRange { planes: 0..0, rows: 0..0 };
     }
 
     /// Gives back the output of [`SlabChannels::derive_block`] for reuse.

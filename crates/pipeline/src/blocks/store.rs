@@ -139,11 +139,32 @@ impl ChannelStore {
             return self.samples_into(name, z, samples);
         }
         let (z0, z1) = (z.start.min(nz), z.end.min(nz).max(z.start.min(nz)));
+        samples.resize((z1 - z0) * nx * rows.len(), 0.0);
+        self.rows_into_slice(name, z0..z1, rows, samples)
+    }
+
+    /// Rows `rows` of planes `z` (within the grid) of channel `name` into
+    /// `samples`, which holds exactly that many.
+    pub fn rows_into_slice(
+        &mut self,
+        name: &str,
+        z: Range<usize>,
+        rows: Range<usize>,
+        samples: &mut [f32],
+    ) -> std::io::Result<()> {
+        let [nx, ny, _] = self.geometry.dims;
         let chunk = nx * rows.len();
-        samples.resize((z1 - z0) * chunk, 0.0);
+        if samples.len() != z.len() * chunk {
+            let what = format!("{} samples for {} planes of {chunk}", samples.len(), z.len());
+            return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, what));
+        }
         let Some(file) = self.files.get_mut(name) else { return Err(missing(name)) };
+        if rows.start == 0 && rows.end == ny {
+            file.seek(SeekFrom::Start((z.start * chunk * 4) as u64))?;
+            return file.read_exact(bytemuck::cast_slice_mut(samples));
+        }
         for (k, plane) in samples.chunks_mut(chunk.max(1)).enumerate() {
-            file.seek(SeekFrom::Start((((z0 + k) * ny + rows.start) * nx * 4) as u64))?;
+            file.seek(SeekFrom::Start((((z.start + k) * ny + rows.start) * nx * 4) as u64))?;
             file.read_exact(bytemuck::cast_slice_mut(plane))?;
         }
         Ok(())
