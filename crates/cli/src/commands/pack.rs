@@ -6,6 +6,7 @@ use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
 use mdtf_pipeline::boundary_chain::BoundaryChainParams;
 use mdtf_pipeline::stages::boundary::AlphaMap;
+use mdtf_pipeline::stages::derive::Kernel;
 use mdtf_pipeline::stages::pack::{
     Dtype, GaussianPrimitive, MANIFEST_SCHEMA, PackParams, Profile, Provenance, TfFile, pack, sha256_file,
 };
@@ -40,13 +41,13 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
     let folder = OutputFolder::begin(output, &inputs)?;
     let ((chans, fields), d_max) = read_channels(input, profile, args, progress)?;
     let ranges = pack_inputs::ranges(&chans, &given_ranges(args)?, d_max)?;
-    let provenance = provenance(input, profile, &ranges, args);
+    let kernel = args.kernel.unwrap_or(mdtf_pipeline::stages::derive::DEFAULT_KERNEL);
+    let provenance = provenance(input, profile, &ranges, kernel);
     let tf = read_tf(args.tf.as_deref())?;
     let alpha: AlphaMap = args.alpha.parse().map_err(anyhow::Error::msg)?;
-    let kernel = args.kernel.unwrap_or(mdtf_pipeline::stages::derive::DEFAULT_KERNEL);
     let luts = progress
         .step("lookup tables", || pack_inputs::luts(profile, tf.as_ref(), &alpha, &chans, &ranges, None, kernel))?;
-    let gaussians = gaussians_of(args, profile, tf.as_ref(), &chans, &fields, progress)?;
+    let gaussians = gaussians_of(args, profile, tf.as_ref(), &chans, &fields, kernel, progress)?;
     let params = PackParams { profile, ranges, fields, dtype: dtype(args)?, nifti: args.nifti };
     let m = progress.step("packing", || pack(&chans, &params, &luts, folder.path(), provenance, &BTreeMap::new()))?;
     if let Some(g) = &gaussians {
@@ -91,8 +92,7 @@ fn given_ranges(args: &PackArgs) -> Result<BTreeMap<String, [f64; 2]>> {
 }
 
 /// The manifest's provenance: the input (with its checksum when a file), the profile, ranges and kernel.
-fn provenance(input: &Path, profile: Profile, ranges: &BTreeMap<String, [f64; 2]>, args: &PackArgs) -> Provenance {
-    let kernel = args.kernel.unwrap_or(mdtf_pipeline::stages::derive::DEFAULT_KERNEL);
+fn provenance(input: &Path, profile: Profile, ranges: &BTreeMap<String, [f64; 2]>, kernel: Kernel) -> Provenance {
     Provenance {
         mdtf_version: env!("CARGO_PKG_VERSION").into(),
         input: Some(input.display().to_string()),
@@ -122,6 +122,7 @@ fn gaussians_of(
     tf: Option<&TfFile>,
     chans: &[(String, Volume)],
     fields: &[String],
+    kernel: Kernel,
     progress: &Progress,
 ) -> Result<Option<Vec<GaussianPrimitive>>> {
     if profile != Profile::GaussianTf {
@@ -139,7 +140,6 @@ fn gaussians_of(
         ),
         None => None,
     };
-    let kernel = args.kernel.unwrap_or(mdtf_pipeline::stages::derive::DEFAULT_KERNEL);
     let (axes, gradient) = if fields.is_empty() { (vec!["v".to_string()], "g") } else { (fields.to_vec(), "gnorm") };
     let primitives = progress.step("Gaussian primitives", || {
         gaussians::gaussians(tf, mask.as_ref(), chans, &axes, gradient, (None, kernel)).map_err(anyhow::Error::msg)

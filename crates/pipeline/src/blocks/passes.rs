@@ -68,6 +68,20 @@ pub(super) struct Derived {
     smallest_inv_g: f32,
 }
 
+impl Derived {
+    /// Takes in a slab of channel `name` (g: the first radix pass of its
+    /// median, behind the tracing's noise floor, the (v, 1/g) axis and
+    /// gaussian-tf's default; 1/g: its smallest positive value, whose
+    /// multiple is the top of its code range).
+    fn add(&mut self, name: &str, samples: &[f32]) {
+        match name {
+            "g" => self.g_buckets.iter_mut().for_each(|b| b.add(samples)),
+            "inv_g" => self.smallest_inv_g = crate::pack_inputs::smallest_positive(samples).min(self.smallest_inv_g),
+            _ => {}
+        }
+    }
+}
+
 impl<'a> SlabPasses<'a> {
     /// The input pass: opens the input, plans the run and sizes its slabs
     /// (`size`), and copies the value slab by slab into a channel store in
@@ -176,14 +190,11 @@ impl<'a> SlabPasses<'a> {
         let mut chans =
             SlabChannels::new(store, groups, self.plan.reach.kernel[2], nz).cancelled_by(self.opts.cancel.clone());
         let summarised: Vec<&str> = ["g", "f2", "inv_g"].into_iter().filter(|c| chans.has(c)).collect();
-        // the first radix pass of g's median (the tracing's noise floor, the (v, 1/g) axis,
-        // gaussian-tf's default), taken as this pass derives g
-        let mut g_buckets = summarised.contains(&"g").then(KeyBuckets::new);
-        // the smallest positive 1/g, whose multiple is the top of its code range
-        let mut smallest_inv_g = f32::INFINITY;
+        let g_buckets = summarised.contains(&"g").then(KeyBuckets::new);
+        let mut derived = Derived { kernel, g_buckets, smallest_inv_g: f32::INFINITY };
         // g waits on disk for the second radix pass of its median before the tracing: reading
         // it back costs less than deriving every slab again (it goes once the median is known)
-        let keep_g = self.median_reads_stored_g() && g_buckets.is_some();
+        let keep_g = self.median_reads_stored_g() && derived.g_buckets.is_some();
         if !summarised.is_empty() {
             self.progress.stage("derive")?;
             let mut writer = chans.store.writer(if keep_g { &["g"] } else { &[] }).map_err(io("derive"))?;
@@ -196,17 +207,9 @@ impl<'a> SlabPasses<'a> {
                 &mut |(first, volumes)| {
                     for (name, v) in volumes {
                         stats.add(&name, v.samples());
-                        match name.as_str() {
-                            "g" => {
-                                g_buckets.iter_mut().for_each(|b| b.add(v.samples()));
-                                if keep_g {
-                                    writer.put_volume("g", first, &v).map_err(io("derive"))?;
-                                }
-                            }
-                            "inv_g" => {
-                                smallest_inv_g = crate::pack_inputs::smallest_positive(v.samples()).min(smallest_inv_g)
-                            }
-                            _ => {}
+                        derived.add(&name, v.samples());
+                        if name == "g" && keep_g {
+                            writer.put_volume("g", first, &v).map_err(io("derive"))?;
                         }
                     }
                     Ok(())
@@ -216,7 +219,7 @@ impl<'a> SlabPasses<'a> {
             // its time includes its tasks'
             self.stages.done("derive", derive_start, self.geo.voxel_count(), vec![]);
         }
-        Ok((chans, Derived { kernel, g_buckets, smallest_inv_g }))
+        Ok((chans, derived))
     }
 
     /// Whether the derive pass stores g for the second pass of its median,
@@ -256,16 +259,16 @@ impl<'a> SlabPasses<'a> {
         if !self.plan.trace {
             return Ok(Traced::default());
         }
-        let (g, f2) = match (self.plan.prefilter, &self.p.prefilter) {
+        let (g, f2, prefiltered) = match (self.plan.prefilter, &self.p.prefilter) {
             (true, Some(pf)) => {
                 self.prefilter(chans, pf)?;
-                ("g_prefiltered", "f2_prefiltered")
+                ("g_prefiltered", "f2_prefiltered", true)
             }
-            _ => ("g", "f2"),
+            _ => ("g", "f2", false),
         };
         self.progress.stage("boundary")?;
         let t = Instant::now();
-        let traced_buckets = derived.g_buckets.as_ref().filter(|_| g == "g");
+        let traced_buckets = derived.g_buckets.as_ref().filter(|_| !prefiltered);
         let l_min = self.geo.min_spacing();
         let value_range = self.value_range();
         let stats = g_stats(chans, g, traced_buckets, &self.slabs, value_range, l_min, &self.stats)?;
@@ -276,6 +279,7 @@ impl<'a> SlabPasses<'a> {
             g,
             f2,
             stored: self.tasks.is_some(),
+            prefiltered,
             params: &self.p.boundary,
             stats: &stats,
             halo: self.plan.reach.trace[2],

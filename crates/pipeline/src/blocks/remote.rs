@@ -170,8 +170,17 @@ pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<(), RunError> {
         }
         SlabPass::Trace { g, f2, params, stats, halo, value_range } => {
             let mut chans = SlabChannels::new(open(&[g, f2, "nx", "ny", "nz"])?, vec![], 0, nz);
-            let setup =
-                TraceSetup { g, f2, stored: true, params, stats, halo: *halo, halo_rows: 0, value_range: *value_range };
+            let setup = TraceSetup {
+                g,
+                f2,
+                stored: true,
+                prefiltered: false,
+                params,
+                stats,
+                halo: *halo,
+                halo_rows: 0,
+                value_range: *value_range,
+            };
             let rows = 0..chans.ny();
             let b = trace_slab(&mut chans, &setup, &z, &rows)?.trace;
             for (c, v) in TRACED.iter().zip([&b.g_hit, &b.hit, &b.distance, &b.dot]) {

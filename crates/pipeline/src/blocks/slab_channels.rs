@@ -48,6 +48,9 @@ pub struct BlockRange {
 }
 
 impl BlockRange {
+    /// No block (no planes, no rows).
+    const NONE: BlockRange = BlockRange { planes: 0..0, rows: 0..0 };
+
     /// Whether a block derived over `self` can hand its exact planes on to
     /// `next`: as tall, the same rows, starting inside it further along z.
     fn slides_to(&self, next: &BlockRange) -> bool {
@@ -86,10 +89,10 @@ impl SlabChannels {
             kernel_reach,
             nz,
             recycled: None,
-            last_block: BlockRange { planes: 0..0, rows: 0..0 },
+            last_block: BlockRange::NONE,
             previous,
             value_buffer: Vec::new(),
-            value_block: BlockRange { planes: 0..0, rows: 0..0 },
+            value_block: BlockRange::NONE,
             cancel: None,
         }
     }
@@ -233,7 +236,7 @@ impl SlabChannels {
     fn value(&mut self, block: &BlockRange) -> Result<MultiField, String> {
         self.check()?;
         let mut buffer = std::mem::take(&mut self.value_buffer);
-        let last = std::mem::replace(&mut self.value_block, BlockRange { planes: 0..0, rows: 0..0 });
+        let last = std::mem::replace(&mut self.value_block, BlockRange::NONE);
         let plane = self.store.geometry().dims[0] * block.rows.len();
         let (planes, rows) = (&block.planes, &block.rows);
         let shared = last.rows == *rows
@@ -269,7 +272,7 @@ impl SlabChannels {
         self.recycled = None;
         self.previous.iter_mut().for_each(|p| *p = None);
         self.value_buffer = Vec::new();
-        self.value_block = BlockRange { planes: 0..0, rows: 0..0 };
+        self.value_block = BlockRange::NONE;
     }
 
     /// Gives back the output of [`SlabChannels::derive_block`] for reuse.

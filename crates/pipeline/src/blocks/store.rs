@@ -134,10 +134,7 @@ impl ChannelStore {
         rows: Range<usize>,
         samples: &mut Vec<f32>,
     ) -> std::io::Result<()> {
-        let [nx, ny, nz] = self.geometry.dims;
-        if rows.start == 0 && rows.end == ny {
-            return self.samples_into(name, z, samples);
-        }
+        let [nx, _, nz] = self.geometry.dims;
         let (z0, z1) = (z.start.min(nz), z.end.min(nz).max(z.start.min(nz)));
         samples.resize((z1 - z0) * nx * rows.len(), 0.0);
         self.rows_into_slice(name, z0..z1, rows, samples)
@@ -179,13 +176,7 @@ impl ChannelStore {
 
     /// [`ChannelStore::samples`] into `samples` (resized; its memory reused).
     pub fn samples_into(&mut self, name: &str, z: Range<usize>, samples: &mut Vec<f32>) -> std::io::Result<()> {
-        let nz = self.geometry.dims[2];
-        let (z0, z1) = (z.start.min(nz), z.end.min(nz).max(z.start.min(nz)));
-        let plane = self.plane_len();
-        samples.resize((z1 - z0) * plane, 0.0);
-        let Some(file) = self.files.get_mut(name) else { return Err(missing(name)) };
-        file.seek(SeekFrom::Start((z0 * plane * 4) as u64))?;
-        file.read_exact(bytemuck::cast_slice_mut(samples.as_mut_slice()))
+        self.rows_into(name, z, 0..self.geometry.dims[1], samples)
     }
 
     /// Planes `z` (clamped to the grid) of channel `name` as a volume placed where they lie.

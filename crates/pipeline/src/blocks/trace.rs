@@ -34,9 +34,10 @@ pub(super) struct TraceSetup<'a> {
     pub f2: &'a str,
     /// Read g, f'' and the normal from the store by whole planes (a task's
     /// tracing: its run stored every channel); else derive them over the
-    /// block (the first derive group), then read g and f'' from the store
-    /// when they are the pre-filtered ones (`g` is not "g").
+    /// block (the first derive group).
     pub stored: bool,
+    /// g and f'' are the pre-filtered ones: a derived block reads them from the store over it.
+    pub prefiltered: bool,
     /// The tracing's parameters.
     pub params: &'a BoundaryParams,
     /// The whole volume's statistics behind the tracing's defaults.
@@ -82,9 +83,9 @@ pub(super) fn trace_slab(
         let read_rows = grown(rows, setup.halo_rows, 1, chans.ny());
         let (place, out) = chans.derive_block(read.clone(), read_rows).map_err(fail("boundary"))?;
         let block = TraceBlock::of(place, out).map_err(fail("boundary"))?;
-        match setup.g == "g" {
-            true => block,
-            false => block.with_stored(&mut chans.store, setup.g, setup.f2).map_err(at("boundary"))?,
+        match setup.prefiltered {
+            false => block,
+            true => block.with_stored(&mut chans.store, setup.g, setup.f2).map_err(at("boundary"))?,
         }
     };
     let own_planes = z.start - block.at.planes.start..z.end - block.at.planes.start;
