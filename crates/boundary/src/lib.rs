@@ -403,6 +403,19 @@ pub fn trace_block(
     place: &BlockPlace,
     stats: &VolumeStats,
 ) -> Result<BlockTrace, BoundaryError> {
+    trace_block_into(input, params, place, stats, None)
+}
+
+/// [`trace_block`], its outputs in the memory of `spent` (a block's tracing
+/// done with) when given: a caller tracing block after block saves mapping
+/// fresh memory for each, which page-faults at a cost like the tracing's.
+pub fn trace_block_into(
+    input: &BoundaryInput,
+    params: &BoundaryParams,
+    place: &BlockPlace,
+    stats: &VolumeStats,
+    spent: Option<BlockTrace>,
+) -> Result<BlockTrace, BoundaryError> {
     let geo = &input.g.geometry;
     if !input.f2.geometry.same_grid(geo) || !input.normal.geometry.same_grid(geo) {
         return Err(BoundaryError::Geometry(format!(
@@ -450,10 +463,15 @@ pub fn trace_block(
     };
     let plane = geo.dims[0] * rows.len();
     let out_geo = geo.z_slab(planes.clone()).y_rows(rows.clone());
-    let mut distance = Volume::zeros(out_geo.clone());
-    let mut g_hit = Volume::zeros(out_geo.clone());
-    let mut hit = Volume::zeros(out_geo.clone());
-    let mut dot = Volume::zeros(out_geo);
+    let mut memory = spent.map(|b| [b.distance, b.g_hit, b.hit, b.dot]).into_iter().flatten();
+    let mut zeros = || -> Result<Volume, BoundaryError> {
+        let Some(v) = memory.next() else { return Ok(Volume::zeros(out_geo.clone())) };
+        let mut samples = v.data.into_raw_vec_and_offset().0;
+        samples.clear();
+        samples.resize(out_geo.voxel_count(), 0.0);
+        Volume::from_samples(out_geo.clone(), samples).map_err(|e| BoundaryError::Geometry(e.to_string()))
+    };
+    let (mut distance, mut g_hit, mut hit, mut dot) = (zeros()?, zeros()?, zeros()?, zeros()?);
     let mut counts = TraceCounts::default();
     let mut crossings = lost::CrossingHistogram::new(stats.g_max);
     {

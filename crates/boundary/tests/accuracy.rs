@@ -290,6 +290,33 @@ fn a_block_cut_in_y_and_z_traces_its_voxels_as_the_whole_volume_does() {
 }
 
 #[test]
+fn a_block_traced_into_the_memory_of_another_has_the_bits_of_a_fresh_one() {
+    use mdtf_boundary::{BlockPlace, VolumeStats, trace_block, trace_block_into};
+    let geo = Geometry::new([30, 28, 26], [1.0, 0.9, 1.1]);
+    let d = derive(&RadialPhantom::tooth(geo, 1.5).volume());
+    let params = BoundaryParams { d_max: Some(4.0), ..BoundaryParams::default() };
+    let stats = VolumeStats::of(&d.g, 255.0);
+    let input = BoundaryInput { g: &d.g, f2: &d.f2, normal: &d.normal, value_range: 255.0 };
+    let place = |rows: std::ops::Range<usize>, planes| BlockPlace { first: [0; 3], rows, planes };
+    let bits = |v: &Volume| v.data.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    // a larger block's and a smaller block's outputs, marked where the tracing may leave a voxel alone
+    for spent_place in [place(0..28, 0..26), place(3..5, 7..8)] {
+        let mut spent = trace_block(&input, &params, &spent_place, &stats).unwrap();
+        for v in [&mut spent.distance, &mut spent.g_hit, &mut spent.hit, &mut spent.dot] {
+            v.data.fill(-7.0);
+        }
+        let at = place(4..20, 6..17);
+        let fresh = trace_block(&input, &params, &at, &stats).unwrap();
+        let reused = trace_block_into(&input, &params, &at, &stats, Some(spent)).unwrap();
+        for (a, b) in [(&reused.distance, &fresh.distance), (&reused.g_hit, &fresh.g_hit), (&reused.hit, &fresh.hit)] {
+            assert_eq!((&a.geometry, bits(a)), (&b.geometry, bits(b)));
+        }
+        assert_eq!(bits(&reused.dot), bits(&fresh.dot));
+        assert!(fresh.hit.data.iter().any(|&h| h == 0.0), "the block has voxels the tracing leaves alone");
+    }
+}
+
+#[test]
 fn bad_input_is_refused() {
     let ph = erf_sphere(Geometry::new([24; 3], [1.0; 3]), 7.0, 1.5, 0.0, 255.0, None);
     let d = derive(&ph.volume());

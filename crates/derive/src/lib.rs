@@ -344,22 +344,31 @@ fn prepare<'a>(input: &FieldsView<'a>, params: &DeriveParams) -> Result<Prepared
     Ok(Prepared { items, layout, engine })
 }
 
-/// `count` buffers of `len` samples, taken from `previous` when it has exactly
-/// that many of that size (their contents are overwritten), else fresh.
+/// `count` buffers of `len` samples (their contents are overwritten), in
+/// the memory of `previous`'s while it has some (grown or shortened): a
+/// caller deriving block after block hands each output back, and its blocks
+/// differ in size at the volume's faces or in their items; fresh memory
+/// page-faults, which costs about as much as the derivation.
 fn reuse_buffers(previous: Option<DeriveOutput>, count: usize, len: usize) -> Vec<Vec<f32>> {
-    let old: Vec<Vec<f32>> = previous
+    // in order: a caller keeping slices (`run_keeping`) gets each component's own back
+    let mut old = previous
         .map(|p| {
             p.items
                 .into_iter()
                 .flat_map(|(_, mf)| mf.fields.into_iter().map(|f| f.data.into_raw_vec_and_offset().0))
-                .collect()
+                .collect::<Vec<_>>()
         })
-        .unwrap_or_default();
-    if old.len() == count && old.iter().all(|b| b.len() == len) {
-        old
-    } else {
-        (0..count).map(|_| vec![0.0f32; len]).collect()
-    }
+        .unwrap_or_default()
+        .into_iter();
+    (0..count)
+        .map(|_| match old.next() {
+            Some(mut b) => {
+                b.resize(len, 0.0);
+                b
+            }
+            None => vec![0.0f32; len],
+        })
+        .collect()
 }
 
 fn dedup(items: &[Item]) -> Vec<Item> {

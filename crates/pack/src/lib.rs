@@ -47,7 +47,7 @@ pub use tet_tables::{
 };
 pub use tf::{Falloff, TfFile, Widget, parse_tf, to_rgba8};
 pub use widget_support::{GAUSSIAN_SUPPORT_SIGMAS, Support};
-pub use writer::{PackWriter, texture_layouts};
+pub use writer::{PackWriter, SlabSource, texture_layouts};
 
 use mdtf_volume::{Geometry, Volume, VolumeError};
 use serde::{Deserialize, Serialize};

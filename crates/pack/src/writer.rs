@@ -221,6 +221,12 @@ impl Prepared<'_> {
     }
 }
 
+/// What [`PackWriter::add_slabs`] reads a slab's channels from: called
+/// with the slab's planes and the slab before's channels (done with: their
+/// memory can hold the next's), it gives the slab's channels by name.
+pub type SlabSource<'a> =
+    dyn FnMut(Range<usize>, Vec<(String, Volume)>) -> Result<Vec<(String, Volume)>, PackError> + Send + 'a;
+
 /// Writes a pack into a folder one texture at a time: [`PackWriter::add`]
 /// quantises and writes a texture and drops its bytes; [`PackWriter::finish`]
 /// writes the lookup tables and the manifest.
@@ -271,11 +277,14 @@ impl<'a> PackWriter<'a> {
     /// code range in the pack's parameters (unit normals excepted), since no
     /// slab sees the whole channel; the bytes equal [`PackWriter::add`]'s
     /// with those ranges. On an error no texture of `layouts` is written.
+    /// `slab(z, spent)` is also handed the channels of the slab before
+    /// (empty for the first), done with, so it can make the next slab's in
+    /// their memory.
     pub fn add_slabs(
         &mut self,
         layouts: &[TextureLayout],
         slabs: &[Range<usize>],
-        slab: &mut (dyn FnMut(Range<usize>) -> Result<Vec<(String, Volume)>, PackError> + Send),
+        slab: &mut SlabSource<'_>,
     ) -> Result<(), PackError> {
         let nz = self.encoder.geometry.dims[2];
         let covered = slabs.first().is_some_and(|s| s.start == 0)
@@ -299,25 +308,33 @@ impl<'a> PackWriter<'a> {
             .map(|layout| AtomicWriter::create(&self.dir.join(format!("{}.raw", layout.name))))
             .collect::<Result<Vec<_>, _>>()?;
         let this = &*self;
+        // the memory of the slab before's channels and written textures is
+        // reused: fresh memory of this size page-faults, at a cost like the quantising's
+        let mut spent = Vec::new();
+        let written: std::sync::Mutex<Vec<Vec<u8>>> = std::sync::Mutex::new(Vec::new());
         // a slab's channels are made and quantised while the slab before is written
         let mut make = |k: usize| -> Result<Vec<Vec<u8>>, PackError> {
             let z = &slabs[k];
-            let chans = slab(z.clone())?;
+            let chans = slab(z.clone(), std::mem::take(&mut spent))?;
             let mut textures = Vec::with_capacity(layouts.len());
             for (layout, decodes) in layouts.iter().zip(&decodes) {
                 let p = this.slab_of(layout, decodes, z, &chans)?;
-                let mut bytes = vec![0; p.plane_bytes() * z.len()];
+                let mut bytes = written.lock().unwrap_or_else(|e| e.into_inner()).pop().unwrap_or_default();
+                // every byte is encoded over
+                bytes.resize(p.plane_bytes() * z.len(), 0);
                 p.encode_planes(0, &mut bytes);
                 textures.push(bytes);
             }
+            spent = chans;
             Ok(textures)
         };
         let mut write = |textures: Vec<Vec<u8>>| -> Result<(), PackError> {
-            for ((layout, file), bytes) in layouts.iter().zip(&mut files).zip(textures) {
-                file.write_all(&bytes).map_err(|cause| {
+            for ((layout, file), bytes) in layouts.iter().zip(&mut files).zip(&textures) {
+                file.write_all(bytes).map_err(|cause| {
                     PackError::Io(VolumeError::Io { path: this.dir.join(format!("{}.raw", layout.name)), cause })
                 })?;
             }
+            written.lock().unwrap_or_else(|e| e.into_inner()).extend(textures);
             Ok(())
         };
         mdtf_volume::overlapped(slabs.len(), &mut |_| Ok(()), &mut make, &mut write)?;

@@ -84,7 +84,7 @@ fn a_texture_written_slab_by_slab_equals_the_whole_one() {
             let mut w = PackWriter::new(dir.path(), &params, geo.clone(), &sources);
             for group in groups {
                 let mut seen = Vec::new();
-                w.add_slabs(group, &slabs, &mut |z| {
+                w.add_slabs(group, &slabs, &mut |z, _| {
                     seen.push(z.clone());
                     Ok(chans.iter().map(|(c, v)| (c.clone(), v.z_slab(z.clone()))).collect())
                 })
@@ -108,15 +108,15 @@ fn slab_writing_refuses_gaps_missing_ranges_and_wrong_slabs() {
     let dir = tempfile::tempdir().unwrap();
     let all = |z: std::ops::Range<usize>| Ok(chans.iter().map(|(c, v)| (c.clone(), v.z_slab(z.clone()))).collect());
     let mut w = PackWriter::new(dir.path(), &params, geo.clone(), &sources);
-    let gap = w.add_slabs(std::slice::from_ref(&layout), &[0..5, 6..23], &mut |z| all(z)).unwrap_err().to_string();
+    let gap = w.add_slabs(std::slice::from_ref(&layout), &[0..5, 6..23], &mut |z, _| all(z)).unwrap_err().to_string();
     assert!(gap.contains("do not cover"), "{gap}");
     // a slab of the wrong height
     let layouts = texture_layouts(&params);
-    let wrong = w.add_slabs(&layouts, &[0..5, 5..23], &mut |z| all(0..z.len() + 1)).unwrap_err().to_string();
+    let wrong = w.add_slabs(&layouts, &[0..5, 5..23], &mut |z, _| all(0..z.len() + 1)).unwrap_err().to_string();
     assert!(wrong.contains("voxels, not"), "{wrong}");
     // a failure on the second slab: no texture and no partial file is left
     let mut slab = 0;
-    let failing = w.add_slabs(&layouts, &[0..5, 5..23], &mut |z| {
+    let failing = w.add_slabs(&layouts, &[0..5, 5..23], &mut |z, _| {
         slab += 1;
         if slab == 2 { Err(mdtf_pack::PackError::Geometry("made to fail".into())) } else { all(z) }
     });
@@ -126,6 +126,6 @@ fn slab_writing_refuses_gaps_missing_ranges_and_wrong_slabs() {
     params.ranges.remove("v");
     let mut w = PackWriter::new(dir.path(), &params, geo, &sources);
     let whole = vec![std::ops::Range { start: 0, end: 23 }];
-    let unranged = w.add_slabs(std::slice::from_ref(&layout), &whole, &mut |z| all(z)).unwrap_err().to_string();
+    let unranged = w.add_slabs(std::slice::from_ref(&layout), &whole, &mut |z, _| all(z)).unwrap_err().to_string();
     assert!(unranged.contains("channel v") && unranged.contains("no code range"), "{unranged}");
 }

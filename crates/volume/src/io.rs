@@ -203,16 +203,22 @@ pub fn write_volume(path: &Path, v: &Volume, opts: &WriteOptions, inputs: &[&Pat
     write(path, &mf, opts, inputs)
 }
 
+/// Where a writer by slabs gets each slab's samples: `slab(z, samples)`
+/// sets `samples` (x-fastest) to those of planes `z`. `samples` holds the
+/// slab before's, whose memory it can reuse (fresh memory of a slab's size
+/// page-faults, which costs about as much as writing it).
+pub type SlabSamples<'a> = dyn FnMut(std::ops::Range<usize>, &mut Vec<f32>) -> std::io::Result<()> + 'a;
+
 /// Writes a scalar volume slab by slab, by extension: NIfTI
 /// ([`write_nifti_slabs`](crate::write_nifti_slabs)) or OME-Zarr
 /// ([`write_ome_zarr_slabs`](crate::ome_zarr::write_ome_zarr_slabs)).
-/// `slab(z)` gives the samples of planes `z` for each of `slabs`, in order.
+/// `slab(z, samples)` sets `samples` to those of planes `z` for each of `slabs`, in order.
 pub fn write_slabs(
     path: &Path,
     geometry: &crate::geometry::Geometry,
     ty: SampleType,
     slabs: &[std::ops::Range<usize>],
-    slab: &mut dyn FnMut(std::ops::Range<usize>) -> std::io::Result<Vec<f32>>,
+    slab: &mut SlabSamples<'_>,
 ) -> Result<()> {
     match Format::from_path(path) {
         Some(Format::Nifti | Format::NiftiGz) => crate::nifti_io::write_nifti_slabs(path, geometry, ty, slabs, slab),

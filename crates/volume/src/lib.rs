@@ -39,7 +39,7 @@ mod volume;
 pub use dtype::{Endian, SAMPLE_TYPE_NAMES, SampleType, round_to_type};
 pub use error::{Result, VolumeError};
 pub use geometry::Geometry;
-pub use io::{Format, WriteOptions, read, read_scalar, read_with_info, write, write_slabs, write_volume};
+pub use io::{Format, SlabSamples, WriteOptions, read, read_scalar, read_with_info, write, write_slabs, write_volume};
 pub use limits::{available_memory, human_bytes, parse_size};
 pub use nifti_io::{read_nifti, read_nifti_with_info, write_nifti, write_nifti_slabs};
 pub use output::{AtomicWriter, Inputs, OutputFolder, write_file_atomically};

@@ -379,16 +379,16 @@ pub fn write_nifti(path: &Path, mf: &MultiField, ty: SampleType) -> Result<()> {
 }
 
 /// Writes a one-field `.nii` or `.nii.gz` on `geometry` slab by slab (for
-/// runs that never hold the whole volume): `slab(z)` gives the samples of
-/// planes `z` (x-fastest) for each range of `slabs` in turn, in order and
-/// covering every plane. The bytes equal [`write_nifti`]'s of the whole
+/// runs that never hold the whole volume): `slab(z, samples)` sets the
+/// samples of planes `z` ([`crate::io::SlabSamples`]) for each range of
+/// `slabs` in turn, in order and covering every plane. The bytes equal [`write_nifti`]'s of the whole
 /// volume; atomic like it.
 pub fn write_nifti_slabs(
     path: &Path,
     geometry: &Geometry,
     ty: SampleType,
     slabs: &[std::ops::Range<usize>],
-    slab: &mut dyn FnMut(std::ops::Range<usize>) -> std::io::Result<Vec<f32>>,
+    slab: &mut crate::io::SlabSamples<'_>,
 ) -> Result<()> {
     let nz = geometry.dims[2];
     if slabs.first().map(|s| s.start) != Some(0)
@@ -408,8 +408,9 @@ pub fn write_nifti_slabs(
     let gz = path.to_string_lossy().to_ascii_lowercase().ends_with(".gz");
     let mut body = |w: &mut dyn Write| -> std::io::Result<()> {
         w.write_all(&header)?;
+        let mut data = Vec::new();
         for z in slabs {
-            let data = slab(z.clone())?;
+            slab(z.clone(), &mut data)?;
             if let Some((index, value)) = first_unrepresentable(&data, ty) {
                 unrepresentable = Some((z.start * plane + index, value));
                 return Err(std::io::Error::other("a sample is not representable"));

@@ -76,8 +76,9 @@ fn a_nifti_written_slab_by_slab_has_the_whole_writes_bytes() {
         mdtf_volume::write_nifti(&whole, &mdtf_volume::MultiField::from(v.clone()), SampleType::F32).unwrap();
         let slabs = [0..1, 1..8, 8..11];
         let path = dir.path().join(name);
-        mdtf_volume::write_nifti_slabs(&path, &v.geometry, SampleType::F32, &slabs, &mut |z| {
-            Ok(v.z_slab(z).data.iter().copied().collect())
+        mdtf_volume::write_nifti_slabs(&path, &v.geometry, SampleType::F32, &slabs, &mut |z, out| {
+            *out = v.z_slab(z).data.iter().copied().collect();
+            Ok(())
         })
         .unwrap();
         assert_eq!(std::fs::read(&path).unwrap(), std::fs::read(&whole).unwrap(), "{name}");
@@ -85,13 +86,15 @@ fn a_nifti_written_slab_by_slab_has_the_whole_writes_bytes() {
     // a slab gap, and a value u8 cannot hold, are refused, leaving no file
     let path = dir.path().join("bad.nii");
     let gap = [0..3, 4..11];
-    let e = mdtf_volume::write_nifti_slabs(&path, &v.geometry, SampleType::F32, &gap, &mut |z| {
-        Ok(v.z_slab(z).data.iter().copied().collect())
+    let e = mdtf_volume::write_nifti_slabs(&path, &v.geometry, SampleType::F32, &gap, &mut |z, out| {
+        *out = v.z_slab(z).data.iter().copied().collect();
+        Ok(())
     });
     assert!(e.unwrap_err().to_string().contains("do not cover"));
     let all = [std::ops::Range { start: 0, end: 11 }];
-    let e = mdtf_volume::write_nifti_slabs(&path, &v.geometry, SampleType::U8, &all, &mut |z| {
-        Ok(v.z_slab(z).data.iter().copied().collect())
+    let e = mdtf_volume::write_nifti_slabs(&path, &v.geometry, SampleType::U8, &all, &mut |z, out| {
+        *out = v.z_slab(z).data.iter().copied().collect();
+        Ok(())
     });
     assert!(e.is_err() && !path.exists());
 }

@@ -33,11 +33,11 @@ fn median_of_g(
     match buckets {
         Some(b) => mdtf_volume::median_from_buckets(b, |visit| {
             for z in slabs {
-                visit(&chans.samples("g", z.clone())?);
+                visit(chans.samples("g", z.clone())?);
             }
             Ok(())
         }),
-        None => median_of_slabs(slabs, &mut |z| chans.samples("g", z)),
+        None => median_of_slabs(slabs, &mut |z| chans.samples("g", z).map(<[f32]>::to_vec)),
     }
 }
 
@@ -51,7 +51,7 @@ pub(super) fn inverse_gradient_axis(
     let Some(median) = median_of_g(chans, slabs, g_buckets)? else { return Ok(None) };
     let cut = 2.0 * median;
     let above = median_of_slabs(slabs, &mut |z| {
-        Ok(chans.samples("g", z)?.into_iter().filter(|&x| x > cut && x.is_finite()).collect())
+        Ok(chans.samples("g", z)?.iter().copied().filter(|&x| x > cut && x.is_finite()).collect())
     })?;
     Ok(above.and_then(|g_b| Axis::inverse_gradient_at(g_b, 256)))
 }
@@ -72,12 +72,12 @@ pub(super) fn median_tgtf(
     }
     let use_all = structured * 100 < voxels;
     let centre = median_of_slabs(slabs, &mut |z| {
-        let v = chans.samples("v", z.clone())?;
+        let v = chans.samples("v", z.clone())?.to_vec();
         if use_all {
             return Ok(v);
         }
         let g = chans.samples("g", z)?;
-        Ok(v.into_iter().zip(g).filter(|(_, g)| *g > g_cut).map(|(v, _)| v).collect())
+        Ok(v.into_iter().zip(g).filter(|(_, g)| **g > g_cut).map(|(v, _)| v).collect())
     })?
     .ok_or("channel 'v' has no finite sample")?;
     Ok(crate::gaussians::median_tgtf(vec![centre as f64], &[1.0]))

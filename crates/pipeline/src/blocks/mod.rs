@@ -49,6 +49,7 @@
 mod budget;
 mod medians;
 mod passes;
+mod pool;
 mod reductions;
 mod remote;
 mod slab_channels;
@@ -56,6 +57,7 @@ mod store;
 mod trace;
 
 pub use budget::{TraceBlocks, automatic_budget, fit_slabs, fit_trace, slab_height, slabs};
+pub use pool::SamplePool;
 pub use remote::{Prefilter, SlabJob, SlabPass, SlabTasks, TracePartial, run_task};
 pub use slab_channels::SlabChannels;
 pub use store::{ChannelStore, StoreWriter};

@@ -198,7 +198,7 @@ impl<'a> SlabPasses<'a> {
         if !summarised.is_empty() {
             self.progress.stage("derive")?;
             let mut writer = chans.store.writer(if keep_g { &["g"] } else { &[] }).map_err(io("derive"))?;
-            let (slabs, stats, progress) = (&self.slabs, &mut self.stats, &self.progress);
+            let (slabs, stats, progress, pool) = (&self.slabs, &mut self.stats, &self.progress, chans.pool());
             // a slab is derived while the one before is summarised (and its g stored)
             overlapped(
                 slabs.len(),
@@ -211,6 +211,7 @@ impl<'a> SlabPasses<'a> {
                         if name == "g" && keep_g {
                             writer.put_volume("g", first, &v).map_err(io("derive"))?;
                         }
+                        pool.give_volumes([v]);
                     }
                     Ok(())
                 },
@@ -275,6 +276,8 @@ impl<'a> SlabPasses<'a> {
         if self.median_reads_stored_g() {
             chans.store.remove("g");
         }
+        // the median's reads are done: their memory is not the tracing's size
+        chans.release();
         let setup = TraceSetup {
             g,
             f2,
@@ -312,12 +315,15 @@ impl<'a> SlabPasses<'a> {
             None => Some(chans.store.writer(&outputs).map_err(io("boundary"))?),
         };
         let (progress, tasks, stats) = (&self.progress, self.tasks.is_some(), &mut self.stats);
+        // the block before's outputs, written and summed: the next block's memory
+        let spent: std::sync::Mutex<Option<SlabTrace>> = std::sync::Mutex::new(None);
+        let take_spent = || spent.lock().unwrap_or_else(|e| e.into_inner()).take();
         // a block is traced while the one before is written and summed
         let mut make = |k: usize| {
             let (rows, z) = &blocks[k];
             match tasks {
                 true => remote::stored_trace(chans, g, z),
-                false => trace::trace_slab(chans, &setup, z, rows),
+                false => trace::trace_slab(chans, &setup, z, rows, take_spent()),
             }
         };
         let mut take = |(k, slab): (usize, SlabTrace)| {
@@ -328,7 +334,8 @@ impl<'a> SlabPasses<'a> {
                 }
             }
             stats.add("g_hit", slab.trace.g_hit.samples());
-            sums.add(slab);
+            sums.add(&slab);
+            *spent.lock().unwrap_or_else(|e| e.into_inner()) = Some(slab);
             Ok(())
         };
         let n = blocks.len();
@@ -413,9 +420,14 @@ impl<'a> SlabPasses<'a> {
                 return None;
             }
             let f32 = mdtf_volume::SampleType::F32;
-            let mut slab = |z| chans.samples(c, z).map_err(std::io::Error::other);
+            let mut slab = |z, out: &mut Vec<f32>| {
+                out.clear();
+                out.extend_from_slice(chans.samples(c, z).map_err(std::io::Error::other)?);
+                Ok(())
+            };
             Some(mdtf_volume::write_slabs(file, geo, f32, slabs, &mut slab).map_err(at("keep")))
         })?;
+        chans.release();
         self.stages.done("keep", t, self.geo.voxel_count(), written);
         Ok(())
     }
@@ -492,8 +504,10 @@ impl<'a> SlabPasses<'a> {
         }
         let mut counting_failed = None;
         let (progress, height, count) = (&self.progress, self.height, self.slabs.len());
-        let written = writer.add_slabs(&layouts, &self.slabs, &mut |z| {
+        let pool = chans.pool();
+        let written = writer.add_slabs(&layouts, &self.slabs, &mut |z, spent| {
             progress.report_slab(z.end.div_ceil(height), count);
+            pool.give_volumes(spent.into_iter().map(|(_, v)| v));
             let slab = chans
                 .volumes(z.clone(), &read)
                 .map_err(|e| mdtf_pack::PackError::Io(mdtf_volume::VolumeError::Fields(e)))?;
@@ -612,7 +626,7 @@ struct TraceSums {
 
 impl TraceSums {
     /// Adds the next slab's tracing.
-    fn add(&mut self, slab: SlabTrace) {
+    fn add(&mut self, slab: &SlabTrace) {
         let SlabTrace { trace: b, g } = slab;
         self.report.get_or_insert_with(|| ReportAccumulator::new(b.resolved.report_thresholds())).add(
             mdtf_boundary::ReportInput {
@@ -625,7 +639,7 @@ impl TraceSums {
         );
         match &mut self.crossings {
             Some(c) => c.merge(&b.crossings),
-            None => self.crossings = Some(b.crossings),
+            None => self.crossings = Some(b.crossings.clone()),
         }
         self.counts += b.counts;
         self.resolved = Some(b.resolved);

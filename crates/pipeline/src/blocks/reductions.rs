@@ -59,7 +59,7 @@ pub(super) fn g_stats(
         Some(last) => {
             let pass = |visit: &mut dyn FnMut(&[f32])| {
                 for z in slabs {
-                    visit(&chans.samples(g_name, z.clone())?);
+                    visit(chans.samples(g_name, z.clone())?);
                 }
                 Ok::<(), String>(())
             };

@@ -182,7 +182,7 @@ pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<(), RunError> {
                 value_range: *value_range,
             };
             let rows = 0..chans.ny();
-            let b = trace_slab(&mut chans, &setup, &z, &rows)?.trace;
+            let b = trace_slab(&mut chans, &setup, &z, &rows, None)?.trace;
             for (c, v) in TRACED.iter().zip([&b.g_hit, &b.hit, &b.distance, &b.dot]) {
                 chans.store.put_volume(c, z.start, v).map_err(at("boundary"))?;
             }

@@ -8,7 +8,7 @@
 //! grown by its halo) keep the planes they share and derive only the new
 //! ones ([`SlabChannels::derive_block`]).
 
-use super::{ChannelStore, grown};
+use super::{ChannelStore, SamplePool, grown};
 use mdtf_derive::{DeriveOutput, DeriveParams, Item};
 use mdtf_volume::{MultiField, Volume};
 use std::ops::Range;
@@ -34,6 +34,10 @@ pub struct SlabChannels {
     value_buffer: Vec<f32>,
     /// Where the block in `value_buffer` lies (empty: it holds none).
     value_block: BlockRange,
+    /// Memory of the channels handed out, handed back for the next slab's.
+    pool: SamplePool,
+    /// The samples [`SlabChannels::samples`] last handed out.
+    samples_buffer: Vec<f32>,
     /// When set, every read fails: a cancelled run stops in the middle of a pass.
     cancel: Option<Arc<AtomicBool>>,
 }
@@ -93,6 +97,8 @@ impl SlabChannels {
             previous,
             value_buffer: Vec::new(),
             value_block: BlockRange::NONE,
+            pool: SamplePool::default(),
+            samples_buffer: Vec::new(),
             cancel: None,
         }
     }
@@ -143,10 +149,9 @@ impl SlabChannels {
             self.keep_value(value);
             let own = z.start - read.start..z.end - read.start;
             for (_, mf) in &out.items {
-                for (i, f) in mf.fields.iter().enumerate() {
+                for f in &mf.fields {
                     if names.contains(&f.name.as_str()) {
-                        let planes = mf.field_z_slab(i, own.clone()).ok_or("a derived field is missing")?;
-                        derived.push((f.name.clone(), planes));
+                        derived.push((f.name.clone(), self.own_planes(mf, f, own.clone())?));
                     }
                 }
             }
@@ -156,9 +161,35 @@ impl SlabChannels {
             .iter()
             .map(|&n| match derived.iter().position(|(d, _)| d == n) {
                 Some(i) => Ok(derived.swap_remove(i)),
-                None => self.store.volume(n, z.clone()).map(|v| (n.to_string(), v)).map_err(|e| e.to_string()),
+                None => self.stored(n, z.clone()).map(|v| (n.to_string(), v)),
             })
             .collect()
+    }
+
+    /// Planes `own` of field `f` of the derive output `mf`, copied into the pool's memory.
+    fn own_planes(&self, mf: &MultiField, f: &mdtf_volume::Field, own: Range<usize>) -> Result<Volume, String> {
+        let plane = mf.geometry.dims[0] * mf.geometry.dims[1];
+        let all = f.data.as_slice().ok_or("a derived field is not contiguous")?;
+        let from = all.get(own.start * plane..own.end * plane).ok_or("a derived field is too short")?;
+        let mut samples = self.pool.take(from.len());
+        samples.copy_from_slice(from);
+        Volume::from_samples(mf.geometry.z_slab(own), samples).map_err(|e| e.to_string())
+    }
+
+    /// Stored channel `name` on planes `z` (clamped to the grid), read into the pool's memory.
+    fn stored(&mut self, name: &str, z: Range<usize>) -> Result<Volume, String> {
+        let geometry = self.store.geometry().clone();
+        let nz = geometry.dims[2];
+        let z = z.start.min(nz)..z.end.min(nz).max(z.start.min(nz));
+        let mut samples = self.pool.take(z.len() * self.store.plane_len());
+        self.store.rows_into_slice(name, z.clone(), 0..geometry.dims[1], &mut samples).map_err(|e| e.to_string())?;
+        Volume::from_samples(geometry.z_slab(z), samples).map_err(|e| e.to_string())
+    }
+
+    /// The pool the channels handed out take their memory from: hand them
+    /// back to it when done (from any thread), for the next slab's.
+    pub fn pool(&self) -> SamplePool {
+        self.pool.clone()
     }
 
     /// The first derive pass's output over rows `rows` of planes `z`, both
@@ -273,6 +304,8 @@ impl SlabChannels {
         self.previous.iter_mut().for_each(|p| *p = None);
         self.value_buffer = Vec::new();
         self.value_block = BlockRange::NONE;
+        self.samples_buffer = Vec::new();
+        self.pool.clear();
     }
 
     /// Gives back the output of [`SlabChannels::derive_block`] for reuse.
@@ -280,13 +313,13 @@ impl SlabChannels {
         self.recycled = Some((self.last_block.clone(), out));
     }
 
-    /// The samples of channel `name` on planes `z`.
-    pub fn samples(&mut self, name: &str, z: Range<usize>) -> Result<Vec<f32>, String> {
+    /// The samples of channel `name` on planes `z`, in memory of the
+    /// channels' own that the next call reuses.
+    pub fn samples(&mut self, name: &str, z: Range<usize>) -> Result<&[f32], String> {
         self.check()?;
-        if self.store.has(name) {
-            return self.store.samples(name, z).map_err(|e| e.to_string());
-        }
-        let mut v = self.volumes(z, &[name])?;
-        Ok(v.pop().map(|(_, v)| v.data.into_raw_vec_and_offset().0).unwrap_or_default())
+        let (_, v) = self.volumes(z, &[name])?.pop().ok_or("no samples")?;
+        let last = std::mem::replace(&mut self.samples_buffer, v.data.into_raw_vec_and_offset().0);
+        self.pool.give(last);
+        Ok(&self.samples_buffer)
     }
 }

@@ -60,12 +60,13 @@ pub(super) struct SlabTrace {
 
 /// The tracing of rows `rows` of the planes of `z` (every row, or a strip
 /// of them when the store's channels are derived here, not read), and the
-/// traced g on them.
+/// traced g on them; in the memory of `spent` (a block's, done with) when given.
 pub(super) fn trace_slab(
     chans: &mut SlabChannels,
     setup: &TraceSetup,
     z: &Range<usize>,
     rows: &Range<usize>,
+    spent: Option<SlabTrace>,
 ) -> Result<SlabTrace, RunError> {
     let read = grown(z, setup.halo, 1, chans.nz());
     let all_rows = rows.len() == chans.ny();
@@ -96,13 +97,32 @@ pub(super) fn trace_slab(
         rows: own_rows.clone(),
         planes: own_planes.clone(),
     };
-    let b = mdtf_boundary::trace_block(&input, setup.params, &place, setup.stats).map_err(at("boundary"))?;
-    let g_own = block.g.z_slab(own_planes);
-    let g_own = if all_rows { g_own } else { g_own.y_rows(own_rows) };
+    let (spent_trace, spent_g) = spent.map(|s| (s.trace, s.g)).unzip();
+    let b = mdtf_boundary::trace_block_into(&input, setup.params, &place, setup.stats, spent_trace)
+        .map_err(at("boundary"))?;
+    let g_own = own_samples(&block.g, &own_planes, &own_rows, spent_g).map_err(at("boundary"))?;
     if let Some(out) = block.into_output() {
         chans.recycle(out);
     }
     Ok(SlabTrace { trace: b, g: g_own })
+}
+
+/// Planes `planes` and rows `rows` of `v` (in its own indices), in the memory of `spent` when given.
+fn own_samples(
+    v: &Volume,
+    planes: &Range<usize>,
+    rows: &Range<usize>,
+    spent: Option<Volume>,
+) -> mdtf_volume::Result<Volume> {
+    let [nx, ny, _] = v.geometry.dims;
+    let mut samples = spent.map(|s| s.data.into_raw_vec_and_offset().0).unwrap_or_default();
+    samples.clear();
+    let all = v.samples();
+    for k in planes.clone() {
+        let row = all.get((k * ny + rows.start) * nx..(k * ny + rows.end) * nx);
+        samples.extend_from_slice(row.ok_or_else(|| mdtf_volume::VolumeError::Fields("g is not the block's".into()))?);
+    }
+    Volume::from_samples(v.geometry.z_slab(planes.clone()).y_rows(rows.clone()), samples)
 }
 
 /// What a block's tracing reads: g, f'' and the normal on the block `at`.
