@@ -36,6 +36,13 @@
 //! thread, and would otherwise leave the other lanes idle. The budget counts
 //! the two slabs' outputs that this keeps alive.
 //!
+//! A pass makes each slab in the memory of the slab before's (the derive
+//! output handed back, the channels' copies and store reads through a
+//! [`SamplePool`], the tracing's outputs, the pack's texture bytes): at
+//! 1024^2 planes a slab's arrays are beyond what glibc keeps for reuse, and
+//! mapping them fresh for every slab page-faults on every 4 KiB, which had
+//! cost the kernel as much time as the derivation.
+//!
 //! The derive, pre-filter and tracing passes can run as tasks elsewhere
 //! ([`RunOptions::tasks`], [`SlabTasks`]; the Python package's
 //! `mdtf.dask.run` gives them to a Dask cluster): the tasks store what they
