@@ -1505,6 +1505,39 @@ fn run_plan_prints_the_steps_and_the_halo_and_writes_nothing() {
 }
 
 #[test]
+fn histogram_and_pack_plan_the_channels_they_compute_and_plan_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("sphere.nrrd");
+    mdtf_ok(&["synth", "erf-sphere", "--size", "24", "--sigma", "2", "-o", input.to_str().unwrap()]);
+    let out = dir.path().join("out");
+    let (i, o) = (input.to_str().unwrap(), out.to_str().unwrap());
+    // the joint (v, g) histogram derives g alone; the stretched one traces
+    let joint = mdtf_ok(&["histogram", i, "-o", o, "--plan"]);
+    assert!(joint.contains("2 derive           reads v -> g [g]") && !joint.contains("boundary"), "{joint}");
+    let stretched = mdtf_ok(&["histogram", i, "-o", o, "--stretched", "--plan"]);
+    for line in [
+        "2 derive           reads v -> g f2 nx ny nz [g, f2, normal]",
+        "3 boundary         reads g f2 nx ny nz -> g_hit hit distance; frees f2 nx ny nz",
+        "channels the outputs read: v g g_hit hit",
+    ] {
+        assert!(stretched.contains(line), "missing {line:?} in:\n{stretched}");
+    }
+    // distance-tf's pack keeps the normal for its texture; slicer-3dtf's traces nothing
+    let distance = mdtf_ok(&["pack", i, "--profile", "distance-tf", "--plan"]);
+    assert!(
+        distance.contains("3 boundary         reads g f2 nx ny nz -> g_hit hit distance; frees g f2"),
+        "{distance}"
+    );
+    // the cubic B-spline's weights at +-2 voxels are 0: it reads one voxel each side (central4: 2)
+    let slicer = mdtf_ok(&["pack", i, "--plan", "--kernel", "bspline3"]);
+    assert!(slicer.contains("[g, f2, normal]") && slicer.contains("halo of a block: x 1, y 1, z 1"), "{slicer}");
+    assert!(!out.exists(), "--plan wrote {}", out.display());
+    // the plan refuses an unknown channel before any work
+    let e = mdtf_err(&["histogram", i, "-o", o, "--axes", "v,gg", "--plan"]);
+    assert!(e.contains("unknown channel 'gg'"), "{e}");
+}
+
+#[test]
 fn run_under_a_memory_budget_matches_the_whole_run_and_explains_a_budget_it_cannot_use() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("sphere.nii");

@@ -124,6 +124,25 @@ pub fn read_tf(path: Option<&Path>) -> Result<Option<mdtf_pipeline::stages::pack
     Ok(Some(tf))
 }
 
+/// Prints the plan of the channels `names(fields)` of the input at `path`
+/// (read as `read` says, to learn its fields and grid), made as `chain`
+/// says: a command's `--plan`. Writes nothing.
+pub fn print_channel_plan(
+    path: &Path,
+    read: &InputArgs,
+    names: &dyn Fn(&[String]) -> Vec<String>,
+    chain: &mdtf_pipeline::boundary_chain::BoundaryChainParams,
+) -> Result<()> {
+    let (mf, _) = read_input(path, read, &read_options(read))?;
+    let fields: Vec<String> = mf.fields.iter().map(|f| f.name.clone()).collect();
+    let names = names(if fields.len() > 1 { &fields } else { &[] });
+    let plan = mdtf_pipeline::plan::Plan::for_channels(&names, &fields, &mf.geometry, chain)?;
+    let ([nx, ny, nz], [sx, sy, sz]) = (mf.geometry.dims, mf.geometry.spacing);
+    println!("plan of {} on {} ({nx} x {ny} x {nz}, spacing {sx} x {sy} x {sz})", names.join(", "), path.display());
+    println!("{plan}");
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

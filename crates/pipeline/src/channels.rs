@@ -2,7 +2,7 @@
 //! `mdtf histogram` and later the pack stage ask for by name.
 
 use crate::boundary_chain::{self, BoundaryChainParams, ChainError};
-use crate::channel::{Channel, Producer};
+use crate::plan::Plan;
 use mdtf_derive::DeriveParams;
 use mdtf_volume::{MultiField, Volume};
 use std::collections::BTreeMap;
@@ -11,8 +11,24 @@ pub use crate::channel::CHANNEL_NAMES;
 
 /// Computes the named channels of `input`: its fields by name (`v` is the
 /// first field), `g` and `f2` by the derive stage, `g_hit`, `hit` and
-/// `distance` by the boundary chain. Unknown names are an error listing the valid ones.
+/// `distance` by the boundary chain: plans them ([`Plan::for_channels`])
+/// and runs the plan on the whole volume ([`execute`]). Unknown names are
+/// an error listing the valid ones, before any work.
 pub fn compute(
+    input: &MultiField,
+    names: &[String],
+    chain: &BoundaryChainParams,
+) -> Result<Vec<(String, Volume)>, ChainError> {
+    let field_names: Vec<String> = input.fields.iter().map(|f| f.name.clone()).collect();
+    let plan = Plan::for_channels(names, &field_names, &input.geometry, chain)
+        .map_err(|e| ChainError::Unknown(e.to_string()))?;
+    execute(&plan, input, names, chain)
+}
+
+/// Runs `plan` (from [`Plan::for_channels`] with `names` and `chain`) on the
+/// whole of `input`: the channels `names`, in that order.
+pub fn execute(
+    plan: &Plan,
     input: &MultiField,
     names: &[String],
     chain: &BoundaryChainParams,
@@ -22,17 +38,11 @@ pub fn compute(
         return Err(ChainError::Unknown("the input has no fields".into()));
     };
     let geometry = &input.geometry;
-    let field_names: Vec<String> = input.fields.iter().map(|f| f.name.clone()).collect();
     let multi = input.fields.len() > 1;
-    let mut wanted = std::collections::BTreeSet::new();
-    for n in names {
-        wanted.insert(Channel::named(n, &field_names).map_err(|e| ChainError::Unknown(e.to_string()))?);
-    }
-    let needs = |n: &str| names.iter().any(|x| x == n);
-    let tracing = wanted.iter().any(|c| c.producer(multi) == Producer::Trace);
     // one derive pass serves both the derivative channels and the tracing,
-    // computing only the items asked for (each is a full volume)
-    let (items, multi_items) = crate::plan::derive_items(&wanted, multi, tracing, false);
+    // computing only the items the plan asks for (each is a full volume)
+    let (items, multi_items, tracing) = (plan.derive.clone(), plan.derive_fields.clone(), plan.trace);
+    let needs = |n: &str| names.iter().any(|x| x == n);
     // derived channels by name, moved out of the derive output (no copies)
     let mut derived: BTreeMap<String, Volume> = BTreeMap::new();
     if !items.is_empty() {

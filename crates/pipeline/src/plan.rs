@@ -7,7 +7,8 @@
 
 use crate::channel::{Channel, Producer, Reach, UnknownChannel};
 use crate::file::Pipeline;
-use mdtf_derive::Item;
+use mdtf_bilateral::BilateralParams;
+use mdtf_derive::{Item, Kernel};
 use mdtf_pack::Profile;
 use mdtf_volume::Geometry;
 use std::collections::BTreeSet;
@@ -111,6 +112,9 @@ pub enum PlanError {
     /// The pack profile asks for a channel the table lacks (a bug, not a user error).
     #[error("pack: {0}")]
     Pack(UnknownChannel),
+    /// A command asks for a channel that does not exist.
+    #[error("{0}")]
+    Channel(UnknownChannel),
 }
 
 impl Plan {
@@ -161,52 +165,7 @@ impl Plan {
         let (derive, derive_fields) = derive_items(&wanted, multi, trace, defer_normals);
         let prefilter = trace && p.prefilter.is_some();
 
-        let made_by = |item: &Item, fields_pass: bool| -> Vec<Channel> {
-            crate::channel::TABLE
-                .iter()
-                .map(|r| r.channel)
-                .filter(|c| {
-                    let want = if fields_pass { Producer::DeriveFields(*item) } else { Producer::Derive(*item) };
-                    c.producer(multi) == want
-                })
-                .collect()
-        };
-        let mut steps = Vec::new();
-        let mut input_makes: BTreeSet<Channel> = BTreeSet::from([Channel::Value]);
-        input_makes.extend((0..fields.len()).map(Channel::Field));
-        steps.push(PlannedStep { step: Step::Input, reads: BTreeSet::new(), makes: input_makes });
-        if !derive.is_empty() {
-            let makes =
-                derive.iter().flat_map(|i| made_by(i, false)).filter(|c| !defer_normals || !normals.contains(c));
-            steps.push(PlannedStep {
-                step: Step::Derive,
-                reads: BTreeSet::from([Channel::Value]),
-                makes: makes.collect(),
-            });
-        }
-        if !derive_fields.is_empty() {
-            steps.push(PlannedStep {
-                step: Step::DeriveFields,
-                reads: (0..fields.len()).map(Channel::Field).collect(),
-                makes: derive_fields.iter().flat_map(|i| made_by(i, true)).collect(),
-            });
-        }
-        let trace_reads: BTreeSet<Channel> =
-            Channel::Distance.row().map_or(&[][..], |r| r.prerequisites).iter().copied().collect();
-        if prefilter {
-            steps.push(PlannedStep {
-                step: Step::Prefilter,
-                reads: [Channel::G, Channel::F2].into(),
-                makes: BTreeSet::new(),
-            });
-        }
-        if trace {
-            steps.push(PlannedStep {
-                step: Step::Trace,
-                reads: trace_reads,
-                makes: [Channel::GHit, Channel::Hit, Channel::Distance].into(),
-            });
-        }
+        let mut steps = channel_steps(&fields, &derive, &derive_fields, defer_normals, prefilter, trace);
         if !keep.is_empty() {
             steps.push(PlannedStep { step: Step::Keep, reads: keep, makes: BTreeSet::new() });
         }
@@ -226,22 +185,8 @@ impl Plan {
             steps.push(PlannedStep { step: Step::Preview, reads: BTreeSet::new(), makes: BTreeSet::new() });
         }
 
-        let kernel = p.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL);
-        let prefilter_radius = match (&p.prefilter, prefilter) {
-            (Some(pf), true) => {
-                mdtf_bilateral::box_radius(geometry.spacing, &crate::boundary_chain::prefilter_params(pf, 1.0))
-            }
-            _ => [0; 3],
-        };
-        let d_max = if trace { p.boundary.d_max.unwrap_or(mdtf_boundary::default_d_max(geometry)) } else { 0.0 };
-        let reach = Reach::new(kernel, prefilter_radius, d_max, geometry.spacing);
-        let mut halo = [0; 3];
-        for c in &wanted {
-            let h = c.halo(multi, &reach);
-            for a in 0..3 {
-                halo[a] = halo[a].max(h[a]);
-            }
-        }
+        let reaching = Reaching { kernel: p.derive.kernel, prefilter: p.prefilter.as_ref(), d_max: p.boundary.d_max };
+        let (reach, halo) = reaching.of(&wanted, multi, prefilter, trace, geometry);
         let reductions = reductions(p, &steps, trace, prefilter, multi);
         Ok(Plan {
             fields,
@@ -249,6 +194,65 @@ impl Plan {
             derive,
             derive_fields,
             defer_normals,
+            prefilter,
+            trace,
+            steps,
+            reductions,
+            reach,
+            halo,
+        })
+    }
+
+    /// The plan of a command that wants the channels `names` of an input
+    /// with these `fields` (empty or one: a scalar) on `geometry`, made as
+    /// `chain` says (kernel, pre-filter, tracing): the steps that make them,
+    /// then the command's own step reading them (shown as `keep`). The
+    /// whole-volume executor is [`crate::channels::compute`].
+    pub fn for_channels(
+        names: &[String],
+        fields: &[String],
+        geometry: &Geometry,
+        chain: &crate::boundary_chain::BoundaryChainParams,
+    ) -> Result<Plan, PlanError> {
+        let fields: Vec<String> = if fields.len() > 1 { fields.to_vec() } else { Vec::new() };
+        let multi = !fields.is_empty();
+        let mut wanted = BTreeSet::new();
+        for name in names {
+            wanted.insert(Channel::named(name, &fields).map_err(PlanError::Channel)?);
+        }
+        let trace = wanted.iter().any(|c| c.producer(multi) == Producer::Trace);
+        let (derive, derive_fields) = derive_items(&wanted, multi, trace, false);
+        let prefilter = trace && chain.prefilter.is_some();
+        let mut steps = channel_steps(&fields, &derive, &derive_fields, false, prefilter, trace);
+        steps.push(PlannedStep { step: Step::Keep, reads: wanted.clone(), makes: BTreeSet::new() });
+        let reaching =
+            Reaching { kernel: chain.kernel, prefilter: chain.prefilter.as_ref(), d_max: chain.boundary.d_max };
+        let (reach, halo) = reaching.of(&wanted, multi, prefilter, trace, geometry);
+        let has = |s: Step| steps.iter().any(|x| x.step == s);
+        let mut reductions = Vec::new();
+        let before: Vec<Step> = [Step::Derive, Step::Trace].into_iter().filter(|&s| has(s)).collect();
+        if !before.is_empty() {
+            reductions
+                .push(Reduction { what: "finite range of v (derive's epsilon, tracing thresholds)".into(), before });
+        }
+        if multi && has(Step::DeriveFields) {
+            let what = "finite range of each field (its [0, 1] normalisation)".into();
+            reductions.push(Reduction { what, before: vec![Step::DeriveFields] });
+        }
+        if prefilter {
+            let what = "finite ranges of g and f'' (the range sigma)".into();
+            reductions.push(Reduction { what, before: vec![Step::Prefilter] });
+        }
+        if trace && chain.boundary.g_min.is_none() {
+            let what = "median of g (the noise floor: g_min, g_hit_min)".into();
+            reductions.push(Reduction { what, before: vec![Step::Trace] });
+        }
+        Ok(Plan {
+            fields,
+            wanted,
+            derive,
+            derive_fields,
+            defer_normals: false,
             prefilter,
             trace,
             steps,
@@ -273,6 +277,95 @@ impl Plan {
         let made: BTreeSet<Channel> =
             self.steps.iter().filter(|s| s.step <= step).flat_map(|s| s.makes.clone()).collect();
         made.into_iter().filter(|&c| self.last_reader(c) == Some(step)).collect()
+    }
+}
+
+/// The steps that make channels, in order: the input (the value, and the
+/// fields of a several-field input), the derive passes with the `derive`
+/// and `derive_fields` items (the normals left out when deferred), the
+/// pre-filter and the tracing when planned.
+fn channel_steps(
+    fields: &[String],
+    derive: &[Item],
+    derive_fields: &[Item],
+    defer_normals: bool,
+    prefilter: bool,
+    trace: bool,
+) -> Vec<PlannedStep> {
+    let multi = !fields.is_empty();
+    let normals = [Channel::Nx, Channel::Ny, Channel::Nz];
+    let made_by = |item: &Item, fields_pass: bool| -> Vec<Channel> {
+        let want = if fields_pass { Producer::DeriveFields(*item) } else { Producer::Derive(*item) };
+        crate::channel::TABLE.iter().map(|r| r.channel).filter(|c| c.producer(multi) == want).collect()
+    };
+    let mut steps = Vec::new();
+    let mut input_makes: BTreeSet<Channel> = BTreeSet::from([Channel::Value]);
+    input_makes.extend((0..fields.len()).map(Channel::Field));
+    steps.push(PlannedStep { step: Step::Input, reads: BTreeSet::new(), makes: input_makes });
+    if !derive.is_empty() {
+        let makes = derive.iter().flat_map(|i| made_by(i, false)).filter(|c| !defer_normals || !normals.contains(c));
+        steps.push(PlannedStep { step: Step::Derive, reads: BTreeSet::from([Channel::Value]), makes: makes.collect() });
+    }
+    if !derive_fields.is_empty() {
+        steps.push(PlannedStep {
+            step: Step::DeriveFields,
+            reads: (0..fields.len()).map(Channel::Field).collect(),
+            makes: derive_fields.iter().flat_map(|i| made_by(i, true)).collect(),
+        });
+    }
+    if prefilter {
+        steps.push(PlannedStep {
+            step: Step::Prefilter,
+            reads: [Channel::G, Channel::F2].into(),
+            makes: BTreeSet::new(),
+        });
+    }
+    if trace {
+        let reads = Channel::Distance.row().map_or(&[][..], |r| r.prerequisites).iter().copied().collect();
+        let makes = [Channel::GHit, Channel::Hit, Channel::Distance].into();
+        steps.push(PlannedStep { step: Step::Trace, reads, makes });
+    }
+    steps
+}
+
+/// The settings behind how far a plan's stages reach.
+struct Reaching<'a> {
+    /// The derivative kernel (None: derive's default).
+    kernel: Option<Kernel>,
+    /// The pre-filter's parameters, when there is one.
+    prefilter: Option<&'a BilateralParams>,
+    /// The tracing's d_max, world units (None: the tracing's default for the grid).
+    d_max: Option<f64>,
+}
+
+impl Reaching<'_> {
+    /// How far each stage reaches and the halo a block of the `wanted`
+    /// channels needs, on `geometry`, with the pre-filter and the tracing as planned.
+    fn of(
+        &self,
+        wanted: &BTreeSet<Channel>,
+        multi: bool,
+        prefilter: bool,
+        trace: bool,
+        geometry: &Geometry,
+    ) -> (Reach, [usize; 3]) {
+        let kernel = self.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL);
+        let prefilter_radius = match (self.prefilter, prefilter) {
+            (Some(pf), true) => {
+                mdtf_bilateral::box_radius(geometry.spacing, &crate::boundary_chain::prefilter_params(pf, 1.0))
+            }
+            _ => [0; 3],
+        };
+        let d_max = if trace { self.d_max.unwrap_or(mdtf_boundary::default_d_max(geometry)) } else { 0.0 };
+        let reach = Reach::new(kernel, prefilter_radius, d_max, geometry.spacing);
+        let mut halo = [0; 3];
+        for c in wanted {
+            let h = c.halo(multi, &reach);
+            for a in 0..3 {
+                halo[a] = halo[a].max(h[a]);
+            }
+        }
+        (reach, halo)
     }
 }
 
@@ -424,6 +517,41 @@ mod tests {
         // several fields: 1/g comes from ||G|| of all of them
         let peak2 = shipped("peak-finding", &["t1", "brain"]);
         assert_eq!((peak2.derive.as_slice(), peak2.derive_fields.as_slice()), (&[Item::G][..], &[Item::InvG][..]));
+    }
+
+    #[test]
+    fn a_command_s_channels_are_planned_with_only_the_steps_that_make_them() {
+        let chain = crate::boundary_chain::BoundaryChainParams::default();
+        let geo = Geometry::new([64; 3], [1.0; 3]);
+        let names = |n: &[&str]| -> Vec<String> { n.iter().map(|s| s.to_string()).collect() };
+        let g = Plan::for_channels(&names(&["v", "g"]), &[], &geo, &chain).unwrap();
+        assert_eq!((g.derive.as_slice(), g.trace, g.halo), (&[Item::G][..], false, [2; 3]));
+        assert_eq!(steps(&g), ["input", "derive", "keep"]);
+        assert_eq!(g.freed_after(Step::Keep), [Channel::Value, Channel::G]);
+
+        let traced = Plan::for_channels(&names(&["g_hit", "hit"]), &[], &geo, &chain).unwrap();
+        assert_eq!(traced.derive, [Item::G, Item::F2, Item::Normal]);
+        assert!(traced.trace && !traced.prefilter);
+        assert_eq!(steps(&traced), ["input", "derive", "boundary", "keep"]);
+        // as distance-tf's: central4's 2 voxels + d_max 15 voxels + 2 for the tricubic g at the hit
+        assert_eq!(traced.halo, [19; 3]);
+        assert!(traced.reductions.iter().any(|r| r.what.starts_with("median of g")));
+
+        let filtered = crate::boundary_chain::BoundaryChainParams {
+            prefilter: Some(mdtf_bilateral::BilateralParams { sigma_d: 2.0, sigma_r: 0.1, ..Default::default() }),
+            ..chain.clone()
+        };
+        let with = Plan::for_channels(&names(&["distance"]), &[], &geo, &filtered).unwrap();
+        assert_eq!(steps(&with), ["input", "derive", "prefilter", "boundary", "keep"]);
+        // the pre-filter is planned only for a tracing
+        let without = Plan::for_channels(&names(&["f2"]), &[], &geo, &filtered).unwrap();
+        assert_eq!((without.derive.as_slice(), without.prefilter), (&[Item::F2][..], false));
+
+        let fields = names(&["a", "b"]);
+        let multi = Plan::for_channels(&names(&["gnorm", "b"]), &fields, &geo, &chain).unwrap();
+        assert_eq!((multi.derive.as_slice(), multi.derive_fields.as_slice()), (&[][..], &[Item::Gnorm][..]));
+        let e = Plan::for_channels(&names(&["g", "gradient"]), &[], &geo, &chain).unwrap_err().to_string();
+        assert!(e.starts_with("unknown channel 'gradient'") && e.contains("distance"), "{e}");
     }
 
     #[test]

@@ -247,6 +247,11 @@ pub struct HistogramArgs {
     /// Derivative kernel for g and f2.
     #[arg(long, value_name = "K")]
     pub kernel: Option<Kernel>,
+    /// Print the plan of the channels instead of computing them: the derive items, whether the
+    /// tracing runs, what each step reads and makes, and a block's halo. Reads the input (to
+    /// learn its fields and grid) and writes nothing.
+    #[arg(long)]
+    pub plan: bool,
     #[command(flatten)]
     pub read: InputArgs,
 }
@@ -284,7 +289,7 @@ pub struct PackArgs {
     #[arg(required_unless_present = "schema")]
     pub input: Option<PathBuf>,
     /// Output pack folder.
-    #[arg(short, long, value_name = "DIR", required_unless_present = "schema")]
+    #[arg(short, long, value_name = "DIR", required_unless_present_any = ["schema", "plan"])]
     pub output: Option<PathBuf>,
     /// Layout: slicer-3dtf, distance-tf, gaussian-tf or peak-finding (meshes: `mdtf tetra`).
     #[arg(long, default_value = "slicer-3dtf")]
@@ -295,6 +300,11 @@ pub struct PackArgs {
     /// Derivative kernel when computing channels from a value volume.
     #[arg(long, value_name = "K")]
     pub kernel: Option<Kernel>,
+    /// Print the plan of the channels instead of computing them: the derive items, whether the
+    /// tracing runs, what each step reads and makes, and a block's halo. Reads the input (a
+    /// value volume, to learn its fields and grid) and writes nothing.
+    #[arg(long)]
+    pub plan: bool,
     /// Transfer-function file (JSON: v_range, g_range, f2_range, boundary_emphasis, widgets, tf1d,
     /// product) rasterised into the profile's lookup tables. Without it, slicer-3dtf gets a default TF
     /// from the boundaries found in the histogram volume: each its own colour on its arch in (v, g),

@@ -36,21 +36,18 @@ fn spec_for(args: &HistogramArgs, i: usize, name: &str) -> Result<AxisSpec> {
 /// Computes and writes the requested histograms.
 pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
     check_axes(args)?;
+    let chain = BoundaryChainParams { kernel: args.kernel, ..Default::default() };
+    if args.plan {
+        return crate::input::print_channel_plan(&args.input, &args.read, &|_| wanted(args), &chain);
+    }
     let scale = if args.scale == ScaleArg::Linear { Scale::Linear } else { Scale::Log };
     let given: Vec<&Path> =
         [Some(&args.input), args.mask.as_ref()].into_iter().flatten().map(PathBuf::as_path).collect();
     let inputs = Inputs::of(&given);
     let folder = OutputFolder::begin(&args.output, &inputs)?;
     let (input, _) = progress.step("reading", || read_input(&args.input, &args.read, &read_options(&args.read)))?;
-    let mut wanted: Vec<String> = args.axes.clone();
-    for extra in [&["v", "g"][..], &["g_hit", "hit"][..]].into_iter().filter(|_| args.stretched).flatten() {
-        if !wanted.iter().any(|w| w == extra) {
-            wanted.push(extra.to_string());
-        }
-    }
-    let chans = progress.step("computing channels", || {
-        channels::compute(&input, &wanted, &BoundaryChainParams { kernel: args.kernel, ..Default::default() })
-    })?;
+    // planned and run on the whole volume
+    let chans = progress.step("computing channels", || channels::compute(&input, &wanted(args), &chain))?;
     let counted = Counting {
         args,
         chans,
@@ -71,6 +68,17 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
     }
     folder.publish(&inputs)?;
     Ok(())
+}
+
+/// The channels the histograms read: the axes, and v, g, g_hit and hit for the stretched pair.
+fn wanted(args: &HistogramArgs) -> Vec<String> {
+    let mut wanted: Vec<String> = args.axes.clone();
+    for extra in [&["v", "g"][..], &["g_hit", "hit"][..]].into_iter().filter(|_| args.stretched).flatten() {
+        if !wanted.iter().any(|w| w == extra) {
+            wanted.push(extra.to_string());
+        }
+    }
+    wanted
 }
 
 /// Refuses 0 or more than 3 axes, and lists of bins or ranges that are neither one nor one per axis.

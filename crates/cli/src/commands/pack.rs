@@ -24,14 +24,12 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
         print!("{MANIFEST_SCHEMA}");
         return Ok(());
     }
-    let (Some(input), Some(output)) = (&args.input, &args.output) else { bail!("give an input and -o PACK_DIR") };
     let profile: Profile = args.profile.parse().map_err(anyhow::Error::msg)?;
-    if profile == Profile::ProjectedTetrahedra {
-        bail!(
-            "projected-tetrahedra packs hold a tetrahedral mesh: make them with `mdtf tetra MESH.vtu -o DIR` or `mdtf tetra --from-volume {} -o DIR`",
-            input.display()
-        );
+    if let (Some(input), true) = (&args.input, args.plan) {
+        return plan_only(input, profile, args);
     }
+    let (Some(input), Some(output)) = (&args.input, &args.output) else { bail!("give an input and -o PACK_DIR") };
+    refuse_meshes(input, profile)?;
     let given: Vec<&Path> = [Some(input), args.tf.as_ref(), args.gtf_from_mask.as_ref()]
         .into_iter()
         .flatten()
@@ -58,6 +56,27 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
     let (count, listed) = (names.len(), names.join(", "));
     progress.note(&format!("packed {count} textures ({listed}) and manifest.json into {}", output.display()));
     Ok(())
+}
+
+/// Refuses the mesh profile, whose packs `mdtf tetra` makes.
+fn refuse_meshes(input: &Path, profile: Profile) -> Result<()> {
+    if profile == Profile::ProjectedTetrahedra {
+        bail!(
+            "projected-tetrahedra packs hold a tetrahedral mesh: make them with `mdtf tetra MESH.vtu -o DIR` or `mdtf tetra --from-volume {} -o DIR`",
+            input.display()
+        );
+    }
+    Ok(())
+}
+
+/// `--plan`: prints the plan of the channels the profile packs, made from a value volume.
+fn plan_only(input: &Path, profile: Profile, args: &PackArgs) -> Result<()> {
+    refuse_meshes(input, profile)?;
+    if input.is_dir() {
+        bail!("--plan: {} is a folder of stage outputs, which the pack reads as they are", input.display());
+    }
+    let chain = BoundaryChainParams { kernel: args.kernel, ..Default::default() };
+    crate::input::print_channel_plan(input, &args.read, &|fields| profile.channels(fields), &chain)
 }
 
 /// The channels the profile packs, from a folder of stage outputs or made
