@@ -188,6 +188,18 @@ type HeatMapChart<'a, 'b> = ChartContext<
     Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
 >;
 
+/// The caption's font size, px: 18, or smaller (down to 11) when `title`
+/// would not fit the width of `area` (a long input name centred past the
+/// picture's edges loses its ends).
+fn caption_size(area: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>, title: &str) -> u32 {
+    let room = area.dim_in_pixel().0.saturating_sub(2 * 12);
+    let fits = |size: u32| {
+        let font = TextStyle::from(("sans-serif", size).into_font());
+        area.estimate_text_size(title, &font).is_ok_and(|(w, _)| w <= room)
+    };
+    (11..=18).rev().find(|&size| fits(size)).unwrap_or(11)
+}
+
 /// The chart of `h`'s heat map in `area` (title, margins, label areas): the
 /// same layout each time it is built, so marks drawn on a second build
 /// land on the first one's axes.
@@ -198,7 +210,7 @@ fn heat_map_chart<'a, 'b>(
 ) -> Result<HeatMapChart<'a, 'b>, String> {
     let (ax, ay) = (&h.axes[0], &h.axes[1]);
     ChartBuilder::on(area)
-        .caption(&labels.title, ("sans-serif", 18))
+        .caption(&labels.title, ("sans-serif", caption_size(area, &labels.title)))
         .margin(12)
         .margin_bottom(12 + note_height(labels))
         .x_label_area_size(AXIS_LABEL_AREA)
@@ -445,7 +457,7 @@ impl Histogram {
         let max = self.max().max(1) as f64;
         let root = BitMapBackend::with_buffer(pixels, (w, h)).into_drawing_area();
         let mut chart = ChartBuilder::on(&root)
-            .caption(&labels.title, ("sans-serif", 18))
+            .caption(&labels.title, ("sans-serif", caption_size(&root, &labels.title)))
             .margin(12)
             .x_label_area_size(48)
             .y_label_area_size(70)
@@ -538,5 +550,28 @@ impl Histogram {
             });
         }
         Ok(Some(Rgb { width: w as usize, height: h as usize, pixels }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_title_keeps_18_px_when_it_fits_and_shrinks_to_fit_its_area_when_it_does_not() {
+        mdtf_volume::register_figure_font();
+        // the heat map's part of a figure, beside its colour bar
+        let (w, h) = (640, 620);
+        let mut pixels = vec![0u8; (w * h * 3) as usize];
+        let area = BitMapBackend::with_buffer(&mut pixels, (w, h)).into_drawing_area();
+        assert_eq!(caption_size(&area, "hist_v_g of b256.nrrd"), 18);
+        let long = "default opacity over the (v, g) histogram of built-in ErfSphere phantom, 128^3, sigma 3";
+        let size = caption_size(&area, long);
+        let width = |size: u32| {
+            let style = TextStyle::from(("sans-serif", size).into_font());
+            area.estimate_text_size(long, &style).map(|(w, _)| w).unwrap_or(0)
+        };
+        assert!(size < 18 && width(18) > w - 24, "18 px would not fit: {} px wide", width(18));
+        assert!(width(size) <= w - 24 && width(size + 1) > w - 24, "{size} px: the largest that fits");
     }
 }
