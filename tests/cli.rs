@@ -1505,7 +1505,7 @@ fn run_plan_prints_the_steps_and_the_halo_and_writes_nothing() {
 }
 
 #[test]
-fn histogram_and_pack_plan_the_channels_they_compute_and_plan_writes_nothing() {
+fn histogram_pack_and_boundary_plan_the_channels_they_compute_and_plan_writes_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("sphere.nrrd");
     mdtf_ok(&["synth", "erf-sphere", "--size", "24", "--sigma", "2", "-o", input.to_str().unwrap()]);
@@ -1531,6 +1531,11 @@ fn histogram_and_pack_plan_the_channels_they_compute_and_plan_writes_nothing() {
     // the cubic B-spline's weights at +-2 voxels are 0: it reads one voxel each side (central4: 2)
     let slicer = mdtf_ok(&["pack", i, "--plan", "--kernel", "bspline3"]);
     assert!(slicer.contains("[g, f2, normal]") && slicer.contains("halo of a block: x 1, y 1, z 1"), "{slicer}");
+    // the chain: central4's 2 voxels + the pre-filter's box ceil(2.5 x 1) + d_max 6 + 2 for g's tricubic at the hit
+    let chain = mdtf_ok(&["boundary", i, "-o", o, "--prefilter", "1,0.1", "--d-max", "6", "--plan"]);
+    for line in ["3 prefilter        reads g f2", "halo of a block: x 13, y 13, z 13 voxels"] {
+        assert!(chain.contains(line), "missing {line:?} in:\n{chain}");
+    }
     assert!(!out.exists(), "--plan wrote {}", out.display());
     // the plan refuses an unknown channel before any work
     let e = mdtf_err(&["histogram", i, "-o", o, "--axes", "v,gg", "--plan"]);

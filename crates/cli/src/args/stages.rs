@@ -155,6 +155,11 @@ pub struct BoundaryArgs {
     /// Bilateral pre-filter of g and f'': SIGMA_D (world units),SIGMA_R (fraction of each channel's range).
     #[arg(long, value_name = "SD,SR")]
     pub prefilter: Option<String>,
+    /// Print the plan of the chain from a value volume instead of running it: the derive items,
+    /// the pre-filter and the tracing with what each reads and makes, and the halo a block needs
+    /// (d_max plus the interpolation's support). Reads the input and writes nothing.
+    #[arg(long, requires = "input")]
+    pub plan: bool,
     /// Trace voxels with g at least this. Default: the noise floor, max(2 x median g, 1e-3 x value range / L_min).
     #[arg(long, value_name = "G")]
     pub g_min: Option<f64>,

@@ -38,6 +38,15 @@ fn prefilter(text: &str) -> Result<BilateralParams> {
     }
 }
 
+/// The chain from a value volume: `--kernel`, `--prefilter` and the tracing's parameters `p`.
+fn chain(args: &BoundaryArgs, p: BoundaryParams) -> Result<BoundaryChainParams> {
+    Ok(BoundaryChainParams {
+        kernel: args.kernel,
+        prefilter: args.prefilter.as_deref().map(prefilter).transpose()?,
+        boundary: p,
+    })
+}
+
 fn scalar(path: &Path, args: &BoundaryArgs) -> Result<Volume> {
     let (mf, _) = read_input(path, &args.read, &read_options(&args.read))?;
     mf.into_scalar().with_context(|| format!("{} must hold one field", path.display()))
@@ -46,6 +55,11 @@ fn scalar(path: &Path, args: &BoundaryArgs) -> Result<Volume> {
 /// Runs the chain (or tracing alone on given g, f'', normal) and writes the outputs.
 pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
     let p = params(args)?;
+    if let (Some(input), true) = (&args.input, args.plan) {
+        let chain = chain(args, p)?;
+        let traced = |_: &[String]| ["distance", "g_hit", "hit"].map(String::from).to_vec();
+        return crate::input::print_channel_plan(input, &args.read, &traced, &chain);
+    }
     let given: Vec<&Path> =
         [&args.input, &args.g, &args.f2, &args.normal].into_iter().flatten().map(PathBuf::as_path).collect();
     let inputs = Inputs::of(&given);
@@ -82,11 +96,7 @@ fn trace(args: &BoundaryArgs, p: BoundaryParams, progress: &Progress) -> Result<
     match (&args.input, &args.g, &args.f2, &args.normal) {
         (Some(input), None, None, None) => {
             let value = progress.step("reading", || scalar(input, args))?;
-            let chain = BoundaryChainParams {
-                kernel: args.kernel,
-                prefilter: args.prefilter.as_deref().map(prefilter).transpose()?,
-                boundary: p,
-            };
+            let chain = chain(args, p)?;
             let r = progress.step("deriving and tracing", || boundary_chain::run(&value, &chain))?;
             Ok((r.boundary, r.g))
         }
