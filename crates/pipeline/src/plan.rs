@@ -228,25 +228,8 @@ impl Plan {
         let reaching =
             Reaching { kernel: chain.kernel, prefilter: chain.prefilter.as_ref(), d_max: chain.boundary.d_max };
         let (reach, halo) = reaching.of(&wanted, multi, prefilter, trace, geometry);
-        let has = |s: Step| steps.iter().any(|x| x.step == s);
-        let mut reductions = Vec::new();
-        let before: Vec<Step> = [Step::Derive, Step::Trace].into_iter().filter(|&s| has(s)).collect();
-        if !before.is_empty() {
-            reductions
-                .push(Reduction { what: "finite range of v (derive's epsilon, tracing thresholds)".into(), before });
-        }
-        if multi && has(Step::DeriveFields) {
-            let what = "finite range of each field (its [0, 1] normalisation)".into();
-            reductions.push(Reduction { what, before: vec![Step::DeriveFields] });
-        }
-        if prefilter {
-            let what = "finite ranges of g and f'' (the range sigma)".into();
-            reductions.push(Reduction { what, before: vec![Step::Prefilter] });
-        }
-        if trace && chain.boundary.g_min.is_none() {
-            let what = "median of g (the noise floor: g_min, g_hit_min)".into();
-            reductions.push(Reduction { what, before: vec![Step::Trace] });
-        }
+        let median_of_g = trace && chain.boundary.g_min.is_none();
+        let reductions = channel_reductions(&steps, median_of_g, prefilter, multi);
         Ok(Plan {
             fields,
             wanted,
@@ -398,8 +381,27 @@ pub fn derive_items(
     (derive, fields)
 }
 
-/// The whole-volume reductions the steps wait for.
+/// The whole-volume reductions the steps of a pipeline's plan wait for.
 fn reductions(p: &Pipeline, steps: &[PlannedStep], trace: bool, prefilter: bool, multi: bool) -> Vec<Reduction> {
+    let mut out = channel_reductions(steps, trace && p.boundary.g_min.is_none(), prefilter, multi);
+    let mut add = |what: &str, before: Step| {
+        if steps.iter().any(|x| x.step == before) {
+            out.push(Reduction { what: what.to_string(), before: vec![before] });
+        }
+    };
+    if p.histogram.is_some() {
+        add("exact percentiles of g (the histogram's g axis, as Teem's qbert clips it)", Step::Histogram);
+    }
+    if p.histogram.as_ref().is_some_and(|h| h.hvol) {
+        add("histogram volume (v, g, f'') counts and sums (boundaries, default opacity)", Step::Pack);
+    }
+    add("finite range of every packed channel (its quantisation)", Step::Pack);
+    out
+}
+
+/// The whole-volume reductions the steps that make channels wait for
+/// (`median_of_g`: the tracing takes its noise floor from the data).
+fn channel_reductions(steps: &[PlannedStep], median_of_g: bool, prefilter: bool, multi: bool) -> Vec<Reduction> {
     let has = |s: Step| steps.iter().any(|x| x.step == s);
     let mut out = Vec::new();
     let mut add = |what: &str, before: Vec<Step>| {
@@ -415,16 +417,9 @@ fn reductions(p: &Pipeline, steps: &[PlannedStep], trace: bool, prefilter: bool,
     if prefilter {
         add("finite ranges of g and f'' (the range sigma)", vec![Step::Prefilter]);
     }
-    if trace && p.boundary.g_min.is_none() {
+    if median_of_g {
         add("median of g (the noise floor: g_min, g_hit_min)", vec![Step::Trace]);
     }
-    if p.histogram.is_some() {
-        add("exact percentiles of g (the histogram's g axis, as Teem's qbert clips it)", vec![Step::Histogram]);
-    }
-    if p.histogram.as_ref().is_some_and(|h| h.hvol) {
-        add("histogram volume (v, g, f'') counts and sums (boundaries, default opacity)", vec![Step::Pack]);
-    }
-    add("finite range of every packed channel (its quantisation)", vec![Step::Pack]);
     out
 }
 
