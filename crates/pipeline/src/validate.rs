@@ -4,7 +4,6 @@
 
 use mdtf_boundary::{BoundaryInput, BoundaryParams, HitCode};
 use mdtf_datagen::erf_sphere;
-use mdtf_derive::{DeriveParams, Item};
 use mdtf_histogram::{Axis, HvolParams, Scale, count, histogram_volume, hit_mask, write_hvol, write_stretched};
 use mdtf_pack::{Dtype, GaussianPrimitive, Tf1d, decode_for, preintegration_table, segment, segment_by_midpoint};
 use mdtf_volume::{Geometry, MultiField, Volume};
@@ -113,12 +112,13 @@ impl Sphere {
         let (sigma, r) = (3.0, 0.3 * n as f64);
         let ph = erf_sphere(Geometry::new([n; 3], [1.0; 3]), r, sigma, 0.0, 255.0, None);
         let (value, truth) = (ph.volume(), ph.truth());
-        let kernel = params.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL);
-        let d = DeriveParams { items: vec![Item::G, Item::F2, Item::Normal], kernel, ..Default::default() };
-        let mut derived = mdtf_derive::run(&MultiField::from(value.clone()), &d).map_err(|e| e.to_string())?;
-        let normal = derived.items.remove(2).1;
-        let f2 = derived.items.remove(1).1.into_scalar().map_err(|e| e.to_string())?;
-        let g = derived.items.remove(0).1.into_scalar().map_err(|e| e.to_string())?;
+        // planned and run as a command's channels are (`Plan::for_channels`)
+        let chain = crate::boundary_chain::BoundaryChainParams { kernel: params.derive.kernel, ..Default::default() };
+        let names = ["g", "f2", "nx", "ny", "nz"].map(String::from);
+        let mut derived =
+            crate::channels::compute(&MultiField::from(value.clone()), &names, &chain).map_err(|e| e.to_string())?;
+        let normal = MultiField::from_volumes(derived.split_off(2)).map_err(|e| e.to_string())?;
+        let (f2, g) = (derived.remove(1).1, derived.remove(0).1);
         let x = truth.x.samples();
         let shell = (0..x.len()).filter(|&i| x[i].abs() < 2.0 * sigma as f32).collect();
         let a = 255.0 / (sigma * (2.0 * PI).sqrt());
