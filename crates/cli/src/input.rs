@@ -137,10 +137,15 @@ pub fn print_channel_plan(
     let fields: Vec<String> = mf.fields.iter().map(|f| f.name.clone()).collect();
     let names = names(if fields.len() > 1 { &fields } else { &[] });
     let plan = mdtf_pipeline::plan::Plan::for_channels(&names, &fields, &mf.geometry, chain)?;
-    let ([nx, ny, nz], [sx, sy, sz]) = (mf.geometry.dims, mf.geometry.spacing);
-    println!("plan of {} on {} ({nx} x {ny} x {nz}, spacing {sx} x {sy} x {sz})", names.join(", "), path.display());
-    println!("{plan}");
+    print_plan(&names.join(", "), &path.display().to_string(), &mf.geometry, &plan);
     Ok(())
+}
+
+/// Prints the plan of `what` on the input named `input` on `geometry` (a `--plan`).
+pub fn print_plan(what: &str, input: &str, geometry: &mdtf_volume::Geometry, plan: &mdtf_pipeline::plan::Plan) {
+    let ([nx, ny, nz], [sx, sy, sz]) = (geometry.dims, geometry.spacing);
+    println!("plan of {what} on {input} ({nx} x {ny} x {nz}, spacing {sx} x {sy} x {sz})");
+    println!("{plan}");
 }
 
 #[cfg(test)]

@@ -310,32 +310,31 @@ impl<'a> PackWriter<'a> {
         let this = &*self;
         // the memory of the slab before's channels and written textures is
         // reused: fresh memory of this size page-faults, at a cost like the quantising's
-        let mut spent = Vec::new();
-        let written: std::sync::Mutex<Vec<Vec<u8>>> = std::sync::Mutex::new(Vec::new());
+        let mut spent_channels = Vec::new();
         // a slab's channels are made and quantised while the slab before is written
-        let mut make = |k: usize| -> Result<Vec<Vec<u8>>, PackError> {
+        let mut make = |k: usize, written: Option<Vec<Vec<u8>>>| -> Result<Vec<Vec<u8>>, PackError> {
             let z = &slabs[k];
-            let chans = slab(z.clone(), std::mem::take(&mut spent))?;
+            let chans = slab(z.clone(), std::mem::take(&mut spent_channels))?;
+            let mut written = written.unwrap_or_default().into_iter();
             let mut textures = Vec::with_capacity(layouts.len());
             for (layout, decodes) in layouts.iter().zip(&decodes) {
                 let p = this.slab_of(layout, decodes, z, &chans)?;
-                let mut bytes = written.lock().unwrap_or_else(|e| e.into_inner()).pop().unwrap_or_default();
+                let mut bytes = written.next().unwrap_or_default();
                 // every byte is encoded over
                 bytes.resize(p.plane_bytes() * z.len(), 0);
                 p.encode_planes(0, &mut bytes);
                 textures.push(bytes);
             }
-            spent = chans;
+            spent_channels = chans;
             Ok(textures)
         };
-        let mut write = |textures: Vec<Vec<u8>>| -> Result<(), PackError> {
+        let mut write = |textures: Vec<Vec<u8>>| -> Result<Option<Vec<Vec<u8>>>, PackError> {
             for ((layout, file), bytes) in layouts.iter().zip(&mut files).zip(&textures) {
                 file.write_all(bytes).map_err(|cause| {
                     PackError::Io(VolumeError::Io { path: this.dir.join(format!("{}.raw", layout.name)), cause })
                 })?;
             }
-            written.lock().unwrap_or_else(|e| e.into_inner()).extend(textures);
-            Ok(())
+            Ok(Some(textures))
         };
         mdtf_volume::overlapped(slabs.len(), &mut |_| Ok(()), &mut make, &mut write)?;
         for (layout, file) in layouts.iter().zip(files) {

@@ -12,7 +12,7 @@ pub use crate::channel::CHANNEL_NAMES;
 /// Computes the named channels of `input`: its fields by name (`v` is the
 /// first field), `g` and `f2` by the derive stage, `g_hit`, `hit` and
 /// `distance` by the boundary chain: plans them ([`Plan::for_channels`])
-/// and runs the plan on the whole volume ([`execute`]). Unknown names are
+/// and runs the plan on the whole volume. Unknown names are
 /// an error listing the valid ones, before any work.
 pub fn compute(
     input: &MultiField,
@@ -27,7 +27,7 @@ pub fn compute(
 
 /// Runs `plan` (from [`Plan::for_channels`] with `names` and `chain`) on the
 /// whole of `input`: the channels `names`, in that order.
-pub fn execute(
+fn execute(
     plan: &Plan,
     input: &MultiField,
     names: &[String],

@@ -8,6 +8,7 @@
 use crate::channel::{Channel, Producer, Reach, UnknownChannel};
 use crate::file::Pipeline;
 use mdtf_bilateral::BilateralParams;
+use mdtf_boundary::BoundaryParams;
 use mdtf_derive::{Item, Kernel};
 use mdtf_pack::Profile;
 use mdtf_volume::Geometry;
@@ -156,16 +157,14 @@ impl Plan {
             }
         }
         let wanted: BTreeSet<Channel> = pack.iter().chain(&keep).chain(&hist).copied().collect();
-        let trace = wanted.iter().any(|c| c.producer(multi) == Producer::Trace);
         let normals = [Channel::Nx, Channel::Ny, Channel::Nz];
         let wants_normals = normals.iter().any(|c| wanted.contains(c));
         let kept_normal = normals.iter().any(|c| keep.contains(c));
-        let defer_normals = wants_normals && !trace && !kept_normal && profile != Profile::ProjectedTetrahedra;
-
-        let (derive, derive_fields) = derive_items(&wanted, multi, trace, defer_normals);
-        let prefilter = trace && p.prefilter.is_some();
-
-        let mut steps = channel_steps(&fields, &derive, &derive_fields, defer_normals, prefilter, trace);
+        let defer_normals =
+            wants_normals && !traces(&wanted, multi) && !kept_normal && profile != Profile::ProjectedTetrahedra;
+        let how = Making { kernel: p.derive.kernel, prefilter: p.prefilter.as_ref(), boundary: &p.boundary };
+        let mut plan = Plan::making(fields, wanted, defer_normals, &how, geometry);
+        let steps = &mut plan.steps;
         if !keep.is_empty() {
             steps.push(PlannedStep { step: Step::Keep, reads: keep, makes: BTreeSet::new() });
         }
@@ -173,7 +172,7 @@ impl Plan {
             steps.push(PlannedStep { step: Step::Histogram, reads: hist, makes: BTreeSet::new() });
         }
         // the deferred normals are made inside the pack step, from the value
-        let mut pack_reads = pack.clone();
+        let mut pack_reads = pack;
         let mut pack_makes = BTreeSet::new();
         if defer_normals {
             pack_reads.retain(|c| !normals.contains(c));
@@ -184,23 +183,9 @@ impl Plan {
         if p.preview {
             steps.push(PlannedStep { step: Step::Preview, reads: BTreeSet::new(), makes: BTreeSet::new() });
         }
-
-        let reaching = Reaching { kernel: p.derive.kernel, prefilter: p.prefilter.as_ref(), d_max: p.boundary.d_max };
-        let (reach, halo) = reaching.of(&wanted, multi, prefilter, trace, geometry);
-        let reductions = reductions(p, &steps, trace, prefilter, multi);
-        Ok(Plan {
-            fields,
-            wanted,
-            derive,
-            derive_fields,
-            defer_normals,
-            prefilter,
-            trace,
-            steps,
-            reductions,
-            reach,
-            halo,
-        })
+        let later = pipeline_reductions(p, &plan.steps);
+        plan.reductions.extend(later);
+        Ok(plan)
     }
 
     /// The plan of a command that wants the channels `names` of an input
@@ -215,34 +200,36 @@ impl Plan {
         chain: &crate::boundary_chain::BoundaryChainParams,
     ) -> Result<Plan, PlanError> {
         let fields: Vec<String> = if fields.len() > 1 { fields.to_vec() } else { Vec::new() };
-        let multi = !fields.is_empty();
         let mut wanted = BTreeSet::new();
         for name in names {
             wanted.insert(Channel::named(name, &fields).map_err(PlanError::Channel)?);
         }
-        let trace = wanted.iter().any(|c| c.producer(multi) == Producer::Trace);
-        let (derive, derive_fields) = derive_items(&wanted, multi, trace, false);
-        let prefilter = trace && chain.prefilter.is_some();
-        let mut steps = channel_steps(&fields, &derive, &derive_fields, false, prefilter, trace);
-        steps.push(PlannedStep { step: Step::Keep, reads: wanted.clone(), makes: BTreeSet::new() });
-        let reaching =
-            Reaching { kernel: chain.kernel, prefilter: chain.prefilter.as_ref(), d_max: chain.boundary.d_max };
-        let (reach, halo) = reaching.of(&wanted, multi, prefilter, trace, geometry);
-        let median_of_g = trace && chain.boundary.g_min.is_none();
+        let how = Making { kernel: chain.kernel, prefilter: chain.prefilter.as_ref(), boundary: &chain.boundary };
+        let mut plan = Plan::making(fields, wanted.clone(), false, &how, geometry);
+        plan.steps.push(PlannedStep { step: Step::Keep, reads: wanted, makes: BTreeSet::new() });
+        Ok(plan)
+    }
+
+    /// The plan of the steps that make the `wanted` channels of an input
+    /// with these `fields` (none: a scalar), as `how` says, on `geometry`,
+    /// with their reductions; `defer_normals`: a later step makes the
+    /// normals. The caller adds the steps that read the channels.
+    fn making(
+        fields: Vec<String>,
+        wanted: BTreeSet<Channel>,
+        defer_normals: bool,
+        how: &Making,
+        geometry: &Geometry,
+    ) -> Plan {
+        let multi = !fields.is_empty();
+        let trace = traces(&wanted, multi);
+        let (derive, derive_fields) = derive_items(&wanted, multi, trace, defer_normals);
+        let prefilter = trace && how.prefilter.is_some();
+        let steps = channel_steps(&fields, &derive, &derive_fields, defer_normals, prefilter, trace);
+        let (reach, halo) = how.reach(&wanted, multi, prefilter, trace, geometry);
+        let median_of_g = trace && how.boundary.g_min.is_none();
         let reductions = channel_reductions(&steps, median_of_g, prefilter, multi);
-        Ok(Plan {
-            fields,
-            wanted,
-            derive,
-            derive_fields,
-            defer_normals: false,
-            prefilter,
-            trace,
-            steps,
-            reductions,
-            reach,
-            halo,
-        })
+        Plan { fields, wanted, derive, derive_fields, defer_normals, prefilter, trace, steps, reductions, reach, halo }
     }
 
     /// Whether some output reads the channel called `name`.
@@ -311,20 +298,26 @@ fn channel_steps(
     steps
 }
 
-/// The settings behind how far a plan's stages reach.
-struct Reaching<'a> {
+/// What makes a plan's channels: the derivative kernel, the pre-filter and the tracing.
+struct Making<'a> {
     /// The derivative kernel (None: derive's default).
     kernel: Option<Kernel>,
     /// The pre-filter's parameters, when there is one.
     prefilter: Option<&'a BilateralParams>,
-    /// The tracing's d_max, world units (None: the tracing's default for the grid).
-    d_max: Option<f64>,
+    /// The tracing's parameters (d_max, world units, None: the tracing's
+    /// default for the grid; g_min, None: from the data's noise floor).
+    boundary: &'a BoundaryParams,
 }
 
-impl Reaching<'_> {
+/// Whether some of the `wanted` channels come from the tracing.
+fn traces(wanted: &BTreeSet<Channel>, multi: bool) -> bool {
+    wanted.iter().any(|c| c.producer(multi) == Producer::Trace)
+}
+
+impl Making<'_> {
     /// How far each stage reaches and the halo a block of the `wanted`
     /// channels needs, on `geometry`, with the pre-filter and the tracing as planned.
-    fn of(
+    fn reach(
         &self,
         wanted: &BTreeSet<Channel>,
         multi: bool,
@@ -339,7 +332,7 @@ impl Reaching<'_> {
             }
             _ => [0; 3],
         };
-        let d_max = if trace { self.d_max.unwrap_or(mdtf_boundary::default_d_max(geometry)) } else { 0.0 };
+        let d_max = if trace { self.boundary.d_max.unwrap_or(mdtf_boundary::default_d_max(geometry)) } else { 0.0 };
         let reach = Reach::new(kernel, prefilter_radius, d_max, geometry.spacing);
         let mut halo = [0; 3];
         for c in wanted {
@@ -381,9 +374,10 @@ pub fn derive_items(
     (derive, fields)
 }
 
-/// The whole-volume reductions the steps of a pipeline's plan wait for.
-fn reductions(p: &Pipeline, steps: &[PlannedStep], trace: bool, prefilter: bool, multi: bool) -> Vec<Reduction> {
-    let mut out = channel_reductions(steps, trace && p.boundary.g_min.is_none(), prefilter, multi);
+/// The whole-volume reductions the steps of a pipeline's plan wait for
+/// beyond those of the steps that make its channels.
+fn pipeline_reductions(p: &Pipeline, steps: &[PlannedStep]) -> Vec<Reduction> {
+    let mut out = Vec::new();
     let mut add = |what: &str, before: Step| {
         if steps.iter().any(|x| x.step == before) {
             out.push(Reduction { what: what.to_string(), before: vec![before] });

@@ -51,10 +51,7 @@ pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
 /// Prints the plan of the run (`--plan`): what it would do, writing nothing.
 fn print_plan(args: &RunArgs, pipeline: &Pipeline, opts: &RunOptions) -> Result<()> {
     let (plan, input, geo) = plan_pipeline(pipeline, opts)?;
-    let [nx, ny, nz] = geo.dims;
-    let [sx, sy, sz] = geo.spacing;
-    println!("plan of {} on {input} ({nx} x {ny} x {nz}, spacing {sx} x {sy} x {sz})", args.pipeline.display());
-    println!("{plan}");
+    crate::input::print_plan(&args.pipeline.display().to_string(), &input, &geo, &plan);
     Ok(())
 }
 

@@ -131,10 +131,11 @@ impl<'a> SlabPasses<'a> {
         overlapped(
             slabs.len(),
             &mut |k| progress.slab(k + 1, slabs.len()),
-            &mut |k| Ok((slabs[k].start, source.read(slabs[k].clone())?)),
+            &mut |k, _| Ok((slabs[k].start, source.read(slabs[k].clone())?)),
             &mut |(first, v)| {
                 stats.add("v", v.samples());
-                writer.put_volume("v", first, &v).map_err(io("input"))
+                writer.put_volume("v", first, &v).map_err(io("input"))?;
+                Ok(None)
             },
         )?;
         let mut stages = Stages::default();
@@ -198,22 +199,24 @@ impl<'a> SlabPasses<'a> {
         if !summarised.is_empty() {
             self.progress.stage("derive")?;
             let mut writer = chans.store.writer(if keep_g { &["g"] } else { &[] }).map_err(io("derive"))?;
-            let (slabs, stats, progress, pool) = (&self.slabs, &mut self.stats, &self.progress, chans.pool());
+            let (slabs, stats, progress) = (&self.slabs, &mut self.stats, &self.progress);
             // a slab is derived while the one before is summarised (and its g stored)
             overlapped(
                 slabs.len(),
                 &mut |k| progress.slab(k + 1, slabs.len()),
-                &mut |k| Ok((slabs[k].start, chans.volumes(slabs[k].clone(), &summarised).map_err(fail("derive"))?)),
+                &mut |k, spent| {
+                    chans.give_back(spent.map(|(_, volumes)| volumes).unwrap_or_default());
+                    Ok((slabs[k].start, chans.volumes(slabs[k].clone(), &summarised).map_err(fail("derive"))?))
+                },
                 &mut |(first, volumes)| {
-                    for (name, v) in volumes {
-                        stats.add(&name, v.samples());
-                        derived.add(&name, v.samples());
+                    for (name, v) in &volumes {
+                        stats.add(name, v.samples());
+                        derived.add(name, v.samples());
                         if name == "g" && keep_g {
-                            writer.put_volume("g", first, &v).map_err(io("derive"))?;
+                            writer.put_volume("g", first, v).map_err(io("derive"))?;
                         }
-                        pool.give_volumes([v]);
                     }
-                    Ok(())
+                    Ok(Some((first, volumes)))
                 },
             )?;
             chans.release();
@@ -315,16 +318,14 @@ impl<'a> SlabPasses<'a> {
             None => Some(chans.store.writer(&outputs).map_err(io("boundary"))?),
         };
         let (progress, tasks, stats) = (&self.progress, self.tasks.is_some(), &mut self.stats);
-        // the block before's outputs, written and summed: the next block's memory
-        let spent: std::sync::Mutex<Option<SlabTrace>> = std::sync::Mutex::new(None);
-        let take_spent = || spent.lock().unwrap_or_else(|e| e.into_inner()).take();
-        // a block is traced while the one before is written and summed
-        let mut make = |k: usize| {
+        // a block is traced (in the memory of one written and summed) while the one before is written and summed
+        let mut make = |k: usize, spent: Option<(usize, SlabTrace)>| {
             let (rows, z) = &blocks[k];
-            match tasks {
+            let slab = match tasks {
                 true => remote::stored_trace(chans, g, z),
-                false => trace::trace_slab(chans, &setup, z, rows, take_spent()),
-            }
+                false => trace::trace_slab(chans, &setup, z, rows, spent.map(|(_, s)| s)),
+            };
+            Ok((k, slab?))
         };
         let mut take = |(k, slab): (usize, SlabTrace)| {
             let (rows, z) = &blocks[k];
@@ -335,11 +336,10 @@ impl<'a> SlabPasses<'a> {
             }
             stats.add("g_hit", slab.trace.g_hit.samples());
             sums.add(&slab);
-            *spent.lock().unwrap_or_else(|e| e.into_inner()) = Some(slab);
-            Ok(())
+            Ok(Some((k, slab)))
         };
         let n = blocks.len();
-        overlapped(n, &mut |k| progress.slab(k + 1, n), &mut |k| Ok((k, make(k)?)), &mut take)?;
+        overlapped(n, &mut |k| progress.slab(k + 1, n), &mut make, &mut take)?;
         let traced = self.finish_trace(sums)?;
         for c in ["g_prefiltered", "f2_prefiltered", "dot"] {
             chans.store.remove(c);
@@ -420,11 +420,7 @@ impl<'a> SlabPasses<'a> {
                 return None;
             }
             let f32 = mdtf_volume::SampleType::F32;
-            let mut slab = |z, out: &mut Vec<f32>| {
-                out.clear();
-                out.extend_from_slice(chans.samples(c, z).map_err(std::io::Error::other)?);
-                Ok(())
-            };
+            let mut slab = |z, out: &mut Vec<f32>| chans.samples_into(c, z, out).map_err(std::io::Error::other);
             Some(mdtf_volume::write_slabs(file, geo, f32, slabs, &mut slab).map_err(at("keep")))
         })?;
         chans.release();
@@ -504,10 +500,9 @@ impl<'a> SlabPasses<'a> {
         }
         let mut counting_failed = None;
         let (progress, height, count) = (&self.progress, self.height, self.slabs.len());
-        let pool = chans.pool();
         let written = writer.add_slabs(&layouts, &self.slabs, &mut |z, spent| {
             progress.report_slab(z.end.div_ceil(height), count);
-            pool.give_volumes(spent.into_iter().map(|(_, v)| v));
+            chans.give_back(spent);
             let slab = chans
                 .volumes(z.clone(), &read)
                 .map_err(|e| mdtf_pack::PackError::Io(mdtf_volume::VolumeError::Fields(e)))?;

@@ -7,12 +7,10 @@
 //! what its budget counts (two slabs' channels) and is mapped once.
 
 use mdtf_volume::Volume;
-use std::sync::{Arc, Mutex, MutexGuard};
 
-/// Spare sample arrays of a pass (see the module docs); clones share them,
-/// so a pass can hand back on one thread what it takes on another.
-#[derive(Clone, Default)]
-pub struct SamplePool(Arc<Mutex<Vec<Vec<f32>>>>);
+/// Spare sample arrays of a pass (see the module docs).
+#[derive(Default)]
+pub struct SamplePool(Vec<Vec<f32>>);
 
 /// Arrays a pool keeps at most: two slabs' channels of the widest pass
 /// (the pack's reads hold about seven); any more are freed.
@@ -22,13 +20,11 @@ impl SamplePool {
     /// An array of `len` samples, in spare memory when the pool holds an
     /// array with room for them (the smallest such), else fresh (zeros).
     /// Its samples are arbitrary: the caller overwrites every one.
-    pub fn take(&self, len: usize) -> Vec<f32> {
-        let mut spare = self.lock();
-        let fitting = spare.iter().enumerate().filter(|(_, b)| b.capacity() >= len).min_by_key(|(_, b)| b.capacity());
+    pub fn take(&mut self, len: usize) -> Vec<f32> {
+        let fitting = self.0.iter().enumerate().filter(|(_, b)| b.capacity() >= len).min_by_key(|(_, b)| b.capacity());
         match fitting.map(|(i, _)| i) {
             Some(i) => {
-                let mut samples = spare.swap_remove(i);
-                drop(spare);
+                let mut samples = self.0.swap_remove(i);
                 samples.resize(len, 0.0);
                 samples
             }
@@ -37,28 +33,22 @@ impl SamplePool {
     }
 
     /// Hands back `samples` for a later [`SamplePool::take`].
-    pub fn give(&self, samples: Vec<f32>) {
-        let mut spare = self.lock();
-        if spare.len() < KEPT && samples.capacity() > 0 {
-            spare.push(samples);
+    pub fn give(&mut self, samples: Vec<f32>) {
+        if self.0.len() < KEPT && samples.capacity() > 0 {
+            self.0.push(samples);
         }
     }
 
     /// Hands back the memory of `volumes`.
-    pub fn give_volumes(&self, volumes: impl IntoIterator<Item = Volume>) {
+    pub fn give_volumes(&mut self, volumes: impl IntoIterator<Item = Volume>) {
         for v in volumes {
             self.give(v.data.into_raw_vec_and_offset().0);
         }
     }
 
     /// Frees every spare array (between passes, whose slabs differ in size).
-    pub fn clear(&self) {
-        self.lock().clear();
-    }
-
-    fn lock(&self) -> MutexGuard<'_, Vec<Vec<f32>>> {
-        // the arrays hold no state a panic elsewhere could have left half-made
-        self.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    pub fn clear(&mut self) {
+        self.0.clear();
     }
 }
 
@@ -68,7 +58,7 @@ mod tests {
 
     #[test]
     fn an_array_handed_back_is_taken_again_by_the_next_request_it_holds() {
-        let pool = SamplePool::default();
+        let mut pool = SamplePool::default();
         let mut a = pool.take(1000);
         assert_eq!(a.len(), 1000);
         a.iter_mut().for_each(|s| *s = 7.0);
@@ -85,10 +75,10 @@ mod tests {
         assert_eq!(pool.take(3), [0.0; 3]);
         pool.give(b);
         pool.clear();
-        assert!(pool.lock().is_empty());
+        assert!(pool.0.is_empty());
         for _ in 0..KEPT + 4 {
             pool.give(vec![1.0; 4]);
         }
-        assert_eq!(pool.lock().len(), KEPT, "at most KEPT arrays are kept");
+        assert_eq!(pool.0.len(), KEPT, "at most KEPT arrays are kept");
     }
 }

@@ -167,7 +167,7 @@ impl SlabChannels {
     }
 
     /// Planes `own` of field `f` of the derive output `mf`, copied into the pool's memory.
-    fn own_planes(&self, mf: &MultiField, f: &mdtf_volume::Field, own: Range<usize>) -> Result<Volume, String> {
+    fn own_planes(&mut self, mf: &MultiField, f: &mdtf_volume::Field, own: Range<usize>) -> Result<Volume, String> {
         let plane = mf.geometry.dims[0] * mf.geometry.dims[1];
         let all = f.data.as_slice().ok_or("a derived field is not contiguous")?;
         let from = all.get(own.start * plane..own.end * plane).ok_or("a derived field is too short")?;
@@ -186,10 +186,10 @@ impl SlabChannels {
         Volume::from_samples(geometry.z_slab(z), samples).map_err(|e| e.to_string())
     }
 
-    /// The pool the channels handed out take their memory from: hand them
-    /// back to it when done (from any thread), for the next slab's.
-    pub fn pool(&self) -> SamplePool {
-        self.pool.clone()
+    /// Takes back channels handed out by [`SlabChannels::volumes`], done
+    /// with: the next slab's are made in their memory.
+    pub fn give_back(&mut self, channels: Vec<(String, Volume)>) {
+        self.pool.give_volumes(channels.into_iter().map(|(_, v)| v));
     }
 
     /// The first derive pass's output over rows `rows` of planes `z`, both
@@ -316,10 +316,20 @@ impl SlabChannels {
     /// The samples of channel `name` on planes `z`, in memory of the
     /// channels' own that the next call reuses.
     pub fn samples(&mut self, name: &str, z: Range<usize>) -> Result<&[f32], String> {
+        let mut samples = std::mem::take(&mut self.samples_buffer);
+        let read = self.samples_into(name, z, &mut samples);
+        self.samples_buffer = samples;
+        read.map(|()| self.samples_buffer.as_slice())
+    }
+
+    /// Sets `samples` (its memory reused) to those of channel `name` on planes `z`.
+    pub fn samples_into(&mut self, name: &str, z: Range<usize>, samples: &mut Vec<f32>) -> Result<(), String> {
         self.check()?;
+        if self.store.has(name) {
+            return self.store.samples_into(name, z, samples).map_err(|e| e.to_string());
+        }
         let (_, v) = self.volumes(z, &[name])?.pop().ok_or("no samples")?;
-        let last = std::mem::replace(&mut self.samples_buffer, v.data.into_raw_vec_and_offset().0);
-        self.pool.give(last);
-        Ok(&self.samples_buffer)
+        self.pool.give(std::mem::replace(samples, v.data.into_raw_vec_and_offset().0));
+        Ok(())
     }
 }
