@@ -1492,7 +1492,7 @@ fn run_plan_prints_the_steps_and_the_halo_and_writes_nothing() {
     let text = mdtf_ok(&["run", pipeline.to_str().unwrap(), "--plan", "-o", out.to_str().unwrap()]);
     for line in [
         "2 derive           reads v -> g f2 nx ny nz [g, f2, normal]",
-        "3 boundary         reads g f2 nx ny nz -> g_hit hit distance; frees f2",
+        "3 boundary         reads g f2 nx ny nz -> g_hit hit distance dot; frees f2",
         "median of g (the noise floor: g_min, g_hit_min) -> boundary",
         // the shipped phantom: 1 mm voxels, central4 (2) + d_max 15 + 2 for g's tricubic at the hit
         "halo of a block: x 19, y 19, z 19 voxels",
@@ -1517,7 +1517,7 @@ fn histogram_pack_and_boundary_plan_the_channels_they_compute_and_plan_writes_no
     let stretched = mdtf_ok(&["histogram", i, "-o", o, "--stretched", "--plan"]);
     for line in [
         "2 derive           reads v -> g f2 nx ny nz [g, f2, normal]",
-        "3 boundary         reads g f2 nx ny nz -> g_hit hit distance; frees f2 nx ny nz",
+        "3 boundary         reads g f2 nx ny nz -> g_hit hit distance dot; frees f2 nx ny nz",
         "channels the outputs read: v g g_hit hit",
     ] {
         assert!(stretched.contains(line), "missing {line:?} in:\n{stretched}");
@@ -1525,7 +1525,7 @@ fn histogram_pack_and_boundary_plan_the_channels_they_compute_and_plan_writes_no
     // distance-tf's pack keeps the normal for its texture; slicer-3dtf's traces nothing
     let distance = mdtf_ok(&["pack", i, "--profile", "distance-tf", "--plan"]);
     assert!(
-        distance.contains("3 boundary         reads g f2 nx ny nz -> g_hit hit distance; frees g f2"),
+        distance.contains("3 boundary         reads g f2 nx ny nz -> g_hit hit distance dot; frees g f2"),
         "{distance}"
     );
     // the cubic B-spline's weights at +-2 voxels are 0: it reads one voxel each side (central4: 2)
@@ -1535,6 +1535,11 @@ fn histogram_pack_and_boundary_plan_the_channels_they_compute_and_plan_writes_no
     let chain = mdtf_ok(&["boundary", i, "-o", o, "--prefilter", "1,0.1", "--d-max", "6", "--plan"]);
     for line in ["3 prefilter        reads g f2", "halo of a block: x 13, y 13, z 13 voxels"] {
         assert!(chain.contains(line), "missing {line:?} in:\n{chain}");
+    }
+    // derive plans its items' channels: central differences read one voxel each side
+    let derive = mdtf_ok(&["derive", i, "-o", o, "--items", "hessian,g", "--kernel", "central", "--plan"]);
+    for line in ["2 derive           reads v -> g hxx hxy hxz hyy hyz hzz; frees v [g, hessian]", "halo of a block: x 1, y 1, z 1"] {
+        assert!(derive.contains(line), "missing {line:?} in:\n{derive}");
     }
     assert!(!out.exists(), "--plan wrote {}", out.display());
     // the plan refuses an unknown channel before any work

@@ -264,15 +264,10 @@ struct Prepared<'a> {
     engine: Engine<'a>,
 }
 
-/// Checks `params` against `input` and builds the pass (shared by [`run`]
-/// and [`stream_slices`]).
-fn prepare<'a>(input: &FieldsView<'a>, params: &DeriveParams) -> Result<Prepared<'a>, DeriveError> {
-    let items = dedup(&params.items);
-    if items.is_empty() {
-        return Err(DeriveError::NoItems);
-    }
-    let g = input.geometry;
-    let m = input.fields.len();
+/// Checks that `items` can be derived together from `fields` fields:
+/// multi-field items (gnorm, jacobian) and one-field items (g, f2, ...)
+/// cannot be mixed, and one-field items need exactly one field.
+pub fn check_field_count(items: &[Item], fields: usize) -> Result<(), DeriveError> {
     let multi: Vec<Item> = items.iter().copied().filter(|i| i.is_multi_field()).collect();
     let single: Vec<Item> = items.iter().copied().filter(|i| !i.is_multi_field() && !i.is_any_field_count()).collect();
     if !multi.is_empty() && !single.is_empty() {
@@ -282,12 +277,26 @@ fn prepare<'a>(input: &FieldsView<'a>, params: &DeriveParams) -> Result<Prepared
             names(&single)
         )));
     }
-    if !single.is_empty() && m != 1 {
+    if !single.is_empty() && fields != 1 {
         return Err(DeriveError::FieldCount(format!(
-            "items {} need one field, the input has {m}; pick one field",
+            "items {} need one field, the input has {fields}; pick one field",
             names(&single)
         )));
     }
+    Ok(())
+}
+
+/// Checks `params` against `input` and builds the pass (shared by [`run`]
+/// and [`stream_slices`]).
+fn prepare<'a>(input: &FieldsView<'a>, params: &DeriveParams) -> Result<Prepared<'a>, DeriveError> {
+    let items = dedup(&params.items);
+    if items.is_empty() {
+        return Err(DeriveError::NoItems);
+    }
+    let g = input.geometry;
+    let m = input.fields.len();
+    check_field_count(&items, m)?;
+    let multi: Vec<Item> = items.iter().copied().filter(|i| i.is_multi_field()).collect();
     if g.spacing.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
         return Err(DeriveError::BadSpacing(g.spacing));
     }

@@ -3,7 +3,7 @@
 
 use mdtf_bilateral::{BilateralError, BilateralParams, RangeUnits};
 use mdtf_boundary::{BoundaryError, BoundaryInput, BoundaryOutput, BoundaryParams};
-use mdtf_derive::{DeriveError, DeriveParams, FieldView, FieldsView, Item, Kernel};
+use mdtf_derive::{Border, DeriveError, DeriveParams, FieldView, FieldsView, Item, Kernel};
 use mdtf_volume::{Geometry, MultiField, Volume};
 use serde::{Deserialize, Serialize};
 
@@ -13,6 +13,11 @@ use serde::{Deserialize, Serialize};
 pub struct BoundaryChainParams {
     /// Derivative kernel (default: derive's default; use gauss:1 or bspline3 on noisy data).
     pub kernel: Option<Kernel>,
+    /// Derive's border policy (None: derive's default, clamp).
+    pub border: Option<Border>,
+    /// Derive's epsilon, value units per world unit: g below it counts as 0
+    /// for the normal, f'' and 1/g (None: derive's default from the value range).
+    pub epsilon: Option<f32>,
     /// Optional bilateral pre-filter of g and f'' (a fraction `sigma_r` is
     /// of each channel's own finite range).
     pub prefilter: Option<BilateralParams>,
@@ -49,6 +54,19 @@ pub enum ChainError {
     /// A request the chain does not know.
     #[error("{0}")]
     Unknown(String),
+}
+
+impl BoundaryChainParams {
+    /// Derive's parameters for `items` with this chain's kernel, border and epsilon.
+    pub fn derive(&self, items: Vec<Item>) -> DeriveParams {
+        let defaults = DeriveParams::default();
+        DeriveParams {
+            items,
+            kernel: self.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
+            border: self.border.unwrap_or(defaults.border),
+            epsilon: self.epsilon,
+        }
+    }
 }
 
 impl From<DeriveError> for ChainError {
@@ -97,12 +115,7 @@ pub fn run_on(
     // Check the tracing parameters before the expensive stages.
     let floor = mdtf_boundary::noise_floor(&[], value_range, geometry.min_spacing());
     mdtf_boundary::resolve(&params.boundary, geometry, value_range, floor)?;
-    let d = DeriveParams {
-        items: vec![Item::G, Item::F2, Item::Normal],
-        kernel: params.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
-        epsilon: at.epsilon,
-        ..DeriveParams::default()
-    };
+    let d = DeriveParams { epsilon: at.epsilon.or(params.epsilon), ..params.derive(vec![Item::G, Item::F2, Item::Normal]) };
     let input = FieldsView::new(geometry, vec![FieldView { name: "value", samples: value }])?;
     let mut out = mdtf_derive::run_view(&input, &d, None, &|_, _| {})?;
     let take = |out: &mut mdtf_derive::DeriveOutput, item| {

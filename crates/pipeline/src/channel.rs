@@ -33,6 +33,42 @@ pub enum Channel {
     Hit,
     /// Distance to the nearest boundary, world units.
     Distance,
+    /// Dot product of the unit normals at the voxel and at its boundary hit (-1 to 1).
+    Dot,
+    /// The value as the kernel reconstructs it (the input itself for interpolating kernels).
+    Reconstructed,
+    /// Gradient component along x, value units per world unit.
+    Gx,
+    /// Gradient component along y, value units per world unit.
+    Gy,
+    /// Gradient component along z, value units per world unit.
+    Gz,
+    /// Hessian component xx, value units per world unit squared.
+    Hxx,
+    /// Hessian component xy, value units per world unit squared.
+    Hxy,
+    /// Hessian component xz, value units per world unit squared.
+    Hxz,
+    /// Hessian component yy, value units per world unit squared.
+    Hyy,
+    /// Hessian component yz, value units per world unit squared.
+    Hyz,
+    /// Hessian component zz, value units per world unit squared.
+    Hzz,
+    /// Laplacian, the Hessian's trace, value units per world unit squared.
+    Laplacian,
+    /// Surface-shading weight 1 - (1 - g / g_max)^2 in [0, 1], g_max the
+    /// largest g of the whole volume.
+    Shade,
+    /// Component of the Jacobian of a several-field input's normalised
+    /// fields: d field / d axis (axis 0, 1, 2: x, y, z), per world unit.
+    /// Named `d{field}/d{axis}`.
+    Jacobian {
+        /// The field.
+        field: usize,
+        /// The axis.
+        axis: usize,
+    },
 }
 
 /// The stage that makes a channel.
@@ -63,86 +99,54 @@ pub struct Row {
     pub prerequisites: &'static [Channel],
 }
 
-const NORMAL_IN: &[Channel] = &[Channel::Value];
 const TRACE_IN: &[Channel] = &[Channel::G, Channel::F2, Channel::Nx, Channel::Ny, Channel::Nz];
+const VALUE_IN: &[Channel] = &[Channel::Value];
 
-/// Every named channel (the fields are not rows: they are the input's).
-pub const TABLE: [Row; 11] = [
-    Row { channel: Channel::Value, name: "v", producer: Producer::Input, producer_multi: None, prerequisites: &[] },
-    Row {
-        channel: Channel::G,
-        name: "g",
-        producer: Producer::Derive(Item::G),
-        producer_multi: None,
-        prerequisites: &[Channel::Value],
-    },
-    Row {
-        channel: Channel::F2,
-        name: "f2",
-        producer: Producer::Derive(Item::F2),
-        producer_multi: None,
-        prerequisites: &[Channel::Value],
-    },
-    Row {
-        channel: Channel::Nx,
-        name: "nx",
-        producer: Producer::Derive(Item::Normal),
-        producer_multi: None,
-        prerequisites: NORMAL_IN,
-    },
-    Row {
-        channel: Channel::Ny,
-        name: "ny",
-        producer: Producer::Derive(Item::Normal),
-        producer_multi: None,
-        prerequisites: NORMAL_IN,
-    },
-    Row {
-        channel: Channel::Nz,
-        name: "nz",
-        producer: Producer::Derive(Item::Normal),
-        producer_multi: None,
-        prerequisites: NORMAL_IN,
-    },
-    Row {
-        channel: Channel::InvG,
-        name: "inv_g",
-        producer: Producer::Derive(Item::InvG),
-        producer_multi: Some(Producer::DeriveFields(Item::InvG)),
-        prerequisites: &[Channel::Value],
-    },
-    Row {
-        channel: Channel::Gnorm,
-        name: "gnorm",
-        producer: Producer::DeriveFields(Item::Gnorm),
-        producer_multi: None,
-        prerequisites: &[],
-    },
-    Row {
-        channel: Channel::GHit,
-        name: "g_hit",
-        producer: Producer::Trace,
-        producer_multi: None,
-        prerequisites: TRACE_IN,
-    },
-    Row {
-        channel: Channel::Hit,
-        name: "hit",
-        producer: Producer::Trace,
-        producer_multi: None,
-        prerequisites: TRACE_IN,
-    },
-    Row {
-        channel: Channel::Distance,
-        name: "distance",
-        producer: Producer::Trace,
-        producer_multi: None,
-        prerequisites: TRACE_IN,
-    },
+/// A row whose producer is the same for one field and several.
+const fn row(channel: Channel, name: &'static str, producer: Producer, prerequisites: &'static [Channel]) -> Row {
+    Row { channel, name, producer, producer_multi: None, prerequisites }
+}
+
+/// A row made by the derive pass over the value with `item`.
+const fn derived(channel: Channel, name: &'static str, item: Item) -> Row {
+    row(channel, name, Producer::Derive(item), VALUE_IN)
+}
+
+/// Every named channel (the fields and the Jacobian's components are not
+/// rows: their names come from the input's fields).
+pub const TABLE: [Row; 24] = [
+    row(Channel::Value, "v", Producer::Input, &[]),
+    derived(Channel::G, "g", Item::G),
+    derived(Channel::F2, "f2", Item::F2),
+    derived(Channel::Nx, "nx", Item::Normal),
+    derived(Channel::Ny, "ny", Item::Normal),
+    derived(Channel::Nz, "nz", Item::Normal),
+    Row { producer_multi: Some(Producer::DeriveFields(Item::InvG)), ..derived(Channel::InvG, "inv_g", Item::InvG) },
+    row(Channel::Gnorm, "gnorm", Producer::DeriveFields(Item::Gnorm), &[]),
+    row(Channel::GHit, "g_hit", Producer::Trace, TRACE_IN),
+    row(Channel::Hit, "hit", Producer::Trace, TRACE_IN),
+    row(Channel::Distance, "distance", Producer::Trace, TRACE_IN),
+    row(Channel::Dot, "dot", Producer::Trace, TRACE_IN),
+    derived(Channel::Reconstructed, "value", Item::Value),
+    derived(Channel::Gx, "gx", Item::Grad),
+    derived(Channel::Gy, "gy", Item::Grad),
+    derived(Channel::Gz, "gz", Item::Grad),
+    derived(Channel::Hxx, "hxx", Item::Hessian),
+    derived(Channel::Hxy, "hxy", Item::Hessian),
+    derived(Channel::Hxz, "hxz", Item::Hessian),
+    derived(Channel::Hyy, "hyy", Item::Hessian),
+    derived(Channel::Hyz, "hyz", Item::Hessian),
+    derived(Channel::Hzz, "hzz", Item::Hessian),
+    derived(Channel::Laplacian, "laplacian", Item::Laplacian),
+    derived(Channel::Shade, "shade", Item::Shade),
 ];
 
 /// Every channel name, for messages and `--help`.
-pub const CHANNEL_NAMES: &str = "v, g, f2, nx, ny, nz, inv_g, gnorm, g_hit, hit, distance";
+pub const CHANNEL_NAMES: &str = "v, g, f2, nx, ny, nz, inv_g, gnorm, g_hit, hit, distance, dot, value, gx, gy, gz, \
+                                 hxx, hxy, hxz, hyy, hyz, hzz, laplacian, shade, or d{field}/d{x,y,z} (jacobian)";
+
+/// The axis names of the Jacobian's components.
+const AXES: [&str; 3] = ["x", "y", "z"];
 
 impl Channel {
     /// The channel called `name` for an input with these fields (a field's
@@ -151,7 +155,14 @@ impl Channel {
         if let Some(k) = fields.iter().position(|f| f == name) {
             return Some(Channel::Field(k));
         }
-        TABLE.iter().find(|r| r.name == name).map(|r| r.channel)
+        if let Some(row) = TABLE.iter().find(|r| r.name == name) {
+            return Some(row.channel);
+        }
+        // d{field}/d{axis}
+        let (field, axis) = name.strip_prefix('d')?.rsplit_once("/d")?;
+        let field = fields.iter().position(|f| f == field)?;
+        let axis = AXES.iter().position(|a| *a == axis)?;
+        Some(Channel::Jacobian { field, axis })
     }
 
     /// The channel called `name`, or an error listing the valid names.
@@ -166,11 +177,14 @@ impl Channel {
     pub fn name(self, fields: &[String]) -> String {
         match self {
             Channel::Field(k) => fields.get(k).cloned().unwrap_or_else(|| format!("field{k}")),
+            Channel::Jacobian { field, axis } => {
+                format!("d{}/d{}", Channel::Field(field).name(fields), AXES.get(axis).unwrap_or(&"?"))
+            }
             c => c.row().map_or("?", |r| r.name).to_string(),
         }
     }
 
-    /// Its row of the table (None for the fields).
+    /// Its row of the table (None for the fields and the Jacobian's components).
     pub fn row(self) -> Option<&'static Row> {
         TABLE.iter().find(|r| r.channel == self)
     }
@@ -180,6 +194,7 @@ impl Channel {
         match self.row() {
             Some(r) if multi => r.producer_multi.unwrap_or(r.producer),
             Some(r) => r.producer,
+            None if matches!(self, Channel::Jacobian { .. }) => Producer::DeriveFields(Item::Jacobian),
             None => Producer::Input,
         }
     }
@@ -244,7 +259,9 @@ mod tests {
     #[test]
     fn every_row_is_found_by_its_name_and_names_are_the_listed_ones() {
         let names: Vec<&str> = TABLE.iter().map(|r| r.name).collect();
-        assert_eq!(names.join(", "), CHANNEL_NAMES);
+        assert!(CHANNEL_NAMES.starts_with(&format!("{}, or ", names.join(", "))), "{CHANNEL_NAMES}");
+        let distinct: std::collections::BTreeSet<Channel> = TABLE.iter().map(|r| r.channel).collect();
+        assert_eq!(distinct.len(), TABLE.len(), "one row per channel");
         for r in &TABLE {
             assert_eq!(Channel::parse(r.name, &[]), Some(r.channel));
             assert_eq!(r.channel.name(&[]), r.name);
@@ -252,6 +269,12 @@ mod tests {
         let fields = vec!["t1".to_string(), "g".to_string()];
         assert_eq!(Channel::parse("g", &fields), Some(Channel::Field(1)), "a field shadows a table name");
         assert_eq!(Channel::Field(1).name(&fields), "g");
+        // the Jacobian's components are named after the fields
+        let dg_dz = Channel::Jacobian { field: 1, axis: 2 };
+        assert_eq!(Channel::parse("dg/dz", &fields), Some(dg_dz));
+        assert_eq!(dg_dz.name(&fields), "dg/dz");
+        assert_eq!(dg_dz.producer(true), Producer::DeriveFields(Item::Jacobian));
+        assert_eq!((Channel::parse("dt2/dx", &fields), Channel::parse("dt1/dw", &fields)), (None, None));
         let e = Channel::named("nope", &fields).unwrap_err().to_string();
         assert!(e.contains("'nope'") && e.contains("distance") && e.contains("t1, g"), "{e}");
     }

@@ -266,7 +266,9 @@ fn channel_steps(
     let normals = [Channel::Nx, Channel::Ny, Channel::Nz];
     let made_by = |item: &Item, fields_pass: bool| -> Vec<Channel> {
         let want = if fields_pass { Producer::DeriveFields(*item) } else { Producer::Derive(*item) };
-        crate::channel::TABLE.iter().map(|r| r.channel).filter(|c| c.producer(multi) == want).collect()
+        let jacobian = (0..fields.len()).flat_map(|field| (0..3).map(move |axis| Channel::Jacobian { field, axis }));
+        let rows = crate::channel::TABLE.iter().map(|r| r.channel);
+        rows.chain(jacobian).filter(|c| c.producer(multi) == want).collect()
     };
     let mut steps = Vec::new();
     let mut input_makes: BTreeSet<Channel> = BTreeSet::from([Channel::Value]);
@@ -292,7 +294,7 @@ fn channel_steps(
     }
     if trace {
         let reads = Channel::Distance.row().map_or(&[][..], |r| r.prerequisites).iter().copied().collect();
-        let makes = [Channel::GHit, Channel::Hit, Channel::Distance].into();
+        let makes = [Channel::GHit, Channel::Hit, Channel::Distance, Channel::Dot].into();
         steps.push(PlannedStep { step: Step::Trace, reads, makes });
     }
     steps
@@ -366,12 +368,17 @@ pub fn derive_items(
     if trace || (wants_normals && !defer_normals) {
         derive.push(Item::Normal);
     }
-    let made_by = |p: Producer| wanted.iter().any(|c| c.producer(multi) == p);
-    if made_by(Producer::Derive(Item::InvG)) {
-        derive.push(Item::InvG);
-    }
-    let fields = [Item::Gnorm, Item::InvG].into_iter().filter(|&i| made_by(Producer::DeriveFields(i))).collect();
-    (derive, fields)
+    // then every other item a wanted channel needs
+    let made = |p: Producer| wanted_from(wanted, multi, p);
+    let first = [Item::G, Item::F2, Item::Normal];
+    derive.extend(Item::ALL.into_iter().filter(|i| !first.contains(i) && made(Producer::Derive(*i))));
+    let fields = [Item::Gnorm, Item::InvG, Item::Jacobian].into_iter().filter(|&i| made(Producer::DeriveFields(i)));
+    (derive, fields.collect())
+}
+
+/// Whether one of the `wanted` channels comes from `producer`.
+fn wanted_from(wanted: &BTreeSet<Channel>, multi: bool, producer: Producer) -> bool {
+    wanted.iter().any(|c| c.producer(multi) == producer)
 }
 
 /// The whole-volume reductions the steps of a pipeline's plan wait for

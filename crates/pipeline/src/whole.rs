@@ -124,13 +124,11 @@ impl<'a> WholeRun<'a> {
             let t = Instant::now();
             let d = DeriveParams { items, kernel: self.kernel, ..Default::default() };
             let out = mdtf_derive::run(&self.value, &d).map_err(at("derive"))?;
+            // every component is a channel of its own name (g, f2, gx, hxx, ...)
             for (item, mf) in out.items {
                 match item {
                     Item::Normal => self.normal = Some(mf),
-                    other => {
-                        let v = mf.into_scalar().map_err(at("derive"))?;
-                        self.chans.insert(other.name().to_string(), v);
-                    }
+                    _ => self.chans.extend(mf.into_volumes()),
                 }
             }
             self.stages.done("derive", t, self.voxels(), vec![]);
@@ -143,9 +141,8 @@ impl<'a> WholeRun<'a> {
             let t = Instant::now();
             let d = DeriveParams { items: multi_items, kernel: self.kernel, ..Default::default() };
             let out = mdtf_derive::run(mf, &d).map_err(at("derive"))?;
-            for (item, m) in out.items {
-                self.chans.insert(item.name().into(), m.into_scalar().map_err(at("derive"))?);
-            }
+            // gnorm, inv_g, and the Jacobian's d{field}/d{axis}
+            self.chans.extend(out.items.into_iter().flat_map(|(_, m)| m.into_volumes()));
             self.stages.done("derive (multi-field)", t, self.voxels(), vec![]);
         }
         // the input's fields move into the channels once the multi-field derive is done with them
@@ -214,7 +211,7 @@ impl<'a> WholeRun<'a> {
         std::fs::create_dir_all(&rdir).map_err(at("boundary"))?;
         report.write(&rdir).map_err(at("boundary"))?;
         drop(filtered);
-        for (c, v) in [("g_hit", out.g_hit), ("hit", out.hit), ("distance", out.distance)] {
+        for (c, v) in [("g_hit", out.g_hit), ("hit", out.hit), ("distance", out.distance), ("dot", out.dot)] {
             if self.needs(c) {
                 self.chans.insert(c.into(), v);
             }

@@ -394,3 +394,56 @@ fn a_failed_task_fails_the_run_with_its_message_and_no_output() {
     let e = run_task(&job, 2..9).unwrap_err().to_string();
     assert!(e.contains("not a slab of the volume's 4"), "{e}");
 }
+
+#[test]
+fn every_derivative_channel_and_dot_are_kept_right_and_the_same_slab_by_slab() {
+    let keep = ["v", "value", "g", "f2", "nx", "ny", "nz", "gx", "gy", "gz", "hxx", "hxy", "hxz", "hyy", "hyz"];
+    let keep: Vec<String> = keep.iter().chain(&["hzz", "laplacian", "dot", "hit"]).map(|s| s.to_string()).collect();
+    let keep_set = format!("keep={keep:?}");
+    let p = shipped("distance-tf", &["input.size=40", "input.sigma=2.0", &keep_set, "preview=false"]);
+    let dir = tempfile::tempdir().unwrap();
+    let opts = RunOptions {
+        pipeline_path: pipelines_dir().join("distance-tf.toml"),
+        output: dir.path().join("out"),
+        ..Default::default()
+    };
+    run_whole(&p, &opts, &|_| {}).unwrap();
+    let read = |c: &str| -> Vec<f32> {
+        let path = opts.output.join(format!("volumes/{c}.nii.gz"));
+        let mf = mdtf_volume::read(&path, &Default::default()).unwrap_or_else(|e| panic!("{c}: {e}"));
+        mf.into_scalar().unwrap().data.iter().copied().collect()
+    };
+    let k: BTreeMap<&str, Vec<f32>> = keep.iter().map(|c| (c.as_str(), read(c))).collect();
+    let g_max = k["g"].iter().fold(0.0f32, |a, &b| a.max(b));
+    let f2_max = k["f2"].iter().fold(0.0f32, |a, &b| a.max(b.abs()));
+    let (mut dots, mut hits) = (0.0f64, 0usize);
+    for i in 0..k["v"].len() {
+        let n = [k["nx"][i], k["ny"][i], k["nz"][i]];
+        // the gradient is g along the normal
+        for (c, &na) in ["gx", "gy", "gz"].iter().zip(&n) {
+            assert!((k[c][i] - k["g"][i] * na).abs() < 1e-4 * g_max, "{c} at {i}");
+        }
+        // the Hessian's components in place: f'' = n^T H n, the Laplacian its trace
+        let h = |c: &str| k[c][i];
+        let nhn = n[0] * n[0] * h("hxx") + n[1] * n[1] * h("hyy") + n[2] * n[2] * h("hzz")
+            + 2.0 * (n[0] * n[1] * h("hxy") + n[0] * n[2] * h("hxz") + n[1] * n[2] * h("hyz"));
+        if k["g"][i] > 0.05 * g_max {
+            assert!((nhn - k["f2"][i]).abs() < 1e-3 * f2_max, "n^T H n {nhn} vs f2 {} at {i}", k["f2"][i]);
+        }
+        assert!((h("hxx") + h("hyy") + h("hzz") - k["laplacian"][i]).abs() < 1e-4 * f2_max, "laplacian at {i}");
+        // central4 interpolates: the reconstructed value is the input's
+        assert!((k["value"][i] - k["v"][i]).abs() <= 1e-3 * k["v"][i].abs().max(1.0), "value at {i}");
+        if k["hit"][i] == 1.0 {
+            dots += k["dot"][i] as f64;
+            hits += 1;
+        }
+    }
+    // on a sphere the normals at a voxel and at its boundary hit are both radial
+    assert!(hits > 1000 && dots / hits as f64 > 0.99, "mean dot {} over {hits} hits", dots / hits as f64);
+    let sizes = [SlabSize::Planes(7), SlabSize::Strips { planes: 5, rows: 9 }];
+    assert_slab_runs_equal_the_whole("distance-tf", &p, None, &sizes);
+    // the shading weight divides by the largest g of the whole volume: not by slabs
+    let shade = shipped("distance-tf", &["input.size=24", "keep=[\"shade\"]"]);
+    let e = run_blocks(&shade, &opts, SlabSize::Planes(4), &|_| {}, &|_, _| {}).unwrap_err().to_string();
+    assert!(e.contains("largest g of the whole volume"), "{e}");
+}

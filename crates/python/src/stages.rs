@@ -148,6 +148,7 @@ pub fn boundary<'py>(
             tolerance: tolerance.unwrap_or(defaults.tolerance),
             ..defaults
         },
+        ..Default::default()
     };
     let v = view("values", &values)?;
     let geo = geometry(shape(&v), spacing, [0.0; 3])?;

@@ -62,6 +62,11 @@ pub struct DeriveArgs {
     /// Output format.
     #[arg(long, value_enum, default_value_t = OutFormat::NiiGz)]
     pub format: OutFormat,
+    /// Print the plan instead of deriving: the derive passes with the items and channels each
+    /// makes, the whole-volume reductions and the halo a block needs (the kernel's support).
+    /// Reads the inputs and writes nothing.
+    #[arg(long)]
+    pub plan: bool,
     #[command(flatten)]
     pub read: InputArgs,
 }

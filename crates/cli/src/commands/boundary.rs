@@ -4,9 +4,11 @@ use crate::args::BoundaryArgs;
 use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
-use mdtf_pipeline::boundary_chain::{self, BoundaryChainParams};
+use mdtf_pipeline::boundary_chain::BoundaryChainParams;
+use mdtf_pipeline::channels::{self, Tracing};
+use mdtf_pipeline::run::BoundarySummary;
 use mdtf_pipeline::stages::bilateral::BilateralParams;
-use mdtf_pipeline::stages::boundary::{AlphaMap, BoundaryInput, BoundaryOutput, BoundaryParams};
+use mdtf_pipeline::stages::boundary::{AlphaMap, BoundaryInput, BoundaryParams};
 use mdtf_volume::{Inputs, MultiField, OutputFolder, Volume, WriteOptions, write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -44,6 +46,7 @@ fn chain(args: &BoundaryArgs, p: BoundaryParams) -> Result<BoundaryChainParams> 
         kernel: args.kernel,
         prefilter: args.prefilter.as_deref().map(prefilter).transpose()?,
         boundary: p,
+        ..Default::default()
     })
 }
 
@@ -57,7 +60,7 @@ pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
     let p = params(args)?;
     if let (Some(input), true) = (&args.input, args.plan) {
         let chain = chain(args, p)?;
-        let traced = |_: &[String]| ["distance", "g_hit", "hit"].map(String::from).to_vec();
+        let traced = |_: &[String]| TRACED.map(String::from).to_vec();
         return crate::input::print_channel_plan(input, &args.read, &traced, &chain);
     }
     let given: Vec<&Path> =
@@ -71,34 +74,51 @@ pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
         _ => None,
     };
     let start = Instant::now();
-    let (out, g) = trace(args, p, progress)?;
+    let traced = trace(args, p, progress)?;
     let seconds = start.elapsed().as_secs_f64();
     let report_dir = match (&report_folder, &report_inside) {
         (Some(f), _) => Some(f.path().to_path_buf()),
         (None, Some(rel)) => Some(folder.path().join(rel)),
         (None, None) => None,
     };
-    write_outputs(&out, &g, folder.path(), args.format.extension(), report_dir.as_deref(), &given, progress)?;
+    write_outputs(&traced, folder.path(), args.format.extension(), report_dir.as_deref(), &given, progress)?;
     folder.publish(&inputs)?;
     if let Some(r) = report_folder {
         r.publish(&inputs)?;
     }
-    for w in &out.warnings {
+    for w in &traced.tracing.warnings {
         progress.note(&format!("warning: {w}"));
     }
-    progress.note(&summary(&out, seconds));
+    progress.note(&summary(&traced.tracing.summary, seconds));
     Ok(())
 }
 
-/// The tracing and the g it traced: the whole chain from a value volume,
-/// or the tracing alone on given g, f'' and normal.
-fn trace(args: &BoundaryArgs, p: BoundaryParams, progress: &Progress) -> Result<(BoundaryOutput, Volume)> {
-    match (&args.input, &args.g, &args.f2, &args.normal) {
+/// The tracing's channels as files (distance, g_hit, hit, dot, then the
+/// flipped distance and alpha maps when asked) and what it found.
+struct Traced {
+    files: Vec<(String, Volume)>,
+    tracing: Tracing,
+}
+
+/// The files of the tracing's channels, in the order they are written.
+const TRACED: [&str; 4] = ["distance", "g_hit", "hit", "dot"];
+
+/// The tracing: the planned chain from a value volume (derive, the
+/// pre-filter if asked, tracing), or the tracing alone on given g, f'' and normal.
+fn trace(args: &BoundaryArgs, p: BoundaryParams, progress: &Progress) -> Result<Traced> {
+    let (mut files, mut tracing) = match (&args.input, &args.g, &args.f2, &args.normal) {
         (Some(input), None, None, None) => {
             let value = progress.step("reading", || scalar(input, args))?;
             let chain = chain(args, p)?;
-            let r = progress.step("deriving and tracing", || boundary_chain::run(&value, &chain))?;
-            Ok((r.boundary, r.g))
+            let names = TRACED.map(String::from).to_vec();
+            let nz = value.geometry.dims[2] as u64;
+            let computed = progress
+                .counted("deriving, then tracing", nz, |tick| {
+                    channels::compute_all(&MultiField::from(value), &names, &chain, tick)
+                })
+                .context("cannot trace the boundaries")?;
+            let tracing = computed.tracing.context("the plan did not trace")?;
+            (computed.channels, tracing)
         }
         (None, Some(g), Some(f2), Some(normal)) => {
             if args.kernel.is_some() || args.prefilter.is_some() {
@@ -110,15 +130,21 @@ fn trace(args: &BoundaryArgs, p: BoundaryParams, progress: &Progress) -> Result<
             let nv = read_input(normal, &args.read, &read_options(&args.read))?.0;
             let input = BoundaryInput { g: &gv, f2: &f2v, normal: &nv, value_range: args.value_range.unwrap_or(255.0) };
             let out = progress.step("tracing", || mdtf_pipeline::stages::boundary::run(&input, &p))?;
-            Ok((out, gv))
+            let report = out.report(&gv);
+            let files = TRACED.map(String::from).into_iter().zip([out.distance, out.g_hit, out.hit, out.dot]).collect();
+            let summary = BoundarySummary { resolved: out.resolved, counts: out.counts, lost: out.lost };
+            (files, Tracing { summary, warnings: out.warnings, flipped: out.flipped, alpha: out.alpha, report })
         }
         _ => bail!("give either a value volume, or all of --g, --f2 and --normal"),
-    }
+    };
+    files.extend(tracing.flipped.take().map(|f| ("flipped".to_string(), f)));
+    files.append(&mut tracing.alpha);
+    Ok(Traced { files, tracing })
 }
 
-/// What the tracing of `out` found, in `seconds`, for the closing note.
-fn summary(out: &BoundaryOutput, seconds: f64) -> String {
-    let (c, r) = (&out.counts, &out.resolved);
+/// What the tracing found (`summary`), in `seconds`, for the closing note.
+fn summary(summary: &BoundarySummary, seconds: f64) -> String {
+    let (c, r) = (&summary.counts, &summary.resolved);
     format!(
         "traced {} voxels in {seconds:.2} s: {} boundaries kept, {} rejected (g at the hit < {:.3}), {} without a zero crossing within {:.3}; \
          {} below g_min {:.3} not traced (noise floor {:.3})",
@@ -135,34 +161,21 @@ fn summary(out: &BoundaryOutput, seconds: f64) -> String {
 }
 
 fn write_outputs(
-    out: &BoundaryOutput,
-    g: &Volume,
+    traced: &Traced,
     dir: &Path,
     ext: &str,
     report_dir: Option<&Path>,
     inputs: &[&Path],
     progress: &Progress,
 ) -> Result<()> {
-    let mut files: Vec<(String, &Volume)> = vec![
-        ("distance".into(), &out.distance),
-        ("g_hit".into(), &out.g_hit),
-        ("hit".into(), &out.hit),
-        ("dot".into(), &out.dot),
-    ];
-    if let Some(f) = &out.flipped {
-        files.push(("flipped".into(), f));
-    }
-    for (name, v) in &out.alpha {
-        files.push((name.clone(), v));
-    }
     progress.step("writing", || -> Result<()> {
-        for (name, v) in &files {
+        for (name, v) in &traced.files {
             let path = dir.join(format!("{name}{ext}"));
-            write(&path, &MultiField::from((*v).clone()), &WriteOptions::default(), inputs)
+            write(&path, &MultiField::from(v.clone()), &WriteOptions::default(), inputs)
                 .context("cannot write the output")?;
         }
         if let Some(report_dir) = report_dir {
-            let report = out.report(g);
+            let report = &traced.tracing.report;
             std::fs::create_dir_all(report_dir)
                 .with_context(|| format!("cannot create the report folder {}", report_dir.display()))?;
             report.write(report_dir).context("cannot write the report")?;

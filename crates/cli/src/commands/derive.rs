@@ -1,45 +1,52 @@
 //! `mdtf derive`: derivative measures, one file per item.
 
 use crate::args::DeriveArgs;
-use crate::input::{read_input, read_options};
+use crate::input::{print_plan, read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
-use mdtf_pipeline::stages::derive::{DeriveParams, Item, run_with_progress};
+use mdtf_pipeline::boundary_chain::BoundaryChainParams;
+use mdtf_pipeline::channels;
+use mdtf_pipeline::plan::Plan;
+use mdtf_pipeline::stages::derive::Item;
 use mdtf_volume::{Inputs, MultiField, OutputFolder, WriteOptions, write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// Parses the command line into the stage's parameters.
-pub fn params(args: &DeriveArgs) -> Result<DeriveParams> {
+/// The items asked for and how they are derived (kernel, border, epsilon).
+fn params(args: &DeriveArgs) -> Result<(Vec<Item>, BoundaryChainParams)> {
     let items = args.items.iter().map(|s| s.parse::<Item>()).collect::<Result<Vec<_>, _>>()?;
-    let defaults = DeriveParams::default();
-    Ok(DeriveParams {
-        items,
-        kernel: args.kernel,
-        border: args.border.unwrap_or(defaults.border),
-        epsilon: args.epsilon,
-    })
+    let chain =
+        BoundaryChainParams { kernel: Some(args.kernel), border: args.border, epsilon: args.epsilon, ..Default::default() };
+    Ok((items, chain))
 }
 
-/// Reads the inputs, derives, writes one file per item.
+/// Reads the inputs, derives through the plan of the items' channels, writes one file per item.
 pub fn run(args: &DeriveArgs, progress: &Progress) -> Result<()> {
-    let params = params(args)?;
+    let (items, chain) = params(args)?;
     let given: Vec<&Path> = args.inputs.iter().map(PathBuf::as_path).collect();
     let inputs = Inputs::of(&given);
-    let folder = OutputFolder::begin(&args.output, &inputs)?;
+    let folder = if args.plan { None } else { Some(OutputFolder::begin(&args.output, &inputs)?) };
     let opts = read_options(&args.read);
     let input = progress.step("reading", || read_inputs(args, &opts))?;
     let input = select_field(input, args.field.as_deref())?;
-    let voxels = input.geometry.voxel_count();
+    let fields: Vec<String> = input.fields.iter().map(|f| f.name.clone()).collect();
+    let per_item = channels::item_channels(&items, &fields)?;
+    let Some(folder) = folder else {
+        let names: Vec<String> = per_item.iter().flat_map(|(_, n)| n.iter().cloned()).collect();
+        let plan = Plan::for_channels(&names, &fields, &input.geometry, &chain)?;
+        let given: Vec<String> = given.iter().map(|p| p.display().to_string()).collect();
+        print_plan(&args.items.join(", "), &given.join(", "), &input.geometry, &plan);
+        return Ok(());
+    };
     let start = Instant::now();
     let nz = input.geometry.dims[2] as u64;
     let out = progress
-        .counted("deriving", nz, |tick| run_with_progress(&input, &params, None, tick))
+        .counted("deriving", nz, |tick| channels::derive(&input, &items, &chain, tick))
         .context("cannot derive")?;
     let seconds = start.elapsed().as_secs_f64();
 
     progress.step("writing", || -> Result<()> {
-        for (item, mf) in &out.items {
+        for (item, mf) in &out {
             let path = folder.path().join(format!("{}{}", item.name(), args.format.extension()));
             write(&path, mf, &WriteOptions::default(), &given).context("cannot write the output")?;
         }
@@ -48,10 +55,10 @@ pub fn run(args: &DeriveArgs, progress: &Progress) -> Result<()> {
     folder.publish(&inputs)?;
     progress.note(&format!(
         "derived {} with {} in {:.2} s ({:.0} Mvoxel/s) into {}",
-        out.items.iter().map(|(i, _)| i.name()).collect::<Vec<_>>().join(", "),
-        params.kernel,
+        out.iter().map(|(i, _)| i.name()).collect::<Vec<_>>().join(", "),
+        args.kernel,
         seconds,
-        voxels as f64 / seconds / 1e6,
+        input.geometry.voxel_count() as f64 / seconds / 1e6,
         args.output.display()
     ));
     Ok(())

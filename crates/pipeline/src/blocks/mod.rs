@@ -93,6 +93,9 @@ pub fn unsupported(p: &Pipeline, fields: usize) -> Option<String> {
     if p.pack.gtf_from_mask.is_some() {
         return Some("a Gaussian fitted to a mask (pack.gtf_from_mask) reads the whole mask and its voxels".into());
     }
+    if p.keep.iter().any(|c| c == "shade") {
+        return Some("the shading weight (keep = [\"shade\"]) divides by the largest g of the whole volume".into());
+    }
     if p.pack.nifti {
         return Some("NIfTI copies of the textures (pack.nifti) need each whole texture".into());
     }

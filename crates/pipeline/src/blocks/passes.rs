@@ -312,10 +312,11 @@ impl<'a> SlabPasses<'a> {
         }
         let blocks: Vec<(Range<usize>, Range<usize>)> =
             strips.iter().flat_map(|rows| tslabs.iter().map(move |z| (rows.clone(), z.clone()))).collect();
-        let outputs = ["g_hit", "hit", "distance"];
+        // dot only when the run keeps it
+        let outputs = &["g_hit", "hit", "distance", "dot"][..if self.plan.wants("dot") { 4 } else { 3 }];
         let mut writer = match self.tasks {
             Some(_) => None,
-            None => Some(chans.store.writer(&outputs).map_err(io("boundary"))?),
+            None => Some(chans.store.writer(outputs).map_err(io("boundary"))?),
         };
         let (progress, tasks, stats) = (&self.progress, self.tasks.is_some(), &mut self.stats);
         // a block is traced (in the memory of one written and summed) while the one before is written and summed
@@ -330,7 +331,8 @@ impl<'a> SlabPasses<'a> {
         let mut take = |(k, slab): (usize, SlabTrace)| {
             let (rows, z) = &blocks[k];
             if let Some(w) = &mut writer {
-                for (c, v) in outputs.iter().zip([&slab.trace.g_hit, &slab.trace.hit, &slab.trace.distance]) {
+                let made = [&slab.trace.g_hit, &slab.trace.hit, &slab.trace.distance, &slab.trace.dot];
+                for (c, v) in outputs.iter().zip(made) {
                     w.put_rows(c, z.start, rows.clone(), v).map_err(io("boundary"))?;
                 }
             }
@@ -342,7 +344,9 @@ impl<'a> SlabPasses<'a> {
         overlapped(n, &mut |k| progress.slab(k + 1, n), &mut make, &mut take)?;
         let traced = self.finish_trace(sums)?;
         for c in ["g_prefiltered", "f2_prefiltered", "dot"] {
-            chans.store.remove(c);
+            if !self.plan.wants(c) {
+                chans.store.remove(c);
+            }
         }
         chans.release();
         let outputs = vec!["boundary/boundary_report.csv".into(), "boundary/boundary_report.png".into()];

@@ -67,10 +67,7 @@ impl BlockRange {
 
 /// The channels derive item `item` makes.
 pub(super) fn made_by(item: Item) -> Vec<String> {
-    match item {
-        Item::Normal => ["nx", "ny", "nz"].map(String::from).to_vec(),
-        other => vec![other.name().to_string()],
-    }
+    item.components().iter().map(|c| c.to_string()).collect()
 }
 
 impl SlabChannels {
@@ -192,7 +189,7 @@ impl SlabChannels {
         self.pool.give_volumes(channels.into_iter().map(|(_, v)| v));
     }
 
-    /// The first derive pass's output over rows `rows` of planes `z`, both
+    /// The first derive pass's g, f'' and normal over rows `rows` of planes `z`, both
     /// grown by the kernel's support (clamped to the volume), and those
     /// grown ranges (planes, rows): exact on `z`'s planes and `rows`' rows
     /// (and wherever the growth reached the volume's faces), not beyond.
@@ -208,7 +205,9 @@ impl SlabChannels {
         let Some((d, _)) = self.groups.first() else { return Err("nothing is derived".into()) };
         let k = self.kernel_reach;
         let read = BlockRange { planes: grown(&z, k, 2 * k + 1, self.nz), rows: grown(&rows, k, 2 * k + 1, self.ny()) };
-        let d = d.clone();
+        let mut d = d.clone();
+        // only what the tracing reads (a kept Hessian would cost it time; the output it hands back has these)
+        d.items.retain(|i| matches!(i, Item::G | Item::F2 | Item::Normal));
         let value = self.value(&read)?;
         let out = match self.recycled.take() {
             Some((last, mut out)) if last.slides_to(&read) => {
