@@ -2,7 +2,7 @@
 //! error next to its documented tolerance. What a user runs to trust an
 //! installation; the same numbers the test suite asserts.
 
-use mdtf_boundary::{BoundaryInput, BoundaryParams, HitCode};
+use mdtf_boundary::{BoundaryParams, HitCode};
 use mdtf_datagen::erf_sphere;
 use mdtf_histogram::{Axis, HvolParams, Scale, count, histogram_volume, hit_mask, write_hvol, write_stretched};
 use mdtf_pack::{Dtype, GaussianPrimitive, Tf1d, decode_for, preintegration_table, segment, segment_by_midpoint};
@@ -67,16 +67,14 @@ pub fn validate(n: usize, dir: &Path, params: &ValidateParams) -> Result<Vec<Che
     }
     let s = Sphere::new(n, params)?;
     let mut out = s.derive_checks();
-    let input = BoundaryInput { g: &s.g, f2: &s.f2, normal: &s.normal, value_range: 255.0 };
-    let b = mdtf_boundary::run(&input, &params.boundary).map_err(|e| e.to_string())?;
-    out.extend(s.boundary_checks(&b));
+    out.extend(s.boundary_checks());
     let rdir = dir.join("boundary");
     std::fs::create_dir_all(&rdir).map_err(|e| e.to_string())?;
-    b.report(&s.g).write(&rdir).map_err(|e| e.to_string())?;
+    s.report.write(&rdir).map_err(|e| e.to_string())?;
     let hdir = dir.join("histogram");
     std::fs::create_dir_all(&hdir).map_err(|e| e.to_string())?;
     out.extend(s.histogram_checks(&hdir)?);
-    s.write_stretched(&b, &hdir)?;
+    s.write_stretched(&hdir)?;
     out.push(check("pack: worst decode error, code steps", s.worst_decode_steps()?, 0.5 + 1e-6, true));
     out.push(check("pack: pre-integration vs quadrature", preintegration_error(), 1e-4, true));
     out.push(check("pack: Gaussian segment integral vs quadrature", gaussian_integral_error(), 1e-5, true));
@@ -88,7 +86,7 @@ pub fn validate(n: usize, dir: &Path, params: &ValidateParams) -> Result<Vec<Che
 }
 
 /// The validation's erf sphere (radius 0.3 n, sigma 3 voxels, values
-/// 0..255), its truth and its derivatives with the kernel checked.
+/// 0..255), its truth, its derivatives with the kernel checked and its tracing.
 struct Sphere {
     n: usize,
     /// The blur, voxels.
@@ -101,28 +99,39 @@ struct Sphere {
     truth: mdtf_datagen::RadialTruth,
     g: Volume,
     f2: Volume,
-    normal: MultiField,
+    /// The tracing's distance, g at the hit, hit code and dot product.
+    distance: Volume,
+    g_hit: Volume,
+    hit: Volume,
+    dot: Volume,
+    /// The tracing's Fig. 2 report.
+    report: mdtf_boundary::Report,
     /// The voxels within 2 sigma of the surface, where the derivatives are checked.
     shell: Vec<usize>,
 }
 
 impl Sphere {
-    /// The n^3 sphere and its derivatives with `params`' kernel.
+    /// The n^3 sphere, its derivatives with `params`' kernel and its tracing with `params`' boundary section.
     fn new(n: usize, params: &ValidateParams) -> Result<Sphere, String> {
         let (sigma, r) = (3.0, 0.3 * n as f64);
         let ph = erf_sphere(Geometry::new([n; 3], [1.0; 3]), r, sigma, 0.0, 255.0, None);
         let (value, truth) = (ph.volume(), ph.truth());
         // planned and run as a command's channels are (`Plan::for_channels`)
-        let chain = crate::boundary_chain::BoundaryChainParams { kernel: params.derive.kernel, ..Default::default() };
-        let names = ["g", "f2", "nx", "ny", "nz"].map(String::from);
-        let mut derived =
-            crate::channels::compute(&MultiField::from(value.clone()), &names, &chain).map_err(|e| e.to_string())?;
-        let normal = MultiField::from_volumes(derived.split_off(2)).map_err(|e| e.to_string())?;
-        let (f2, g) = (derived.remove(1).1, derived.remove(0).1);
+        let chain = crate::boundary_chain::BoundaryChainParams {
+            kernel: params.derive.kernel,
+            boundary: params.boundary.clone(),
+            ..Default::default()
+        };
+        let names = ["g", "f2", "distance", "g_hit", "hit", "dot"].map(String::from);
+        let computed = crate::channels::compute_all(&MultiField::from(value.clone()), &names, &chain, &|_, _| {})
+            .map_err(|e| e.to_string())?;
+        let report = computed.tracing.ok_or("the plan did not trace")?.report;
+        let [g, f2, distance, g_hit, hit, dot] =
+            <[(String, Volume); 6]>::try_from(computed.channels).map_err(|_| "a channel is missing")?.map(|(_, v)| v);
         let x = truth.x.samples();
         let shell = (0..x.len()).filter(|&i| x[i].abs() < 2.0 * sigma as f32).collect();
         let a = 255.0 / (sigma * (2.0 * PI).sqrt());
-        Ok(Sphere { n, sigma, r, a, value, truth, g, f2, normal, shell })
+        Ok(Sphere { n, sigma, r, a, value, truth, g, f2, distance, g_hit, hit, dot, report, shell })
     }
 
     /// Mean |est - tru| over the shell, over `peak`.
@@ -156,14 +165,15 @@ impl Sphere {
     }
 
     /// The tracing's normals, distances and g at the hit against the truth.
-    fn boundary_checks(&self, b: &mdtf_boundary::BoundaryOutput) -> Vec<Check> {
+    fn boundary_checks(&self) -> Vec<Check> {
         let (x, a, sigma) = (self.truth.x.samples(), self.a, self.sigma);
-        let hits: Vec<usize> =
-            (0..b.hit.samples().len()).filter(|&i| b.hit.samples()[i] == HitCode::Hit as u8 as f32).collect();
-        let mean_dot = hits.iter().map(|&i| b.dot.samples()[i] as f64).sum::<f64>() / hits.len().max(1) as f64;
+        let (hit, dot, distance, g_hit) =
+            (self.hit.samples(), self.dot.samples(), self.distance.samples(), self.g_hit.samples());
+        let hits: Vec<usize> = (0..hit.len()).filter(|&i| hit[i] == HitCode::Hit as u8 as f32).collect();
+        let mean_dot = hits.iter().map(|&i| dot[i] as f64).sum::<f64>() / hits.len().max(1) as f64;
         let near = hits.iter().copied().filter(|&i| x[i].abs() <= 3.0 * sigma as f32);
-        let derr: Vec<f64> = near.map(|i| (b.distance.samples()[i] as f64 - x[i].abs() as f64).abs()).collect();
-        let g_ok = hits.iter().filter(|&&i| ((b.g_hit.samples()[i] as f64 - a) / a).abs() <= 0.01).count() as f64
+        let derr: Vec<f64> = near.map(|i| (distance[i] as f64 - x[i].abs() as f64).abs()).collect();
+        let g_ok = hits.iter().filter(|&&i| ((g_hit[i] as f64 - a) / a).abs() <= 0.01).count() as f64
             / hits.len().max(1) as f64;
         let mean_derr = derr.iter().sum::<f64>() / derr.len().max(1) as f64;
         vec![
@@ -202,8 +212,8 @@ impl Sphere {
     }
 
     /// The (v, g) and (v, g_hit) histograms of the traced voxels, as a picture in `hdir`.
-    fn write_stretched(&self, b: &mdtf_boundary::BoundaryOutput, hdir: &Path) -> Result<(), String> {
-        let traced = hit_mask(b.hit.samples());
+    fn write_stretched(&self, hdir: &Path) -> Result<(), String> {
+        let traced = hit_mask(self.hit.samples());
         let axes = vec![
             Axis::new("v", 0.0, 255.0, 256).map_err(|e| e.to_string())?,
             Axis::new("g", 0.0, 1.05 * self.a, 256).map_err(|e| e.to_string())?,
@@ -212,7 +222,7 @@ impl Sphere {
         let normal = count(&[v, self.g.samples()], axes.clone(), Some(&traced)).map_err(|e| e.to_string())?;
         let mut sa = axes;
         sa[1].name = "g_hit".into();
-        let stretched = count(&[v, b.g_hit.samples()], sa, Some(&traced)).map_err(|e| e.to_string())?;
+        let stretched = count(&[v, self.g_hit.samples()], sa, Some(&traced)).map_err(|e| e.to_string())?;
         write_stretched(hdir, &normal, &stretched, Scale::Log, "the validation erf sphere", &[])
             .map_err(|e| e.to_string())
     }
