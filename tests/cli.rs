@@ -1538,7 +1538,10 @@ fn histogram_pack_and_boundary_plan_the_channels_they_compute_and_plan_writes_no
     }
     // derive plans its items' channels: central differences read one voxel each side
     let derive = mdtf_ok(&["derive", i, "-o", o, "--items", "hessian,g", "--kernel", "central", "--plan"]);
-    for line in ["2 derive           reads v -> g hxx hxy hxz hyy hyz hzz; frees v [g, hessian]", "halo of a block: x 1, y 1, z 1"] {
+    for line in [
+        "2 derive           reads v -> g hxx hxy hxz hyy hyz hzz; frees v [g, hessian]",
+        "halo of a block: x 1, y 1, z 1",
+    ] {
         assert!(derive.contains(line), "missing {line:?} in:\n{derive}");
     }
     assert!(!out.exists(), "--plan wrote {}", out.display());

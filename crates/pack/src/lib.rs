@@ -37,7 +37,7 @@ pub use manifest::{
 };
 pub use manifest_check::ManifestError;
 pub use product_tf::{FactorShape, PRODUCT_MAX_CHANNELS, ProductFactor, ProductTf};
-pub use profile::{PROFILE_NAMES, Profile, TextureLayout, describe};
+pub use profile::{ChannelText, PROFILE_NAMES, Profile, TextureLayout, describe, texts};
 pub use quantise::{Decode, Dtype, QuantiseError, decode_for};
 pub use tables::{PEAKS_PER_ENTRY, Tf1d, peak_table, peaks, preintegration_table, segment, segment_by_midpoint};
 pub use tet_tables::{
@@ -130,7 +130,7 @@ pub fn check_channels(channels: &[(String, Volume)], params: &PackParams) -> Res
         .channels(&params.fields)
         .into_iter()
         .filter(|c| get(c).is_none())
-        .map(|c| format!("{c} (made by the {} stage)", describe(&c, !params.fields.is_empty()).2))
+        .map(|c| format!("{c} (made by the {} stage)", describe(&c, !params.fields.is_empty()).stage))
         .collect();
     if !missing.is_empty() {
         return Err(PackError::MissingChannels { profile: params.profile.to_string(), missing: missing.join(", ") });

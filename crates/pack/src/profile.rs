@@ -87,27 +87,77 @@ impl Profile {
     }
 }
 
-/// What a channel is, its units, the stage that makes it, and whether it is
-/// signed (0 kept exact); `multi_field`: the pack's input has several fields
-/// (its 1/g then comes from ||G|| of all of them).
-pub fn describe(channel: &str, multi_field: bool) -> (&'static str, &'static str, &'static str, bool) {
+/// What a packed channel is: the manifest's meaning and units, the stage
+/// that makes it, and whether it is signed (quantised with 0 kept exact).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ChannelText {
+    /// What it measures, as the manifest says it.
+    pub meaning: &'static str,
+    /// Its units.
+    pub units: &'static str,
+    /// The mdtf stage that makes it ("input", "derive", "boundary").
+    pub stage: &'static str,
+    /// Signed: its code keeps 0 exact.
+    pub signed: bool,
+}
+
+/// The texts of the channels the profiles pack (the pipeline's channel
+/// table takes its rows' texts from here, so a packed channel is described once).
+pub mod texts {
+    use super::ChannelText;
+
+    const fn text(meaning: &'static str, units: &'static str, stage: &'static str, signed: bool) -> ChannelText {
+        ChannelText { meaning, units, stage, signed }
+    }
+
+    /// The value.
+    pub const V: ChannelText = text("value", "input units", "input", false);
+    /// A field of a several-field input.
+    pub const FIELD: ChannelText = text("field", "field units", "input", false);
+    /// g.
+    pub const G: ChannelText = text("gradient magnitude |grad f|", "value units per world unit", "derive", false);
+    /// f''.
+    pub const F2: ChannelText =
+        text("second derivative along the gradient", "value units per world unit^2", "derive", true);
+    /// A unit normal's component.
+    pub const NORMAL: ChannelText = text("unit normal component along the grid axis", "1", "derive", true);
+    /// g at the boundary hit.
+    pub const G_HIT: ChannelText =
+        text("gradient magnitude at the boundary hit", "value units per world unit", "boundary", false);
+    /// The distance to the boundary.
+    pub const DISTANCE: ChannelText =
+        text("distance to the nearest boundary (-1: none)", "world units", "boundary", false);
+    /// ||Df^T Df||.
+    pub const GNORM: ChannelText =
+        text("||Df^T Df|| (Frobenius) of the fields normalised to [0, 1]", "per world unit^2", "derive", false);
+    /// 1/g of one field.
+    pub const INV_G: ChannelText =
+        text("inverse gradient magnitude 1 / max(g, epsilon)", "world units per value unit", "derive", false);
+    /// 1/g of several fields.
+    pub const INV_G_MULTI: ChannelText = text(
+        "inverse multi-field gradient 1 / max(sqrt(||Df^T Df||), epsilon) of the fields normalised to [0, 1] \
+         (for one field, 1 / g)",
+        "world units",
+        "derive",
+        false,
+    );
+}
+
+/// The text of packed channel `channel`; `multi_field`: the pack's input has
+/// several fields (its 1/g then comes from ||G|| of all of them). A name
+/// not listed is one of the input's fields.
+pub fn describe(channel: &str, multi_field: bool) -> ChannelText {
     match channel {
-        "inv_g" if multi_field => (
-            "inverse multi-field gradient 1 / max(sqrt(||Df^T Df||), epsilon) of the fields normalised to [0, 1] \
-             (for one field, 1 / g)",
-            "world units",
-            "derive",
-            false,
-        ),
-        "v" => ("value", "input units", "input", false),
-        "g" => ("gradient magnitude |grad f|", "value units per world unit", "derive", false),
-        "f2" => ("second derivative along the gradient", "value units per world unit^2", "derive", true),
-        "nx" | "ny" | "nz" => ("unit normal component along the grid axis", "1", "derive", true),
-        "g_hit" => ("gradient magnitude at the boundary hit", "value units per world unit", "boundary", false),
-        "distance" => ("distance to the nearest boundary (-1: none)", "world units", "boundary", false),
-        "gnorm" => ("||Df^T Df|| (Frobenius) of the fields normalised to [0, 1]", "per world unit^2", "derive", false),
-        "inv_g" => ("inverse gradient magnitude 1 / max(g, epsilon)", "world units per value unit", "derive", false),
-        _ => ("field", "field units", "input", false),
+        "inv_g" if multi_field => texts::INV_G_MULTI,
+        "v" => texts::V,
+        "g" => texts::G,
+        "f2" => texts::F2,
+        "nx" | "ny" | "nz" => texts::NORMAL,
+        "g_hit" => texts::G_HIT,
+        "distance" => texts::DISTANCE,
+        "gnorm" => texts::GNORM,
+        "inv_g" => texts::INV_G,
+        _ => texts::FIELD,
     }
 }
 

@@ -110,7 +110,7 @@ impl<'a> TextureEncoder<'a> {
     fn missing(&self, c: &str) -> PackError {
         PackError::MissingChannels {
             profile: self.params.profile.to_string(),
-            missing: format!("{c} (made by the {} stage)", describe(c, !self.params.fields.is_empty()).2),
+            missing: format!("{c} (made by the {} stage)", describe(c, !self.params.fields.is_empty()).stage),
         }
     }
 
@@ -123,13 +123,13 @@ impl<'a> TextureEncoder<'a> {
         c: &str,
         [min, max]: [f64; 2],
     ) -> Result<Decode, PackError> {
-        let (meaning, units, stage, signed) = describe(c, !self.params.fields.is_empty());
-        let d = decode_for(c, min, max, layout.dtype, signed)?;
+        let text = describe(c, !self.params.fields.is_empty());
+        let d = decode_for(c, min, max, layout.dtype, text.signed)?;
         let top = layout.dtype.max_code().unwrap_or(0.0);
         self.entries.push(ChannelEntry {
             name: c.to_string(),
-            meaning: meaning.into(),
-            units: units.into(),
+            meaning: text.meaning.into(),
+            units: text.units.into(),
             texture: layout.name.clone(),
             component: ci,
             decode: d,
@@ -138,7 +138,7 @@ impl<'a> TextureEncoder<'a> {
                 .sources
                 .get(c)
                 .cloned()
-                .unwrap_or(ChannelSource { stage: stage.into(), params: serde_json::Value::Null }),
+                .unwrap_or(ChannelSource { stage: text.stage.into(), params: serde_json::Value::Null }),
         });
         Ok(d)
     }

@@ -115,7 +115,8 @@ pub fn run_on(
     // Check the tracing parameters before the expensive stages.
     let floor = mdtf_boundary::noise_floor(&[], value_range, geometry.min_spacing());
     mdtf_boundary::resolve(&params.boundary, geometry, value_range, floor)?;
-    let d = DeriveParams { epsilon: at.epsilon.or(params.epsilon), ..params.derive(vec![Item::G, Item::F2, Item::Normal]) };
+    let d =
+        DeriveParams { epsilon: at.epsilon.or(params.epsilon), ..params.derive(vec![Item::G, Item::F2, Item::Normal]) };
     let input = FieldsView::new(geometry, vec![FieldView { name: "value", samples: value }])?;
     let mut out = mdtf_derive::run_view(&input, &d, None, &|_, _| {})?;
     let take = |out: &mut mdtf_derive::DeriveOutput, item| {

@@ -5,6 +5,7 @@
 //! its producer in [`crate::run`].
 
 use mdtf_derive::{Item, Kernel};
+use mdtf_pack::{ChannelText, texts};
 
 /// A per-voxel channel of a run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -93,53 +94,113 @@ pub struct Row {
     pub name: &'static str,
     /// Who makes it for a one-field input.
     pub producer: Producer,
-    /// Who makes it when the input has several fields (where that differs).
-    pub producer_multi: Option<Producer>,
     /// Channels its producer reads (the derive pass over all fields reads every field).
     pub prerequisites: &'static [Channel],
+    /// What it is, its units and signedness (for a packed channel, the
+    /// manifest's text, from [`mdtf_pack::texts`]).
+    pub text: ChannelText,
+    /// Who makes it and what it is when the input has several fields (where that differs).
+    pub multi: Option<(Producer, ChannelText)>,
 }
 
 const TRACE_IN: &[Channel] = &[Channel::G, Channel::F2, Channel::Nx, Channel::Ny, Channel::Nz];
 const VALUE_IN: &[Channel] = &[Channel::Value];
 
 /// A row whose producer is the same for one field and several.
-const fn row(channel: Channel, name: &'static str, producer: Producer, prerequisites: &'static [Channel]) -> Row {
-    Row { channel, name, producer, producer_multi: None, prerequisites }
+const fn row(
+    channel: Channel,
+    name: &'static str,
+    producer: Producer,
+    prerequisites: &'static [Channel],
+    text: ChannelText,
+) -> Row {
+    Row { channel, name, producer, prerequisites, text, multi: None }
 }
 
 /// A row made by the derive pass over the value with `item`.
-const fn derived(channel: Channel, name: &'static str, item: Item) -> Row {
-    row(channel, name, Producer::Derive(item), VALUE_IN)
+const fn derived(channel: Channel, name: &'static str, item: Item, text: ChannelText) -> Row {
+    row(channel, name, Producer::Derive(item), VALUE_IN, text)
 }
+
+/// The text of a channel the packs do not hold.
+const fn text(meaning: &'static str, units: &'static str, stage: &'static str, signed: bool) -> ChannelText {
+    ChannelText { meaning, units, stage, signed }
+}
+
+const PER_UNIT: &str = "value units per world unit";
+const PER_UNIT2: &str = "value units per world unit^2";
 
 /// Every named channel (the fields and the Jacobian's components are not
 /// rows: their names come from the input's fields).
 pub const TABLE: [Row; 24] = [
-    row(Channel::Value, "v", Producer::Input, &[]),
-    derived(Channel::G, "g", Item::G),
-    derived(Channel::F2, "f2", Item::F2),
-    derived(Channel::Nx, "nx", Item::Normal),
-    derived(Channel::Ny, "ny", Item::Normal),
-    derived(Channel::Nz, "nz", Item::Normal),
-    Row { producer_multi: Some(Producer::DeriveFields(Item::InvG)), ..derived(Channel::InvG, "inv_g", Item::InvG) },
-    row(Channel::Gnorm, "gnorm", Producer::DeriveFields(Item::Gnorm), &[]),
-    row(Channel::GHit, "g_hit", Producer::Trace, TRACE_IN),
-    row(Channel::Hit, "hit", Producer::Trace, TRACE_IN),
-    row(Channel::Distance, "distance", Producer::Trace, TRACE_IN),
-    row(Channel::Dot, "dot", Producer::Trace, TRACE_IN),
-    derived(Channel::Reconstructed, "value", Item::Value),
-    derived(Channel::Gx, "gx", Item::Grad),
-    derived(Channel::Gy, "gy", Item::Grad),
-    derived(Channel::Gz, "gz", Item::Grad),
-    derived(Channel::Hxx, "hxx", Item::Hessian),
-    derived(Channel::Hxy, "hxy", Item::Hessian),
-    derived(Channel::Hxz, "hxz", Item::Hessian),
-    derived(Channel::Hyy, "hyy", Item::Hessian),
-    derived(Channel::Hyz, "hyz", Item::Hessian),
-    derived(Channel::Hzz, "hzz", Item::Hessian),
-    derived(Channel::Laplacian, "laplacian", Item::Laplacian),
-    derived(Channel::Shade, "shade", Item::Shade),
+    row(Channel::Value, "v", Producer::Input, &[], texts::V),
+    derived(Channel::G, "g", Item::G, texts::G),
+    derived(Channel::F2, "f2", Item::F2, texts::F2),
+    derived(Channel::Nx, "nx", Item::Normal, texts::NORMAL),
+    derived(Channel::Ny, "ny", Item::Normal, texts::NORMAL),
+    derived(Channel::Nz, "nz", Item::Normal, texts::NORMAL),
+    Row {
+        multi: Some((Producer::DeriveFields(Item::InvG), texts::INV_G_MULTI)),
+        ..derived(Channel::InvG, "inv_g", Item::InvG, texts::INV_G)
+    },
+    row(Channel::Gnorm, "gnorm", Producer::DeriveFields(Item::Gnorm), &[], texts::GNORM),
+    row(Channel::GHit, "g_hit", Producer::Trace, TRACE_IN, texts::G_HIT),
+    row(
+        Channel::Hit,
+        "hit",
+        Producer::Trace,
+        TRACE_IN,
+        text(
+            "tracing outcome: 0 not traced (g < g_min), 1 boundary kept, 2 no zero crossing, 3 rejected",
+            "code",
+            "boundary",
+            false,
+        ),
+    ),
+    row(Channel::Distance, "distance", Producer::Trace, TRACE_IN, texts::DISTANCE),
+    row(
+        Channel::Dot,
+        "dot",
+        Producer::Trace,
+        TRACE_IN,
+        text("dot product of the unit normals at the voxel and at its boundary hit", "1", "boundary", true),
+    ),
+    derived(
+        Channel::Reconstructed,
+        "value",
+        Item::Value,
+        text("the value as the kernel reconstructs it", "input units", "derive", false),
+    ),
+    derived(Channel::Gx, "gx", Item::Grad, text("gradient component df/dx", PER_UNIT, "derive", true)),
+    derived(Channel::Gy, "gy", Item::Grad, text("gradient component df/dy", PER_UNIT, "derive", true)),
+    derived(Channel::Gz, "gz", Item::Grad, text("gradient component df/dz", PER_UNIT, "derive", true)),
+    derived(Channel::Hxx, "hxx", Item::Hessian, text("Hessian component d2f/dx2", PER_UNIT2, "derive", true)),
+    derived(Channel::Hxy, "hxy", Item::Hessian, text("Hessian component d2f/dxdy", PER_UNIT2, "derive", true)),
+    derived(Channel::Hxz, "hxz", Item::Hessian, text("Hessian component d2f/dxdz", PER_UNIT2, "derive", true)),
+    derived(Channel::Hyy, "hyy", Item::Hessian, text("Hessian component d2f/dy2", PER_UNIT2, "derive", true)),
+    derived(Channel::Hyz, "hyz", Item::Hessian, text("Hessian component d2f/dydz", PER_UNIT2, "derive", true)),
+    derived(Channel::Hzz, "hzz", Item::Hessian, text("Hessian component d2f/dz2", PER_UNIT2, "derive", true)),
+    derived(
+        Channel::Laplacian,
+        "laplacian",
+        Item::Laplacian,
+        text("Laplacian, the Hessian's trace", PER_UNIT2, "derive", true),
+    ),
+    derived(
+        Channel::Shade,
+        "shade",
+        Item::Shade,
+        text("surface-shading weight 1 - (1 - g / g_max)^2, g_max the volume's largest g", "1", "derive", false),
+    ),
 ];
+
+/// The text of a Jacobian component (not a row).
+const JACOBIAN: ChannelText = text(
+    "component d field / d axis of the Jacobian of the fields normalised to [0, 1]",
+    "per world unit",
+    "derive",
+    true,
+);
 
 /// Every channel name, for messages and `--help`.
 pub const CHANNEL_NAMES: &str = "v, g, f2, nx, ny, nz, inv_g, gnorm, g_hit, hit, distance, dot, value, gx, gy, gz, \
@@ -192,10 +253,20 @@ impl Channel {
     /// Who makes it; `multi`: the input has several fields.
     pub fn producer(self, multi: bool) -> Producer {
         match self.row() {
-            Some(r) if multi => r.producer_multi.unwrap_or(r.producer),
+            Some(r) if multi => r.multi.map_or(r.producer, |(p, _)| p),
             Some(r) => r.producer,
             None if matches!(self, Channel::Jacobian { .. }) => Producer::DeriveFields(Item::Jacobian),
             None => Producer::Input,
+        }
+    }
+
+    /// What it is, its units and signedness; `multi`: the input has several fields.
+    pub fn text(self, multi: bool) -> ChannelText {
+        match self.row() {
+            Some(r) if multi => r.multi.map_or(r.text, |(_, t)| t),
+            Some(r) => r.text,
+            None if matches!(self, Channel::Jacobian { .. }) => JACOBIAN,
+            None => texts::FIELD,
         }
     }
 
@@ -277,6 +348,41 @@ mod tests {
         assert_eq!((Channel::parse("dt2/dx", &fields), Channel::parse("dt1/dw", &fields)), (None, None));
         let e = Channel::named("nope", &fields).unwrap_err().to_string();
         assert!(e.contains("'nope'") && e.contains("distance") && e.contains("t1, g"), "{e}");
+    }
+
+    #[test]
+    fn a_packed_channel_is_described_as_its_manifest_says_and_each_text_names_its_producer() {
+        let fields = ["t1".to_string(), "t2".to_string()];
+        for name in mdtf_pack::PROFILE_NAMES.split(", ") {
+            let profile: mdtf_pack::Profile = name.parse().unwrap();
+            for fs in [&[][..], &fields[..]] {
+                let multi = !fs.is_empty();
+                for c in profile.channels(fs) {
+                    let channel = Channel::parse(&c, fs).unwrap();
+                    assert_eq!(channel.text(multi), mdtf_pack::describe(&c, multi), "{name}: {c}");
+                }
+            }
+        }
+        // every row's text names the stage of its producer; signed where the channel takes both signs
+        for r in &TABLE {
+            for multi in [false, true] {
+                let stage = match r.channel.producer(multi) {
+                    Producer::Input => "input",
+                    Producer::Derive(_) | Producer::DeriveFields(_) => "derive",
+                    Producer::Trace => "boundary",
+                };
+                assert_eq!(r.channel.text(multi).stage, stage, "{}", r.name);
+            }
+        }
+        let signed: Vec<&str> = TABLE.iter().filter(|r| r.text.signed).map(|r| r.name).collect();
+        assert_eq!(
+            signed,
+            ["f2", "nx", "ny", "nz", "dot", "gx", "gy", "gz", "hxx", "hxy", "hxz", "hyy", "hyz", "hzz", "laplacian"]
+        );
+        assert_eq!(Channel::InvG.text(true).units, "world units");
+        assert_eq!(Channel::InvG.text(false).units, "world units per value unit");
+        assert_eq!(Channel::Field(1).text(true), mdtf_pack::texts::FIELD);
+        assert_eq!(Channel::Jacobian { field: 0, axis: 1 }.text(true).units, "per world unit");
     }
 
     #[test]

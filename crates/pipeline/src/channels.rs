@@ -131,8 +131,8 @@ fn execute(
         return Err(ChainError::Unknown("the input has no fields".into()));
     };
     let geometry = &input.geometry;
-    let value_range = mdtf_volume::finite_sample_range(first.data.as_slice().unwrap_or(&[]))
-        .map_or(0.0, |(lo, hi)| (hi - lo) as f64);
+    let value_range =
+        mdtf_volume::finite_sample_range(first.data.as_slice().unwrap_or(&[])).map_or(0.0, |(lo, hi)| (hi - lo) as f64);
     if plan.trace {
         // the tracing's parameters are checked before the expensive stages
         let floor = mdtf_boundary::noise_floor(&[], value_range, geometry.min_spacing());

@@ -6,8 +6,10 @@
 //! its outputs read (pack profile, histograms, kept channels), over the
 //! channel table [`channel::TABLE`] (each channel's producer, prerequisites
 //! and halo); `mdtf run --plan` prints the plan. To add a channel: a
-//! [`channel::Channel`] variant and its row, the derive item or stage that
-//! produces it, and its meaning in `mdtf_pack::describe` if it is packed.
+//! [`channel::Channel`] variant and its row (with its units and meaning;
+//! a packed channel takes the manifest's text from `mdtf_pack::texts`), and
+//! the derive item or stage that produces it. The [`plan`] module's docs
+//! show the table and the plan of each shipped pipeline.
 //!
 //! The same plan runs on the whole volume ([`run::run`]) or slab by slab
 //! under a memory budget ([`blocks::run`]): z-slabs grown by each pass's

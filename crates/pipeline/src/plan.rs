@@ -4,6 +4,14 @@
 //! reads and makes, the step after which each channel is last read, the
 //! whole-volume reductions each step waits for, and the halo a block of the
 //! volume needs. `mdtf run --plan` prints it.
+//!
+//! To add a channel: a [`Channel`] variant and its row in
+//! [`crate::channel::TABLE`] (producer, what it reads, units, meaning), and
+//! its producer: a derive item's component, or a stage's output handed to
+//! the channels. The table and the shipped pipelines' plans (kept in step
+//! with the code by `tests/plans_doc.rs`):
+//!
+#![doc = include_str!("plans.md")]
 
 use crate::channel::{Channel, Producer, Reach, UnknownChannel};
 use crate::file::Pipeline;
@@ -411,7 +419,12 @@ fn channel_reductions(steps: &[PlannedStep], median_of_g: bool, prefilter: bool,
             out.push(Reduction { what: what.to_string(), before });
         }
     };
-    add("finite range of v (derive's epsilon, tracing thresholds)", vec![Step::Derive, Step::Trace]);
+    let of_v = if has(Step::Trace) {
+        "finite range of v (derive's epsilon, tracing thresholds)"
+    } else {
+        "finite range of v (derive's epsilon)"
+    };
+    add(of_v, vec![Step::Derive, Step::Trace]);
     if multi {
         add("finite range of each field (its [0, 1] normalisation)", vec![Step::DeriveFields]);
     }

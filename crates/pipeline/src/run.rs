@@ -4,6 +4,7 @@
 //! renamed into place at the end, so a failed run leaves the output folder
 //! as it was.
 
+use crate::channel::Channel;
 use crate::file::Pipeline;
 use crate::plan::Plan;
 use crate::progress::Progress;
@@ -84,21 +85,36 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &(dyn Fn(&str) + Sync)) ->
 
 /// Writes the channels `p` keeps into the staging folder's `volumes/`,
 /// each by `write(channel, file)` (None: the run did not make that
-/// channel); the files written, relative to `dir`.
-pub(crate) fn write_kept<W>(p: &Pipeline, dir: &Path, mut write: W) -> Result<Vec<String>, RunError>
+/// channel), and `volumes/channels.json`: each file's channel, meaning,
+/// units and producing stage from the channel table (`fields`: the input's
+/// field names, empty for one field); the files written, relative to `dir`.
+pub(crate) fn write_kept<W>(p: &Pipeline, fields: &[String], dir: &Path, mut write: W) -> Result<Vec<String>, RunError>
 where
     W: FnMut(&str, &Path) -> Option<Result<(), RunError>>,
 {
     let kdir = dir.join("volumes");
     std::fs::create_dir_all(&kdir).map_err(at("keep"))?;
-    p.keep
-        .iter()
-        .map(|c| {
-            let name = p.keep_format.file_name(c);
-            write(c, &kdir.join(&name)).ok_or_else(|| fail("keep")(format!("no channel '{c}' was computed")))??;
-            Ok(format!("volumes/{name}"))
-        })
-        .collect()
+    let mut written = Vec::with_capacity(p.keep.len() + 1);
+    let mut listed = Vec::with_capacity(p.keep.len());
+    for c in &p.keep {
+        let name = p.keep_format.file_name(c);
+        write(c, &kdir.join(&name)).ok_or_else(|| fail("keep")(format!("no channel '{c}' was computed")))??;
+        let text = Channel::named(c, fields).map_err(|e| fail("keep")(e.to_string()))?.text(!fields.is_empty());
+        listed.push(serde_json::json!({
+            "channel": c,
+            "file": name,
+            "meaning": text.meaning,
+            "units": text.units,
+            "signed": text.signed,
+            "stage": text.stage,
+        }));
+        written.push(format!("volumes/{name}"));
+    }
+    let sidecar = serde_json::to_string_pretty(&serde_json::json!({ "volumes": listed }))
+        .map_err(|e| fail("keep")(e.to_string()))?;
+    std::fs::write(kdir.join("channels.json"), sidecar + "\n").map_err(at("keep"))?;
+    written.push("volumes/channels.json".into());
+    Ok(written)
 }
 
 /// The end of every run: the preview and the contact sheet (when asked for

@@ -233,7 +233,7 @@ impl<'a> WholeRun<'a> {
         self.progress.stage("keep")?;
         let t = Instant::now();
         let chans = &self.chans;
-        let written = crate::run::write_kept(self.p, &self.dir, |c, file| {
+        let written = crate::run::write_kept(self.p, &self.plan.fields, &self.dir, |c, file| {
             let v = chans.get(c)?;
             Some(mdtf_volume::write_volume(file, v, &WriteOptions::default(), &[]).map_err(at("keep")))
         })?;

@@ -425,7 +425,9 @@ fn every_derivative_channel_and_dot_are_kept_right_and_the_same_slab_by_slab() {
         }
         // the Hessian's components in place: f'' = n^T H n, the Laplacian its trace
         let h = |c: &str| k[c][i];
-        let nhn = n[0] * n[0] * h("hxx") + n[1] * n[1] * h("hyy") + n[2] * n[2] * h("hzz")
+        let nhn = n[0] * n[0] * h("hxx")
+            + n[1] * n[1] * h("hyy")
+            + n[2] * n[2] * h("hzz")
             + 2.0 * (n[0] * n[1] * h("hxy") + n[0] * n[2] * h("hxz") + n[1] * n[2] * h("hyz"));
         if k["g"][i] > 0.05 * g_max {
             assert!((nhn - k["f2"][i]).abs() < 1e-3 * f2_max, "n^T H n {nhn} vs f2 {} at {i}", k["f2"][i]);
@@ -440,6 +442,28 @@ fn every_derivative_channel_and_dot_are_kept_right_and_the_same_slab_by_slab() {
     }
     // on a sphere the normals at a voxel and at its boundary hit are both radial
     assert!(hits > 1000 && dots / hits as f64 > 0.99, "mean dot {} over {hits} hits", dots / hits as f64);
+    // the sidecar says what each kept file is, in its units
+    let sidecar: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(opts.output.join("volumes/channels.json")).unwrap()).unwrap();
+    let listed = sidecar["volumes"].as_array().unwrap();
+    assert_eq!(listed.iter().map(|e| e["channel"].as_str().unwrap()).collect::<Vec<_>>(), keep);
+    let entry = |c: &str| listed.iter().find(|e| e["channel"] == c).unwrap();
+    for (c, units, signed, stage) in [
+        ("v", "input units", false, "input"),
+        ("g", "value units per world unit", false, "derive"),
+        ("gx", "value units per world unit", true, "derive"),
+        ("laplacian", "value units per world unit^2", true, "derive"),
+        ("dot", "1", true, "boundary"),
+        ("hit", "code", false, "boundary"),
+    ] {
+        let e = entry(c);
+        assert_eq!(
+            (e["units"].as_str(), e["signed"].as_bool(), e["stage"].as_str()),
+            (Some(units), Some(signed), Some(stage)),
+            "{c}"
+        );
+        assert_eq!(e["file"], format!("{c}.nii.gz"));
+    }
     let sizes = [SlabSize::Planes(7), SlabSize::Strips { planes: 5, rows: 9 }];
     assert_slab_runs_equal_the_whole("distance-tf", &p, None, &sizes);
     // the shading weight divides by the largest g of the whole volume: not by slabs

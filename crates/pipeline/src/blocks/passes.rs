@@ -419,7 +419,7 @@ impl<'a> SlabPasses<'a> {
         self.progress.stage("keep")?;
         let t = Instant::now();
         let (geo, slabs) = (&self.geo, &self.slabs);
-        let written = crate::run::write_kept(self.p, &self.dir, |c, file| {
+        let written = crate::run::write_kept(self.p, &self.plan.fields, &self.dir, |c, file| {
             if !chans.has(c) {
                 return None;
             }
