@@ -34,9 +34,11 @@ fn pass_planes(h: u64, plan: &Plan, trace_whole_planes: bool) -> u64 {
     let k = plan.reach.kernel[2] as u64;
     // derive reads at least a kernel's width of planes
     let read = (h + 2 * k).max(2 * k + 1);
-    // the value, five outputs (g, f'', three normals), the derive's own scratch; the interiors
-    // copied out, of two slabs (one is derived while the one before is summarised)
-    let derive = 8 * read + 10 * h;
+    // every derive of a slab makes all the plan's items (kept gradients and Hessians too)
+    let outputs = derived_components(plan).max(5);
+    // the value, the outputs (at least g, f'', three normals), the derive's own scratch; the
+    // interiors copied out, of two slabs (one is derived while the one before is summarised)
+    let derive = (outputs + 3) * read + 2 * outputs * h;
     let pf = plan.reach.prefilter[2] as u64;
     let prefilter = if plan.prefilter { 4 * (h + 2 * pf) + 2 * h } else { 0 };
     let t = plan.reach.trace[2] as u64;
@@ -49,8 +51,14 @@ fn pass_planes(h: u64, plan: &Plan, trace_whole_planes: bool) -> u64 {
     // copied out (at most eight: distance-tf reads v, g, three normals, g_hit, hit and distance)
     // and the textures' bytes of two slabs, one quantised while the other is written (at most
     // 8 bytes a voxel: two f32 planes a plane)
-    let pack = 8 * read + 12 * h;
+    let pack = (outputs + 3) * read + 12 * h;
     derive.max(prefilter).max(trace).max(pack)
+}
+
+/// f32 components one derivation of a slab makes: the components of every
+/// item the plan derives (the value is a component of none).
+fn derived_components(plan: &Plan) -> u64 {
+    plan.derive.iter().map(|i| i.components().len() as u64).sum()
 }
 
 /// The slab height of a run within `budget`, with the histogram volume's
@@ -228,6 +236,26 @@ mod tests {
         assert!(BASE_BYTES + HVOL_BYTES + pass_planes(h2 + 1, &plan, true) * plane > budget);
         assert_eq!(fit_slabs(budget, &geo, &plan, true, false).unwrap(), h2 as usize);
         assert_eq!(fit_slabs(budget, &geo, &plan, false, false).unwrap(), h as usize);
+    }
+
+    #[test]
+    fn kept_derivatives_count_in_every_derivation_of_a_slab() {
+        let geo = Geometry::new([256; 3], [1.0; 3]);
+        let plan_of = |keep: &str| {
+            let text = format!("keep = [{keep}]\n[derive]\nkernel = \"central4\"\n[pack]\nprofile = \"distance-tf\"\n");
+            Plan::resolve(&parse(&text, &[]).unwrap(), &[], &geo).unwrap()
+        };
+        let plain = plan_of("");
+        // g, f'', three normals, three gradient and six Hessian components, the Laplacian
+        let many = plan_of("\"gx\", \"hxx\", \"laplacian\"");
+        assert_eq!(derived_components(&plain), 5);
+        assert_eq!(derived_components(&many), 15);
+        let k = many.reach.kernel[2] as u64;
+        // the value, the 15 outputs and the scratch over the read planes, two slabs' interiors copied
+        assert!(pass_planes(20, &many, true) >= 18 * (20 + 2 * k) + 30 * 20);
+        let budget = 400u64 << 20;
+        let (h_plain, h_many) = (slab_height(budget, &geo, &plain, true), slab_height(budget, &geo, &many, true));
+        assert!(h_many.unwrap() < h_plain.unwrap(), "the kept derivatives make slabs shorter");
     }
 
     #[test]
