@@ -1642,3 +1642,39 @@ fn print_settings_shows_every_default_and_is_itself_a_pipeline_file() {
     assert_eq!(report["settings"]["boundary"]["tolerance"].as_f64(), Some(0.25));
     assert_eq!(report["settings"]["input"]["size"].as_i64(), Some(24));
 }
+
+#[test]
+fn derive_under_a_memory_budget_writes_the_whole_derives_files_and_says_how_it_cut() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("sphere.nii");
+    let synth = ["synth", "erf-sphere", "--size", "40,36,30", "--sigma", "2", "--noise", "3", "--type", "u16"];
+    mdtf_ok(&[&synth[..], &["-o", input.to_str().unwrap(), "-q"]].concat());
+    let i = input.to_str().unwrap();
+    let (whole, slabs) = (dir.path().join("whole"), dir.path().join("slabs"));
+    let items = "g,f2,normal,hessian,value";
+    for format in ["nii.gz", "nrrd"] {
+        mdtf_ok(&["derive", i, "-o", whole.to_str().unwrap(), "--items", items, "--format", format, "-q"]);
+        // 48 MiB of fixed costs and a few 40 x 36 planes: several slabs
+        let budget = ["--memory-budget", "49MiB"];
+        let args = [&["derive", i, "-o", slabs.to_str().unwrap(), "--items", items, "--format", format][..], &budget];
+        let out = mdtf(&args.concat());
+        let text = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success() && text.contains("slabs of") && text.contains("within 49.0 MiB"), "{text}");
+        for item in ["g", "f2", "normal", "hessian", "value"] {
+            let name = format!("{item}.{format}");
+            let (a, b) = (std::fs::read(whole.join(&name)).unwrap(), std::fs::read(slabs.join(&name)).unwrap());
+            assert!(a == b, "{name} differs between the whole and the slab-by-slab derive");
+        }
+    }
+    // what cannot go by slabs is refused before anything is written
+    let other = dir.path().join("other");
+    let e = mdtf_err(&["derive", i, i, "-o", other.to_str().unwrap(), "--memory-budget", "1GiB"]);
+    assert!(e.contains("--memory-budget derives one input file"), "{e}");
+    let e = mdtf_err(&["derive", i, "-o", other.to_str().unwrap(), "--items", "shade", "--memory-budget", "1GiB"]);
+    assert!(e.contains("largest g of the whole volume"), "{e}");
+    let e = mdtf_err(&["derive", i, "-o", other.to_str().unwrap(), "--format", "nhdr", "--memory-budget", "1GiB"]);
+    assert!(e.contains("slab by slab as .nii, .nii.gz, .nrrd"), "{e}");
+    let e = mdtf_err(&["derive", i, "-o", other.to_str().unwrap(), "--memory-budget", "1MiB"]);
+    assert!(e.contains("too small"), "{e}");
+    assert!(!other.exists(), "a refused derive left {}", other.display());
+}

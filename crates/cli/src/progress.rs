@@ -43,7 +43,8 @@ impl Progress {
     }
 
     /// Runs `work` as a named step with a bar counting to `total`; `work`
-    /// receives a callback `(done, total)` that is safe to call from worker threads.
+    /// receives a callback `(done, of)` that is safe to call from worker
+    /// threads (`of` becomes the bar's length).
     pub fn counted<T>(&self, name: &str, total: u64, work: impl FnOnce(&(dyn Fn(usize, usize) + Sync)) -> T) -> T {
         let start = Instant::now();
         let Some(bar) = &self.bar else {
@@ -56,7 +57,11 @@ impl Progress {
             ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} [{elapsed}]")
                 .unwrap_or_else(|_| ProgressStyle::default_bar()),
         );
-        let out = work(&|done, _| bar.set_position(done as u64));
+        // a step that learns its count as it goes (slabs) says it with each tick
+        let out = work(&|done, of| {
+            bar.set_length(of as u64);
+            bar.set_position(done as u64)
+        });
         bar.set_style(
             ProgressStyle::with_template("{spinner} {msg} [{elapsed}]")
                 .unwrap_or_else(|_| ProgressStyle::default_spinner()),

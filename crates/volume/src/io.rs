@@ -208,21 +208,3 @@ pub fn write_volume(path: &Path, v: &Volume, opts: &WriteOptions, inputs: &[&Pat
 /// slab before's, whose memory it can reuse (fresh memory of a slab's size
 /// page-faults, which costs about as much as writing it).
 pub type SlabSamples<'a> = dyn FnMut(std::ops::Range<usize>, &mut Vec<f32>) -> std::io::Result<()> + 'a;
-
-/// Writes a scalar volume slab by slab, by extension: NIfTI
-/// ([`write_nifti_slabs`](crate::write_nifti_slabs)) or OME-Zarr
-/// ([`write_ome_zarr_slabs`](crate::ome_zarr::write_ome_zarr_slabs)).
-/// `slab(z, samples)` sets `samples` to those of planes `z` for each of `slabs`, in order.
-pub fn write_slabs(
-    path: &Path,
-    geometry: &crate::geometry::Geometry,
-    ty: SampleType,
-    slabs: &[std::ops::Range<usize>],
-    slab: &mut SlabSamples<'_>,
-) -> Result<()> {
-    match Format::from_path(path) {
-        Some(Format::Nifti | Format::NiftiGz) => crate::nifti_io::write_nifti_slabs(path, geometry, ty, slabs, slab),
-        Some(Format::OmeZarr) => crate::ome_zarr::write_ome_zarr_slabs(path, geometry, ty, slabs, slab),
-        _ => Err(VolumeError::header(path, "volumes are written by slabs as .nii, .nii.gz or .ome.zarr")),
-    }
-}

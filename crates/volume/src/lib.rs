@@ -9,7 +9,8 @@
 //!   LIST slices), TIFF stacks, DICOM series ([`dicom`]: folders, DICOMDIR,
 //!   multi-frame; sorted and checked), raw with a caller-given [`RawSpec`].
 //!   The content picks the reader, the extension where the content is silent.
-//! * Writers: NIfTI, NRRD and MetaImage for f32, u8, u16, atomically
+//! * Writers: NIfTI, NRRD and MetaImage for f32, u8, u16, atomically; NIfTI,
+//!   NRRD and OME-Zarr also slab by slab ([`SlabWriter`]), with the same bytes
 //!   ([`output`]: temporary file, then rename; folders swapped in whole),
 //!   never over an input.
 //!
@@ -33,15 +34,16 @@ mod png_out;
 mod range;
 mod raw;
 mod samples;
+mod slab_writer;
 mod tiff_stack;
 mod volume;
 
 pub use dtype::{Endian, SAMPLE_TYPE_NAMES, SampleType, round_to_type};
 pub use error::{Result, VolumeError};
 pub use geometry::Geometry;
-pub use io::{Format, SlabSamples, WriteOptions, read, read_scalar, read_with_info, write, write_slabs, write_volume};
+pub use io::{Format, SlabSamples, WriteOptions, read, read_scalar, read_with_info, write, write_volume};
 pub use limits::{available_memory, human_bytes, parse_size};
-pub use nifti_io::{read_nifti, read_nifti_with_info, write_nifti, write_nifti_slabs};
+pub use nifti_io::{read_nifti, read_nifti_with_info, write_nifti};
 pub use output::{AtomicWriter, Inputs, OutputFolder, write_file_atomically};
 pub use overlap::overlapped;
 pub use planes::PlaneReader;
@@ -52,4 +54,5 @@ pub use range::{
 };
 pub use raw::{RawSpec, read_raw};
 pub use samples::{FileInfo, NanPolicy, ReadOptions};
+pub use slab_writer::{SlabWriter, write_slabs};
 pub use volume::{Field, MultiField, Volume};

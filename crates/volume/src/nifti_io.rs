@@ -336,6 +336,26 @@ fn header_bytes(h: &NiftiHeader, dims: &[usize], ty: SampleType) -> Option<Vec<u
     Some(b)
 }
 
+/// The header bytes (with the `n+1` extension block) of a NIfTI at `path`
+/// holding `fields` fields on `geometry` as `ty`: 3D for one field, 4D for several.
+pub(crate) fn header_of(path: &Path, geometry: &Geometry, fields: usize, ty: SampleType) -> Result<Vec<u8>> {
+    let mut dims = geometry.dims.to_vec();
+    if fields > 1 {
+        dims.push(fields);
+    }
+    header_bytes(&header_for(geometry), &dims, ty).ok_or_else(|| {
+        if datatype_code(ty).is_none() {
+            VolumeError::UnsupportedType {
+                path: path.to_path_buf(),
+                name: ty.name().into(),
+                supported: "f32, u8, u16, i16 for writing",
+            }
+        } else {
+            VolumeError::header(path, format!("dims {dims:?} exceed NIfTI-1's limit of 32767 per axis"))
+        }
+    })
+}
+
 /// Writes `mf` as `.nii` or `.nii.gz` (by the path's extension) with samples
 /// stored as `ty` (f32, u8, u16 or i16). One field gives a 3D file, several a
 /// 4D file with one volume per field. Integer targets require exactly
@@ -347,21 +367,7 @@ pub fn write_nifti(path: &Path, mf: &MultiField, ty: SampleType) -> Result<()> {
             return Err(VolumeError::NotRepresentable { path: path.to_path_buf(), value, index, target: ty.name() });
         }
     }
-    let mut dims = mf.geometry.dims.to_vec();
-    if mf.fields.len() > 1 {
-        dims.push(mf.fields.len());
-    }
-    let header = header_bytes(&header_for(&mf.geometry), &dims, ty).ok_or_else(|| {
-        if datatype_code(ty).is_none() {
-            VolumeError::UnsupportedType {
-                path: path.to_path_buf(),
-                name: ty.name().into(),
-                supported: "f32, u8, u16, i16 for writing",
-            }
-        } else {
-            VolumeError::header(path, format!("dims {dims:?} exceed NIfTI-1's limit of 32767 per axis"))
-        }
-    })?;
+    let header = header_of(path, &mf.geometry, mf.fields.len(), ty)?;
     let fields: Vec<&[f32]> = mf.fields.iter().map(|f| f.data.as_slice().unwrap_or(&[])).collect();
     let gz = path.to_string_lossy().to_ascii_lowercase().ends_with(".gz");
     write_file_atomically(path, |w| {
@@ -376,63 +382,6 @@ pub fn write_nifti(path: &Path, mf: &MultiField, ty: SampleType) -> Result<()> {
             write_fields(w, &fields, FieldAxis::Slowest, ty)
         }
     })
-}
-
-/// Writes a one-field `.nii` or `.nii.gz` on `geometry` slab by slab (for
-/// runs that never hold the whole volume): `slab(z, samples)` sets the
-/// samples of planes `z` ([`crate::io::SlabSamples`]) for each range of
-/// `slabs` in turn, in order and covering every plane. The bytes equal [`write_nifti`]'s of the whole
-/// volume; atomic like it.
-pub fn write_nifti_slabs(
-    path: &Path,
-    geometry: &Geometry,
-    ty: SampleType,
-    slabs: &[std::ops::Range<usize>],
-    slab: &mut crate::io::SlabSamples<'_>,
-) -> Result<()> {
-    let nz = geometry.dims[2];
-    if slabs.first().map(|s| s.start) != Some(0)
-        || slabs.last().map(|s| s.end) != Some(nz)
-        || slabs.windows(2).any(|w| w[0].end != w[1].start)
-    {
-        return Err(VolumeError::header(path, format!("the slabs {slabs:?} do not cover the {nz} planes in order")));
-    }
-    let header =
-        header_bytes(&header_for(geometry), &geometry.dims, ty).ok_or_else(|| VolumeError::UnsupportedType {
-            path: path.to_path_buf(),
-            name: ty.name().into(),
-            supported: "f32, u8, u16, i16 for writing",
-        })?;
-    let plane = geometry.dims[0] * geometry.dims[1];
-    let mut unrepresentable = None;
-    let gz = path.to_string_lossy().to_ascii_lowercase().ends_with(".gz");
-    let mut body = |w: &mut dyn Write| -> std::io::Result<()> {
-        w.write_all(&header)?;
-        let mut data = Vec::new();
-        for z in slabs {
-            slab(z.clone(), &mut data)?;
-            if let Some((index, value)) = first_unrepresentable(&data, ty) {
-                unrepresentable = Some((z.start * plane + index, value));
-                return Err(std::io::Error::other("a sample is not representable"));
-            }
-            write_fields(w, &[&data], FieldAxis::Slowest, ty)?;
-        }
-        Ok(())
-    };
-    let written = write_file_atomically(path, |w| {
-        if gz {
-            let mut enc = flate2::write::GzEncoder::new(w, flate2::Compression::fast());
-            body(&mut enc)?;
-            enc.finish()?;
-            Ok(())
-        } else {
-            body(w)
-        }
-    });
-    if let Some((index, value)) = unrepresentable {
-        return Err(VolumeError::NotRepresentable { path: path.to_path_buf(), value, index, target: ty.name() });
-    }
-    written
 }
 
 #[cfg(test)]

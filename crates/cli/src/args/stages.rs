@@ -34,7 +34,8 @@ Kernels (all evaluated at the grid points; derivatives in world units):\n  \
     gauss:S      Gaussian derivatives of scale S (world units), cut at 4 S\n\n\
 Examples:\n  mdtf derive ct.nii.gz -o derived/ --items g,f2,normal\n  \
     mdtf derive noisy.nrrd -o d/ --items g,f2 --kernel gauss:1.5 --format nrrd\n  \
-    mdtf derive t1.nii t2.nii pd.nii -o mf/ --items gnorm"
+    mdtf derive t1.nii t2.nii pd.nii -o mf/ --items gnorm\n  \
+    mdtf derive big.nii -o d/ --items g,f2,normal --memory-budget 4GiB"
 )]
 pub struct DeriveArgs {
     /// Input volume(s). Several files (or one multi-field file) form a multi-field volume; their grids must match.
@@ -67,6 +68,15 @@ pub struct DeriveArgs {
     /// Reads the inputs and writes nothing.
     #[arg(long)]
     pub plan: bool,
+    /// Derive slab by slab within this much memory (e.g. 2GiB, 512MiB): the input is read by
+    /// planes into a file in the output's staging folder (disk: 4 bytes a voxel), each z-slab
+    /// is derived over its planes grown by the kernel's support, and every item's file is
+    /// written slab by slab (.nii, .nii.gz, .nrrd or .ome.zarr). The files are byte-identical
+    /// to a whole-volume derive's. One input file with one field; not shade (it divides by
+    /// the whole volume's largest g). Without it, a volume whose whole derive would not fit in
+    /// three quarters of the available memory goes this way within that.
+    #[arg(long, value_name = "SIZE", value_parser = mdtf_volume::parse_size)]
+    pub memory_budget: Option<u64>,
     #[command(flatten)]
     pub read: InputArgs,
 }

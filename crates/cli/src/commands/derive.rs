@@ -4,11 +4,12 @@ use crate::args::DeriveArgs;
 use crate::input::{print_plan, read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
+use mdtf_pipeline::blocks::{self, SlabSize};
 use mdtf_pipeline::boundary_chain::BoundaryChainParams;
 use mdtf_pipeline::channels;
 use mdtf_pipeline::plan::Plan;
 use mdtf_pipeline::stages::derive::Item;
-use mdtf_volume::{Inputs, MultiField, OutputFolder, WriteOptions, write};
+use mdtf_volume::{Inputs, MultiField, OutputFolder, WriteOptions, human_bytes, write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -27,6 +28,9 @@ fn params(args: &DeriveArgs) -> Result<(Vec<Item>, BoundaryChainParams)> {
 /// Reads the inputs, derives through the plan of the items' channels, writes one file per item.
 pub fn run(args: &DeriveArgs, progress: &Progress) -> Result<()> {
     let (items, chain) = params(args)?;
+    if let Some(budget) = slab_budget(args, &items, progress)? {
+        return run_by_slabs(args, &items, &chain, budget, progress);
+    }
     let given: Vec<&Path> = args.inputs.iter().map(PathBuf::as_path).collect();
     let inputs = Inputs::of(&given);
     let folder = if args.plan { None } else { Some(OutputFolder::begin(&args.output, &inputs)?) };
@@ -63,6 +67,69 @@ pub fn run(args: &DeriveArgs, progress: &Progress) -> Result<()> {
         args.kernel,
         seconds,
         input.geometry.voxel_count() as f64 / seconds / 1e6,
+        args.output.display()
+    ));
+    Ok(())
+}
+
+/// The budget of a slab-by-slab derive: `--memory-budget`, or one of its
+/// own when the whole volume would not fit in memory (said in a note); None
+/// for a whole-volume derive (and for `--plan`).
+fn slab_budget(args: &DeriveArgs, items: &[Item], progress: &Progress) -> Result<Option<u64>> {
+    let one_file = args.inputs.len() == 1 && args.read.raw_dims.is_none() && args.field.is_none();
+    match args.memory_budget {
+        _ if args.plan => Ok(None),
+        Some(_) if !one_file => bail!(
+            "--memory-budget derives one input file with a header, slab by slab: without --raw-dims or --field, \
+             and one file (several fields do not go by slabs)"
+        ),
+        Some(b) => Ok(Some(b)),
+        None if !one_file => Ok(None),
+        None => {
+            let opts = read_options(&args.read);
+            let available = mdtf_volume::available_memory();
+            let auto = blocks::automatic_item_budget(&args.inputs[0], &opts, items, available);
+            Ok(auto.map(|(budget, geo)| {
+                let [nx, ny, nz] = geo.dims;
+                progress.note(&format!(
+                    "{nx} x {ny} x {nz} voxels do not fit in memory at once: deriving slab by slab within {} \
+                     (--memory-budget sets it)",
+                    human_bytes(budget as u128)
+                ));
+                budget
+            }))
+        }
+    }
+}
+
+/// Derives slab by slab within `budget` bytes: the input read by planes,
+/// each item's file written slab by slab (see `--memory-budget`).
+fn run_by_slabs(
+    args: &DeriveArgs,
+    items: &[Item],
+    chain: &BoundaryChainParams,
+    budget: u64,
+    progress: &Progress,
+) -> Result<()> {
+    let input = args.inputs[0].as_path();
+    let inputs = Inputs::of(&[input]);
+    let folder = OutputFolder::begin(&args.output, &inputs)?;
+    let (opts, ext, size) = (read_options(&args.read), args.format.extension(), SlabSize::Budget(budget));
+    let start = Instant::now();
+    let made = progress
+        .counted("reading, then deriving, slab by slab", 0, |tick| {
+            blocks::derive_item_files(input, &opts, items, chain, size, folder.path(), ext, tick)
+        })
+        .context("cannot derive")?;
+    let seconds = start.elapsed().as_secs_f64();
+    folder.publish(&inputs)?;
+    progress.note(&format!(
+        "derived {} with {} in {seconds:.2} s, {} slabs of {} planes within {}, into {}",
+        made.files.iter().map(|(i, _)| i.name()).collect::<Vec<_>>().join(", "),
+        args.kernel,
+        made.slabs,
+        made.height,
+        human_bytes(budget as u128),
         args.output.display()
     ));
     Ok(())

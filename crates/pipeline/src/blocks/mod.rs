@@ -54,6 +54,7 @@
 //! channels and histograms). Others are refused with the reason, before any work.
 
 mod budget;
+mod item_files;
 mod medians;
 mod passes;
 mod pool;
@@ -64,6 +65,7 @@ mod store;
 mod trace;
 
 pub use budget::{TraceBlocks, automatic_budget, fit_slabs, fit_trace, slab_height, slabs};
+pub use item_files::{ItemFiles, automatic_item_budget, derive_item_files, items_unsupported};
 pub use pool::SamplePool;
 pub use remote::{Prefilter, SlabJob, SlabPass, SlabTasks, TracePartial, run_task};
 pub use slab_channels::SlabChannels;
@@ -126,6 +128,16 @@ enum Source {
 }
 
 impl Source {
+    /// The one-field volume in `path`: by planes when its format allows, else read whole.
+    fn of_file(path: &Path, read: &mdtf_volume::ReadOptions) -> Result<Source, RunError> {
+        if let Some(r) = PlaneReader::open(path, read).map_err(at("input"))? {
+            return Ok(Source::Planes(r));
+        }
+        let mf = mdtf_volume::read(path, read).map_err(at("input"))?;
+        let v = mf.into_scalar().map_err(|e| fail("input")(format!("{}: {e}", path.display())))?;
+        Ok(Source::Whole(v))
+    }
+
     fn geometry(&self) -> &Geometry {
         match self {
             Source::Planes(r) => r.geometry(),

@@ -301,7 +301,8 @@ pub fn write_nrrd(path: &Path, mf: &MultiField, ty: SampleType, encoding: Encodi
         }
     }
     let data_name = data_file_name(path, encoding == Encoding::Gzip);
-    let header = header_text(mf, ty, encoding, data_name.as_deref());
+    let names: Vec<&str> = mf.fields.iter().map(|f| f.name.as_str()).collect();
+    let header = header_text(&mf.geometry, &names, ty, encoding, data_name.as_deref());
     let slices: Vec<&[f32]> = mf.fields.iter().map(|f| f.data.as_slice().unwrap_or(&[])).collect();
     let write_samples = |w: &mut dyn Write| -> std::io::Result<()> {
         match encoding {
@@ -378,9 +379,16 @@ pub(crate) fn with_data_file(text: &str, data_file: &str) -> String {
     out
 }
 
-fn header_text(mf: &MultiField, ty: SampleType, encoding: Encoding, data_file: Option<&str>) -> String {
-    let g = &mf.geometry;
-    let m = (mf.fields.len() > 1).then_some(mf.fields.len());
+/// The header of an attached raw NRRD holding the fields `names` on
+/// `geometry` as `ty`, as [`write_nrrd`] writes it (for writers by slabs).
+pub(crate) fn header_of(geometry: &Geometry, names: &[String], ty: SampleType) -> String {
+    let names: Vec<&str> = names.iter().map(String::as_str).collect();
+    header_text(geometry, &names, ty, Encoding::Raw, None)
+}
+
+/// The header of fields `names` on `g` as `ty`, with `encoding` and the detached `data_file` if any.
+fn header_text(g: &Geometry, names: &[&str], ty: SampleType, encoding: Encoding, data_file: Option<&str>) -> String {
+    let m = (names.len() > 1).then_some(names.len());
     let dirs: Vec<String> =
         (0..3).map(|a| format_vector([0, 1, 2].map(|r| g.directions[a][r] * g.spacing[a]))).collect();
     let mut s = String::from("NRRD0005\n# written by mdtf\n");
@@ -406,8 +414,7 @@ fn header_text(mf: &MultiField, ty: SampleType, encoding: Encoding, data_file: O
     if let Some(df) = data_file {
         s += &format!("data file: {df}\n");
     }
-    if mf.fields.len() > 1 || mf.fields[0].name != "value" {
-        let names: Vec<&str> = mf.fields.iter().map(|f| f.name.as_str()).collect();
+    if names.len() > 1 || names.first() != Some(&"value") {
         s += &format!("mdtf_fields:={}\n", names.join(" "));
     }
     if data_file.is_none() {

@@ -553,25 +553,3 @@ pub fn write_ome_zarr(path: &Path, mf: &MultiField, ty: SampleType, inputs: &cra
     drop(w);
     out.publish(inputs)
 }
-
-/// Writes a one-field OME-Zarr store at `path` slab by slab, atomically
-/// (as [`write_ome_zarr`]): `slab(z, samples)` sets the samples of planes
-/// `z` ([`crate::io::SlabSamples`]), for each of `slabs` in order.
-pub fn write_ome_zarr_slabs(
-    path: &Path,
-    geometry: &Geometry,
-    ty: SampleType,
-    slabs: &[Range<usize>],
-    slab: &mut crate::io::SlabSamples<'_>,
-) -> Result<()> {
-    let inputs = crate::output::Inputs::new();
-    let out = crate::output::OutputFolder::begin(path, &inputs)?;
-    let mut w = ZarrWriter::create(out.path(), geometry, &["value".into()], ty)?;
-    let mut samples = Vec::new();
-    for z in slabs {
-        slab(z.clone(), &mut samples).map_err(|e| VolumeError::io(path, e))?;
-        w.write_planes(z.start, &[&samples])?;
-    }
-    drop(w);
-    out.publish(&inputs)
-}

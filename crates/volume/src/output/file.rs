@@ -29,7 +29,7 @@ impl StagedFile {
     }
 
     /// A new, empty partial file beside `target`, open for writing.
-    fn open(target: &Path) -> Result<(Self, std::fs::File)> {
+    pub(crate) fn open(target: &Path) -> Result<(Self, std::fs::File)> {
         let (parent, name) = super::parent_and_name(target)?;
         let tmp = staging::builder(&prefix_for(&name.to_string_lossy()))
             .tempfile_in(&parent)
@@ -37,6 +37,11 @@ impl StagedFile {
         let (file, partial) = tmp.keep().map_err(|e| VolumeError::io(target, e.error))?;
         register(&partial);
         Ok((StagedFile { partial, target: parent.join(&name), published: false }, file))
+    }
+
+    /// Where the partial file is.
+    pub(crate) fn partial(&self) -> &Path {
+        &self.partial
     }
 
     /// The partial file with every byte of `w` in it, closed, ready to publish.

@@ -1,0 +1,224 @@
+//! Volume files written slab by slab, in z order, and published whole: for
+//! runs that never hold a whole volume. The bytes equal those of
+//! [`write`](crate::write) of the whole (multi-field) volume with the
+//! default [`WriteOptions`](crate::WriteOptions) and `ty`, whatever the slabs.
+//!
+//! NIfTI stores several fields one after another, so the first field goes
+//! straight into the file and the others wait in partial files beside it
+//! (removed on any failure or signal), appended when the last slab is in.
+//! NRRD interleaves the fields per voxel and OME-Zarr chunks them, so both
+//! take each slab as it comes.
+
+use crate::SampleType;
+use crate::dtype::first_unrepresentable;
+use crate::error::{Result, VolumeError};
+use crate::geometry::Geometry;
+use crate::io::Format;
+use crate::ome_zarr::ZarrWriter;
+use crate::output::{AtomicWriter, Inputs, OutputFolder, StagedFile};
+use crate::samples::{FieldAxis, write_fields};
+use std::io::{BufWriter, Write};
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+/// A volume file being written slab by slab (see the module docs). Dropped
+/// before [`SlabWriter::finish`], it leaves nothing behind and the target as it was.
+pub struct SlabWriter {
+    path: PathBuf,
+    geometry: Geometry,
+    ty: SampleType,
+    fields: usize,
+    /// The next plane expected.
+    next: usize,
+    sink: Sink,
+}
+
+/// Where the samples go, by format.
+enum Sink {
+    /// The first field into the file, the others into partial files (encoded) until the end.
+    Nifti { out: Stream, rest: Vec<(StagedFile, BufWriter<std::fs::File>)> },
+    /// Fields interleaved per voxel, after the header.
+    Nrrd(Stream),
+    /// A store in a folder published whole.
+    Zarr { writer: Box<ZarrWriter>, folder: OutputFolder },
+}
+
+/// A file's bytes, plain or gzip-compressed on their way in.
+enum Stream {
+    Plain(AtomicWriter),
+    Gz(flate2::write::GzEncoder<AtomicWriter>),
+}
+
+impl Stream {
+    /// A stream into `path`, gzip-compressed when `gz` (as the whole writers compress).
+    fn create(path: &Path, gz: bool) -> Result<Stream> {
+        let w = AtomicWriter::create(path)?;
+        Ok(if gz {
+            Stream::Gz(flate2::write::GzEncoder::new(w, flate2::Compression::fast()))
+        } else {
+            Stream::Plain(w)
+        })
+    }
+
+    /// Puts the file in place with every byte written.
+    fn publish(self, path: &Path) -> Result<()> {
+        let w = match self {
+            Stream::Plain(w) => w,
+            Stream::Gz(gz) => gz.finish().map_err(|e| VolumeError::io(path, e))?,
+        };
+        w.publish()
+    }
+
+    fn writer(&mut self) -> &mut dyn Write {
+        match self {
+            Stream::Plain(w) => w,
+            Stream::Gz(gz) => gz,
+        }
+    }
+}
+
+impl SlabWriter {
+    /// Starts writing `path` (`.nii`, `.nii.gz`, `.nrrd` or `.ome.zarr`,
+    /// by its extension) on `geometry` with the fields `names` (their names
+    /// go into the file where the format keeps them), samples stored as `ty`.
+    pub fn create(path: &Path, geometry: &Geometry, names: &[String], ty: SampleType) -> Result<SlabWriter> {
+        if names.is_empty() {
+            return Err(VolumeError::Fields(format!("{}: a volume needs at least one field", path.display())));
+        }
+        let gz = path.to_string_lossy().to_ascii_lowercase().ends_with(".gz");
+        let sink = match Format::from_path(path) {
+            Some(Format::Nifti | Format::NiftiGz) => {
+                let header = crate::nifti_io::header_of(path, geometry, names.len(), ty)?;
+                let mut out = Stream::create(path, gz)?;
+                out.writer().write_all(&header).map_err(|e| VolumeError::io(path, e))?;
+                let rest = (1..names.len())
+                    .map(|k| {
+                        let (staged, file) = StagedFile::open(&field_file(path, k))?;
+                        Ok((staged, BufWriter::new(file)))
+                    })
+                    .collect::<Result<_>>()?;
+                Sink::Nifti { out, rest }
+            }
+            Some(Format::Nrrd) => {
+                let header = crate::nrrd::header_of(geometry, names, ty);
+                let mut out = Stream::create(path, false)?;
+                out.writer().write_all(header.as_bytes()).map_err(|e| VolumeError::io(path, e))?;
+                Sink::Nrrd(out)
+            }
+            Some(Format::OmeZarr) => {
+                let folder = OutputFolder::begin(path, &Inputs::new())?;
+                let writer = Box::new(ZarrWriter::create(folder.path(), geometry, names, ty)?);
+                Sink::Zarr { writer, folder }
+            }
+            _ => {
+                return Err(VolumeError::header(
+                    path,
+                    "volumes are written slab by slab as .nii, .nii.gz, .nrrd (attached) or .ome.zarr",
+                ));
+            }
+        };
+        Ok(SlabWriter { path: path.to_path_buf(), geometry: geometry.clone(), ty, fields: names.len(), next: 0, sink })
+    }
+
+    /// Adds the planes from `first` on: one x-fastest slice per field, each
+    /// of the same whole number of planes. Slabs come in z order, each
+    /// starting where the one before ended.
+    pub fn put(&mut self, first: usize, fields: &[&[f32]]) -> Result<()> {
+        let plane = self.geometry.dims[0] * self.geometry.dims[1];
+        let planes = fields.first().map_or(0, |f| f.len() / plane.max(1));
+        if first != self.next
+            || fields.len() != self.fields
+            || fields.iter().any(|f| f.len() != planes * plane)
+            || first + planes > self.geometry.dims[2]
+        {
+            return Err(VolumeError::header(
+                &self.path,
+                format!(
+                    "slab of {} field(s) at planes {first}..{} does not follow plane {} of {} field(s) on {}",
+                    fields.len(),
+                    first + planes,
+                    self.next,
+                    self.fields,
+                    self.geometry.dims_string()
+                ),
+            ));
+        }
+        for f in fields {
+            if let Some((index, value)) = first_unrepresentable(f, self.ty) {
+                let (path, target) = (self.path.clone(), self.ty.name());
+                return Err(VolumeError::NotRepresentable { path, value, index: first * plane + index, target });
+            }
+        }
+        let io = |e| VolumeError::io(&self.path, e);
+        match &mut self.sink {
+            Sink::Nifti { out, rest } => {
+                write_fields(out.writer(), &fields[..1], FieldAxis::Slowest, self.ty).map_err(io)?;
+                for ((_, w), f) in rest.iter_mut().zip(&fields[1..]) {
+                    write_fields(w, &[f], FieldAxis::Slowest, self.ty).map_err(io)?;
+                }
+            }
+            Sink::Nrrd(out) => write_fields(out.writer(), fields, FieldAxis::Fastest, self.ty).map_err(io)?,
+            Sink::Zarr { writer, .. } => writer.write_planes(first, fields)?,
+        }
+        self.next = first + planes;
+        Ok(())
+    }
+
+    /// Publishes the file once every plane is in.
+    pub fn finish(self) -> Result<()> {
+        let SlabWriter { path, geometry, next, sink, .. } = self;
+        if next != geometry.dims[2] {
+            let what = format!("only planes 0..{next} of {} were written", geometry.dims[2]);
+            return Err(VolumeError::header(&path, what));
+        }
+        match sink {
+            Sink::Nifti { mut out, rest } => {
+                for (staged, w) in rest {
+                    let file = w.into_inner().map_err(|e| VolumeError::io(&path, e.into_error()))?;
+                    drop(file);
+                    let mut field = std::fs::File::open(staged.partial()).map_err(|e| VolumeError::io(&path, e))?;
+                    std::io::copy(&mut field, out.writer()).map_err(|e| VolumeError::io(&path, e))?;
+                }
+                out.publish(&path)
+            }
+            Sink::Nrrd(out) => out.publish(&path),
+            Sink::Zarr { writer, folder } => {
+                drop(writer);
+                folder.publish(&Inputs::new())
+            }
+        }
+    }
+}
+
+/// Where field `k` of a NIfTI being written waits (its partial file is made beside this name).
+fn field_file(path: &Path, k: usize) -> PathBuf {
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(format!(".field{k}"));
+    path.with_file_name(name)
+}
+
+/// Writes a one-field volume slab by slab (see [`SlabWriter`]):
+/// `slab(z, samples)` sets `samples` to those of planes `z` for each of
+/// `slabs`, which must cover the planes in order.
+pub fn write_slabs(
+    path: &Path,
+    geometry: &Geometry,
+    ty: SampleType,
+    slabs: &[Range<usize>],
+    slab: &mut crate::io::SlabSamples<'_>,
+) -> Result<()> {
+    let nz = geometry.dims[2];
+    if slabs.first().map(|s| s.start) != Some(0)
+        || slabs.last().map(|s| s.end) != Some(nz)
+        || slabs.windows(2).any(|w| w[0].end != w[1].start)
+    {
+        return Err(VolumeError::header(path, format!("the slabs {slabs:?} do not cover the {nz} planes in order")));
+    }
+    let mut w = SlabWriter::create(path, geometry, &["value".to_string()], ty)?;
+    let mut data = Vec::new();
+    for z in slabs {
+        slab(z.clone(), &mut data).map_err(|e| VolumeError::io(path, e))?;
+        w.put(z.start, &[&data])?;
+    }
+    w.finish()
+}
