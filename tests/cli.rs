@@ -1678,3 +1678,37 @@ fn derive_under_a_memory_budget_writes_the_whole_derives_files_and_says_how_it_c
     assert!(e.contains("too small"), "{e}");
     assert!(!other.exists(), "a refused derive left {}", other.display());
 }
+
+#[test]
+fn boundary_under_a_memory_budget_writes_the_whole_runs_files_and_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("sphere.nii");
+    let synth = ["synth", "erf-sphere", "--size", "40,36,34", "--sigma", "2", "--noise", "3", "--type", "u16"];
+    mdtf_ok(&[&synth[..], &["-o", input.to_str().unwrap(), "-q"]].concat());
+    let i = input.to_str().unwrap();
+    let (whole, slabs) = (dir.path().join("whole"), dir.path().join("slabs"));
+    let common = ["--d-max", "5", "--flipped", "--alpha", "linear:a=1,dc=3", "--format", "nrrd"];
+    let (w, s) = (whole.to_str().unwrap(), slabs.to_str().unwrap());
+    mdtf_ok(&[&["boundary", i, "-o", w, "--report", w, "-q"][..], &common].concat());
+    // 48 MiB of fixed costs and a few 40 x 36 planes with the tracing's halo: several slabs
+    let out = mdtf(&[&["boundary", i, "-o", s, "--report", s, "--memory-budget", "49MiB"][..], &common].concat());
+    let text = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && text.contains("slabs of") && text.contains("within 49.0 MiB"), "{text}");
+    let names = ["distance", "g_hit", "hit", "dot", "flipped", "alpha_linear"].map(|n| format!("{n}.nrrd"));
+    for name in names.iter().map(String::as_str).chain(["boundary_report.csv", "boundary_report.png"]) {
+        let (a, b) = (std::fs::read(whole.join(name)).unwrap(), std::fs::read(slabs.join(name)).unwrap());
+        assert!(a == b, "{name} differs between the whole and the slab-by-slab tracing");
+    }
+    // without --report no report is left in the output; given g, f'', normal do not go by slabs
+    let other = dir.path().join("other");
+    mdtf_ok(&["boundary", i, "-o", other.to_str().unwrap(), "--memory-budget", "52MiB", "-q"]);
+    assert!(!other.join("boundary").exists() && other.join("distance.nii.gz").exists());
+    let third = dir.path().join("third");
+    let g = whole.join("g_hit.nrrd");
+    let given = ["--g", g.to_str().unwrap(), "--f2", g.to_str().unwrap(), "--normal", g.to_str().unwrap()];
+    let e = mdtf_err(&[&["boundary", "-o", third.to_str().unwrap(), "--memory-budget", "1GiB"][..], &given].concat());
+    assert!(e.contains("--memory-budget traces from a value volume"), "{e}");
+    let e = mdtf_err(&["boundary", i, "-o", third.to_str().unwrap(), "--format", "nhdr", "--memory-budget", "1GiB"]);
+    assert!(e.contains("slab by slab as .nii, .nii.gz, .nrrd"), "{e}");
+    assert!(!third.exists(), "a refused tracing left {}", third.display());
+}

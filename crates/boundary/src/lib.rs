@@ -516,20 +516,48 @@ pub fn run_block(
     let place = BlockPlace::z_slab(first_plane, input.g.geometry.dims);
     let BlockTrace { distance, g_hit, hit, dot, counts, crossings, resolved: r } =
         trace_block(input, params, &place, &stats)?;
-    let hit_mask = |f: &dyn Fn(f32) -> f32| {
-        let data =
-            ndarray::Zip::from(&distance.data).and(&hit.data).map_collect(|&d, &h| if h == 1.0 { f(d) } else { 0.0 });
+    let maps = hit_maps(params, r.d_max);
+    let hit_mask = |f: &HitMap| {
+        let data = ndarray::Zip::from(&distance.data).and(&hit.data).map_collect(|&d, &h| f.at(d, h));
         Volume { geometry: distance.geometry.clone(), data }
     };
-    let d_max = r.d_max as f32;
-    let flipped = params.flipped.then(|| hit_mask(&|d| d_max - d));
-    let alpha = params
-        .alpha
-        .iter()
-        .map(|a| (a.file_name().to_string(), hit_mask(&|d| a.eval(d as f64, r.d_max) as f32)))
-        .collect();
+    let mut maps = maps.iter();
+    let flipped = params.flipped.then(|| maps.next().map(hit_mask)).flatten();
+    let alpha = maps.map(|m| (m.name.clone(), hit_mask(m))).collect();
     let (lost, warnings) = crossings.lost(&r);
     Ok(BoundaryOutput { distance, g_hit, hit, dot, flipped, alpha, counts, resolved: r, lost, warnings })
+}
+
+/// A map of the distance where the tracing kept a boundary (0 elsewhere):
+/// the flipped distance or an alpha map, by the file name it is written to.
+pub struct HitMap {
+    /// The file name (without extension): `flipped`, or the alpha map's.
+    pub name: String,
+    /// The map's value at distance d (voxels), f32 as written.
+    map: Box<dyn Fn(f32) -> f32 + Send + Sync>,
+}
+
+impl HitMap {
+    /// The map at a voxel of distance `d` and hit code `hit` (0 without a kept boundary).
+    pub fn at(&self, d: f32, hit: f32) -> f32 {
+        if hit == 1.0 { (self.map)(d) } else { 0.0 }
+    }
+}
+
+/// The maps `params` asks for (`flipped` first, then each alpha map), for a
+/// tracing that resolved `d_max` (voxels): functions of a voxel's distance
+/// and hit code, so a slab-by-slab run makes them slab by slab.
+pub fn hit_maps(params: &BoundaryParams, d_max: f64) -> Vec<HitMap> {
+    let mut maps = Vec::with_capacity(params.alpha.len() + 1);
+    if params.flipped {
+        let top = d_max as f32;
+        maps.push(HitMap { name: "flipped".into(), map: Box::new(move |d| top - d) });
+    }
+    for &a in &params.alpha {
+        let map = Box::new(move |d: f32| a.eval(d as f64, d_max) as f32);
+        maps.push(HitMap { name: a.file_name().to_string(), map });
+    }
+    maps
 }
 
 fn lost_warning(l: &LostBoundary, r: &ResolvedParams) -> String {

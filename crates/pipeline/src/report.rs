@@ -115,6 +115,8 @@ pub(crate) struct Traced {
     pub(crate) boundary: Option<BoundarySummary>,
     /// The tracing's largest distance, voxels (the distance code range).
     pub(crate) d_max: Option<f64>,
+    /// The Fig. 2 report (a slab-by-slab tracing's, from its sums).
+    pub(crate) report: Option<mdtf_boundary::Report>,
 }
 
 /// Peak resident set size of this process in MiB (VmHWM), 0 where unknown.

@@ -205,6 +205,7 @@ impl<'a> WholeRun<'a> {
         let traced = Traced {
             d_max: Some(out.resolved.d_max),
             boundary: Some(BoundarySummary { resolved: out.resolved, counts: out.counts, lost: out.lost.clone() }),
+            report: None,
         };
         let report = out.report(g);
         let rdir = self.dir.join("boundary");

@@ -39,6 +39,7 @@ fn items_written_slab_by_slab_have_the_whole_derives_bytes() {
         let whole = tmp.path().join(format!("whole-{input_name}"));
         std::fs::create_dir(&whole).unwrap();
         whole_files(&input, &items, chain, &whole, ext);
+        // the budget: 48 MiB of fixed costs and room for about 10 planes with the kernel's halo
         let sizes =
             [SlabSize::Planes(1), SlabSize::Planes(7), SlabSize::Planes(33), SlabSize::Budget((48 << 20) + 1_100_000)];
         for (k, size) in sizes.into_iter().enumerate() {

@@ -110,14 +110,18 @@ impl SlabWriter {
                 let writer = Box::new(ZarrWriter::create(folder.path(), geometry, names, ty)?);
                 Sink::Zarr { writer, folder }
             }
-            _ => {
-                return Err(VolumeError::header(
-                    path,
-                    "volumes are written slab by slab as .nii, .nii.gz, .nrrd (attached) or .ome.zarr",
-                ));
-            }
+            _ => return Err(SlabWriter::check_format(path).err().unwrap_or_else(|| not_by_slabs(path))),
         };
         Ok(SlabWriter { path: path.to_path_buf(), geometry: geometry.clone(), ty, fields: names.len(), next: 0, sink })
+    }
+
+    /// Whether `path`'s format can be written slab by slab (`.nii`,
+    /// `.nii.gz`, `.nrrd` or `.ome.zarr`): an error naming them if not.
+    pub fn check_format(path: &Path) -> Result<()> {
+        match Format::from_path(path) {
+            Some(Format::Nifti | Format::NiftiGz | Format::Nrrd | Format::OmeZarr) => Ok(()),
+            _ => Err(not_by_slabs(path)),
+        }
     }
 
     /// Adds the planes from `first` on: one x-fastest slice per field, each
@@ -188,6 +192,11 @@ impl SlabWriter {
             }
         }
     }
+}
+
+/// The error of a format [`SlabWriter`] does not write.
+fn not_by_slabs(path: &Path) -> VolumeError {
+    VolumeError::header(path, "volumes are written slab by slab as .nii, .nii.gz, .nrrd (attached) or .ome.zarr")
 }
 
 /// Where field `k` of a NIfTI being written waits (its partial file is made beside this name).

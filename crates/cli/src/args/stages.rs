@@ -143,7 +143,8 @@ concave:a=0.4,dc=3,n=9  a / dc^n |d - dc|^n for d < dc, else 0    (eq. 10)\n  \
 convex:a=1,dc=3,n=3   max(-a d^n / dc^n + a, 0)                  (eq. 11)\n\n\
 Examples:\n  mdtf boundary sphere.nii.gz -o bnd/ --report bnd/\n  \
     mdtf boundary noisy.nrrd -o bnd/ --kernel gauss:1 --prefilter 1,0.1 --alpha linear:a=1,dc=3\n  \
-    mdtf boundary --g d/g.nii.gz --f2 d/f2.nii.gz --normal d/normal.nii.gz -o bnd/ --value-range 255"
+    mdtf boundary --g d/g.nii.gz --f2 d/f2.nii.gz --normal d/normal.nii.gz -o bnd/ --value-range 255\n  \
+    mdtf boundary big.nii -o bnd/ --memory-budget 4GiB"
 )]
 pub struct BoundaryArgs {
     /// Value volume: derive (g, f'', normal) runs in process first. Omit when giving --g, --f2 and --normal.
@@ -203,6 +204,15 @@ pub struct BoundaryArgs {
     /// Output format.
     #[arg(long, value_enum, default_value_t = OutFormat::NiiGz)]
     pub format: OutFormat,
+    /// Trace slab by slab within this much memory (e.g. 2GiB, 512MiB), from a value volume: the
+    /// input is read by planes, each pass (derive, pre-filter, tracing) works on z-slabs grown by
+    /// its halo (the tracing's: d_max plus the interpolation's support), the channels wait in
+    /// files in the output's staging folder (disk: about 30 bytes a voxel), and every output is
+    /// written slab by slab (.nii, .nii.gz or .ome.zarr). The outputs and the report are
+    /// byte-identical to a whole-volume run's. Without it, a volume whose whole run would not
+    /// fit in three quarters of the available memory goes this way within that.
+    #[arg(long, value_name = "SIZE", value_parser = mdtf_volume::parse_size)]
+    pub memory_budget: Option<u64>,
     #[command(flatten)]
     pub read: InputArgs,
 }

@@ -4,12 +4,13 @@ use crate::args::BoundaryArgs;
 use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
+use mdtf_pipeline::blocks::{self, SlabSize};
 use mdtf_pipeline::boundary_chain::BoundaryChainParams;
 use mdtf_pipeline::channels::{self, Tracing};
 use mdtf_pipeline::run::BoundarySummary;
 use mdtf_pipeline::stages::bilateral::BilateralParams;
 use mdtf_pipeline::stages::boundary::{AlphaMap, BoundaryInput, BoundaryParams};
-use mdtf_volume::{Inputs, MultiField, OutputFolder, Volume, WriteOptions, write};
+use mdtf_volume::{Inputs, MultiField, OutputFolder, Volume, WriteOptions, human_bytes, write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -63,6 +64,7 @@ pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
         let traced = |_: &[String]| TRACED.map(String::from).to_vec();
         return crate::input::print_channel_plan(input, &args.read, &traced, &chain);
     }
+    let budget = slab_budget(args, progress)?;
     let given: Vec<&Path> =
         [&args.input, &args.g, &args.f2, &args.normal].into_iter().flatten().map(PathBuf::as_path).collect();
     let inputs = Inputs::of(&given);
@@ -74,23 +76,98 @@ pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
         _ => None,
     };
     let start = Instant::now();
-    let traced = trace(args, p, progress)?;
+    let found = match budget {
+        Some(b) => trace_by_slabs(args, p, b, folder.path(), progress)?,
+        None => trace(args, p, progress)?.write(folder.path(), args.format.extension(), &given, progress)?,
+    };
     let seconds = start.elapsed().as_secs_f64();
     let report_dir = match (&report_folder, &report_inside) {
         (Some(f), _) => Some(f.path().to_path_buf()),
         (None, Some(rel)) => Some(folder.path().join(rel)),
         (None, None) => None,
     };
-    write_outputs(&traced, folder.path(), args.format.extension(), report_dir.as_deref(), &given, progress)?;
+    found.write_report(report_dir.as_deref(), progress)?;
     folder.publish(&inputs)?;
     if let Some(r) = report_folder {
         r.publish(&inputs)?;
     }
-    for w in &traced.tracing.warnings {
+    for w in &found.warnings {
         progress.note(&format!("warning: {w}"));
     }
-    progress.note(&summary(&traced.tracing.summary, seconds));
+    progress.note(&summary(&found.summary, seconds));
     Ok(())
+}
+
+/// The budget of a slab-by-slab tracing: `--memory-budget`, or one of its
+/// own when the whole volume would not fit in memory (said in a note); None
+/// for a whole-volume run (and for tracing given g, f'' and normal).
+fn slab_budget(args: &BoundaryArgs, progress: &Progress) -> Result<Option<u64>> {
+    let value_file = args.input.as_deref().filter(|_| args.read.raw_dims.is_none());
+    match (args.memory_budget, value_file) {
+        (Some(_), None) => bail!(
+            "--memory-budget traces from a value volume with a header, slab by slab (not from --g/--f2/--normal \
+             or --raw-dims)"
+        ),
+        (Some(b), Some(_)) => Ok(Some(b)),
+        (None, None) => Ok(None),
+        (None, Some(input)) => {
+            let available = mdtf_volume::available_memory();
+            let auto = blocks::automatic_trace_budget(input, &read_options(&args.read), available);
+            Ok(auto.map(|(budget, geo)| {
+                let [nx, ny, nz] = geo.dims;
+                progress.note(&format!(
+                    "{nx} x {ny} x {nz} voxels do not fit in memory at once: tracing slab by slab within {} \
+                     (--memory-budget sets it)",
+                    human_bytes(budget as u128)
+                ));
+                budget
+            }))
+        }
+    }
+}
+
+/// The chain from the value volume, slab by slab within `budget` bytes,
+/// its files written into `dir` (the report waits in `dir`/boundary).
+fn trace_by_slabs(
+    args: &BoundaryArgs,
+    p: BoundaryParams,
+    budget: u64,
+    dir: &Path,
+    progress: &Progress,
+) -> Result<Found> {
+    let input = args.input.as_deref().context("--memory-budget traces from a value volume")?;
+    let (chain, opts, ext) = (chain(args, p)?, read_options(&args.read), args.format.extension());
+    let size = SlabSize::Budget(budget);
+    let stage = |s: &str| progress.message(s);
+    let t = progress
+        .counted("reading, deriving, then tracing, slab by slab", 0, |tick| {
+            blocks::trace_files(input, &opts, &chain, size, dir, ext, &stage, tick)
+        })
+        .context("cannot trace the boundaries")?;
+    // the passes leave the report in the output folder: it goes where --report says, if anywhere
+    std::fs::remove_dir_all(dir.join("boundary")).context("cannot tidy the staging folder")?;
+    progress.note(&format!("traced {} slabs of {} planes within {}", t.slabs, t.height, human_bytes(budget as u128)));
+    Ok(Found { summary: t.summary, warnings: t.warnings, report: t.report })
+}
+
+/// What the tracing found, its files written.
+struct Found {
+    summary: BoundarySummary,
+    warnings: Vec<String>,
+    report: mdtf_pipeline::stages::boundary::Report,
+}
+
+impl Found {
+    /// The Fig. 2 report into `report_dir`, when asked for.
+    fn write_report(&self, report_dir: Option<&Path>, progress: &Progress) -> Result<()> {
+        let Some(report_dir) = report_dir else { return Ok(()) };
+        std::fs::create_dir_all(report_dir)
+            .with_context(|| format!("cannot create the report folder {}", report_dir.display()))?;
+        self.report.write(report_dir).context("cannot write the report")?;
+        let (mean, hits) = (self.report.mean_dot, self.report.hits);
+        progress.note(&format!("mean dot product {mean:.6} over {hits} voxels with a boundary"));
+        Ok(())
+    }
 }
 
 /// The tracing's channels as files (distance, g_hit, hit, dot, then the
@@ -160,28 +237,18 @@ fn summary(summary: &BoundarySummary, seconds: f64) -> String {
     )
 }
 
-fn write_outputs(
-    traced: &Traced,
-    dir: &Path,
-    ext: &str,
-    report_dir: Option<&Path>,
-    inputs: &[&Path],
-    progress: &Progress,
-) -> Result<()> {
-    progress.step("writing", || -> Result<()> {
-        for (name, v) in &traced.files {
-            let path = dir.join(format!("{name}{ext}"));
-            write(&path, &MultiField::from(v.clone()), &WriteOptions::default(), inputs)
-                .context("cannot write the output")?;
-        }
-        if let Some(report_dir) = report_dir {
-            let report = &traced.tracing.report;
-            std::fs::create_dir_all(report_dir)
-                .with_context(|| format!("cannot create the report folder {}", report_dir.display()))?;
-            report.write(report_dir).context("cannot write the report")?;
-            progress
-                .note(&format!("mean dot product {:.6} over {} voxels with a boundary", report.mean_dot, report.hits));
-        }
-        Ok(())
-    })
+impl Traced {
+    /// Writes the files into `dir` with extension `ext` (never over one of `inputs`); what the tracing found.
+    fn write(self, dir: &Path, ext: &str, inputs: &[&Path], progress: &Progress) -> Result<Found> {
+        progress.step("writing", || -> Result<()> {
+            for (name, v) in &self.files {
+                let path = dir.join(format!("{name}{ext}"));
+                write(&path, &MultiField::from(v.clone()), &WriteOptions::default(), inputs)
+                    .context("cannot write the output")?;
+            }
+            Ok(())
+        })?;
+        let Tracing { summary, warnings, report, .. } = self.tracing;
+        Ok(Found { summary, warnings, report })
+    }
 }

@@ -203,6 +203,23 @@ pub fn automatic_budget(profile: mdtf_pack::Profile, voxels: u64, available: u64
     (whole_run_bytes_per_voxel(profile).saturating_mul(voxels) > usable).then_some(usable)
 }
 
+/// The budget a single-stage command takes on the file `input` without
+/// `--memory-budget`, and the file's grid: three quarters of `available`
+/// bytes when its whole-volume run, holding `bytes_per_voxel`, would need
+/// more and the file is read by planes (its header tells the grid without
+/// reading the samples); None otherwise.
+pub fn automatic_file_budget(
+    input: &std::path::Path,
+    read: &mdtf_volume::ReadOptions,
+    bytes_per_voxel: u64,
+    available: u64,
+) -> Option<(u64, Geometry)> {
+    let reader = mdtf_volume::PlaneReader::open(input, read).ok()??;
+    let geo = reader.geometry().clone();
+    let usable = available / 4 * 3;
+    (bytes_per_voxel.saturating_mul(geo.voxel_count() as u64) > usable).then_some((usable, geo))
+}
+
 /// The slabs of height `h` covering `nz` planes, in order.
 pub fn slabs(nz: usize, h: usize) -> Vec<std::ops::Range<usize>> {
     (0..nz).step_by(h.max(1)).map(|z| z..(z + h.max(1)).min(nz)).collect()

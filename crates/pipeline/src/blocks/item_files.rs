@@ -8,7 +8,7 @@
 //! ([`SlabChannels`]) and its components are handed to one
 //! [`SlabWriter`] per item, while the next slab is derived.
 
-use super::{ChannelStore, SlabChannels, SlabSize, Source, slab_height, slabs};
+use super::{ChannelStore, SlabChannels, SlabSize, Source, automatic_file_budget, slab_height, slabs};
 use crate::boundary_chain::{BoundaryChainParams, ChainError};
 use crate::error::{RunError, at, fail};
 use crate::plan::Plan;
@@ -65,12 +65,8 @@ pub fn automatic_item_budget(
     if items_unsupported(items).is_some() {
         return None;
     }
-    let reader = mdtf_volume::PlaneReader::open(input, read).ok()??;
-    let geo = reader.geometry().clone();
     let components: u64 = items.iter().map(|i| i.components().len() as u64).sum();
-    let whole = 4 * (components + WHOLE_DERIVE_EXTRA_F32) * geo.voxel_count() as u64;
-    let usable = available / 4 * 3;
-    (whole > usable).then_some((usable, geo))
+    automatic_file_budget(input, read, 4 * (components + WHOLE_DERIVE_EXTRA_F32), available)
 }
 
 /// Derives `items` of the one-field volume in `input` (read by planes where

@@ -63,13 +63,15 @@ mod remote;
 mod slab_channels;
 mod store;
 mod trace;
+mod trace_files;
 
-pub use budget::{TraceBlocks, automatic_budget, fit_slabs, fit_trace, slab_height, slabs};
+pub use budget::{TraceBlocks, automatic_budget, automatic_file_budget, fit_slabs, fit_trace, slab_height, slabs};
 pub use item_files::{ItemFiles, automatic_item_budget, derive_item_files, items_unsupported};
 pub use pool::SamplePool;
 pub use remote::{Prefilter, SlabJob, SlabPass, SlabTasks, TracePartial, run_task};
 pub use slab_channels::SlabChannels;
 pub use store::{ChannelStore, StoreWriter};
+pub use trace_files::{TRACED_CHANNELS, TracedFiles, automatic_trace_budget, trace_files};
 
 use crate::file::Pipeline;
 use crate::progress::{Progress, cancelled};
@@ -231,7 +233,7 @@ fn run_slabs(
     let base = opts.base();
     let out = OutputFolder::begin(&opts.output, &crate::inputs::run_inputs(p, opts, &base)).map_err(at("output"))?;
     let progress = Progress::new(opts, on_stage, on_slab);
-    let (mut run, store) = SlabPasses::read_input(p, opts, size, out.path(), progress)?;
+    let (mut run, store) = SlabPasses::read_input(p, opts, size, out.path(), progress, true)?;
     let (mut chans, derived) = run.derive(store)?;
     let traced = run.trace(&mut chans, &derived)?;
     run.keep(&mut chans)?;

@@ -85,13 +85,15 @@ impl Derived {
 impl<'a> SlabPasses<'a> {
     /// The input pass: opens the input, plans the run and sizes its slabs
     /// (`size`), and copies the value slab by slab into a channel store in
-    /// `dir`, taking its statistics.
+    /// `dir`, taking its statistics. Without `packs` the run stops after its
+    /// tracing and kept volumes (no histogram volume is counted or budgeted).
     pub(super) fn read_input(
         p: &'a Pipeline,
         opts: &'a RunOptions,
         size: SlabSize,
         dir: &Path,
         progress: Progress<'a>,
+        packs: bool,
     ) -> Result<(SlabPasses<'a>, ChannelStore), RunError> {
         let base = opts.base();
         progress.stage("input")?;
@@ -102,7 +104,7 @@ impl<'a> SlabPasses<'a> {
         let plan = Plan::resolve(p, &[], &geo).map_err(at("plan"))?;
         let tf = crate::inputs::read_tf(p, &base)?;
         let hvol_asked = p.histogram.as_ref().is_some_and(|h| h.hvol);
-        let hvol_needed = hvol_asked || tf.is_none();
+        let hvol_needed = packs && (hvol_asked || tf.is_none());
         let threads = rayon::current_num_threads();
         // the tracing cuts strips of rows unless its tasks stored every channel by whole planes
         let strips = opts.tasks.is_none();
@@ -407,8 +409,10 @@ impl<'a> SlabPasses<'a> {
         self.warnings.extend(lost_warnings.iter().map(|w| format!("boundary: {w}")));
         let rdir = self.dir.join("boundary");
         std::fs::create_dir_all(&rdir).map_err(io("boundary"))?;
-        report.finish().write(&rdir).map_err(at("boundary"))?;
-        Ok(Traced { d_max: Some(r.d_max), boundary: Some(BoundarySummary { resolved: r, counts, lost }) })
+        let report = report.finish();
+        report.write(&rdir).map_err(at("boundary"))?;
+        let boundary = Some(BoundarySummary { resolved: r, counts, lost });
+        Ok(Traced { d_max: Some(r.d_max), boundary, report: Some(report) })
     }
 
     /// The kept channels, written slab by slab as volumes.

@@ -1,0 +1,162 @@
+//! The tracing of a one-field file slab by slab under a memory budget, into
+//! one file per channel (`mdtf boundary --memory-budget`): the bytes of the
+//! whole-volume tracing's files, whatever the slab height.
+//!
+//! It runs the input, derive, pre-filter and tracing passes of a
+//! slab-by-slab pipeline run ([`SlabPasses`]) with a pipeline made of the
+//! chain's settings whose later passes (pack, histograms, preview) are
+//! never run, then writes the traced channels from the store slab by slab,
+//! with the flipped distance and the alpha maps made from them.
+
+use super::passes::SlabPasses;
+use super::{SlabChannels, SlabSize};
+use crate::boundary_chain::BoundaryChainParams;
+use crate::error::{RunError, at, fail};
+use crate::file::{DeriveSection, InputSection, PackSection, Pipeline};
+use crate::progress::Progress;
+use crate::report::BoundarySummary;
+use crate::run::RunOptions;
+use mdtf_volume::{ReadOptions, SampleType, write_slabs};
+use std::path::{Path, PathBuf};
+
+/// The traced channels written, in order.
+pub const TRACED_CHANNELS: [&str; 4] = ["distance", "g_hit", "hit", "dot"];
+
+/// What [`trace_files`] wrote and found.
+#[derive(Debug)]
+pub struct TracedFiles {
+    /// Each file by its name (`distance`, `g_hit`, `hit`, `dot`, then
+    /// `flipped` and the alpha maps when the tracing's parameters ask for them).
+    pub files: Vec<(String, PathBuf)>,
+    /// The thresholds the tracing used and the voxels per hit code.
+    pub summary: BoundarySummary,
+    /// One sentence per boundary the thresholds took out.
+    pub warnings: Vec<String>,
+    /// The Fig. 2 report, over the g the tracing read (pre-filtered when the chain pre-filters).
+    pub report: mdtf_boundary::Report,
+    /// Planes per slab (the last may hold fewer).
+    pub height: usize,
+    /// How many slabs.
+    pub slabs: usize,
+}
+
+/// Bytes a whole-volume `mdtf boundary` holds per voxel at its peak
+/// (measured: 651 MiB on a 256^3 volume, about 41), rounded up.
+const WHOLE_TRACE_BYTES_PER_VOXEL: u64 = 44;
+
+/// The budget `mdtf boundary` on the file `input` takes without
+/// `--memory-budget`, and the file's grid: three quarters of `available`
+/// bytes when the whole-volume tracing would need more and the file is read
+/// by planes; None otherwise.
+pub fn automatic_trace_budget(
+    input: &Path,
+    read: &ReadOptions,
+    available: u64,
+) -> Option<(u64, mdtf_volume::Geometry)> {
+    super::automatic_file_budget(input, read, WHOLE_TRACE_BYTES_PER_VOXEL, available)
+}
+
+/// The pipeline whose first passes are the chain's tracing of `input`:
+/// `chain`'s kernel, pre-filter and tracing parameters, every traced
+/// channel kept (so the tracing stores dot as well). Its pack section only
+/// makes the plan trace (distance-tf packs distance and g_hit); it never runs.
+fn tracing_pipeline(input: &Path, read: &ReadOptions, chain: &BoundaryChainParams) -> Pipeline {
+    Pipeline {
+        description: String::new(),
+        input: InputSection {
+            file: Some(input.to_path_buf()),
+            series: read.dicom.series.clone(),
+            resample: read.dicom.resample,
+            level: read.level,
+            nan: read.nan,
+            ..InputSection::default()
+        },
+        derive: DeriveSection { kernel: chain.kernel },
+        prefilter: chain.prefilter.clone(),
+        boundary: chain.boundary.clone(),
+        histogram: None,
+        pack: PackSection {
+            profile: mdtf_pack::Profile::DistanceTf,
+            tf: None,
+            alpha: None,
+            gtf_from_mask: None,
+            nifti: false,
+        },
+        tetra: Default::default(),
+        keep: TRACED_CHANNELS.map(String::from).to_vec(),
+        keep_format: Default::default(),
+        preview: false,
+    }
+}
+
+/// Traces the one-field volume in `input` (read by planes where its format
+/// allows, else whole) as `chain` says (kernel, pre-filter, tracing
+/// parameters; its border and epsilon are the defaults), slab by slab in
+/// slabs of `size`, into `dir`/`{channel}{ext}` (`.nii`, `.nii.gz`,
+/// `.nrrd` or `.ome.zarr`), byte-identical to the whole-volume tracing's files. The
+/// Fig. 2 report is written to `dir`/`boundary`. The channels wait in a
+/// store in `dir`/`.slabs`, removed at the end. `on_stage(name)` is called
+/// as each pass starts, `on_slab(k, of)` as it starts its slab k (from 1).
+#[allow(clippy::too_many_arguments)]
+pub fn trace_files(
+    input: &Path,
+    read: &ReadOptions,
+    chain: &BoundaryChainParams,
+    size: SlabSize,
+    dir: &Path,
+    ext: &str,
+    on_stage: &(dyn Fn(&str) + Sync),
+    on_slab: &(dyn Fn(usize, usize) + Sync),
+) -> Result<TracedFiles, RunError> {
+    if chain.border.is_some() || chain.epsilon.is_some() {
+        return Err(fail("plan")("a slab-by-slab tracing derives with the default border and epsilon".into()));
+    }
+    // a format that cannot be written by slabs is refused before any work
+    mdtf_volume::SlabWriter::check_format(&dir.join(format!("distance{ext}"))).map_err(at("write"))?;
+    let p = tracing_pipeline(input, read, chain);
+    let opts =
+        RunOptions { pipeline_path: PathBuf::new(), input: None, output: dir.to_path_buf(), cancel: None, tasks: None };
+    let progress = Progress::new(&opts, on_stage, on_slab);
+    let (mut run, store) = SlabPasses::read_input(&p, &opts, size, dir, progress, false)?;
+    let (mut chans, derived) = run.derive(store)?;
+    let traced = run.trace(&mut chans, &derived)?;
+    let (Some(summary), Some(report)) = (traced.boundary, traced.report) else {
+        return Err(fail("boundary")("the plan did not trace".into()));
+    };
+    run.progress.stage("write")?;
+    let mut files = Vec::with_capacity(TRACED_CHANNELS.len() + 1 + chain.boundary.alpha.len());
+    for c in TRACED_CHANNELS {
+        let path = dir.join(format!("{c}{ext}"));
+        let mut slab = |z, out: &mut Vec<f32>| chans.samples_into(c, z, out).map_err(std::io::Error::other);
+        write_slabs(&path, &run.geo, SampleType::F32, &run.slabs, &mut slab).map_err(at("write"))?;
+        files.push((c.to_string(), path));
+    }
+    let mut hit = Vec::new();
+    for map in mdtf_boundary::hit_maps(&chain.boundary, summary.resolved.d_max) {
+        let path = dir.join(format!("{}{ext}", map.name));
+        let mut slab = |z, out: &mut Vec<f32>| hit_map_slab(&mut chans, &map, z, &mut hit, out);
+        write_slabs(&path, &run.geo, SampleType::F32, &run.slabs, &mut slab).map_err(at("write"))?;
+        files.push((map.name, path));
+    }
+    chans.release();
+    chans.store.clear();
+    // the tracing's own warnings, without the run's "boundary: " prefix
+    let warnings = run.warnings.iter().map(|w| w.strip_prefix("boundary: ").unwrap_or(w).to_string()).collect();
+    Ok(TracedFiles { files, summary, warnings, report, height: run.height, slabs: run.slabs.len() })
+}
+
+/// `map` on planes `z`, from the stored distance and hit (read into `hit`), into `out`.
+fn hit_map_slab(
+    chans: &mut SlabChannels,
+    map: &mdtf_boundary::HitMap,
+    z: std::ops::Range<usize>,
+    hit: &mut Vec<f32>,
+    out: &mut Vec<f32>,
+) -> std::io::Result<()> {
+    chans.samples_into("hit", z.clone(), hit).map_err(std::io::Error::other)?;
+    chans.samples_into("distance", z, out).map_err(std::io::Error::other)?;
+    for (d, &h) in out.iter_mut().zip(hit.iter()) {
+        *d = map.at(*d, h);
+    }
+    Ok(())
+}
