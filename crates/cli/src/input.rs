@@ -148,6 +148,25 @@ pub fn print_plan(what: &str, input: &str, geometry: &mdtf_volume::Geometry, pla
     println!("{plan}");
 }
 
+/// The budget of a run that goes slab by slab on its own (`auto`: the
+/// budget and the grid that would not fit in memory whole), said in a note
+/// naming what it is `doing` ("deriving", "tracing", ...).
+pub fn announce_slabs(
+    progress: &crate::progress::Progress,
+    doing: &str,
+    auto: Option<(u64, mdtf_volume::Geometry)>,
+) -> Option<u64> {
+    auto.map(|(budget, geo)| {
+        let [nx, ny, nz] = geo.dims;
+        progress.note(&format!(
+            "{nx} x {ny} x {nz} voxels do not fit in memory at once: {doing} slab by slab within {} \
+             (--memory-budget sets it)",
+            mdtf_volume::human_bytes(budget as u128)
+        ));
+        budget
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -113,15 +113,7 @@ fn slab_budget(args: &BoundaryArgs, progress: &Progress) -> Result<Option<u64>> 
         (None, Some(input)) => {
             let available = mdtf_volume::available_memory();
             let auto = blocks::automatic_trace_budget(input, &read_options(&args.read), available);
-            Ok(auto.map(|(budget, geo)| {
-                let [nx, ny, nz] = geo.dims;
-                progress.note(&format!(
-                    "{nx} x {ny} x {nz} voxels do not fit in memory at once: tracing slab by slab within {} \
-                     (--memory-budget sets it)",
-                    human_bytes(budget as u128)
-                ));
-                budget
-            }))
+            Ok(crate::input::announce_slabs(progress, "tracing", auto))
         }
     }
 }

@@ -89,15 +89,7 @@ fn slab_budget(args: &DeriveArgs, items: &[Item], progress: &Progress) -> Result
             let opts = read_options(&args.read);
             let available = mdtf_volume::available_memory();
             let auto = blocks::automatic_item_budget(&args.inputs[0], &opts, items, available);
-            Ok(auto.map(|(budget, geo)| {
-                let [nx, ny, nz] = geo.dims;
-                progress.note(&format!(
-                    "{nx} x {ny} x {nz} voxels do not fit in memory at once: deriving slab by slab within {} \
-                     (--memory-budget sets it)",
-                    human_bytes(budget as u128)
-                ));
-                budget
-            }))
+            Ok(crate::input::announce_slabs(progress, "deriving", auto))
         }
     }
 }

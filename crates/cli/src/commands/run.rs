@@ -62,15 +62,10 @@ fn slab_size(args: &RunArgs, pipeline: &Pipeline, opts: &RunOptions, progress: &
     match (args.memory_budget, args.slab_planes) {
         (Some(b), _) => Some(SlabSize::Budget(b)),
         (None, Some(h)) => Some(SlabSize::Planes(h.max(1))),
-        (None, None) => mdtf_pipeline::blocks::automatic(pipeline, opts).map(|(budget, geo)| {
-            let [nx, ny, nz] = geo.dims;
-            progress.note(&format!(
-                "{nx} x {ny} x {nz} voxels do not fit in memory at once: running slab by slab within {} \
-                 (--memory-budget sets it)",
-                mdtf_volume::human_bytes(budget as u128)
-            ));
-            SlabSize::Budget(budget)
-        }),
+        (None, None) => {
+            let auto = mdtf_pipeline::blocks::automatic(pipeline, opts);
+            crate::input::announce_slabs(progress, "running", auto).map(SlabSize::Budget)
+        }
     }
 }
 
