@@ -8,15 +8,16 @@
 //! never run, then writes the traced channels from the store slab by slab,
 //! with the flipped distance and the alpha maps made from them.
 
+use super::SlabSize;
 use super::passes::SlabPasses;
-use super::{SlabChannels, SlabSize};
 use crate::boundary_chain::BoundaryChainParams;
 use crate::error::{RunError, at, fail};
 use crate::file::{DeriveSection, InputSection, PackSection, Pipeline};
 use crate::progress::Progress;
 use crate::report::BoundarySummary;
 use crate::run::RunOptions;
-use mdtf_volume::{ReadOptions, SampleType, write_slabs};
+use mdtf_volume::{ReadOptions, SampleType, SlabWriter};
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// The traced channels written, in order.
@@ -124,39 +125,38 @@ pub fn trace_files(
         return Err(fail("boundary")("the plan did not trace".into()));
     };
     run.progress.stage("write")?;
-    let mut files = Vec::with_capacity(TRACED_CHANNELS.len() + 1 + chain.boundary.alpha.len());
-    for c in TRACED_CHANNELS {
-        let path = dir.join(format!("{c}{ext}"));
-        let mut slab = |z, out: &mut Vec<f32>| chans.samples_into(c, z, out).map_err(std::io::Error::other);
-        write_slabs(&path, &run.geo, SampleType::F32, &run.slabs, &mut slab).map_err(at("write"))?;
-        files.push((c.to_string(), path));
+    let maps = mdtf_boundary::hit_maps(&chain.boundary, summary.resolved.d_max);
+    let names: Vec<String> =
+        TRACED_CHANNELS.iter().map(|c| c.to_string()).chain(maps.iter().map(|m| m.name.clone())).collect();
+    let mut writers = Vec::with_capacity(names.len());
+    for name in &names {
+        let path = dir.join(format!("{name}{ext}"));
+        let w = SlabWriter::create(&path, &run.geo, &["value".to_string()], SampleType::F32).map_err(at("write"))?;
+        writers.push((w, Vec::new()));
     }
-    let mut hit = Vec::new();
-    for map in mdtf_boundary::hit_maps(&chain.boundary, summary.resolved.d_max) {
-        let path = dir.join(format!("{}{ext}", map.name));
-        let mut slab = |z, out: &mut Vec<f32>| hit_map_slab(&mut chans, &map, z, &mut hit, out);
-        write_slabs(&path, &run.geo, SampleType::F32, &run.slabs, &mut slab).map_err(at("write"))?;
-        files.push((map.name, path));
+    for (k, z) in run.slabs.iter().enumerate() {
+        run.progress.slab(k + 1, run.slabs.len())?;
+        // the stored channels, then each map from the distance and hit
+        for (c, (_, samples)) in TRACED_CHANNELS.iter().zip(writers.iter_mut()) {
+            chans.samples_into(c, z.clone(), samples).map_err(fail("write"))?;
+        }
+        let (stored, made) = writers.split_at_mut(TRACED_CHANNELS.len());
+        let (distance, hit) = (&stored[0].1, &stored[2].1);
+        for (map, (_, out)) in maps.iter().zip(made.iter_mut()) {
+            out.clear();
+            out.extend(distance.iter().zip(hit).map(|(&d, &h)| map.at(d, h)));
+        }
+        // the files are encoded (and compressed) side by side
+        writers.par_iter_mut().try_for_each(|(w, samples)| w.put(z.start, &[samples]).map_err(at("write")))?;
+    }
+    let mut files = Vec::with_capacity(names.len());
+    for ((w, _), name) in writers.into_iter().zip(names) {
+        w.finish().map_err(at("write"))?;
+        files.push((name.clone(), dir.join(format!("{name}{ext}"))));
     }
     chans.release();
     chans.store.clear();
     // the tracing's own warnings, without the run's "boundary: " prefix
     let warnings = run.warnings.iter().map(|w| w.strip_prefix("boundary: ").unwrap_or(w).to_string()).collect();
     Ok(TracedFiles { files, summary, warnings, report, height: run.height, slabs: run.slabs.len() })
-}
-
-/// `map` on planes `z`, from the stored distance and hit (read into `hit`), into `out`.
-fn hit_map_slab(
-    chans: &mut SlabChannels,
-    map: &mdtf_boundary::HitMap,
-    z: std::ops::Range<usize>,
-    hit: &mut Vec<f32>,
-    out: &mut Vec<f32>,
-) -> std::io::Result<()> {
-    chans.samples_into("hit", z.clone(), hit).map_err(std::io::Error::other)?;
-    chans.samples_into("distance", z, out).map_err(std::io::Error::other)?;
-    for (d, &h) in out.iter_mut().zip(hit.iter()) {
-        *d = map.at(*d, h);
-    }
-    Ok(())
 }
