@@ -73,6 +73,10 @@ fn the_tracing_written_slab_by_slab_has_the_whole_tracings_bytes() {
                 let want = std::fs::read(whole.join(format!("{name}.nii.gz"))).unwrap();
                 assert!(std::fs::read(path).unwrap() == want, "{what}: {name} in slabs {size:?} differs");
             }
+            // the report comes back (the run's folder holds only the files)
+            assert!(!dir.join("boundary").exists(), "no report left in the folder");
+            std::fs::create_dir(dir.join("boundary")).unwrap();
+            t.report.write(&dir.join("boundary")).unwrap();
             for f in ["boundary_report.csv", "boundary_report.png"] {
                 let (a, b) =
                     (std::fs::read(whole.join("boundary").join(f)), std::fs::read(dir.join("boundary").join(f)));

@@ -110,7 +110,7 @@ impl SlabWriter {
                 let writer = Box::new(ZarrWriter::create(folder.path(), geometry, names, ty)?);
                 Sink::Zarr { writer, folder }
             }
-            _ => return Err(SlabWriter::check_format(path).err().unwrap_or_else(|| not_by_slabs(path))),
+            _ => return Err(not_by_slabs(path)),
         };
         Ok(SlabWriter { path: path.to_path_buf(), geometry: geometry.clone(), ty, fields: names.len(), next: 0, sink })
     }

@@ -136,8 +136,6 @@ fn trace_by_slabs(
             blocks::trace_files(input, &opts, &chain, size, dir, ext, &stage, tick)
         })
         .context("cannot trace the boundaries")?;
-    // the passes leave the report in the output folder: it goes where --report says, if anywhere
-    std::fs::remove_dir_all(dir.join("boundary")).context("cannot tidy the staging folder")?;
     progress.note(&format!("traced {} slabs of {} planes within {}", t.slabs, t.height, human_bytes(budget as u128)));
     Ok(Found { summary: t.summary, warnings: t.warnings, report: t.report })
 }

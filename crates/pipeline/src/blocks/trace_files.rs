@@ -94,8 +94,8 @@ fn tracing_pipeline(input: &Path, read: &ReadOptions, chain: &BoundaryChainParam
 /// allows, else whole) as `chain` says (kernel, pre-filter, tracing
 /// parameters; its border and epsilon are the defaults), slab by slab in
 /// slabs of `size`, into `dir`/`{channel}{ext}` (`.nii`, `.nii.gz`,
-/// `.nrrd` or `.ome.zarr`), byte-identical to the whole-volume tracing's files. The
-/// Fig. 2 report is written to `dir`/`boundary`. The channels wait in a
+/// `.nrrd` or `.ome.zarr`), byte-identical to the whole-volume tracing's files; the Fig. 2
+/// report is returned, not written. The channels wait in a
 /// store in `dir`/`.slabs`, removed at the end. `on_stage(name)` is called
 /// as each pass starts, `on_slab(k, of)` as it starts its slab k (from 1).
 #[allow(clippy::too_many_arguments)]
@@ -121,6 +121,8 @@ pub fn trace_files(
     let (mut run, store) = SlabPasses::read_input(&p, &opts, size, dir, progress, false)?;
     let (mut chans, derived) = run.derive(store)?;
     let traced = run.trace(&mut chans, &derived)?;
+    // the passes write the report into the run's folder (`dir`/boundary, made by them); it is returned instead
+    std::fs::remove_dir_all(dir.join("boundary")).map_err(at("boundary"))?;
     let (Some(summary), Some(report)) = (traced.boundary, traced.report) else {
         return Err(fail("boundary")("the plan did not trace".into()));
     };
@@ -129,10 +131,12 @@ pub fn trace_files(
     let names: Vec<String> =
         TRACED_CHANNELS.iter().map(|c| c.to_string()).chain(maps.iter().map(|m| m.name.clone())).collect();
     let mut writers = Vec::with_capacity(names.len());
-    for name in &names {
+    let mut files = Vec::with_capacity(names.len());
+    for name in names {
         let path = dir.join(format!("{name}{ext}"));
         let w = SlabWriter::create(&path, &run.geo, &["value".to_string()], SampleType::F32).map_err(at("write"))?;
         writers.push((w, Vec::new()));
+        files.push((name, path));
     }
     for (k, z) in run.slabs.iter().enumerate() {
         run.progress.slab(k + 1, run.slabs.len())?;
@@ -149,10 +153,8 @@ pub fn trace_files(
         // the files are encoded (and compressed) side by side
         writers.par_iter_mut().try_for_each(|(w, samples)| w.put(z.start, &[samples]).map_err(at("write")))?;
     }
-    let mut files = Vec::with_capacity(names.len());
-    for ((w, _), name) in writers.into_iter().zip(names) {
+    for (w, _) in writers {
         w.finish().map_err(at("write"))?;
-        files.push((name.clone(), dir.join(format!("{name}{ext}"))));
     }
     chans.release();
     chans.store.clear();
