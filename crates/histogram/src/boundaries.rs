@@ -1,73 +1,93 @@
-//! Boundaries found in the histogram volume: the materials a scan holds and
-//! the surfaces between them, read off the (v, g) plane as Kindlmann and
-//! Durkin read it.
+//! Boundaries found in the (v, g) histogram: which materials a scan holds
+//! and which pairs of them meet, read as Kindlmann and Durkin read the
+//! arches of the (v, g) plane, made to hold on real scans.
 //!
 //! An ideal boundary between values v_a < v_b, blurred by a Gaussian of
-//! width sigma, draws an arch in the (v, g) histogram: g = G exp(-x^2 / 2
-//! sigma^2) at v = v_a + (v_b - v_a) Phi(x / sigma), with its apex, where
-//! f'' = 0, at v = (v_a + v_b) / 2 and g = G = (v_b - v_a) / (sqrt(2 pi)
-//! sigma). The position function p(v, g) (the signed distance to the
-//! boundary, see [`crate::HistogramVolume`]) is 0 at the apex and grows
-//! along the arch with v. So each boundary's core is a connected patch of
-//! (v, g) bins with |p| <= [`CORE_HALF_WIDTH`] sigma, above the noise, in
-//! which p rises with v. Arches of boundaries that share a v range (the
-//! skin and bone of a CT both span soft tissue) are told apart by their g.
-//!
-//! The rule, in full:
-//! 1. the noise floor is max(2 x the median g of all voxels, the histogram
-//!    volume's g threshold) (the boundary stage's floor, less its spacing term);
-//! 2. candidate bins hold voxels, have g above the floor and |p| <= 0.5 sigma;
-//! 3. candidates connected through bins at most 4 apart on each axis form a patch; a patch
-//!    is a boundary when it holds at least [`MIN_CORE_SHARE`] of the
-//!    voxels, spans at least 3 bins, has a count-weighted correlation of p
-//!    with v of at least [`MIN_RISE_CORRELATION`], and its peak g is at
-//!    least twice the noise floor (the tracer's default g_hit_min): so
-//!    the fluctuations of noise, whose g stays near the floor, are not boundaries;
-//! 4. G is the patch's g weighted by count and by 1 - |p| / (0.5 sigma)
-//!    (the apex counts most), the centre v its count-weighted mean v, and
-//!    the two materials v_centre -+ G sqrt(2 pi) sigma / 2;
-//! 5. a patch whose centre lies within a quarter of a stronger boundary's v
-//!    span and whose G is within 25 % of it is part of that boundary;
+//! width sigma, draws an arch in the (v, g) histogram: at v = v_a + (v_b -
+//! v_a) t the gradient is g = G exp(-z^2 / 2) with Phi(z) = t and G = (v_b -
+//! v_a) / (sqrt(2 pi) sigma). Real scans break the shortcuts that work on
+//! phantoms: noise swamps f'' (and with it the position function), each
+//! boundary has its own sigma, materials are uneven and arches cross. So the
+//! detection fits the arch's shape itself, between materials found first:
+//! 1. the materials are the dips of the median g of the v columns
+//!    ([`crate::materials`]): where voxels sit still;
+//! 2. for every pair of materials (not only neighbours in value: the air
+//!    of a sinus meets bone across the soft tissue's value), the arch of
+//!    the pair is fitted: over [`ARCH_SAMPLES`] values at t from
+//!    [`ARCH_T`].0 to [`ARCH_T`].1 (the arch's ends sink into the
+//!    materials' noise), the share of the voxels above the pair's noise
+//!    floor (twice the larger of the two materials' noise g) whose g lies
+//!    within a factor [`ARCH_BAND`] of the arch's, times the share of those
+//!    values whose band holds at least a tenth of the median band's voxels
+//!    (an arch must run the whole way, not borrow one stretch of another),
+//!    is its confidence; G is the one of the most confidence, searched on a
+//!    geometric grid from the floor to the top of the g axis;
+//! 3. a pair is a boundary when its confidence is at least
+//!    [`MIN_CONFIDENCE`], G is at least twice its floor (it stands out of
+//!    the noise) and its band holds at least [`MIN_CORE_SHARE`] of the voxels;
+//! 4. boundaries are taken one at a time, the most confident first; the
+//!    voxels on a taken arch are removed from the histogram before the
+//!    pairs are fitted again, so that a weak arch crossed by a strong one is
+//!    judged on the voxels the strong one does not explain; a pair is one
+//!    boundary at most, and a pair whose
+//!    arch runs within a factor [`ARCH_BAND`] of a taken one over half or
+//!    more of the values they share is that one again, and not taken;
+//! 5. at most [`MAX_BOUNDARIES`] are taken, then listed strongest (most
+//!    voxels on the arch) first;
 //! 6. a boundary meets the background when one of its materials lies within
 //!    a quarter of its span of the value most voxels hold.
 //!
-//! sigma is the histogram volume's one estimate for the whole volume, so
-//! the material values of a boundary much sharper or blurrier than the
-//! rest are off by the ratio of the widths; its centre and G are not.
+//! Pure noise and a smooth field have one dip or none and no arch: nothing
+//! is found.
 
+use crate::axis::Axis;
 use crate::hvol::HistogramVolume;
+use crate::materials::{Material, find_materials};
 use serde::Serialize;
 
-/// Bins along each axis within which two candidate bins belong to one patch:
-/// more than the 8 neighbours, because a noise-free boundary sampled on a
-/// grid leaves some v bins empty (its voxels take only certain values).
-const REACH: i64 = 4;
-
-/// Half-width of a boundary's core in p, in units of sigma.
-pub const CORE_HALF_WIDTH: f64 = 0.5;
-/// Least share of all voxels in a boundary's core.
+/// Values along an arch at which its fit is measured.
+pub const ARCH_SAMPLES: usize = 29;
+/// The part of an arch (t from the low material to the high one) that is fitted.
+pub const ARCH_T: (f64, f64) = (0.15, 0.85);
+/// Factor within which a voxel's g lies on an arch.
+pub const ARCH_BAND: f64 = 1.4;
+/// Least confidence of a boundary.
+pub const MIN_CONFIDENCE: f64 = 0.4;
+/// Least share of all voxels on a boundary's arch.
 pub const MIN_CORE_SHARE: f64 = 1e-4;
-/// Least count-weighted correlation of p with v inside a core.
-pub const MIN_RISE_CORRELATION: f64 = 0.5;
+/// Most boundaries reported (the default TFs' distinct colours).
+pub const MAX_BOUNDARIES: usize = 6;
+/// Columns on each side of a sampled value whose voxels count with its own.
+const COLUMN_REACH: usize = 2;
+/// Candidate peak gradients tried per pair of materials.
+const G_STEPS: usize = 160;
 
-/// A boundary found in the histogram volume.
+/// A boundary found in the (v, g) histogram.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct DetectedBoundary {
     /// Value of the material on the low side (input units).
     pub v_low: f64,
-    /// Value of the material on the high side.
+    /// Standard deviation of that material's still voxels (input units).
+    pub v_low_spread: f64,
+    /// Value of the material on the high side (input units).
     pub v_high: f64,
-    /// Value at the boundary's centre (f'' = 0).
+    /// Standard deviation of that material's still voxels (input units).
+    pub v_high_spread: f64,
+    /// Value at the boundary's centre (f'' = 0), the mean of the two.
     pub v_centre: f64,
-    /// Peak gradient magnitude G, value units per world unit.
+    /// Peak gradient magnitude G, input units per world unit.
     pub g_peak: f64,
-    /// The boundary width used for the material values (the volume's sigma), world units.
+    /// The boundary's width, world units: (v_high - v_low) / (sqrt(2 pi) G).
     pub sigma: f64,
-    /// Voxels in its core (|p| <= 0.5 sigma).
+    /// Voxels on its arch (g within a factor [`ARCH_BAND`] of the arch's,
+    /// above the floor, over the fitted part of its value span).
     pub core_voxels: u64,
-    /// The noise floor of g (rule 1 of the module docs): below it a voxel
-    /// is taken for noise inside a material, not for this boundary.
+    /// The noise floor of g: twice the larger noise g of its two
+    /// materials; below it a voxel is taken for noise inside a material.
     pub g_floor: f64,
+    /// How sure the detection is, 0 to 1: the share of the voxels above the
+    /// floor along its arch that the arch explains (see the module docs).
+    pub confidence: f64,
     /// One of its two materials is the background, the value held by the
     /// most voxels (see [`background_value`]): the surface a ray from
     /// outside meets first.
@@ -86,88 +106,266 @@ impl DetectedBoundary {
             collapsed: false,
         }
     }
+
+    /// The arch's g at value `v` (None outside the open span).
+    fn g_at(&self, v: f64) -> Option<f64> {
+        let t = (v - self.v_low) / (self.v_high - self.v_low);
+        (t > 0.0 && t < 1.0).then(|| self.g_peak * arch_shape(t))
+    }
 }
 
-/// The boundaries of `hv`, strongest (most core voxels) first; see the module docs.
+/// What [`detect_boundaries`] found: the materials and the boundaries between them.
+#[derive(Debug, Clone, PartialEq, Serialize, Default)]
+pub struct Detection {
+    /// The materials, in increasing value.
+    pub materials: Vec<Material>,
+    /// The boundaries, strongest (most voxels on the arch) first.
+    pub boundaries: Vec<DetectedBoundary>,
+}
+
+/// The boundaries of `hv`, strongest first; see the module docs.
 pub fn detect_boundaries(hv: &HistogramVolume) -> Vec<DetectedBoundary> {
-    let [av, ag] = &hv.vg_axes;
-    let (nv, ng) = (av.bins, ag.bins);
-    let sigma = hv.sigma;
-    let total: u64 = hv.count_vg.iter().sum();
-    if total == 0 || !(sigma > 0.0 && sigma.is_finite()) {
-        return Vec::new();
+    detect(hv).boundaries
+}
+
+/// The materials and boundaries of `hv`; see the module docs.
+pub fn detect(hv: &HistogramVolume) -> Detection {
+    detect_in(&hv.count_vg, &hv.vg_axes, background_value(hv))
+}
+
+/// [`detect`] over (v, g) counts (v fastest) with the background value given.
+pub fn detect_in(count_vg: &[u64], axes: &[Axis; 2], background: f64) -> Detection {
+    let materials = find_materials(count_vg, axes);
+    let mut counts = count_vg.to_vec();
+    let total = count_vg.iter().sum::<u64>() as f64;
+    let mut kept: Vec<DetectedBoundary> = Vec::new();
+    while kept.len() < MAX_BOUNDARIES {
+        let columns = Columns::new(&counts, axes);
+        let best = materials
+            .iter()
+            .enumerate()
+            .flat_map(|(a, low)| materials[a + 1..].iter().map(move |high| (low, high)))
+            .filter(|(low, high)| !kept.iter().any(|k| k.v_low == low.value && k.v_high == high.value))
+            .filter_map(|(low, high)| fit_pair(&columns, low, high, background))
+            .filter(|b| b.core_voxels as f64 >= MIN_CORE_SHARE * total && !kept.iter().any(|k| same_voxels(k, b)))
+            .max_by(|a, b| a.confidence.total_cmp(&b.confidence).then(b.v_centre.total_cmp(&a.v_centre)));
+        let Some(best) = best else { break };
+        explain_away(&mut counts, axes, &best);
+        kept.push(best);
     }
-    let floor = (2.0 * median_g(hv)).max(hv.g_thresh);
-    let background = background_value(hv);
-    let core = CORE_HALF_WIDTH * sigma;
-    let candidate = |i: usize| {
-        let bg = i / nv;
-        hv.count_vg[i] > 0 && ag.centre(bg) > floor && (hv.position[i] as f64).abs() <= core
-    };
-    let mut seen = vec![false; nv * ng];
-    let mut found: Vec<DetectedBoundary> = Vec::new();
-    let mut stack = Vec::new();
-    for start in 0..nv * ng {
-        if seen[start] || !candidate(start) {
-            continue;
-        }
-        // flood fill over the bins within REACH of each other
-        let mut patch = Patch::default();
-        seen[start] = true;
-        stack.push(start);
-        while let Some(i) = stack.pop() {
-            let (bv, bg) = (i % nv, i / nv);
-            let p = hv.position[i] as f64;
-            patch.add(hv.count_vg[i] as f64, av.centre(bv), ag.centre(bg), p, 1.0 - p.abs() / core);
-            for dg in -REACH..=REACH {
-                for dv in -REACH..=REACH {
-                    let (v2, g2) = (bv as i64 + dv, bg as i64 + dg);
-                    if v2 < 0 || g2 < 0 || v2 >= nv as i64 || g2 >= ng as i64 {
-                        continue;
-                    }
-                    let j = g2 as usize * nv + v2 as usize;
-                    if !seen[j] && candidate(j) {
-                        seen[j] = true;
-                        stack.push(j);
-                    }
-                }
+    kept.sort_by(|a, b| b.core_voxels.cmp(&a.core_voxels).then(a.v_centre.total_cmp(&b.v_centre)));
+    Detection { materials, boundaries: kept }
+}
+
+/// Removes from `counts` the voxels on boundary `b`'s arch (within a factor
+/// [`ARCH_BAND`] of its g, above its floor, over its whole value span), so
+/// that the arches fitted after it are measured against the voxels it does
+/// not explain: a weak arch under a strong one (skin and bone under air and
+/// bone on a CT) is then judged on its own voxels.
+fn explain_away(counts: &mut [u64], axes: &[Axis; 2], b: &DetectedBoundary) {
+    let [av, ag] = axes;
+    let nv = av.bins;
+    for i in 0..nv {
+        let Some(g_arch) = b.g_at(av.centre(i)) else { continue };
+        for j in 0..ag.bins {
+            let g = ag.centre(j);
+            if g >= b.g_floor && g >= g_arch / ARCH_BAND && g <= g_arch * ARCH_BAND {
+                counts[j * nv + i] = 0;
             }
         }
-        if patch.bins < 3
-            || patch.count < MIN_CORE_SHARE * total as f64
-            || patch.rise() < MIN_RISE_CORRELATION
-            || patch.g_max < 2.0 * floor
-        {
-            continue;
-        }
-        let g_peak = patch.apex_g();
-        let v_centre = patch.sv / patch.count;
-        let half_span = g_peak * (2.0 * std::f64::consts::PI).sqrt() * sigma / 2.0;
-        let (v_low, v_high) = (v_centre - half_span, v_centre + half_span);
-        let near = |v: f64| (v - background).abs() <= 0.25 * (v_high - v_low);
-        found.push(DetectedBoundary {
-            v_low,
-            v_high,
-            v_centre,
-            g_peak,
-            sigma,
-            core_voxels: patch.count as u64,
-            g_floor: floor,
-            meets_background: near(v_low) || near(v_high),
-        });
     }
-    found.sort_by(|a, b| b.core_voxels.cmp(&a.core_voxels).then(a.v_centre.total_cmp(&b.v_centre)));
-    let mut kept: Vec<DetectedBoundary> = Vec::new();
-    for b in found {
-        let part_of = kept.iter().any(|k| {
-            (b.v_centre - k.v_centre).abs() < 0.25 * (k.v_high - k.v_low)
-                && (b.g_peak - k.g_peak).abs() < 0.25 * k.g_peak
-        });
-        if !part_of {
-            kept.push(b);
+}
+
+/// g / G of an arch at t in (0, 1) of its value span: exp(-z^2 / 2), Phi(z) = t.
+fn arch_shape(t: f64) -> f64 {
+    let z = normal_quantile(t);
+    (-z * z / 2.0).exp()
+}
+
+/// z with Phi(z) = t for t in (0, 1), by bisection (64 halvings of [-40, 40]).
+fn normal_quantile(t: f64) -> f64 {
+    let (mut lo, mut hi) = (-40.0f64, 40.0f64);
+    for _ in 0..64 {
+        let mid = 0.5 * (lo + hi);
+        if 0.5 * libm::erfc(-mid / std::f64::consts::SQRT_2) < t {
+            lo = mid;
+        } else {
+            hi = mid;
         }
     }
-    kept
+    0.5 * (lo + hi)
+}
+
+/// Per-column cumulative counts over g, for the voxels of a g range of one column.
+struct Columns<'a> {
+    axes: &'a [Axis; 2],
+    /// cum[j * nv + i]: voxels of column i in g bins below j (j = 0..=ng).
+    cum: Vec<u64>,
+    total: u64,
+}
+
+impl<'a> Columns<'a> {
+    fn new(count_vg: &[u64], axes: &'a [Axis; 2]) -> Self {
+        let (nv, ng) = (axes[0].bins, axes[1].bins);
+        let mut cum = vec![0u64; (ng + 1) * nv];
+        for j in 0..ng {
+            for i in 0..nv {
+                cum[(j + 1) * nv + i] = cum[j * nv + i] + count_vg.get(j * nv + i).copied().unwrap_or(0);
+            }
+        }
+        let total = cum[ng * nv..].iter().sum();
+        Columns { axes, cum, total }
+    }
+
+    /// The column of value `v` (None outside the v axis).
+    fn column(&self, v: f64) -> Option<usize> {
+        let av = &self.axes[0];
+        let b = ((v - av.min) / av.width()).floor();
+        (b >= 0.0 && b < av.bins as f64).then_some(b as usize)
+    }
+
+    /// The median g (a bin centre) of the voxels of [`Columns::mass`] (None when there are none).
+    fn median_g(&self, i: usize, lo: f64, hi: f64) -> Option<f64> {
+        let ag = &self.axes[1];
+        let half = self.mass(i, lo, hi).div_ceil(2);
+        if half == 0 {
+            return None;
+        }
+        (0..ag.bins).find(|&j| self.mass(i, lo, ag.min + (j + 1) as f64 * ag.width()) >= half).map(|j| ag.centre(j))
+    }
+
+    /// Voxels of column `i` alone with g in [lo, hi).
+    fn mass_of_one(&self, i: usize, lo: f64, hi: f64) -> u64 {
+        let (nv, ag) = (self.axes[0].bins, &self.axes[1]);
+        let edge = |g: f64| (((g - ag.min) / ag.width()).ceil().max(0.0) as usize).min(ag.bins);
+        let (jl, jh) = (edge(lo), edge(hi));
+        if jh <= jl { 0 } else { self.cum[jh * nv + i] - self.cum[jl * nv + i] }
+    }
+
+    /// Voxels with g in [lo, hi) of column `i` and the [`COLUMN_REACH`]
+    /// columns on each side: a boundary without noise, sampled on a grid,
+    /// leaves some columns empty (its voxels take only certain values).
+    fn mass(&self, i: usize, lo: f64, hi: f64) -> u64 {
+        let (nv, ag) = (self.axes[0].bins, &self.axes[1]);
+        let edge = |g: f64| (((g - ag.min) / ag.width()).ceil().max(0.0) as usize).min(ag.bins);
+        let (jl, jh) = (edge(lo), edge(hi));
+        if jh <= jl {
+            return 0;
+        }
+        (i.saturating_sub(COLUMN_REACH)..(i + COLUMN_REACH + 1).min(nv))
+            .map(|c| self.cum[jh * nv + c] - self.cum[jl * nv + c])
+            .sum()
+    }
+}
+
+/// The arch between two materials at its most confident G, or None when it
+/// is not a boundary by rules 2 and 3 of the module docs (the voxel share is the caller's).
+fn fit_pair(columns: &Columns, low: &Material, high: &Material, background: f64) -> Option<DetectedBoundary> {
+    let ag = &columns.axes[1];
+    let floor = 2.0 * low.noise_g.max(high.noise_g).max(ag.width());
+    let span = high.value - low.value;
+    let samples: Vec<(usize, f64)> = (0..ARCH_SAMPLES)
+        .filter_map(|k| {
+            let t = ARCH_T.0 + (ARCH_T.1 - ARCH_T.0) * k as f64 / (ARCH_SAMPLES - 1) as f64;
+            columns.column(low.value + span * t).map(|i| (i, arch_shape(t)))
+        })
+        .collect();
+    if samples.len() < ARCH_SAMPLES / 2 || !(span > 0.0) {
+        return None;
+    }
+    let above: u64 = samples.iter().map(|&(i, _)| columns.mass(i, floor, f64::INFINITY)).sum();
+    if above == 0 {
+        return None;
+    }
+    let (g_lo, g_hi) = (floor, ag.max);
+    if g_hi <= g_lo {
+        return None;
+    }
+    let mut band = vec![0u64; samples.len()];
+    let mut best: Option<(f64, f64)> = None;
+    for step in 0..G_STEPS {
+        let g_peak = g_lo * (g_hi / g_lo).powf(step as f64 / (G_STEPS - 1) as f64);
+        for (n, &(i, shape)) in band.iter_mut().zip(&samples) {
+            let g = g_peak * shape;
+            *n = columns.mass(i, (g / ARCH_BAND).max(floor), g * ARCH_BAND);
+        }
+        let confidence = band.iter().sum::<u64>() as f64 / above as f64 * coverage(&band);
+        if best.is_none_or(|(c, _)| confidence > c) {
+            best = Some((confidence, g_peak));
+        }
+    }
+    let (confidence, g_coarse) = best?;
+    // the confidence is flat while the band covers the arch: G is the median
+    // over the sampled values of the median g in the band over the arch's shape
+    let mut ratios: Vec<f64> = samples
+        .iter()
+        .filter_map(|&(i, shape)| {
+            let g = g_coarse * shape;
+            columns.median_g(i, (g / ARCH_BAND).max(floor), g * ARCH_BAND).map(|m| m / shape)
+        })
+        .collect();
+    ratios.sort_by(f64::total_cmp);
+    let g_peak = ratios.get(ratios.len() / 2).copied().unwrap_or(g_coarse);
+    if confidence < MIN_CONFIDENCE || g_peak < 2.0 * floor {
+        return None;
+    }
+    // the voxels on the arch, over every column of its fitted part
+    let (first, last) = (columns.column(low.value + span * ARCH_T.0), columns.column(low.value + span * ARCH_T.1));
+    let core_voxels = match (first, last) {
+        (Some(first), Some(last)) => (first..=last)
+            .map(|i| {
+                let t = (columns.axes[0].centre(i) - low.value) / span;
+                let g = g_peak * arch_shape(t.clamp(ARCH_T.0, ARCH_T.1));
+                columns.mass_of_one(i, (g / ARCH_BAND).max(floor), g * ARCH_BAND)
+            })
+            .sum(),
+        _ => 0,
+    };
+    let near = |v: f64| (v - background).abs() <= 0.25 * span;
+    Some(DetectedBoundary {
+        v_low: low.value,
+        v_low_spread: low.spread,
+        v_high: high.value,
+        v_high_spread: high.spread,
+        v_centre: (low.value + high.value) / 2.0,
+        g_peak,
+        sigma: span / ((2.0 * std::f64::consts::PI).sqrt() * g_peak),
+        core_voxels,
+        g_floor: floor,
+        confidence,
+        meets_background: near(low.value) || near(high.value),
+    })
+}
+
+/// The share of an arch's sampled values whose band holds at least a tenth
+/// of the median band's voxels (0 when the median band is empty).
+fn coverage(band: &[u64]) -> f64 {
+    let mut sorted = band.to_vec();
+    sorted.sort_unstable();
+    let median = sorted[sorted.len() / 2];
+    if median == 0 {
+        return 0.0;
+    }
+    band.iter().filter(|&&n| n * 10 >= median).count() as f64 / band.len() as f64
+}
+
+/// Whether two arches run within a factor [`ARCH_BAND`] of each other over
+/// half or more of the values they share (16 values across the overlap).
+fn same_voxels(a: &DetectedBoundary, b: &DetectedBoundary) -> bool {
+    let (lo, hi) = (a.v_low.max(b.v_low), a.v_high.min(b.v_high));
+    if hi <= lo {
+        return false;
+    }
+    let close = (0..16)
+        .filter(|k| {
+            let v = lo + (hi - lo) * (*k as f64 + 0.5) / 16.0;
+            match (a.g_at(v), b.g_at(v)) {
+                (Some(x), Some(y)) if x > 0.0 && y > 0.0 => (x / y).ln().abs() <= ARCH_BAND.ln(),
+                _ => false,
+            }
+        })
+        .count();
+    close >= 8
 }
 
 /// The background: the centre of the v bin holding the most voxels (air
@@ -177,66 +375,4 @@ pub fn background_value(hv: &HistogramVolume) -> f64 {
     let [av, _] = &hv.vg_axes;
     let mode = hv.count_v.iter().enumerate().max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(&a.0))).map_or(0, |(i, _)| i);
     av.centre(mode)
-}
-
-/// The median g of all counted voxels, from the (v, g) counts (a bin centre).
-fn median_g(hv: &HistogramVolume) -> f64 {
-    let [av, ag] = &hv.vg_axes;
-    let (nv, ng) = (av.bins, ag.bins);
-    let per_g: Vec<u64> = (0..ng).map(|bg| hv.count_vg[bg * nv..(bg + 1) * nv].iter().sum()).collect();
-    let half = per_g.iter().sum::<u64>().div_ceil(2);
-    let mut seen = 0;
-    for (bg, c) in per_g.iter().enumerate() {
-        seen += c;
-        if seen >= half && seen > 0 {
-            return ag.centre(bg);
-        }
-    }
-    0.0
-}
-
-/// Count-weighted sums over one connected patch of candidate bins.
-#[derive(Default)]
-struct Patch {
-    bins: usize,
-    count: f64,
-    sv: f64,
-    sp: f64,
-    svv: f64,
-    spp: f64,
-    svp: f64,
-    /// Sums of count x apex weight, and of that times g.
-    sw: f64,
-    swg: f64,
-    g_max: f64,
-}
-
-impl Patch {
-    fn add(&mut self, c: f64, v: f64, g: f64, p: f64, apex_weight: f64) {
-        self.bins += 1;
-        self.count += c;
-        self.sv += c * v;
-        self.sp += c * p;
-        self.svv += c * v * v;
-        self.spp += c * p * p;
-        self.svp += c * v * p;
-        let w = c * apex_weight.max(0.0);
-        self.sw += w;
-        self.swg += w * g;
-        self.g_max = self.g_max.max(g);
-    }
-
-    /// Count-weighted correlation of p with v (0 when either is constant).
-    fn rise(&self) -> f64 {
-        let n = self.count;
-        let cov = self.svp / n - (self.sv / n) * (self.sp / n);
-        let var_v = self.svv / n - (self.sv / n).powi(2);
-        let var_p = self.spp / n - (self.sp / n).powi(2);
-        if var_v > 0.0 && var_p > 0.0 { cov / (var_v * var_p).sqrt() } else { 0.0 }
-    }
-
-    /// G: the patch's g weighted towards its apex.
-    fn apex_g(&self) -> f64 {
-        if self.sw > 0.0 { self.swg / self.sw } else { self.g_max }
-    }
 }

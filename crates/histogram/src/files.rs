@@ -128,7 +128,7 @@ pub fn write_overlay_figure(
 const OPACITY_COLOUR: [f32; 3] = [1.0, 0.85, 0.3];
 
 /// Writes `hvol.nrrd`, `position.nrrd`, `opacity.{nrrd,png}`, `hvol_per_v.csv` and `hvol.json`
-/// (with the boundaries [`crate::detect_boundaries`] finds). `opacity.png`
+/// (with the materials and boundaries [`crate::detect`] finds). `opacity.png`
 /// draws the opacity over the (v, g) counts, with `arches` (e.g. the
 /// boundaries found, in their colours) and the tent's width stated; `title` names the input.
 pub fn write_hvol(dir: &Path, hv: &HistogramVolume, title: &str, arches: &[ArchMark]) -> Result<(), VolumeError> {
@@ -156,12 +156,13 @@ pub fn write_hvol(dir: &Path, hv: &HistogramVolume, title: &str, arches: &[ArchM
         csv += &format!("{},{},{},{}\n", hv.vg_axes[0].centre(b), hv.count_v[b], hv.mean_g_v[b], hv.mean_h_v[b]);
     }
     write_file_atomically(&dir.join("hvol_per_v.csv"), |w| w.write_all(csv.as_bytes()))?;
+    let detection = crate::boundaries::detect(hv);
     write_json(
         &dir.join("hvol.json"),
         &serde_json::json!({
             "sigma": hv.sigma, "g_thresh": hv.g_thresh, "tent_width": hv.tent_width,
             "axes": hv.hist.axes, "sigma_formula": "2 max g(v) / (sqrt(e) (max h(v) - min h(v)))",
-            "boundaries": crate::boundaries::detect_boundaries(hv),
+            "materials": detection.materials, "boundaries": detection.boundaries,
         }),
     )
 }

@@ -15,12 +15,14 @@ mod figure;
 mod files;
 mod hvol;
 mod image;
+mod materials;
 mod percentile;
 mod rgb;
 
 pub use axis::{Axis, AxisSpec, DEFAULT_BINS, MAX_INTEGER_BINS};
 pub use boundaries::{
-    CORE_HALF_WIDTH, DetectedBoundary, MIN_CORE_SHARE, MIN_RISE_CORRELATION, background_value, detect_boundaries,
+    ARCH_BAND, ARCH_SAMPLES, ARCH_T, DetectedBoundary, Detection, MAX_BOUNDARIES, MIN_CONFIDENCE, MIN_CORE_SHARE,
+    background_value, detect, detect_boundaries, detect_in,
 };
 pub use clusters::{
     CLUSTER_BINS, CLUSTER_MASK, CORE_BIT, CORE_DENSITY, Cluster, JointClusters, MAX_CLUSTERS, MERGE_RATIO,
@@ -36,6 +38,9 @@ pub use hvol::{
     part_groups,
 };
 pub use image::{Grey, Scale, grey_level, side_by_side, write_exr, write_png};
+pub use materials::{
+    DIP_REACH, MIN_COLUMN_SHARE, MIN_DEPTH, MIN_MATERIAL_SHARE, Material, column_median_g, find_materials,
+};
 pub use percentile::ChannelStats;
 pub use rgb::{Rgb, write_rgb_png};
 
