@@ -23,8 +23,11 @@
 //!    is its confidence; G is the one of the most confidence, searched on a
 //!    geometric grid from the floor to the top of the g axis;
 //! 3. a pair is a boundary when its confidence is at least
-//!    [`MIN_CONFIDENCE`], G is at least twice its floor (it stands out of
-//!    the noise) and its band holds at least [`MIN_CORE_SHARE`] of the voxels;
+//!    [`MIN_CONFIDENCE`], G is at least [`MIN_PEAK_OVER_NOISE`] times the
+//!    geometric mean of its materials' noise g (it stands out of the noise
+//!    of both: a textured material beside a still one, like an engine's
+//!    cast metal beside its inserts, has the larger noise of the two) and
+//!    its band holds at least [`MIN_CORE_SHARE`] of the voxels;
 //! 4. boundaries are taken one at a time, the most confident first; the
 //!    voxels on a taken arch are removed from the histogram before the
 //!    pairs are fitted again, so that a weak arch crossed by a strong one is
@@ -53,6 +56,8 @@ pub const ARCH_T: (f64, f64) = (0.15, 0.85);
 pub const ARCH_BAND: f64 = 1.4;
 /// Least confidence of a boundary.
 pub const MIN_CONFIDENCE: f64 = 0.4;
+/// Least ratio of a boundary's G to the geometric mean of its materials' noise g.
+pub const MIN_PEAK_OVER_NOISE: f64 = 4.0;
 /// Least share of all voxels on a boundary's arch.
 pub const MIN_CORE_SHARE: f64 = 1e-4;
 /// Most boundaries reported (the default TFs' distinct colours).
@@ -201,7 +206,6 @@ struct Columns<'a> {
     axes: &'a [Axis; 2],
     /// cum[j * nv + i]: voxels of column i in g bins below j (j = 0..=ng).
     cum: Vec<u64>,
-    total: u64,
 }
 
 impl<'a> Columns<'a> {
@@ -213,8 +217,7 @@ impl<'a> Columns<'a> {
                 cum[(j + 1) * nv + i] = cum[j * nv + i] + count_vg.get(j * nv + i).copied().unwrap_or(0);
             }
         }
-        let total = cum[ng * nv..].iter().sum();
-        Columns { axes, cum, total }
+        Columns { axes, cum }
     }
 
     /// The column of value `v` (None outside the v axis).
@@ -263,6 +266,8 @@ impl<'a> Columns<'a> {
 fn fit_pair(columns: &Columns, low: &Material, high: &Material, background: f64) -> Option<DetectedBoundary> {
     let ag = &columns.axes[1];
     let floor = 2.0 * low.noise_g.max(high.noise_g).max(ag.width());
+    // the arch must stand out of the noise of the two materials together
+    let noise = (low.noise_g * high.noise_g).sqrt().max(ag.width());
     let span = high.value - low.value;
     let samples: Vec<(usize, f64)> = (0..ARCH_SAMPLES)
         .filter_map(|k| {
@@ -270,7 +275,7 @@ fn fit_pair(columns: &Columns, low: &Material, high: &Material, background: f64)
             columns.column(low.value + span * t).map(|i| (i, arch_shape(t)))
         })
         .collect();
-    if samples.len() < ARCH_SAMPLES / 2 || !(span > 0.0) {
+    if samples.len() < ARCH_SAMPLES / 2 || span.is_nan() || span <= 0.0 {
         return None;
     }
     let above: u64 = samples.iter().map(|&(i, _)| columns.mass(i, floor, f64::INFINITY)).sum();
@@ -306,7 +311,7 @@ fn fit_pair(columns: &Columns, low: &Material, high: &Material, background: f64)
         .collect();
     ratios.sort_by(f64::total_cmp);
     let g_peak = ratios.get(ratios.len() / 2).copied().unwrap_or(g_coarse);
-    if confidence < MIN_CONFIDENCE || g_peak < 2.0 * floor {
+    if confidence < MIN_CONFIDENCE || g_peak < MIN_PEAK_OVER_NOISE * noise {
         return None;
     }
     // the voxels on the arch, over every column of its fitted part
@@ -366,6 +371,56 @@ fn same_voxels(a: &DetectedBoundary, b: &DetectedBoundary) -> bool {
         })
         .count();
     close >= 8
+}
+
+/// Share of the voxels whose value lies below the fallback boundary's high value.
+pub const FALLBACK_HIGH_QUANTILE: f64 = 0.99;
+/// Share of the boundary voxels (g above twice the median) below the fallback's peak g.
+pub const FALLBACK_G_QUANTILE: f64 = 0.75;
+
+/// A boundary to show when [`detect_boundaries`] finds none, placed by
+/// percentiles instead of found: from the background value (see
+/// [`background_value`]) to the value below which [`FALLBACK_HIGH_QUANTILE`]
+/// of the voxels lie, its peak g the [`FALLBACK_G_QUANTILE`] quantile of
+/// the g of the voxels above twice the median g, its confidence 0. None when
+/// the histogram holds no such span (a constant volume).
+pub fn fallback_boundary(hv: &HistogramVolume) -> Option<DetectedBoundary> {
+    let [av, ag] = &hv.vg_axes;
+    let (nv, ng) = (av.bins, ag.bins);
+    let total: u64 = hv.count_v.iter().sum();
+    let per_g: Vec<u64> = (0..ng).map(|j| hv.count_vg[j * nv..(j + 1) * nv].iter().sum()).collect();
+    let quantile_bin = |counts: &[u64], q: f64| {
+        let n: u64 = counts.iter().sum();
+        let target = (q * n as f64).ceil() as u64;
+        let mut seen = 0;
+        counts.iter().position(|&c| {
+            seen += c;
+            seen >= target.max(1)
+        })
+    };
+    let background = background_value(hv);
+    let v_high = av.centre(quantile_bin(&hv.count_v, FALLBACK_HIGH_QUANTILE)?);
+    let median_g = ag.centre(quantile_bin(&per_g, 0.5)?);
+    let floor = 2.0 * median_g.max(ag.width());
+    let above: Vec<u64> = per_g.iter().enumerate().map(|(j, &c)| if ag.centre(j) > floor { c } else { 0 }).collect();
+    let g_peak = ag.centre(quantile_bin(&above, FALLBACK_G_QUANTILE)?);
+    let (v_low, v_high) = if v_high > background { (background, v_high) } else { (av.centre(0), background) };
+    if v_high <= v_low || g_peak <= 0.0 || total == 0 {
+        return None;
+    }
+    Some(DetectedBoundary {
+        v_low,
+        v_low_spread: 0.0,
+        v_high,
+        v_high_spread: 0.0,
+        v_centre: (v_low + v_high) / 2.0,
+        g_peak,
+        sigma: (v_high - v_low) / ((2.0 * std::f64::consts::PI).sqrt() * g_peak),
+        core_voxels: above.iter().sum(),
+        g_floor: floor,
+        confidence: 0.0,
+        meets_background: true,
+    })
 }
 
 /// The background: the centre of the v bin holding the most voxels (air

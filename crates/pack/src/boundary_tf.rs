@@ -52,6 +52,9 @@ pub struct BoundaryArch {
     pub g_floor: f64,
     /// One of its materials is the background (what rays from outside cross first).
     pub meets_background: bool,
+    /// Placed by percentiles because no boundary was found: shown at
+    /// [`FALLBACK_OPACITY`], so that what lies inside it shows through.
+    pub fallback: bool,
 }
 
 /// Colours of the detected boundaries, in order (then repeated).
@@ -65,6 +68,8 @@ pub const MIN_BOUNDARY_OPACITY: f64 = 0.1;
 /// Surface opacity of a boundary that meets the background, when there are
 /// others: faint enough that the ones inside show through it.
 pub const OUTER_BOUNDARY_OPACITY: f64 = 0.3;
+/// Surface opacity of a fallback boundary (placed by percentiles, not found).
+pub const FALLBACK_OPACITY: f64 = 0.5;
 /// How far (as a ratio) a cell's g may be from a boundary's arch to belong to it.
 pub const ARCH_RATIO: f64 = 2.0;
 
@@ -99,7 +104,11 @@ pub fn boundary_opacities(arches: &[BoundaryArch]) -> Vec<f64> {
     };
     arches
         .iter()
-        .map(|a| if inner(a) { by_size(least_inner, a) } else { by_size(least_all, a).min(OUTER_BOUNDARY_OPACITY) })
+        .map(|a| match () {
+            _ if a.fallback => FALLBACK_OPACITY,
+            _ if inner(a) => by_size(least_inner, a),
+            _ => by_size(least_all, a).min(OUTER_BOUNDARY_OPACITY),
+        })
         .collect()
 }
 
@@ -322,6 +331,7 @@ mod tests {
             core_voxels,
             g_floor: 0.0,
             meets_background,
+            fallback: false,
         };
         // skin (outer), bone, a small inner boundary; then an outer surface much larger than the rest
         let head = [arch(40_000, true), arch(60_000, false), arch(20_000, false)];
@@ -345,6 +355,7 @@ mod tests {
             core_voxels: 1,
             g_floor: 0.0,
             meets_background: true,
+            fallback: false,
         };
         for x in [-3.0f64, -1.0, -0.2, 0.0, 0.7, 2.5] {
             let phi = 0.5 * (1.0 + libm::erf(x / 2.0 / std::f64::consts::SQRT_2));
@@ -365,6 +376,7 @@ mod tests {
             core_voxels,
             g_floor: 5.0,
             meets_background: false,
+            fallback: false,
         };
         let arches = [arch(0.0, 200.0, 40.0, 40_000), arch(50.0, 150.0, 10.0, 10_000)];
         assert_eq!(boundary_opacities(&arches), vec![0.25, 1.0]);
@@ -405,6 +417,7 @@ mod tests {
             core_voxels: 1000,
             g_floor: 4.0,
             meets_background: false,
+            fallback: false,
         };
         let tf = multi_field_isosurface_tf(&[arch], [0.0, 400.0], 400.0);
         let alpha = |v, g| tf.eval2(v, g)[3];

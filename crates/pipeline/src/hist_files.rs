@@ -24,6 +24,13 @@ pub struct Counted {
     pub stretched: Option<(Histogram, Histogram)>,
 }
 
+/// The warning of a run whose histogram volume shows no boundary.
+pub const NO_BOUNDARY_WARNING: &str = "detection: no boundary found in the (v, g) histogram (no pair of materials \
+     with an arch between them standing out of the noise; see histogram/hvol.json for the materials found). \
+     The default TFs show one fallback boundary placed by percentiles (from the background value to the 99th \
+     percentile of v) at opacity 0.5. To do better: a smoothing kernel for noisy data (--set derive.kernel=gauss:1.5), \
+     or your own TF (--set pack.tf=my-tf.json; widgets over the (v, g) histogram figure)";
+
 /// What the files written leave for the later steps.
 #[derive(Default)]
 pub struct Written {
@@ -46,6 +53,9 @@ pub fn write(hdir: &Path, c: Counted, input_name: &str, warnings: &mut Vec<Strin
     let mut w = Written::default();
     if let Some(hv) = c.hvol {
         w.boundaries = mdtf_histogram::detect_boundaries(&hv);
+        if w.boundaries.is_empty() {
+            warnings.push(NO_BOUNDARY_WARNING.into());
+        }
         w.arches = crate::figures::boundary_arches(&w.boundaries);
         write_hvol(hdir, &hv, input_name, &w.arches).map_err(err)?;
         w.outputs.push("histogram/opacity.png".into());

@@ -43,9 +43,19 @@ pub fn detected_arches(
     Ok(arches_of(&*hvol_or_computed(hvol, v, kernel)?))
 }
 
-/// The arches of the boundaries found in `hv`, strongest first.
+/// The arches of the boundaries found in `hv`, strongest first; when none
+/// is found, the one fallback boundary placed by percentiles
+/// ([`mdtf_histogram::fallback_boundary`]), so that every default TF shows
+/// something (none only for a volume without a span of values).
 fn arches_of(hv: &HistogramVolume) -> Vec<BoundaryArch> {
-    arches_from(&detect_boundaries(hv))
+    let found = arches_from(&detect_boundaries(hv));
+    if !found.is_empty() {
+        return found;
+    }
+    mdtf_histogram::fallback_boundary(hv)
+        .map(|b| BoundaryArch { fallback: true, ..arches_from(std::slice::from_ref(&b))[0] })
+        .into_iter()
+        .collect()
 }
 
 /// The pack's arches of detected boundaries, in the same order.
@@ -59,6 +69,7 @@ pub fn arches_from(boundaries: &[mdtf_histogram::DetectedBoundary]) -> Vec<Bound
             core_voxels: b.core_voxels,
             g_floor: b.g_floor,
             meets_background: b.meets_background,
+            fallback: false,
         })
         .collect()
 }

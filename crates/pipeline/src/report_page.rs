@@ -200,18 +200,22 @@ fn boundaries_section(h: &mut String, r: &RunReport) {
         h.push_str("<h2>Boundaries found</h2>\n");
         if r.boundaries.is_empty() {
             h.push_str(
-                "<p>No boundary stood out in the histogram volume (no patch of (v, g) bins near an arch's \
-                 apex, above twice the noise floor). The default transfer function is the plain tent of \
-                 the position function.</p>\n",
+                "<p>No boundary stood out in the (v, g) histogram: no pair of the materials found (the dips \
+                 of the median g of its value columns, listed in histogram/hvol.json) has an arch between them \
+                 that explains the voxels above the noise. The default transfer functions show one fallback \
+                 boundary placed by percentiles (from the background value to the 99th percentile of the values) \
+                 at opacity 0.5. To try: a smoothing derivative kernel for noisy data (derive.kernel = \
+                 \"gauss:1.5\"), or a TF of your own (pack.tf) drawn over the (v, g) histogram figure.</p>\n",
             );
         } else {
             h.push_str(
-                "<p>From the histogram volume (Kindlmann and Durkin's position function), strongest first. \
+                "<p>The pairs of materials whose erf-edge arch stands out in the (v, g) histogram, strongest first; \
+                 confidence is the share of the voxels above the noise along the arch that it explains. \
                  The default transfer functions give each its colour and surface opacity (what a ray crossing \
                  it accumulates: the smallest inner surface opaque, larger ones fainter, one meeting the \
                  background at most 0.3).</p>\n<table><tr><th>#</th><th>colour</th>\
                  <th>low material v</th><th>centre v</th><th>high material v</th><th>peak g (per world unit)</th>\
-                 <th>sigma (world units)</th><th>core voxels</th><th>meets the background</th>\
+                 <th>sigma (world units)</th><th>voxels on the arch</th><th>confidence</th><th>meets the background</th>\
                  <th>surface opacity</th></tr>\n",
             );
             let n = r.boundaries.len();
@@ -221,16 +225,19 @@ fn boundaries_section(h: &mut String, r: &RunReport) {
                 let _ = writeln!(
                     h,
                     "<tr><td class=\"n\">{}</td><td><span class=\"swatch\" style=\"background:rgb({cr},{cg},{cb})\">\
-                     </span></td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
-                     <td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td>{}</td>\
-                     <td class=\"n\">{a:.3}</td></tr>",
+                     </span></td><td class=\"n\">{} (sd {})</td><td class=\"n\">{}</td><td class=\"n\">{} (sd {})</td>\
+                     <td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
+                     <td class=\"n\">{:.2}</td><td>{}</td><td class=\"n\">{a:.3}</td></tr>",
                     k + 1,
                     num(b.v_low),
+                    num(b.v_low_spread),
                     num(b.v_centre),
                     num(b.v_high),
+                    num(b.v_high_spread),
                     num(b.g_peak),
                     num(b.sigma),
                     b.core_voxels,
+                    b.confidence,
                     if b.meets_background { "yes" } else { "no" }
                 );
             }
