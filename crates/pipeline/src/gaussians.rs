@@ -71,7 +71,7 @@ pub fn gaussians(
     }
     if let [value] = &data[..] {
         let (hvol, kernel) = boundaries_from;
-        let arches = crate::pack_inputs::detected_arches(value, hvol, kernel).map_err(|e| e.to_string())?;
+        let arches = crate::pack_inputs::detected_arches(value, hvol, kernel, false).map_err(|e| e.to_string())?;
         if !arches.is_empty() {
             return Ok(boundary_tgtfs(&arches, &value.geometry));
         }

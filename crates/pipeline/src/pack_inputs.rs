@@ -34,13 +34,17 @@ fn hvol_or_computed<'a>(
 }
 
 /// The arches of the boundaries found in the histogram volume of the value
-/// volume `v` (`hvol` when the caller has it, else derived with `kernel`), strongest first.
+/// volume `v` (`hvol` when the caller has it, else derived with `kernel`),
+/// strongest first; with `fallback`, the fallback boundary when none is
+/// found (see [`arches_of`]).
 pub fn detected_arches(
     v: &Volume,
     hvol: Option<&HistogramVolume>,
     kernel: mdtf_derive::Kernel,
+    fallback: bool,
 ) -> Result<Vec<BoundaryArch>, crate::error::StageError> {
-    Ok(arches_of(&*hvol_or_computed(hvol, v, kernel)?))
+    let hv = hvol_or_computed(hvol, v, kernel)?;
+    Ok(if fallback { arches_of(&hv) } else { arches_from(&detect_boundaries(&hv)) })
 }
 
 /// The arches of the boundaries found in `hv`, strongest first; when none
@@ -289,7 +293,7 @@ pub fn luts(
                 && let Some((lo, hi)) = first.finite_range()
             {
                 // multi-field data without a TF: thin widgets at the boundaries of the first field
-                let arches = detected_arches(first, None, kernel)?;
+                let arches = detected_arches(first, None, kernel, true)?;
                 let (lo, hi) = (lo as f64, hi as f64);
                 let default = multi_field_isosurface_tf(&arches, [lo, hi], hi - lo);
                 if let Some(mut lut) = default.peak_finding_tf2d(*r, [1024, 1024]) {
