@@ -27,7 +27,8 @@
 //!    geometric mean of its materials' noise g (it stands out of the noise
 //!    of both: a textured material beside a still one, like an engine's
 //!    cast metal beside its inserts, has the larger noise of the two) and
-//!    its band holds at least [`MIN_CORE_SHARE`] of the voxels;
+//!    its core (the band within half a sigma of its centre, [`CORE_T`])
+//!    holds at least [`MIN_CORE_SHARE`] of the voxels;
 //! 4. boundaries are taken one at a time, the most confident first; the
 //!    voxels on a taken arch are removed from the histogram before the
 //!    pairs are fitted again, so that a weak arch crossed by a strong one is
@@ -36,7 +37,7 @@
 //!    arch runs within a factor [`ARCH_BAND`] of a taken one over half or
 //!    more of the values they share is that one again, and not taken;
 //! 5. at most [`MAX_BOUNDARIES`] are taken, then listed strongest (most
-//!    voxels on the arch) first;
+//!    voxels in the core) first;
 //! 6. a boundary meets the background when one of its materials lies within
 //!    a quarter of its span of the value most voxels hold.
 //!
@@ -52,6 +53,10 @@ use serde::Serialize;
 pub const ARCH_SAMPLES: usize = 29;
 /// The part of an arch (t from the low material to the high one) that is fitted.
 pub const ARCH_T: (f64, f64) = (0.15, 0.85);
+/// The core of an arch (t from the low material to the high one): within
+/// half a sigma of its centre, Phi(-0.5) to Phi(0.5). Its voxels grow with
+/// the boundary's area (times its sigma), what its default opacity reads.
+pub const CORE_T: (f64, f64) = (0.3085, 0.6915);
 /// Factor within which a voxel's g lies on an arch.
 pub const ARCH_BAND: f64 = 1.4;
 /// Least confidence of a boundary.
@@ -84,8 +89,8 @@ pub struct DetectedBoundary {
     pub g_peak: f64,
     /// The boundary's width, world units: (v_high - v_low) / (sqrt(2 pi) G).
     pub sigma: f64,
-    /// Voxels on its arch (g within a factor [`ARCH_BAND`] of the arch's,
-    /// above the floor, over the fitted part of its value span).
+    /// Voxels in its core: g within a factor [`ARCH_BAND`] of the arch's,
+    /// above the floor, v within [`CORE_T`] of its value span.
     pub core_voxels: u64,
     /// The noise floor of g: twice the larger noise g of its two
     /// materials; below it a voxel is taken for noise inside a material.
@@ -124,7 +129,7 @@ impl DetectedBoundary {
 pub struct Detection {
     /// The materials, in increasing value.
     pub materials: Vec<Material>,
-    /// The boundaries, strongest (most voxels on the arch) first.
+    /// The boundaries, strongest (most core voxels) first.
     pub boundaries: Vec<DetectedBoundary>,
 }
 
@@ -135,7 +140,12 @@ pub fn detect_boundaries(hv: &HistogramVolume) -> Vec<DetectedBoundary> {
 
 /// The materials and boundaries of `hv`; see the module docs.
 pub fn detect(hv: &HistogramVolume) -> Detection {
-    detect_in(&hv.count_vg, &hv.vg_axes, background_value(hv))
+    let mut found = detect_in(&hv.count_vg, &hv.vg_axes, background_value(hv));
+    // the default TFs leave out cells below the floor: not below the histogram volume's own g threshold
+    for b in &mut found.boundaries {
+        b.g_floor = b.g_floor.max(hv.g_thresh);
+    }
+    found
 }
 
 /// [`detect`] over (v, g) counts (v fastest) with the background value given.
@@ -314,13 +324,13 @@ fn fit_pair(columns: &Columns, low: &Material, high: &Material, background: f64)
     if confidence < MIN_CONFIDENCE || g_peak < MIN_PEAK_OVER_NOISE * noise {
         return None;
     }
-    // the voxels on the arch, over every column of its fitted part
-    let (first, last) = (columns.column(low.value + span * ARCH_T.0), columns.column(low.value + span * ARCH_T.1));
+    // the voxels on the arch within half a sigma of its centre (its core)
+    let (first, last) = (columns.column(low.value + span * CORE_T.0), columns.column(low.value + span * CORE_T.1));
     let core_voxels = match (first, last) {
         (Some(first), Some(last)) => (first..=last)
             .map(|i| {
                 let t = (columns.axes[0].centre(i) - low.value) / span;
-                let g = g_peak * arch_shape(t.clamp(ARCH_T.0, ARCH_T.1));
+                let g = g_peak * arch_shape(t.clamp(CORE_T.0, CORE_T.1));
                 columns.mass_of_one(i, (g / ARCH_BAND).max(floor), g * ARCH_BAND)
             })
             .sum(),

@@ -21,7 +21,7 @@ mod rgb;
 
 pub use axis::{Axis, AxisSpec, DEFAULT_BINS, MAX_INTEGER_BINS};
 pub use boundaries::{
-    ARCH_BAND, ARCH_SAMPLES, ARCH_T, DetectedBoundary, Detection, FALLBACK_G_QUANTILE, FALLBACK_HIGH_QUANTILE,
+    ARCH_BAND, ARCH_SAMPLES, ARCH_T, CORE_T, DetectedBoundary, Detection, FALLBACK_G_QUANTILE, FALLBACK_HIGH_QUANTILE,
     MAX_BOUNDARIES, MIN_CONFIDENCE, MIN_CORE_SHARE, MIN_PEAK_OVER_NOISE, background_value, detect, detect_boundaries,
     detect_in, fallback_boundary,
 };
@@ -40,7 +40,8 @@ pub use hvol::{
 };
 pub use image::{Grey, Scale, grey_level, side_by_side, write_exr, write_png};
 pub use materials::{
-    DIP_REACH, MIN_COLUMN_SHARE, MIN_DEPTH, MIN_MATERIAL_SHARE, Material, column_median_g, find_materials,
+    BASIN_RATIO, CLEAR_DEPTH, DIP_REACH, MIN_COLUMN_SHARE, MIN_DEPTH, MIN_MATERIAL_SHARE, MIN_NEAR_ZERO_SHARE,
+    Material, column_median_g, find_materials,
 };
 pub use percentile::ChannelStats;
 pub use rgb::{Rgb, write_rgb_png};

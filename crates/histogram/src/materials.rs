@@ -9,18 +9,29 @@
 //! 1. the columns hold at least [`MIN_COLUMN_SHARE`] of the voxels (a
 //!    column of a few stray voxels has no typical g);
 //! 2. a column is a dip when its median g is the least within
-//!    [`DIP_REACH`] columns on each side, and the highest median g met on
+//!    [`DIP_REACH`] columns on each side (of equal medians, the column
+//!    holding more voxels), and the highest median g met on
 //!    one side before a lower one is at least [`MIN_DEPTH`] times the dip's
 //!    (one side: the other may be the material's own noise tail, or the
 //!    top of the range, where an MRI's brightest tissue meets a few vessels);
-//! 3. the dip holds at least [`MIN_MATERIAL_SHARE`] of the voxels with g
-//!    at most twice the dip's median g within [`DIP_REACH`] columns;
-//! 4. its value is the count-weighted mean v of those still voxels, its
+//! 3. unless the dip is [`CLEAR_DEPTH`] deep, at least
+//!    [`MIN_NEAR_ZERO_SHARE`] of its voxels have g at most half its median
+//!    (noise spreads g from zero; where a weak arch passes under a strong
+//!    one, a shallow dip holds a narrow band of g far from zero; a thin
+//!    layer without noise, blurred by its neighbours, has neither noise
+//!    nor a g of zero, but a deep dip);
+//! 4. its basin (the columns around it whose median g is within
+//!    [`BASIN_RATIO`] of the dip's, and at least [`DIP_REACH`] on each
+//!    side) holds at least [`MIN_MATERIAL_SHARE`] of the voxels with g at
+//!    most twice the dip's median g, its still voxels (the extremes of a
+//!    material's noise are its peaks and pits, where g is least: the dip
+//!    may lie in the noise's tail, the material's voxels in its basin);
+//! 5. its value is the count-weighted mean v of those still voxels, its
 //!    spread their standard deviation about it (both in input units), its
 //!    noise g the dip's median g;
-//! 5. two neighbouring dips between which the median g never rises to
+//! 6. two neighbouring dips between which the median g never rises to
 //!    [`MIN_DEPTH`] times the larger one's are one material (a noisy
-//!    plateau dips more than once): the one with more still voxels.
+//!    plateau dips more than once): the deeper one.
 //!
 //! The median g of a column is robust to the tail of strong boundaries
 //! that cross it, and needs no noise model: CT noise, MRI's Rician noise and
@@ -37,6 +48,16 @@ pub const MEDIAN_REACH: usize = 2;
 pub const DIP_REACH: usize = 3;
 /// Least ratio of the highest median g on one side of a dip to the dip's.
 pub const MIN_DEPTH: f64 = 2.0;
+/// Ratio of the median g on one side of a dip to the dip's beyond which
+/// the dip needs no voxels near g = 0 (rule 3 of the module docs).
+pub const CLEAR_DEPTH: f64 = 4.0;
+/// Least share of a dip's voxels with g at most half its median g (or in
+/// the first g bin): noise spreads a material's g from zero (about a tenth
+/// of a pure noise gradient lies below half its median), while a dip where
+/// one arch passes under another holds a narrow band of g far from zero.
+pub const MIN_NEAR_ZERO_SHARE: f64 = 0.03;
+/// How far (as a ratio) the median g of a dip's basin may rise above the dip's.
+pub const BASIN_RATIO: f64 = 1.5;
 /// Least share of all voxels a material's still voxels must hold.
 pub const MIN_MATERIAL_SHARE: f64 = 1e-3;
 
@@ -93,11 +114,15 @@ pub fn find_materials(count_vg: &[u64], axes: &[Axis; 2]) -> Vec<Material> {
     let median = column_median_g(count_vg, axes);
     // a dip's g is at least one g bin's width: noise-free materials have g = 0
     let least_g = ag.width();
+    let voxels: Vec<u64> = (0..nv).map(|i| (0..ng).map(|j| count_vg[j * nv + i]).sum()).collect();
+    // of columns with equal median g (medians are g bin centres), the one holding more voxels
+    let lower =
+        |k: usize, i: usize, m: f64| median[k].is_some_and(|x| x < m || (x == m && (voxels[k], i) > (voxels[i], k)));
     let mut found = Vec::new();
     for (i, m) in median.iter().enumerate() {
         let Some(m) = *m else { continue };
         let window = i.saturating_sub(DIP_REACH)..(i + DIP_REACH + 1).min(nv);
-        let least_in_window = window.clone().filter(|&k| median[k].is_some_and(|x| x < m || (x == m && k < i)));
+        let least_in_window = window.clone().filter(|&k| k != i && lower(k, i, m));
         if least_in_window.count() > 0 {
             continue;
         }
@@ -117,8 +142,22 @@ pub fn find_materials(count_vg: &[u64], axes: &[Axis; 2]) -> Vec<Material> {
         let left = side(&mut (0..i).rev());
         let right = side(&mut (i + 1..nv));
         let floor = m.max(least_g);
-        let deep = left.into_iter().chain(right).fold(0.0, f64::max) >= MIN_DEPTH * floor;
-        if !deep {
+        let highest = left.into_iter().chain(right).fold(0.0, f64::max);
+        if highest < MIN_DEPTH * floor {
+            continue;
+        }
+        // the basin of the dip: the columns around it whose median g stays within BASIN_RATIO of its
+        let within = |k: usize| median[k].is_some_and(|x| x <= BASIN_RATIO * floor);
+        let first = (0..i).rev().take_while(|&k| within(k)).last().unwrap_or(i);
+        let last = (i + 1..nv).take_while(|&k| within(k)).last().unwrap_or(i);
+        let window = first.min(window.start)..(last + 1).max(window.end);
+        // noise from zero, not the band of an arch passing through
+        let near_zero = (m / 2.0).max(ag.min + ag.width());
+        let in_window = |keep: &dyn Fn(usize) -> bool| -> u64 {
+            window.clone().flat_map(|k| (0..ng).filter(|&j| keep(j)).map(move |j| count_vg[j * nv + k])).sum()
+        };
+        let low = in_window(&|j| ag.min + (j + 1) as f64 * ag.width() <= near_zero + 1e-12 * ag.width());
+        if highest < CLEAR_DEPTH * floor && (low as f64) < MIN_NEAR_ZERO_SHARE * in_window(&|_| true) as f64 {
             continue;
         }
         // the still voxels around the dip
@@ -143,16 +182,18 @@ pub fn find_materials(count_vg: &[u64], axes: &[Axis; 2]) -> Vec<Material> {
     merge_unseparated(found, &median)
 }
 
-/// Rule 5 of the module docs: neighbouring dips between which the median g
+/// Rule 6 of the module docs: neighbouring dips between which the median g
 /// never rises to [`MIN_DEPTH`] times the larger dip's are one material (a
-/// noisy plateau dips twice); the one with more still voxels stands for it.
+/// noisy plateau dips twice); the deeper dip (then the one with more still
+/// voxels) stands for it.
 fn merge_unseparated(dips: Vec<(usize, Material)>, median: &[Option<f64>]) -> Vec<Material> {
     let mut kept: Vec<(usize, Material)> = Vec::new();
     for (i, m) in dips {
         if let Some((k, last)) = kept.last_mut() {
             let between = median[*k..=i].iter().flatten().fold(0.0, |a: f64, &b| a.max(b));
             if between < MIN_DEPTH * last.noise_g.max(m.noise_g) {
-                if m.still_voxels > last.still_voxels {
+                if (m.noise_g, std::cmp::Reverse(m.still_voxels)) < (last.noise_g, std::cmp::Reverse(last.still_voxels))
+                {
                     (*k, *last) = (i, m);
                 }
                 continue;

@@ -11,9 +11,10 @@
 //! * a cell belongs to the boundary whose v span holds its v and whose arch
 //!   g(v) is nearest its g by ratio, if that ratio is within a factor of
 //!   [`ARCH_RATIO`]; other cells stay transparent;
-//! * cells with g below the boundaries' noise floor (twice the median g,
-//!   as detection takes it) are noise inside a material, and transparent:
-//!   near its two materials an arch's g falls to the noise's;
+//! * cells with g below a boundary's noise floor (twice its materials'
+//!   noise g, as detection takes it), or whose v lies within [`NOISE_SPREADS`]
+//!   spreads of one of its materials' values, are noise inside a material, and
+//!   transparent: near its two materials an arch's g falls to the noise's;
 //! * boundary k's surface opacity, what a ray crossing it accumulates: a
 //!   lone boundary is opaque ([`MAX_BOUNDARY_OPACITY`]); of several, one
 //!   that meets the background (the value most voxels hold: air around a
@@ -52,6 +53,11 @@ pub struct BoundaryArch {
     pub g_floor: f64,
     /// One of its materials is the background (what rays from outside cross first).
     pub meets_background: bool,
+    /// Standard deviation of the low material's values: cells within
+    /// [`NOISE_SPREADS`] of them of its value are that material's noise, not the boundary.
+    pub v_low_spread: f64,
+    /// The same for the high material.
+    pub v_high_spread: f64,
     /// Placed by percentiles because no boundary was found: shown at
     /// [`FALLBACK_OPACITY`], so that what lies inside it shows through.
     pub fallback: bool,
@@ -68,6 +74,8 @@ pub const MIN_BOUNDARY_OPACITY: f64 = 0.1;
 /// Surface opacity of a boundary that meets the background, when there are
 /// others: faint enough that the ones inside show through it.
 pub const OUTER_BOUNDARY_OPACITY: f64 = 0.3;
+/// Standard deviations of a material's values within which a cell is its noise.
+pub const NOISE_SPREADS: f64 = 3.0;
 /// Surface opacity of a fallback boundary (placed by percentiles, not found).
 pub const FALLBACK_OPACITY: f64 = 0.5;
 /// How far (as a ratio) a cell's g may be from a boundary's arch to belong to it.
@@ -83,6 +91,16 @@ impl BoundaryArch {
         // g / G = exp(-z^2 / 2) with Phi(z) = t
         let z = normal_quantile(t);
         Some(self.g_peak * (-z * z / 2.0).exp())
+    }
+}
+
+impl BoundaryArch {
+    /// [`BoundaryArch::g_at`] where `v` lies more than [`NOISE_SPREADS`] spreads from
+    /// either material (None within a material's noise).
+    pub fn g_beyond_noise(&self, v: f64) -> Option<f64> {
+        let clear =
+            v > self.v_low + NOISE_SPREADS * self.v_low_spread && v < self.v_high - NOISE_SPREADS * self.v_high_spread;
+        if clear { self.g_at(v) } else { None }
     }
 }
 
@@ -129,7 +147,7 @@ pub fn boundary_tf(v: &LutAxis, g: &LutAxis, tent: Tent, arches: &[BoundaryArch]
     let per_voxel = per_voxel_opacities(&opacity, tent.half_width_voxels);
     // each arch's g at every v cell centre, once
     let arch_g: Vec<Vec<Option<f64>>> =
-        (0..v.size).map(|i| arches.iter().map(|a| a.g_at(v.centre(i))).collect()).collect();
+        (0..v.size).map(|i| arches.iter().map(|a| a.g_beyond_noise(v.centre(i))).collect()).collect();
     let mut values = Vec::with_capacity(4 * v.size * g.size);
     for j in 0..g.size {
         let gc = g.centre(j);
@@ -331,6 +349,8 @@ mod tests {
             core_voxels,
             g_floor: 0.0,
             meets_background,
+            v_low_spread: 0.0,
+            v_high_spread: 0.0,
             fallback: false,
         };
         // skin (outer), bone, a small inner boundary; then an outer surface much larger than the rest
@@ -355,6 +375,8 @@ mod tests {
             core_voxels: 1,
             g_floor: 0.0,
             meets_background: true,
+            v_low_spread: 0.0,
+            v_high_spread: 0.0,
             fallback: false,
         };
         for x in [-3.0f64, -1.0, -0.2, 0.0, 0.7, 2.5] {
@@ -376,6 +398,8 @@ mod tests {
             core_voxels,
             g_floor: 5.0,
             meets_background: false,
+            v_low_spread: 0.0,
+            v_high_spread: 0.0,
             fallback: false,
         };
         let arches = [arch(0.0, 200.0, 40.0, 40_000), arch(50.0, 150.0, 10.0, 10_000)];
@@ -417,6 +441,8 @@ mod tests {
             core_voxels: 1000,
             g_floor: 4.0,
             meets_background: false,
+            v_low_spread: 0.0,
+            v_high_spread: 0.0,
             fallback: false,
         };
         let tf = multi_field_isosurface_tf(&[arch], [0.0, 400.0], 400.0);

@@ -73,6 +73,8 @@ pub fn arches_from(boundaries: &[mdtf_histogram::DetectedBoundary]) -> Vec<Bound
             core_voxels: b.core_voxels,
             g_floor: b.g_floor,
             meets_background: b.meets_background,
+            v_low_spread: b.v_low_spread,
+            v_high_spread: b.v_high_spread,
             fallback: false,
         })
         .collect()

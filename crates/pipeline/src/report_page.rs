@@ -215,7 +215,7 @@ fn boundaries_section(h: &mut String, r: &RunReport) {
                  it accumulates: the smallest inner surface opaque, larger ones fainter, one meeting the \
                  background at most 0.3).</p>\n<table><tr><th>#</th><th>colour</th>\
                  <th>low material v</th><th>centre v</th><th>high material v</th><th>peak g (per world unit)</th>\
-                 <th>sigma (world units)</th><th>voxels on the arch</th><th>confidence</th><th>meets the background</th>\
+                 <th>sigma (world units)</th><th>core voxels (within sigma / 2 of its centre)</th><th>confidence</th><th>meets the background</th>\
                  <th>surface opacity</th></tr>\n",
             );
             let n = r.boundaries.len();
