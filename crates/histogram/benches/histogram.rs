@@ -38,3 +38,18 @@ fn hvol_of_stored_channels_256_cubed(bencher: divan::Bencher) {
         .counter(ItemsCount::new(v.len()))
         .bench(|| histogram_volume(&v, &g, &h, 256 * 256, &HvolParams::default()).map(|hv| hv.sigma));
 }
+
+/// Boundary detection (materials, arch fits) on the histogram volume of a
+/// noisy 128^3 shells phantom (256 x 256 (v, g) bins; its cost does not
+/// depend on the voxel count).
+#[divan::bench(sample_count = 10, sample_size = 1)]
+fn detect_boundaries_256x256(bencher: divan::Bencher) {
+    let mut v = mdtf_datagen::RadialPhantom::tooth(Geometry::new([128; 3], [1.0; 3]), 2.0).volume();
+    mdtf_datagen::add_gaussian_noise(&mut v, 3.0, 5);
+    let d = DeriveParams { items: vec![Item::G, Item::F2], ..DeriveParams::default() };
+    let out = mdtf_derive::run(&MultiField::from(v.clone()), &d).expect("derive");
+    let (g, h) = (&out.items[0].1.fields[0].data, &out.items[1].1.fields[0].data);
+    let (g, h): (Vec<f32>, Vec<f32>) = (g.iter().copied().collect(), h.iter().copied().collect());
+    let hv = histogram_volume(v.samples(), &g, &h, v.plane_len(), &HvolParams::default()).expect("hvol");
+    bencher.bench(|| mdtf_histogram::detect(&hv).boundaries.len());
+}
