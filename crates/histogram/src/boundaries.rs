@@ -47,6 +47,7 @@
 use crate::axis::Axis;
 use crate::hvol::HistogramVolume;
 use crate::materials::{Material, find_materials};
+use mdtf_volume::arch_shape;
 use serde::Serialize;
 
 /// Values along an arch at which its fit is measured.
@@ -119,8 +120,7 @@ impl DetectedBoundary {
 
     /// The arch's g at value `v` (None outside the open span).
     fn g_at(&self, v: f64) -> Option<f64> {
-        let t = (v - self.v_low) / (self.v_high - self.v_low);
-        (t > 0.0 && t < 1.0).then(|| self.g_peak * arch_shape(t))
+        mdtf_volume::arch_g(self.v_low, self.v_high, self.g_peak, v)
     }
 }
 
@@ -140,12 +140,7 @@ pub fn detect_boundaries(hv: &HistogramVolume) -> Vec<DetectedBoundary> {
 
 /// The materials and boundaries of `hv`; see the module docs.
 pub fn detect(hv: &HistogramVolume) -> Detection {
-    let mut found = detect_in(&hv.count_vg, &hv.vg_axes, background_value(hv));
-    // the default TFs leave out cells below the floor: not below the histogram volume's own g threshold
-    for b in &mut found.boundaries {
-        b.g_floor = b.g_floor.max(hv.g_thresh);
-    }
-    found
+    detect_in(&hv.count_vg, &hv.vg_axes, background_value(hv))
 }
 
 /// [`detect`] over (v, g) counts (v fastest) with the background value given.
@@ -191,26 +186,6 @@ fn explain_away(counts: &mut [u64], axes: &[Axis; 2], b: &DetectedBoundary) {
     }
 }
 
-/// g / G of an arch at t in (0, 1) of its value span: exp(-z^2 / 2), Phi(z) = t.
-fn arch_shape(t: f64) -> f64 {
-    let z = normal_quantile(t);
-    (-z * z / 2.0).exp()
-}
-
-/// z with Phi(z) = t for t in (0, 1), by bisection (64 halvings of [-40, 40]).
-fn normal_quantile(t: f64) -> f64 {
-    let (mut lo, mut hi) = (-40.0f64, 40.0f64);
-    for _ in 0..64 {
-        let mid = 0.5 * (lo + hi);
-        if 0.5 * libm::erfc(-mid / std::f64::consts::SQRT_2) < t {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    0.5 * (lo + hi)
-}
-
 /// Per-column cumulative counts over g, for the voxels of a g range of one column.
 struct Columns<'a> {
     axes: &'a [Axis; 2],
@@ -249,25 +224,25 @@ impl<'a> Columns<'a> {
 
     /// Voxels of column `i` alone with g in [lo, hi).
     fn mass_of_one(&self, i: usize, lo: f64, hi: f64) -> u64 {
-        let (nv, ag) = (self.axes[0].bins, &self.axes[1]);
-        let edge = |g: f64| (((g - ag.min) / ag.width()).ceil().max(0.0) as usize).min(ag.bins);
-        let (jl, jh) = (edge(lo), edge(hi));
-        if jh <= jl { 0 } else { self.cum[jh * nv + i] - self.cum[jl * nv + i] }
+        self.mass_in(i..i + 1, lo, hi)
     }
 
     /// Voxels with g in [lo, hi) of column `i` and the [`COLUMN_REACH`]
     /// columns on each side: a boundary without noise, sampled on a grid,
     /// leaves some columns empty (its voxels take only certain values).
     fn mass(&self, i: usize, lo: f64, hi: f64) -> u64 {
+        self.mass_in(i.saturating_sub(COLUMN_REACH)..i + COLUMN_REACH + 1, lo, hi)
+    }
+
+    /// Voxels with g in [lo, hi) of the columns `cols` (clipped to the v axis).
+    fn mass_in(&self, cols: std::ops::Range<usize>, lo: f64, hi: f64) -> u64 {
         let (nv, ag) = (self.axes[0].bins, &self.axes[1]);
         let edge = |g: f64| (((g - ag.min) / ag.width()).ceil().max(0.0) as usize).min(ag.bins);
         let (jl, jh) = (edge(lo), edge(hi));
         if jh <= jl {
             return 0;
         }
-        (i.saturating_sub(COLUMN_REACH)..(i + COLUMN_REACH + 1).min(nv))
-            .map(|c| self.cum[jh * nv + c] - self.cum[jl * nv + c])
-            .sum()
+        (cols.start..cols.end.min(nv)).map(|c| self.cum[jh * nv + c] - self.cum[jl * nv + c]).sum()
     }
 }
 

@@ -84,17 +84,9 @@ pub const ARCH_RATIO: f64 = 2.0;
 impl BoundaryArch {
     /// The arch's g at value `v` (None outside the open span (v_low, v_high)).
     pub fn g_at(&self, v: f64) -> Option<f64> {
-        let t = (v - self.v_low) / (self.v_high - self.v_low);
-        if !(t > 0.0 && t < 1.0) {
-            return None;
-        }
-        // g / G = exp(-z^2 / 2) with Phi(z) = t
-        let z = normal_quantile(t);
-        Some(self.g_peak * (-z * z / 2.0).exp())
+        mdtf_volume::arch_g(self.v_low, self.v_high, self.g_peak, v)
     }
-}
 
-impl BoundaryArch {
     /// [`BoundaryArch::g_at`] where `v` lies more than [`NOISE_SPREADS`] spreads from
     /// either material (None within a material's noise).
     pub fn g_beyond_noise(&self, v: f64) -> Option<f64> {
@@ -319,21 +311,6 @@ fn nearest_by_ratio(g: f64, references: impl Iterator<Item = Option<f64>>) -> Op
 pub fn per_voxel_opacities(surface: &[f64], w: f64) -> Vec<f64> {
     let w = w.max(1e-3);
     surface.iter().map(|a| 1.0 - (1.0 - a).powf(1.0 / w)).collect()
-}
-
-/// z with Phi(z) = t for t in (0, 1), Phi the standard normal CDF, by
-/// bisection (Phi is monotone; 64 halvings of [-40, 40] reach f64's resolution).
-fn normal_quantile(t: f64) -> f64 {
-    let (mut lo, mut hi) = (-40.0f64, 40.0f64);
-    for _ in 0..64 {
-        let mid = 0.5 * (lo + hi);
-        if 0.5 * libm::erfc(-mid / std::f64::consts::SQRT_2) < t {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    0.5 * (lo + hi)
 }
 
 #[cfg(test)]

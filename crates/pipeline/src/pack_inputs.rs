@@ -56,28 +56,27 @@ fn arches_of(hv: &HistogramVolume) -> Vec<BoundaryArch> {
     if !found.is_empty() {
         return found;
     }
-    mdtf_histogram::fallback_boundary(hv)
-        .map(|b| BoundaryArch { fallback: true, ..arches_from(std::slice::from_ref(&b))[0] })
-        .into_iter()
-        .collect()
+    mdtf_histogram::fallback_boundary(hv).map(|b| BoundaryArch { fallback: true, ..arch_of(&b) }).into_iter().collect()
 }
 
 /// The pack's arches of detected boundaries, in the same order.
 pub fn arches_from(boundaries: &[mdtf_histogram::DetectedBoundary]) -> Vec<BoundaryArch> {
-    boundaries
-        .iter()
-        .map(|b| BoundaryArch {
-            v_low: b.v_low,
-            v_high: b.v_high,
-            g_peak: b.g_peak,
-            core_voxels: b.core_voxels,
-            g_floor: b.g_floor,
-            meets_background: b.meets_background,
-            v_low_spread: b.v_low_spread,
-            v_high_spread: b.v_high_spread,
-            fallback: false,
-        })
-        .collect()
+    boundaries.iter().map(arch_of).collect()
+}
+
+/// The pack's arch of one detected boundary (found, not a fallback).
+fn arch_of(b: &mdtf_histogram::DetectedBoundary) -> BoundaryArch {
+    BoundaryArch {
+        v_low: b.v_low,
+        v_high: b.v_high,
+        g_peak: b.g_peak,
+        core_voxels: b.core_voxels,
+        g_floor: b.g_floor,
+        meets_background: b.meets_background,
+        v_low_spread: b.v_low_spread,
+        v_high_spread: b.v_high_spread,
+        fallback: false,
+    }
 }
 
 /// Code ranges: the explicit ones; for g, f2 and g_hit the data range with

@@ -19,6 +19,7 @@
 
 pub mod dicom;
 mod dtype;
+mod erf_edge;
 mod error;
 mod geometry;
 mod io;
@@ -39,6 +40,7 @@ mod tiff_stack;
 mod volume;
 
 pub use dtype::{Endian, SAMPLE_TYPE_NAMES, SampleType, round_to_type};
+pub use erf_edge::{arch_g, arch_shape, normal_quantile};
 pub use error::{Result, VolumeError};
 pub use geometry::Geometry;
 pub use io::{Format, SlabSamples, WriteOptions, read, read_scalar, read_with_info, write, write_volume};
