@@ -7,15 +7,19 @@
 //!   `x = r - |P - c|`; three or four are the nested "tooth" shells.
 //! * [`MultiFieldPhantom`]: three erf spheres with their own centres and
 //!   radii, with the analytic Jacobian and ||G|| = ||Df^T Df||_F.
+//! * [`CtHead`]: a head CT with its tissues, holder, blur, noise, int16
+//!   values and padding, and the boundaries an expert would show.
 //! * [`add_gaussian_noise`]: seeded, reproducible noise.
 //!
 //! All lengths (radius, sigma, distances) are in world units; the grid puts
 //! voxel (i, j, k) at origin + (i sx, j sy, k sz).
 
+mod ct_head;
 mod multifield;
 mod noise;
 mod radial;
 
+pub use ct_head::{CtHead, Tissue, TrueBoundary, hu};
 pub use multifield::{MultiFieldPhantom, MultiFieldTruth, SphereField};
 pub use noise::add_gaussian_noise;
 pub use radial::{Boundary, RadialPhantom, RadialTruth, erf_sphere};

@@ -86,6 +86,12 @@ pub enum Phantom {
     Shells,
     /// Three overlapping erf spheres as a 3-field volume (for multi-field gradients, ||G||).
     Multifield,
+    /// A head CT in HU: skin 40, fat -90, galea 40, skull (tables 1400, diploe 600), CSF 8, brain
+    /// 35, a frontal sinus (air) in bone, a head holder 250, 5 mm layers, 1 mm blur (--sigma), 20 HU
+    /// noise (--noise), int16 values and -2000 padding outside the circular field of view (--size
+    /// 200,200,48 for a head of radius 80). Boundaries: air|skin, air|holder, air|bone, soft
+    /// tissue|bone, diploe|bone, fat|skin (6.5 noise sds); padding|air is a hard edge, no arch.
+    CtHead,
 }
 
 /// Sample type of written volumes.
@@ -121,8 +127,9 @@ pub struct SynthArgs {
     #[arg(long, value_name = "R", allow_negative_numbers = true)]
     pub radius: Option<f64>,
     /// Boundary blur: standard deviation of the Gaussian, world units.
-    #[arg(long, default_value_t = 3.0, value_name = "S", allow_negative_numbers = true)]
-    pub sigma: f64,
+    /// Default: 3 (ct-head: 1, a scanner's).
+    #[arg(long, value_name = "S", allow_negative_numbers = true)]
+    pub sigma: Option<f64>,
     /// Value outside the sphere (erf-sphere only).
     #[arg(long, default_value_t = 0.0, value_name = "A", allow_negative_numbers = true)]
     pub vmin: f64,
@@ -147,7 +154,7 @@ pub struct SynthArgs {
     /// Write the analytic fields into this folder (see below).
     #[arg(long, value_name = "DIR")]
     pub truth: Option<PathBuf>,
-    /// Sample type of the written volume (truth is always f32).
+    /// Sample type of the written volume (truth is always f32; ct-head is always int16).
     #[arg(long = "type", value_enum, default_value_t = OutType::F32)]
     pub out_type: OutType,
     /// Gzip NRRD data (NIfTI is compressed by naming it .nii.gz).

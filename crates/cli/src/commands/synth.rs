@@ -4,7 +4,9 @@ use crate::args::{OutType, Phantom, SynthArgs};
 use crate::input::{parse_size, parse_spacing, parse_triple, sample_type};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
-use mdtf_pipeline::stages::datagen::{MultiFieldPhantom, RadialPhantom, add_gaussian_noise, erf_sphere, min_extent};
+use mdtf_pipeline::stages::datagen::{
+    CtHead, MultiFieldPhantom, RadialPhantom, add_gaussian_noise, erf_sphere, min_extent,
+};
 use mdtf_volume::{
     Format, Geometry, Inputs, MultiField, OutputFolder, SampleType, Volume, WriteOptions, write, write_volume,
 };
@@ -22,6 +24,7 @@ pub fn run(args: &SynthArgs, progress: &Progress) -> Result<()> {
     match args.phantom {
         Phantom::ErfSphere | Phantom::Shells => radial(args, geometry, &opts, &truth, progress)?,
         Phantom::Multifield => multifield(args, geometry, &opts, &truth, progress)?,
+        Phantom::CtHead => ct_head(args, geometry, &opts, progress)?,
     }
     progress.note(&format!("wrote {}", args.output.display()));
     if let (Some(folder), Some(shown)) = (truth_folder, &args.truth) {
@@ -36,10 +39,16 @@ fn geometry(args: &SynthArgs) -> Result<Geometry> {
     let dims = parse_size(&args.size, "--size")?;
     let spacing = parse_spacing(&args.spacing, "--spacing")?;
     let origin = parse_triple(&args.origin, "--origin")?;
-    if !(args.sigma.is_finite() && args.sigma > 0.0) {
-        bail!("--sigma must be positive (world units), got {}", args.sigma);
+    let sigma = sigma(args);
+    if !(sigma.is_finite() && sigma > 0.0) {
+        bail!("--sigma must be positive (world units), got {sigma}");
     }
     Ok(Geometry::new(dims, spacing).with_origin(origin))
+}
+
+/// `--sigma`, or the phantom's default blur (world units).
+fn sigma(args: &SynthArgs) -> f64 {
+    args.sigma.unwrap_or(if args.phantom == Phantom::CtHead { 1.0 } else { 3.0 })
 }
 
 /// Where the analytic truth goes (`--truth`), when asked for.
@@ -71,9 +80,9 @@ fn radial(args: &SynthArgs, geometry: Geometry, opts: &WriteOptions, truth: &Tru
             bail!("--radius must be positive (world units), got {radius}");
         }
         let centre = args.centre.as_deref().map(|c| parse_triple(c, "--centre")).transpose()?;
-        erf_sphere(geometry, radius, args.sigma, args.vmin, args.vmax, centre)
+        erf_sphere(geometry, radius, sigma(args), args.vmin, args.vmax, centre)
     } else {
-        RadialPhantom::tooth(geometry, args.sigma)
+        RadialPhantom::tooth(geometry, sigma(args))
     };
     let mut vol = progress.step("generating", || ph.volume());
     add_noise(&mut vol, args)?;
@@ -99,7 +108,7 @@ fn multifield(
     truth: &Truth,
     progress: &Progress,
 ) -> Result<()> {
-    let ph = MultiFieldPhantom::new(geometry, args.sigma);
+    let ph = MultiFieldPhantom::new(geometry, sigma(args));
     let mut mf = progress.step("generating", || ph.volume());
     if truth.dir.is_some() {
         // Truth belongs to the noise-free fields' ranges.
@@ -114,6 +123,28 @@ fn multifield(
         f.data = v.data;
     }
     progress.step("writing", || write(&args.output, &mf, opts, &[])).context("cannot write the output")?;
+    Ok(())
+}
+
+/// The head CT: the scan as a scanner stores it (no analytic truth fields:
+/// its truth is the table of tissues in `mdtf synth --help`).
+fn ct_head(args: &SynthArgs, geometry: Geometry, opts: &WriteOptions, progress: &Progress) -> Result<()> {
+    if args.truth.is_some() {
+        bail!("ct-head has no --truth fields: its tissues and boundaries are listed in `mdtf synth --help`");
+    }
+    let mut head = CtHead::new(geometry);
+    head.sigma = sigma(args);
+    head.noise = args.noise.unwrap_or(head.noise);
+    if !(head.noise.is_finite() && head.noise >= 0.0) {
+        bail!("--noise must be a non-negative standard deviation, got {}", head.noise);
+    }
+    head.seed = args.seed;
+    let vol = progress.step("generating", || head.scan());
+    if args.out_type != OutType::F32 {
+        bail!("ct-head is written as int16, as scanners store CT: leave out --type");
+    }
+    let opts = WriteOptions { ty: SampleType::I16, ..*opts };
+    progress.step("writing", || write_volume(&args.output, &vol, &opts, &[])).context("cannot write the output")?;
     Ok(())
 }
 
