@@ -1500,10 +1500,12 @@ fn run_plan_prints_the_steps_and_the_halo_and_writes_nothing() {
     let text = mdtf_ok(&["run", pipeline.to_str().unwrap(), "--plan", "-o", out.to_str().unwrap()]);
     for line in [
         "2 derive           reads v -> g f2 nx ny nz [g, f2, normal]",
-        "3 boundary         reads g f2 nx ny nz -> g_hit hit distance dot; frees f2",
+        "3 prefilter        reads g f2 [exact bilateral: 343 taps per voxel on each of g and f''",
+        "4 boundary         reads g f2 nx ny nz -> g_hit hit distance dot; frees f2",
         "median of g (the noise floor: g_min, g_hit_min) -> boundary",
-        // the shipped phantom: 1 mm voxels, central4 (2) + d_max 15 + 2 for g's tricubic at the hit
-        "halo of a block: x 19, y 19, z 19 voxels",
+        // the shipped phantom: 1 mm voxels, gauss:1 (4) + the bilateral's box (3) + d_max 15 + 2 for g's
+        // tricubic at the hit
+        "halo of a block: x 24, y 24, z 24 voxels",
     ] {
         assert!(text.contains(line), "missing {line:?} in:\n{text}");
     }
@@ -1636,7 +1638,7 @@ fn print_settings_shows_every_default_and_is_itself_a_pipeline_file() {
     assert!(!out.exists());
     let table: toml::Table = toml::from_str(&printed).unwrap();
     assert_eq!(table["boundary"]["tolerance"].as_float(), Some(0.25));
-    assert_eq!(table["derive"]["kernel"].as_str(), Some("central4"));
+    assert_eq!(table["derive"]["kernel"].as_str(), Some("gauss:1"));
     assert_eq!(table["input"]["file"].as_str(), missing.to_str());
     assert_eq!(table["pack"]["profile"].as_str(), Some("distance-tf"));
     assert!(table.get("tetra").is_none() && table["input"].get("phantom").is_none(), "{printed}");

@@ -14,7 +14,11 @@ const SIZE: usize = 40;
 
 /// Runs `name`.toml at SIZE^3 and returns (its parsed file, the pack folder, the manifest).
 fn run(name: &str, dir: &Path) -> (Pipeline, PathBuf, Value) {
-    let file = shipped_pipeline(name);
+    run_file(&shipped_pipeline(name), name, dir)
+}
+
+/// [`run`] of the pipeline file `file`, into `dir/name`.
+fn run_file(file: &Path, name: &str, dir: &Path) -> (Pipeline, PathBuf, Value) {
     let size = format!("input.size={SIZE}");
     let pipeline = parse(&std::fs::read_to_string(&file).unwrap(), std::slice::from_ref(&size)).unwrap();
     let out = dir.join(name);
@@ -134,7 +138,14 @@ fn slicer_3dtf_pack_decodes_to_the_analytic_sphere() {
 #[test]
 fn distance_tf_pack_decodes_to_the_analytic_distance_and_hit_gradient() {
     let dir = tempfile::tempdir().unwrap();
-    let (p, pack, m) = run("distance-tf", dir.path());
+    // the clean-data settings the README gives (no pre-filter, central4): the truth is the
+    // unsmoothed sphere's
+    let text = std::fs::read_to_string(shipped_pipeline("distance-tf")).unwrap();
+    let clean = text.replace("[prefilter]\nsigma_d = 1.0\nsigma_r = 0.1\n", "").replace("\"gauss:1\"", "\"central4\"");
+    let file = dir.path().join("distance-tf-clean.toml");
+    std::fs::write(&file, clean).unwrap();
+    let (p, pack, m) = run_file(&file, "distance-tf", dir.path());
+    assert!(p.prefilter.is_none() && p.derive.kernel == Some(mdtf_derive::Kernel::Central4));
     let ph = sphere(&p);
     let truth: Vec<_> = positions(&geometry()).into_iter().map(|x| ph.at(x)).collect();
     let peak_g = truth.iter().map(|t| t.g).fold(0.0, f64::max);

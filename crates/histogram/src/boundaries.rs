@@ -16,30 +16,44 @@
 //!    the pair is fitted: over [`ARCH_SAMPLES`] values at t from
 //!    [`ARCH_T`].0 to [`ARCH_T`].1 (the arch's ends sink into the
 //!    materials' noise), the share of the voxels above the pair's noise
-//!    floor (twice the larger of the two materials' noise g) whose g lies
+//!    floor (twice the larger of the two materials' noise g, or, within
+//!    [`STILL_SPREADS`] spreads of a material's value, twice its: those
+//!    are its still voxels, not a crossing arch's) whose g lies
 //!    within a factor [`ARCH_BAND`] of the arch's, times the share of those
 //!    values whose band holds at least a tenth of the median band's voxels
 //!    (an arch must run the whole way, not borrow one stretch of another),
 //!    is its confidence; G is the one of the most confidence, searched on a
 //!    geometric grid from the floor to the top of the g axis;
 //! 3. a pair is a boundary when its confidence is at least
-//!    [`MIN_CONFIDENCE`], G is at least [`MIN_PEAK_OVER_NOISE`] times the
+//!    [`MIN_CONFIDENCE`], its sigma is at least [`MIN_SIGMA_SPACINGS`]
+//!    voxel spacings (a narrower arch is the flank of a wider one), G is
+//!    at least [`MIN_PEAK_OVER_NOISE`] times the
 //!    geometric mean of its materials' noise g (it stands out of the noise
 //!    of both: a textured material beside a still one, like an engine's
 //!    cast metal beside its inserts, has the larger noise of the two) and
 //!    its core (the band within half a sigma of its centre, [`CORE_T`])
 //!    holds at least [`MIN_CORE_SHARE`] of the voxels;
-//! 4. boundaries are taken one at a time, the most confident first; the
-//!    voxels on a taken arch are removed from the histogram before the
-//!    pairs are fitted again, so that a weak arch crossed by a strong one is
-//!    judged on the voxels the strong one does not explain; a pair is one
-//!    boundary at most, and a pair whose
-//!    arch runs within a factor [`ARCH_BAND`] of a taken one over half or
-//!    more of the values they share is that one again, and not taken;
+//! 4. boundaries are taken one at a time, the most confident first, unless
+//!    a pair enclosing it (one material shared, the other farther) runs
+//!    within [`ARCH_BAND`] of it over its core and on past it
+//!    ([`runs_past`]): then that one (the arch of a material lying under
+//!    another arch, like a head holder's under the skin-to-bone arch, fits
+//!    that arch's top as well as the whole arch does). The voxels on a
+//!    taken arch are removed from the histogram before the pairs are
+//!    fitted again, so that a weak arch crossed by a strong one is judged
+//!    on the voxels the strong one does not explain; a pair is one
+//!    boundary at most; a pair whose arch peaks and runs within a factor
+//!    [`ARCH_BAND`] of a taken one over half or more of the values they
+//!    share is that one again, and not taken; and a pair that, fitted on
+//!    the whole histogram, is a taken arch's stretch in the sense above is
+//!    what the removal left of that arch, and not taken;
 //! 5. at most [`MAX_BOUNDARIES`] are taken, then listed strongest (most
 //!    voxels in the core) first;
-//! 6. a boundary meets the background when one of its materials lies within
-//!    a quarter of its span of the value most voxels hold.
+//! 6. a boundary meets the background when one of its materials is the
+//!    surround: the material nearest the value most voxels hold, or, while
+//!    no boundary has that one as a side, its neighbour in value with more
+//!    still voxels (a scanner's padding meets the air inside its field of
+//!    view along a hard edge, with no arch).
 //!
 //! Pure noise and a smooth field have one dip or none and no arch: nothing
 //! is found.
@@ -66,8 +80,20 @@ pub const MIN_CONFIDENCE: f64 = 0.4;
 pub const MIN_PEAK_OVER_NOISE: f64 = 4.0;
 /// Least share of all voxels on a boundary's arch.
 pub const MIN_CORE_SHARE: f64 = 1e-4;
+/// Least sigma of a boundary, in voxel spacings: a sampled edge, however
+/// sharp, spreads over a voxel, so a kernel that interpolates (weights at
+/// most 1) measures at most its step per spacing, a sigma of at least
+/// spacing / sqrt(2 pi). A narrower arch is the flank of a wider one.
+pub const MIN_SIGMA_SPACINGS: f64 = 0.398_942_280_401_432_7;
 /// Most boundaries reported (the default TFs' distinct colours).
 pub const MAX_BOUNDARIES: usize = 6;
+/// Spreads around a material's value within which its still voxels (g up to
+/// twice its noise g) are its own and not on any arch that crosses it.
+pub const STILL_SPREADS: f64 = 2.0;
+/// The end of an arch (t from its material) where its g sinks into noise.
+const FOOT_T: f64 = 0.05;
+/// Values sampled where an enclosing arch must run on ([`runs_past`]).
+const PAST_SAMPLES: usize = 8;
 /// Columns on each side of a sampled value whose voxels count with its own.
 const COLUMN_REACH: usize = 2;
 /// Candidate peak gradients tried per pair of materials.
@@ -99,9 +125,8 @@ pub struct DetectedBoundary {
     /// How sure the detection is, 0 to 1: the share of the voxels above the
     /// floor along its arch that the arch explains (see the module docs).
     pub confidence: f64,
-    /// One of its two materials is the background, the value held by the
-    /// most voxels (see [`background_value`]): the surface a ray from
-    /// outside meets first.
+    /// One of its two materials is the surround (rule 6 of the module docs):
+    /// the surface a ray from outside meets first.
     pub meets_background: bool,
 }
 
@@ -116,6 +141,35 @@ impl DetectedBoundary {
             colour,
             collapsed: false,
         }
+    }
+
+    /// Voxels of a (v, g) histogram `hist` (first axis v, second g, any
+    /// bins) on this boundary's core, as [`DetectedBoundary::core_voxels`]
+    /// counts them: bins whose centre v lies within [`CORE_T`] of its span
+    /// and whose centre g lies within a factor [`ARCH_BAND`] of the arch's
+    /// there (at the core's end beyond it), above the floor. 0 for a
+    /// histogram of other than two axes.
+    pub fn core_count(&self, hist: &crate::Histogram) -> u64 {
+        let [av, ag] = match hist.axes.as_slice() {
+            [av, ag] => [av, ag],
+            _ => return 0,
+        };
+        let span = self.v_high - self.v_low;
+        let mut n = 0u64;
+        for i in 0..av.bins {
+            let t = (av.centre(i) - self.v_low) / span;
+            if !(CORE_T.0..=CORE_T.1).contains(&t) {
+                continue;
+            }
+            let g_arch = self.g_peak * arch_shape(t);
+            for j in 0..ag.bins {
+                let g = ag.centre(j);
+                if g >= self.g_floor && g >= g_arch / ARCH_BAND && g <= g_arch * ARCH_BAND {
+                    n += hist.counts[j * av.bins + i] as u64;
+                }
+            }
+        }
+        n
     }
 
     /// The arch's g at value `v` (None outside the open span).
@@ -140,30 +194,80 @@ pub fn detect_boundaries(hv: &HistogramVolume) -> Vec<DetectedBoundary> {
 
 /// The materials and boundaries of `hv`; see the module docs.
 pub fn detect(hv: &HistogramVolume) -> Detection {
-    detect_in(&hv.count_vg, &hv.vg_axes, background_value(hv))
+    let min_sigma = hv.spacing.map_or(0.0, |s| MIN_SIGMA_SPACINGS * s);
+    detect_in(&hv.count_vg, &hv.vg_axes, min_sigma)
 }
 
-/// [`detect`] over (v, g) counts (v fastest) with the background value given.
-pub fn detect_in(count_vg: &[u64], axes: &[Axis; 2], background: f64) -> Detection {
+/// [`detect`] over (v, g) counts (v fastest), reporting no boundary
+/// narrower than `min_sigma` (world units).
+pub fn detect_in(count_vg: &[u64], axes: &[Axis; 2], min_sigma: f64) -> Detection {
     let materials = find_materials(count_vg, axes);
+
     let mut counts = count_vg.to_vec();
     let total = count_vg.iter().sum::<u64>() as f64;
+    let whole = Columns::new(count_vg, axes, &materials);
     let mut kept: Vec<DetectedBoundary> = Vec::new();
+    // pairs found to be a stretch of a kept boundary's arch
+    let mut refused: Vec<(f64, f64)> = Vec::new();
     while kept.len() < MAX_BOUNDARIES {
-        let columns = Columns::new(&counts, axes);
-        let best = materials
+        let columns = Columns::new(&counts, axes, &materials);
+        let candidates: Vec<DetectedBoundary> = materials
             .iter()
             .enumerate()
             .flat_map(|(a, low)| materials[a + 1..].iter().map(move |high| (low, high)))
-            .filter(|(low, high)| !kept.iter().any(|k| k.v_low == low.value && k.v_high == high.value))
-            .filter_map(|(low, high)| fit_pair(&columns, low, high, background))
+            .filter(|(low, high)| {
+                let taken = |k: &(f64, f64)| *k == (low.value, high.value);
+                !kept.iter().map(|k| (k.v_low, k.v_high)).any(|k| taken(&k)) && !refused.iter().any(taken)
+            })
+            .filter_map(|(low, high)| fit_pair(&columns, low, high).filter(|b| b.sigma >= min_sigma))
             .filter(|b| b.core_voxels as f64 >= MIN_CORE_SHARE * total && !kept.iter().any(|k| same_voxels(k, b)))
+            .collect();
+        let most_confident = candidates
+            .iter()
             .max_by(|a, b| a.confidence.total_cmp(&b.confidence).then(b.v_centre.total_cmp(&a.v_centre)));
-        let Some(best) = best else { break };
+        let Some(most_confident) = most_confident else { break };
+        // a pair nested in another sharing one material, on the same voxels, is
+        // the top of the outer arch when the outer arch runs on past it
+        let best = candidates
+            .iter()
+            .filter(|outer| encloses(outer, most_confident) && runs_past(&columns, outer, most_confident, &candidates))
+            .max_by(|a, b| a.confidence.total_cmp(&b.confidence))
+            .unwrap_or(most_confident)
+            .clone();
         explain_away(&mut counts, axes, &best);
+        // what the arches taken before leave of an arch can be the rim of one
+        // of theirs: fitted on the whole histogram, such a pair is a stretch
+        // of a kept arch that runs on past it, and no boundary of its own
+        let material = |v: f64| materials.iter().find(|m| m.value == v);
+        let on_whole = match (kept.is_empty(), material(best.v_low), material(best.v_high)) {
+            (false, Some(low), Some(high)) => fit_pair(&whole, low, high),
+            _ => None,
+        };
+        let stretch = on_whole.as_ref().is_some_and(|arch| {
+            kept.iter().any(|k| {
+                let others: Vec<DetectedBoundary> = kept.iter().filter(|o| !std::ptr::eq(*o, k)).cloned().collect();
+                encloses(k, arch) && runs_past(&whole, k, arch, &others)
+            })
+        });
+        if stretch {
+            refused.push((best.v_low, best.v_high));
+            continue;
+        }
+        // an arch under a taken one's band keeps only its rim in what is left
+        // (a head holder's under the skin's): its peak is the whole
+        // histogram's where that fits it at least as surely
+        let mut best = best;
+        if let Some(arch) = on_whole.filter(|a| a.confidence >= best.confidence && a.sigma >= min_sigma) {
+            (best.g_peak, best.sigma) = (arch.g_peak, arch.sigma);
+        }
         kept.push(best);
     }
     kept.sort_by(|a, b| b.core_voxels.cmp(&a.core_voxels).then(a.v_centre.total_cmp(&b.v_centre)));
+    if let Some(surround) = surround_material(&materials, mode_value(count_vg, axes), &kept) {
+        for b in &mut kept {
+            b.meets_background = b.v_low == surround || b.v_high == surround;
+        }
+    }
     Detection { materials, boundaries: kept }
 }
 
@@ -191,10 +295,14 @@ struct Columns<'a> {
     axes: &'a [Axis; 2],
     /// cum[j * nv + i]: voxels of column i in g bins below j (j = 0..=ng).
     cum: Vec<u64>,
+    /// still[i]: the g below which column i's voxels are a material's still
+    /// voxels: twice the noise g of the materials within
+    /// [`STILL_SPREADS`] spreads of its value (0 where none is).
+    still: Vec<f64>,
 }
 
 impl<'a> Columns<'a> {
-    fn new(count_vg: &[u64], axes: &'a [Axis; 2]) -> Self {
+    fn new(count_vg: &[u64], axes: &'a [Axis; 2], materials: &[Material]) -> Self {
         let (nv, ng) = (axes[0].bins, axes[1].bins);
         let mut cum = vec![0u64; (ng + 1) * nv];
         for j in 0..ng {
@@ -202,7 +310,16 @@ impl<'a> Columns<'a> {
                 cum[(j + 1) * nv + i] = cum[j * nv + i] + count_vg.get(j * nv + i).copied().unwrap_or(0);
             }
         }
-        Columns { axes, cum }
+        let still = (0..nv)
+            .map(|i| {
+                let v = axes[0].centre(i);
+                materials
+                    .iter()
+                    .filter(|m| (v - m.value).abs() <= STILL_SPREADS * m.spread)
+                    .fold(0.0, |a: f64, m| a.max(2.0 * m.noise_g))
+            })
+            .collect();
+        Columns { axes, cum, still }
     }
 
     /// The column of value `v` (None outside the v axis).
@@ -220,6 +337,12 @@ impl<'a> Columns<'a> {
             return None;
         }
         (0..ag.bins).find(|&j| self.mass(i, lo, ag.min + (j + 1) as f64 * ag.width()) >= half).map(|j| ag.centre(j))
+    }
+
+    /// Voxels of column `i` in g bin `j`.
+    fn in_bin(&self, i: usize, j: usize) -> u64 {
+        let nv = self.axes[0].bins;
+        self.cum[(j + 1) * nv + i] - self.cum[j * nv + i]
     }
 
     /// Voxels of column `i` alone with g in [lo, hi).
@@ -248,22 +371,23 @@ impl<'a> Columns<'a> {
 
 /// The arch between two materials at its most confident G, or None when it
 /// is not a boundary by rules 2 and 3 of the module docs (the voxel share is the caller's).
-fn fit_pair(columns: &Columns, low: &Material, high: &Material, background: f64) -> Option<DetectedBoundary> {
+fn fit_pair(columns: &Columns, low: &Material, high: &Material) -> Option<DetectedBoundary> {
     let ag = &columns.axes[1];
     let floor = 2.0 * low.noise_g.max(high.noise_g).max(ag.width());
     // the arch must stand out of the noise of the two materials together
     let noise = (low.noise_g * high.noise_g).sqrt().max(ag.width());
     let span = high.value - low.value;
-    let samples: Vec<(usize, f64)> = (0..ARCH_SAMPLES)
+    // (column, arch shape, the column's floor: the pair's, or a material's still voxels' there)
+    let samples: Vec<(usize, f64, f64)> = (0..ARCH_SAMPLES)
         .filter_map(|k| {
             let t = ARCH_T.0 + (ARCH_T.1 - ARCH_T.0) * k as f64 / (ARCH_SAMPLES - 1) as f64;
-            columns.column(low.value + span * t).map(|i| (i, arch_shape(t)))
+            columns.column(low.value + span * t).map(|i| (i, arch_shape(t), floor.max(columns.still[i])))
         })
         .collect();
     if samples.len() < ARCH_SAMPLES / 2 || span.is_nan() || span <= 0.0 {
         return None;
     }
-    let above: u64 = samples.iter().map(|&(i, _)| columns.mass(i, floor, f64::INFINITY)).sum();
+    let above: u64 = samples.iter().map(|&(i, _, floor)| columns.mass(i, floor, f64::INFINITY)).sum();
     if above == 0 {
         return None;
     }
@@ -275,7 +399,7 @@ fn fit_pair(columns: &Columns, low: &Material, high: &Material, background: f64)
     let mut best: Option<(f64, f64)> = None;
     for step in 0..G_STEPS {
         let g_peak = g_lo * (g_hi / g_lo).powf(step as f64 / (G_STEPS - 1) as f64);
-        for (n, &(i, shape)) in band.iter_mut().zip(&samples) {
+        for (n, &(i, shape, floor)) in band.iter_mut().zip(&samples) {
             let g = g_peak * shape;
             *n = columns.mass(i, (g / ARCH_BAND).max(floor), g * ARCH_BAND);
         }
@@ -289,7 +413,7 @@ fn fit_pair(columns: &Columns, low: &Material, high: &Material, background: f64)
     // over the sampled values of the median g in the band over the arch's shape
     let mut ratios: Vec<f64> = samples
         .iter()
-        .filter_map(|&(i, shape)| {
+        .filter_map(|&(i, shape, floor)| {
             let g = g_coarse * shape;
             columns.median_g(i, (g / ARCH_BAND).max(floor), g * ARCH_BAND).map(|m| m / shape)
         })
@@ -311,7 +435,6 @@ fn fit_pair(columns: &Columns, low: &Material, high: &Material, background: f64)
             .sum(),
         _ => 0,
     };
-    let near = |v: f64| (v - background).abs() <= 0.25 * span;
     Some(DetectedBoundary {
         v_low: low.value,
         v_low_spread: low.spread,
@@ -323,7 +446,7 @@ fn fit_pair(columns: &Columns, low: &Material, high: &Material, background: f64)
         core_voxels,
         g_floor: floor,
         confidence,
-        meets_background: near(low.value) || near(high.value),
+        meets_background: false,
     })
 }
 
@@ -339,11 +462,87 @@ fn coverage(band: &[u64]) -> f64 {
     band.iter().filter(|&&n| n * 10 >= median).count() as f64 / band.len() as f64
 }
 
-/// Whether two arches run within a factor [`ARCH_BAND`] of each other over
-/// half or more of the values they share (16 values across the overlap).
+/// Whether `outer` spans `inner` and more, with one material in common,
+/// and `inner`'s arch runs within a factor [`ARCH_BAND`] of `outer`'s over
+/// its core ([`CORE_T`]): `inner` may be a stretch of `outer`.
+fn encloses(outer: &DetectedBoundary, inner: &DetectedBoundary) -> bool {
+    let shares = (outer.v_low == inner.v_low) != (outer.v_high == inner.v_high);
+    if !(shares && outer.v_low <= inner.v_low && outer.v_high >= inner.v_high) {
+        return false;
+    }
+    (0..8).all(|k| {
+        let t = CORE_T.0 + (CORE_T.1 - CORE_T.0) * k as f64 / 7.0;
+        let v = inner.v_low + (inner.v_high - inner.v_low) * t;
+        match (outer.g_at(v), inner.g_at(v)) {
+            (Some(x), Some(y)) if x > 0.0 && y > 0.0 => (x / y).ln().abs() <= ARCH_BAND.ln(),
+            _ => false,
+        }
+    })
+}
+
+/// Whether the arch of `outer` runs on where `inner`'s cannot: over the
+/// values between the material `inner` does not share and `outer`'s own
+/// (leaving out [`STILL_SPREADS`] spreads around each and the outer arch's
+/// last [`FOOT_T`] at its end), the voxels within its band and on no other
+/// candidate's that crosses it (one running on the same voxels,
+/// [`same_voxels`], is the same arch) outnumber those above its band in at
+/// least half of [`PAST_SAMPLES`] columns. The head holder
+/// (250 HU) lies under the skin-to-bone arch (40 to 1400 HU): the holder's
+/// arch to bone fits that arch's top; below 250 HU the skin's arch runs
+/// on, the holder's would end.
+fn runs_past(
+    columns: &Columns,
+    outer: &DetectedBoundary,
+    inner: &DetectedBoundary,
+    others: &[DetectedBoundary],
+) -> bool {
+    let span = outer.v_high - outer.v_low;
+    let (from, to) = if outer.v_low == inner.v_low {
+        (
+            inner.v_high + STILL_SPREADS * inner.v_high_spread,
+            outer.v_high - (FOOT_T * span).max(STILL_SPREADS * outer.v_high_spread),
+        )
+    } else {
+        (
+            outer.v_low + (FOOT_T * span).max(STILL_SPREADS * outer.v_low_spread),
+            inner.v_low - STILL_SPREADS * inner.v_low_spread,
+        )
+    };
+    if to <= from {
+        return false;
+    }
+    let on_arch = (0..PAST_SAMPLES)
+        .filter(|k| {
+            let v = from + (to - from) * (*k as f64 + 0.5) / PAST_SAMPLES as f64;
+            let (Some(i), Some(g)) = (columns.column(v), outer.g_at(v)) else { return false };
+            let floor = outer.g_floor.max(columns.still[i]);
+            // the voxels of the band on no other candidate's arch (arches cross here)
+            let crossing: Vec<f64> = others
+                .iter()
+                .filter(|o| !std::ptr::eq(*o, outer) && !std::ptr::eq(*o, inner) && !same_voxels(o, outer))
+                .filter_map(|o| o.g_at(v))
+                .collect();
+            let ag = &columns.axes[1];
+            let own = |j: usize| {
+                let x = ag.centre(j);
+                x >= floor.max(g / ARCH_BAND)
+                    && x < g * ARCH_BAND
+                    && !crossing.iter().any(|&c| x >= c / ARCH_BAND && x < c * ARCH_BAND)
+            };
+            let band: u64 = (0..ag.bins).filter(|&j| own(j)).map(|j| columns.in_bin(i, j)).sum();
+            band > 0 && band >= columns.mass_of_one(i, (g * ARCH_BAND).max(floor), f64::INFINITY)
+        })
+        .count();
+    2 * on_arch >= PAST_SAMPLES
+}
+
+/// Whether two arches peak within a factor [`ARCH_BAND`] of each other and
+/// run so over half or more of the values they share (16 values across the
+/// overlap). Arches of different peaks sharing a material converge towards
+/// it: they are not the same arch.
 fn same_voxels(a: &DetectedBoundary, b: &DetectedBoundary) -> bool {
     let (lo, hi) = (a.v_low.max(b.v_low), a.v_high.min(b.v_high));
-    if hi <= lo {
+    if hi <= lo || (a.g_peak / b.g_peak).ln().abs() > ARCH_BAND.ln() {
         return false;
     }
     let close = (0..16)
@@ -412,7 +611,43 @@ pub fn fallback_boundary(hv: &HistogramVolume) -> Option<DetectedBoundary> {
 /// around a CT, the dark surround of an MRI or a micrograph, the ambient
 /// value of a simulation; inside a cropped scan, its commonest tissue).
 pub fn background_value(hv: &HistogramVolume) -> f64 {
-    let [av, _] = &hv.vg_axes;
-    let mode = hv.count_v.iter().enumerate().max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(&a.0))).map_or(0, |(i, _)| i);
+    mode_value(&hv.count_vg, &hv.vg_axes)
+}
+
+/// The centre of the v bin holding the most voxels of `count_vg` (v fastest).
+fn mode_value(count_vg: &[u64], axes: &[Axis; 2]) -> f64 {
+    let [av, ag] = axes;
+    let nv = av.bins;
+    let column = |i: usize| (0..ag.bins).map(|j| count_vg.get(j * nv + i).copied().unwrap_or(0)).sum::<u64>();
+    let mode = (0..nv).map(|i| (i, column(i))).max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0))).map_or(0, |(i, _)| i);
     av.centre(mode)
+}
+
+/// The value of the surround's material (rule 6 of the module docs): the
+/// material nearest `background`; while none of the `boundaries` has it as
+/// one side, its neighbour in value holding more still voxels (a scanner's
+/// padding, the commonest value, meets the air inside its field of view
+/// along a hard edge with no arch; the air is what the head meets).
+fn surround_material(materials: &[Material], background: f64, boundaries: &[DetectedBoundary]) -> Option<f64> {
+    let nearest = |a: &&Material, b: &&Material| (a.value - background).abs().total_cmp(&(b.value - background).abs());
+    let mut at = materials.iter().enumerate().min_by(|a, b| nearest(&a.1, &b.1))?.0;
+    let touched = |m: &Material| boundaries.iter().any(|b| b.v_low == m.value || b.v_high == m.value);
+    let mut step: Option<isize> = None;
+    while !touched(&materials[at]) {
+        let side = |d: isize| at.checked_add_signed(d).filter(|&k| k < materials.len());
+        let next = match step {
+            Some(d) => side(d),
+            None => {
+                let pick = [-1, 1]
+                    .into_iter()
+                    .filter_map(|d| side(d).map(|k| (d, k)))
+                    .max_by_key(|&(_, k)| materials[k].still_voxels);
+                step = pick.map(|(d, _)| d);
+                pick.map(|(_, k)| k)
+            }
+        };
+        let Some(next) = next else { break };
+        at = next;
+    }
+    Some(materials[at].value)
 }

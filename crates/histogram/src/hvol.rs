@@ -36,11 +36,22 @@ pub struct HvolParams {
     pub tent_width: Option<f64>,
     /// Opacity at p = 0.
     pub max_opacity: f64,
+    /// The smallest voxel spacing of the grid, world units (None: unknown):
+    /// the boundary detection reports no boundary narrower than the
+    /// sampling can show (see [`crate::boundaries::MIN_SIGMA_SPACINGS`]).
+    pub spacing: Option<f64>,
 }
 
 impl Default for HvolParams {
     fn default() -> Self {
-        HvolParams { bins: [256, 256, 256], g_thresh: None, tent_width: None, max_opacity: 1.0 }
+        HvolParams { bins: [256, 256, 256], g_thresh: None, tent_width: None, max_opacity: 1.0, spacing: None }
+    }
+}
+
+impl HvolParams {
+    /// The defaults for a grid of voxel `spacing` (world units per axis).
+    pub fn on_grid(spacing: [f64; 3]) -> Self {
+        HvolParams { spacing: Some(spacing.into_iter().fold(f64::INFINITY, f64::min)), ..Self::default() }
     }
 }
 
@@ -71,6 +82,8 @@ pub struct HistogramVolume {
     pub position: Vec<f32>,
     /// Default opacity alpha(v, g) in [0, 1].
     pub opacity: Vec<f32>,
+    /// The smallest voxel spacing, world units ([`HvolParams::spacing`]).
+    pub spacing: Option<f64>,
 }
 
 /// Least share of the voxels a v bin must hold for its mean g and f'' to
@@ -412,6 +425,7 @@ fn derive_tables(
         count_vg: sums.c_vg,
         position,
         opacity,
+        spacing: params.spacing,
     })
 }
 

@@ -30,8 +30,10 @@
 //!    spread their standard deviation about it (both in input units), its
 //!    noise g the dip's median g;
 //! 6. two neighbouring dips between which the median g never rises to
-//!    [`MIN_DEPTH`] times the larger one's are one material (a noisy
-//!    plateau dips more than once): the deeper one.
+//!    [`MIN_DEPTH`] times the larger one's, and no column is empty, are one
+//!    material (a noisy plateau dips more than once): the deeper one (values
+//!    with no voxels between them part two materials, like a scanner's
+//!    padding and the air inside its field of view).
 //!
 //! The median g of a column is robust to the tail of strong boundaries
 //! that cross it, and needs no noise model: CT noise, MRI's Rician noise and
@@ -191,7 +193,8 @@ fn merge_unseparated(dips: Vec<(usize, Material)>, median: &[Option<f64>]) -> Ve
     for (i, m) in dips {
         if let Some((k, last)) = kept.last_mut() {
             let between = median[*k..=i].iter().flatten().fold(0.0, |a: f64, &b| a.max(b));
-            if between < MIN_DEPTH * last.noise_g.max(m.noise_g) {
+            let gap = median[*k..=i].iter().any(Option::is_none);
+            if !gap && between < MIN_DEPTH * last.noise_g.max(m.noise_g) {
                 if (m.noise_g, std::cmp::Reverse(m.still_voxels)) < (last.noise_g, std::cmp::Reverse(last.still_voxels))
                 {
                     (*k, *last) = (i, m);

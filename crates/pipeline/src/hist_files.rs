@@ -31,6 +31,36 @@ pub const NO_BOUNDARY_WARNING: &str = "detection: no boundary found in the (v, g
      percentile of v) at opacity 0.5. To do better: a smoothing kernel for noisy data (--set derive.kernel=gauss:1.5), \
      or your own TF (--set pack.tf=my-tf.json; widgets over the (v, g) histogram figure)";
 
+/// Least share of a boundary's core voxels the tracing must keep (hit) before
+/// [`tracing_losses`] warns.
+pub const TRACED_MIN_SHARE: f64 = 0.5;
+
+/// One warning per boundary of `boundaries` fewer than [`TRACED_MIN_SHARE`]
+/// of whose core voxels (in the (v, g) histogram `all`) the tracing kept
+/// (in `traced`, the histogram of the voxels with a hit): on a noisy scan
+/// f'' crosses zero at noise, and the crossings' g fall below g_hit_min.
+pub fn tracing_losses(boundaries: &[DetectedBoundary], all: &Histogram, traced: &Histogram) -> Vec<String> {
+    boundaries
+        .iter()
+        .filter_map(|b| {
+            let (n, kept) = (b.core_count(all), b.core_count(traced));
+            let share = kept as f64 / n.max(1) as f64;
+            (n > 0 && share < TRACED_MIN_SHARE).then(|| {
+                format!(
+                    "tracing: the boundary {:.4} | {:.4} (peak g {:.4}) kept {:.1} % of the {n} voxels on its arch: \
+                     the others found no zero crossing of f'' or one with g below boundary.g_hit_min, so distance \
+                     and g_hit miss them. Pre-filter g and f'' ([prefilter], as the shipped distance-tf does) \
+                     with a smoothing kernel (derive.kernel = \"gauss:1\"), or lower boundary.g_hit_min",
+                    b.v_low,
+                    b.v_high,
+                    b.g_peak,
+                    100.0 * share
+                )
+            })
+        })
+        .collect()
+}
+
 /// What the files written leave for the later steps.
 #[derive(Default)]
 pub struct Written {
@@ -47,16 +77,30 @@ pub struct Written {
 }
 
 /// Writes the files of `c` into `hdir` (the output folder's `histogram/`),
-/// titled by `input_name`; a warning for voxels outside the (v, g) histogram.
-pub fn write(hdir: &Path, c: Counted, input_name: &str, warnings: &mut Vec<String>) -> Result<Written, String> {
+/// titled by `input_name`, with the boundaries found in its histogram
+/// volume, else in `default_hvol` (the default TF's, not an output); a
+/// warning for voxels outside the (v, g) histogram, and one for each
+/// boundary the tracing kept too few voxels of (see [`tracing_losses`]).
+pub fn write(
+    hdir: &Path,
+    c: Counted,
+    default_hvol: Option<&HistogramVolume>,
+    input_name: &str,
+    warnings: &mut Vec<String>,
+) -> Result<Written, String> {
     let err = |e: mdtf_volume::VolumeError| e.to_string();
     let mut w = Written::default();
-    if let Some(hv) = c.hvol {
-        w.boundaries = mdtf_histogram::detect_boundaries(&hv);
+    if let Some(hv) = c.hvol.as_ref().or(default_hvol) {
+        w.boundaries = mdtf_histogram::detect_boundaries(hv);
         if w.boundaries.is_empty() {
             warnings.push(NO_BOUNDARY_WARNING.into());
         }
         w.arches = crate::figures::boundary_arches(&w.boundaries);
+    }
+    if let (Some(all), Some((traced, _))) = (&c.joint, &c.stretched) {
+        warnings.extend(tracing_losses(&w.boundaries, all, traced));
+    }
+    if let Some(hv) = c.hvol {
         write_hvol(hdir, &hv, input_name, &w.arches).map_err(err)?;
         w.outputs.push("histogram/opacity.png".into());
         // the pack needs only the 2D opacity: free the 3D counts (64 MiB at 256^3) now

@@ -21,16 +21,17 @@ fn hvol_or_computed<'a>(
 ) -> Result<std::borrow::Cow<'a, HistogramVolume>, crate::error::StageError> {
     Ok(match hvol {
         Some(h) => std::borrow::Cow::Borrowed(h),
-        None => {
-            let input = mdtf_volume::MultiField::from(v.clone());
-            let derive = mdtf_derive::DeriveParams { kernel, ..Default::default() };
-            std::borrow::Cow::Owned(crate::hvol_streamed::histogram_volume_derived(
-                &input,
-                &derive,
-                &HvolParams::default(),
-            )?)
-        }
+        None => std::borrow::Cow::Owned(hvol_of(v, kernel)?),
     })
+}
+
+/// The histogram volume of the value volume `v`, its g and f'' derived
+/// with `kernel` slice by slice (the default TFs' source when the run has
+/// no f'' left).
+pub(crate) fn hvol_of(v: &Volume, kernel: mdtf_derive::Kernel) -> Result<HistogramVolume, crate::error::StageError> {
+    let input = mdtf_volume::MultiField::from(v.clone());
+    let derive = mdtf_derive::DeriveParams { kernel, ..Default::default() };
+    crate::hvol_streamed::histogram_volume_derived(&input, &derive, &HvolParams::on_grid(v.geometry.spacing))
 }
 
 /// The arches of the boundaries found in the histogram volume of the value
@@ -185,7 +186,7 @@ pub fn luts(
                             g.samples(),
                             f2.samples(),
                             v.plane_len(),
-                            &HvolParams::default(),
+                            &HvolParams::on_grid(v.geometry.spacing),
                         )?;
                         &computed
                     }

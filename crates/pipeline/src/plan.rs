@@ -459,6 +459,13 @@ impl fmt::Display for Plan {
             match s.step {
                 Step::Derive => line += &format!(" [{}]", item_names(&self.derive)),
                 Step::DeriveFields => line += &format!(" [{}]", item_names(&self.derive_fields)),
+                Step::Prefilter => {
+                    let taps: usize = self.reach.prefilter.iter().map(|r| 2 * r + 1).product();
+                    line += &format!(
+                        " [exact bilateral: {taps} taps per voxel on each of g and f'', often the costliest step; \
+                         drop [prefilter] on clean data]"
+                    );
+                }
                 _ => {}
             }
             writeln!(f, "{}", line.trim_end())?;
@@ -509,9 +516,9 @@ mod tests {
 
         let distance = shipped("distance-tf", &[]);
         assert_eq!(distance.derive, [Item::G, Item::F2, Item::Normal]);
-        assert!(distance.trace && !distance.prefilter && !distance.defer_normals);
-        // central4's 2 voxels + d_max 15 voxels + 2 for g's tricubic at the hit
-        assert_eq!(distance.halo, [19; 3]);
+        assert!(distance.trace && distance.prefilter && !distance.defer_normals);
+        // gauss:1's 4 voxels + the bilateral's box of 3 + d_max 15 voxels + 2 for g's tricubic at the hit
+        assert_eq!(distance.halo, [24; 3]);
         // f'' is read by the tracing alone: freed after it; g by the histogram too
         assert_eq!(distance.freed_after(Step::Trace), [Channel::F2]);
         assert_eq!(distance.last_reader(Channel::G), Some(Step::Histogram));
@@ -575,5 +582,7 @@ mod tests {
         // pre-filter box ceil(2.5 x 2 / s): 5, 5, 3; rays of 15 mm: 15 + 2, 15 + 2, 8 + 2
         assert_eq!((plan.reach.prefilter, plan.halo), ([5, 5, 3], [2 + 5 + 17, 2 + 5 + 17, 2 + 3 + 10]));
         assert!(plan.to_string().contains("halo of a block: x 24, y 24, z 15 voxels"), "{plan}");
+        // its cost: a box of 11 x 11 x 7 taps
+        assert!(plan.to_string().contains("exact bilateral: 847 taps per voxel"), "{plan}");
     }
 }

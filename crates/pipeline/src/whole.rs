@@ -253,8 +253,15 @@ impl<'a> WholeRun<'a> {
         let hdir = self.dir.join("histogram");
         std::fs::create_dir_all(&hdir).map_err(at("histogram"))?;
         let err = |e: String| fail("histogram")(e);
-        let counted = self.count(h)?;
-        let mut hists = crate::hist_files::write(&hdir, counted, &self.input_name, &mut self.warnings).map_err(err)?;
+        let mut counted = self.count(h)?;
+        // the default TF's histogram volume is an output only when the histograms ask for it
+        let default_hvol = if h.hvol { None } else { counted.hvol.take() };
+        let mut hists =
+            crate::hist_files::write(&hdir, counted, default_hvol.as_ref(), &self.input_name, &mut self.warnings)
+                .map_err(err)?;
+        if default_hvol.is_some() {
+            hists.hvol = default_hvol;
+        }
         let mut field_pair_hists = Vec::new();
         if h.joint && !self.plan.fields.is_empty() {
             let (written, pairs) =
@@ -277,13 +284,20 @@ impl<'a> WholeRun<'a> {
             |name: &str, data: &Volume| AxisSpec::qbert(name).resolve(name, data.samples()).map_err(at("histogram"));
         let axes: Vec<Axis> = vec![axis("v", v)?, axis("g", g)?];
         let mut counted = Counted { voxels: self.voxels(), ..Default::default() };
-        if h.hvol
-            && let Some(f2) = get("f2")
-        {
-            counted.hvol = Some(
-                histogram_volume(v.samples(), g.samples(), f2.samples(), v.plane_len(), &HvolParams::default())
-                    .map_err(at("histogram"))?,
-            );
+        // asked for, or read by the default TF (no TF file given); once the
+        // tracing has freed f'', of v derived again, as the pack would
+        if h.hvol || self.p.pack.tf.is_none() {
+            counted.hvol = Some(match get("f2") {
+                Some(f2) => histogram_volume(
+                    v.samples(),
+                    g.samples(),
+                    f2.samples(),
+                    v.plane_len(),
+                    &HvolParams::on_grid(v.geometry.spacing),
+                )
+                .map_err(at("histogram"))?,
+                None => crate::pack_inputs::hvol_of(v, self.kernel).map_err(at("histogram"))?,
+            });
         }
         if h.joint {
             counted.joint = Some(count(&[v.samples(), g.samples()], axes.clone(), None).map_err(at("histogram"))?);

@@ -116,7 +116,19 @@ fn shipped(name: &str, sets: &[&str]) -> Pipeline {
     parse(&text, &sets).unwrap()
 }
 
-/// A budget that gives distance-tf on 64 x 64 planes slabs of 8 planes (8 slabs of 64) when its
+/// The shipped distance-tf as the README advises for clean data: without its
+/// pre-filter, derived with central4.
+fn distance_tf_for_clean_data(sets: &[&str]) -> Pipeline {
+    let text = std::fs::read_to_string(pipelines_dir().join("distance-tf.toml")).unwrap();
+    let text = text.replace("[prefilter]\nsigma_d = 1.0\nsigma_r = 0.1\n", "");
+    let mut sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+    sets.push("derive.kernel=\"central4\"".into());
+    let p = parse(&text, &sets).unwrap();
+    assert!(p.prefilter.is_none(), "the shipped pre-filter section changed");
+    p
+}
+
+/// A budget that gives the clean-data distance-tf on 64 x 64 planes slabs of 8 planes (8 slabs of 64) when its
 /// tracing reads whole planes: the fixed costs (48 MiB, 88 MiB for the histogram volume) and 402
 /// planes, of which the tracing needs 17 per slab plane (7 arrays over the block, and 10 outputs:
 /// two blocks' five) and 7 x (2 x 17 + 2 x 2) = 266 for its halo.
@@ -143,7 +155,7 @@ fn the_shipped_pipelines_give_the_same_files_slab_by_slab() {
 
 #[test]
 fn the_budget_sets_the_slab_height_and_a_budget_too_small_is_refused_before_any_output() {
-    let p = shipped("distance-tf", &["input.size=64"]);
+    let p = distance_tf_for_clean_data(&["input.size=64"]);
     let geo = Geometry::new([64; 3], [1.0; 3]);
     let plan = mdtf_pipeline::plan::Plan::resolve(&p, &[], &geo).unwrap();
     let h = mdtf_pipeline::blocks::slab_height(EIGHT_SLAB_BUDGET, &geo, &plan, true).unwrap();
@@ -340,7 +352,7 @@ fn runs_whose_passes_go_to_tasks_give_the_same_files() {
         let ran = tasks.ran.lock().unwrap().clone();
         let passes: Vec<&str> = ran.iter().map(|(p, _)| p.as_str()).collect();
         let traced = name == "distance-tf";
-        assert_eq!(passes, if traced { vec!["Derive", "Trace"] } else { vec!["Derive"] }, "{name}");
+        assert_eq!(passes, if traced { vec!["Derive", "Prefilter", "Trace"] } else { vec!["Derive"] }, "{name}");
         assert!(ran.iter().all(|(_, n)| *n == 48usize.div_ceil(7) + 1), "{name}: {ran:?}");
     }
     // the pre-filter's pass too, on an anisotropic noisy file read by planes
@@ -400,7 +412,7 @@ fn every_derivative_channel_and_dot_are_kept_right_and_the_same_slab_by_slab() {
     let keep = ["v", "value", "g", "f2", "nx", "ny", "nz", "gx", "gy", "gz", "hxx", "hxy", "hxz", "hyy", "hyz"];
     let keep: Vec<String> = keep.iter().chain(&["hzz", "laplacian", "dot", "hit"]).map(|s| s.to_string()).collect();
     let keep_set = format!("keep={keep:?}");
-    let p = shipped("distance-tf", &["input.size=40", "input.sigma=2.0", &keep_set, "preview=false"]);
+    let p = distance_tf_for_clean_data(&["input.size=40", "input.sigma=2.0", &keep_set, "preview=false"]);
     let dir = tempfile::tempdir().unwrap();
     let opts = RunOptions {
         pipeline_path: pipelines_dir().join("distance-tf.toml"),

@@ -172,7 +172,11 @@ impl Counting<'_> {
     /// and f'' derived slice by slice and counted as they come, never stored whole.
     fn histogram_volume(&self, input: &MultiField, progress: &Progress) -> Result<()> {
         let args = self.args;
-        let p = HvolParams { g_thresh: args.g_thresh, tent_width: args.tent_width, ..HvolParams::default() };
+        let p = HvolParams {
+            g_thresh: args.g_thresh,
+            tent_width: args.tent_width,
+            ..HvolParams::on_grid(input.geometry.spacing)
+        };
         let kernel = args.kernel.unwrap_or(mdtf_pipeline::stages::derive::DEFAULT_KERNEL);
         let d = DeriveParams { kernel, ..DeriveParams::default() };
         let value;

@@ -244,7 +244,7 @@ fn run_slabs(
         value_range: run.finite_range(),
         boundary: traced.boundary,
         boundaries,
-        hvol_built: run.hvol_asked,
+        hvol_built: run.detected(),
         slabs: Some(crate::report::SlabRun {
             planes: run.height,
             count: run.slabs.len(),

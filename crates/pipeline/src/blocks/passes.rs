@@ -46,7 +46,7 @@ pub(super) struct SlabPasses<'a> {
     /// How the tracing pass cuts the volume.
     pub(super) trace_blocks: TraceBlocks,
     /// The histograms ask for the histogram volume.
-    pub(super) hvol_asked: bool,
+    hvol_asked: bool,
     /// The histogram volume is counted: asked for, or the default TF's source.
     hvol_needed: bool,
     tf: Option<TfFile>,
@@ -83,6 +83,12 @@ impl Derived {
 }
 
 impl<'a> SlabPasses<'a> {
+    /// Whether the histogram step looks for boundaries: it runs, and the
+    /// histogram volume is counted (asked for, or for the default TF).
+    pub(super) fn detected(&self) -> bool {
+        self.hvol_needed && self.p.histogram.is_some()
+    }
+
     /// The input pass: opens the input, plans the run and sizes its slabs
     /// (`size`), and copies the value slab by slab into a channel store in
     /// `dir`, taking its statistics. Without `packs` the run stops after its
@@ -537,15 +543,16 @@ impl<'a> SlabPasses<'a> {
     /// the histogram volume the default TF reads.
     fn write_histograms(&mut self, h: SlabHistograms) -> Result<Written, RunError> {
         let t = Instant::now();
-        let mut counted = h.finish()?;
+        let mut counted = h.finish(self.geo.spacing)?;
         // the default TF's histogram volume is an output only when the histograms ask for it
         let default_hvol = if self.hvol_asked { None } else { counted.hvol.take() };
         let mut hists = Written::default();
         if self.p.histogram.is_some() {
             let hdir = self.dir.join("histogram");
             std::fs::create_dir_all(&hdir).map_err(io("histogram"))?;
-            hists = crate::hist_files::write(&hdir, counted, &self.input_name, &mut self.warnings)
-                .map_err(fail("histogram"))?;
+            hists =
+                crate::hist_files::write(&hdir, counted, default_hvol.as_ref(), &self.input_name, &mut self.warnings)
+                    .map_err(fail("histogram"))?;
             self.stages.done("histogram", t, self.geo.voxel_count(), hists.outputs.clone());
         }
         if default_hvol.is_some() {

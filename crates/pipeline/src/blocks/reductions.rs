@@ -190,11 +190,11 @@ impl SlabHistograms {
         Ok(())
     }
 
-    /// The histograms of every slab added.
-    pub(super) fn finish(self) -> Result<Counted, RunError> {
+    /// The histograms of every slab added, of a grid of voxel `spacing`.
+    pub(super) fn finish(self, spacing: [f64; 3]) -> Result<Counted, RunError> {
         let mut counted = self.counted;
         if let Some(acc) = self.hvol {
-            counted.hvol = Some(acc.finish(&HvolParams::default()).map_err(at("histogram"))?);
+            counted.hvol = Some(acc.finish(&HvolParams::on_grid(spacing)).map_err(at("histogram"))?);
         }
         if let (Some(a), Some(b)) = self.stretched_pair {
             counted.stretched = Some((a, b));
