@@ -20,7 +20,7 @@ fn run(name: &str, dir: &Path) -> (Pipeline, PathBuf, Value) {
 /// [`run`] of the pipeline file `file`, into `dir/name`.
 fn run_file(file: &Path, name: &str, dir: &Path) -> (Pipeline, PathBuf, Value) {
     let size = format!("input.size={SIZE}");
-    let pipeline = parse(&std::fs::read_to_string(&file).unwrap(), std::slice::from_ref(&size)).unwrap();
+    let pipeline = parse(&std::fs::read_to_string(file).unwrap(), std::slice::from_ref(&size)).unwrap();
     let out = dir.join(name);
     mdtf_ok(&["run", file.to_str().unwrap(), "-o", out.to_str().unwrap(), "--set", &size, "-q"]);
     let pack = out.join("pack");

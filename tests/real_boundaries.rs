@@ -216,7 +216,7 @@ fn traced_shell(noise: f64, set: &[&str]) -> (f64, Vec<String>) {
 fn names_the_lost_sphere(warnings: &[String]) -> bool {
     warnings.iter().any(|w| {
         let Some(rest) = w.strip_prefix("tracing: the boundary ") else { return false };
-        let mut values = rest.split(|c: char| c == '|' || c == '(').map(|s| s.trim().parse::<f64>());
+        let mut values = rest.split(['|', '(']).map(|s| s.trim().parse::<f64>());
         matches!((values.next(), values.next()), (Some(Ok(lo)), Some(Ok(hi))) if lo.abs() < 25.5 && (hi - 255.0).abs() < 25.5)
     })
 }
