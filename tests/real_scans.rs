@@ -5,7 +5,7 @@
 //! pixels lit) and its (v, g) figure, within the figure size limit.
 
 use mdtf_e2e::{mdtf_ok, read_rgb_png, real_scan, run_python, shipped_pipeline};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The pipelines that run on any volume (every shipped one).
 const PIPELINES: [&str; 5] = ["slicer-3dtf", "distance-tf", "peak-finding", "gaussian-tf", "projected-tetrahedra"];
@@ -25,6 +25,9 @@ fn run_shows_something(pipeline: &str, input: &Path, out: &Path) {
         .filter(|f| f.extension().is_some_and(|e| e == "png"))
         .collect();
     assert!(figures.iter().any(|f| f.ends_with("hist_v_g.png")), "{pipeline}: {figures:?}");
+    // the TF drawn over a histogram (a mesh's (s, g) TF has no figure yet)
+    let tf_figure = |f: &PathBuf| f.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with("tf_"));
+    assert!(pipeline == "projected-tetrahedra" || figures.iter().any(tf_figure), "{pipeline}: {figures:?}");
     for f in &figures {
         let (w, h, _) = read_rgb_png(f);
         assert!(w <= 1260 && h <= 1200, "{}: {w} x {h}", f.display());

@@ -120,8 +120,10 @@ const GAUSSIAN_FIGURE_CELLS: usize = 256;
 /// of `gaussians` over the pair's plane, the other fields at each
 /// primitive's centre, drawn over the counts (colour by each primitive's
 /// share of the extinction sum alpha_max rho, opacity 1 - exp(-sum)).
-/// Triangular primitives, which need the gradient, are left out. Returns
-/// the files written, relative to `dir`.
+/// Triangular primitives, which need the gradient, are left out. On scalar
+/// data (`fields` empty), `tf_gaussians_v_g.png` over the (v, g) histogram
+/// of `hists` instead, with every primitive (a triangular one widening with
+/// g). Returns the files written, relative to `dir`.
 pub fn write_gaussian_figures(
     dir: &Path,
     gaussians: &[mdtf_pack::GaussianPrimitive],
@@ -129,45 +131,73 @@ pub fn write_gaussian_figures(
     fields: &[String],
     title: &str,
 ) -> Result<Vec<String>, VolumeError> {
+    if fields.is_empty() {
+        let plane = hists.iter().find(|h| h.axes.len() == 2 && h.axes[0].name == "v" && h.axes[1].name == "g");
+        let scalar: Vec<&mdtf_pack::GaussianPrimitive> = gaussians.iter().filter(|g| g.fields() == 1).collect();
+        return match plane {
+            Some(h) if !scalar.is_empty() => {
+                // (v, g): a full Gaussian reads v alone, a triangular one v and g
+                let note = "the Gaussians' colour mixed in by the square root of their opacity relative to the \
+                            largest; a triangular one widens with g";
+                Ok(vec![gaussian_figure(dir, h, &scalar, title, note, |_, xv, yv| vec![xv, yv])?])
+            }
+            _ => Ok(Vec::new()),
+        };
+    }
     let full: Vec<&mdtf_pack::GaussianPrimitive> =
         gaussians.iter().filter(|g| !g.triangular && g.fields() == fields.len()).collect();
     let mut written = Vec::new();
     if full.is_empty() {
         return Ok(written);
     }
-    let n = GAUSSIAN_FIGURE_CELLS;
     for h in hists.iter().filter(|h| h.axes.len() == 2) {
         let index = |name: &str| fields.iter().position(|f| f == name);
         let (Some(a), Some(b)) = (index(&h.axes[0].name), index(&h.axes[1].name)) else { continue };
-        let (x, y) = (&h.axes[0], &h.axes[1]);
-        let centre = |axis: &Axis, i: usize| axis.min + (i as f64 + 0.5) * (axis.max - axis.min) / n as f64;
-        let mut rgba = vec![0f32; 4 * n * n];
-        let mut v = vec![0.0; fields.len()];
-        for (cell, out) in rgba.chunks_exact_mut(4).enumerate() {
-            let (xv, yv) = (centre(x, cell % n), centre(y, cell / n));
-            let (mut depth, mut colour) = (0.0, [0.0f64; 3]);
-            for g in &full {
-                v.copy_from_slice(&g.centre);
-                (v[a], v[b]) = (xv, yv);
-                let e = g.alpha_max * g.density(&v);
-                depth += e;
-                colour.iter_mut().zip(g.colour).for_each(|(c, gc)| *c += e * gc);
-            }
-            if depth > 0.0 {
-                out[..3].iter_mut().zip(colour).for_each(|(o, c)| *o = (c / depth) as f32);
-                out[3] = (1.0 - (-depth).exp()) as f32;
-            }
-        }
-        let mut labels = Labels::of(h, &format!("Gaussian TF over the ({}, {}) histogram of {title}", x.name, y.name));
-        labels.note = Some(
-            "the Gaussians' colour mixed in by the square root of their opacity relative to the largest; other \
-             fields at each Gaussian's centre"
-                .into(),
-        );
-        let overlay = Overlay { x: (x.min, x.max, n), y: (y.min, y.max, n), rgba: &rgba };
-        let file = format!("tf_gaussians_{}_{}.png", x.name, y.name);
-        write_overlay_figure(&dir.join(&file), h, Scale::Log, &labels, &overlay)?;
-        written.push(file);
+        let note = "the Gaussians' colour mixed in by the square root of their opacity relative to the largest; \
+                    other fields at each Gaussian's centre";
+        let at = |g: &mdtf_pack::GaussianPrimitive, xv: f64, yv: f64| {
+            let mut v = g.centre.clone();
+            (v[a], v[b]) = (xv, yv);
+            v
+        };
+        written.push(gaussian_figure(dir, h, &full, title, note, at)?);
     }
     Ok(written)
+}
+
+/// Draws the primitives `gs` over the 2D histogram `h` into
+/// `tf_gaussians_<x>_<y>.png` in `dir`: each evaluated at `at(primitive,
+/// x, y)` on a grid of [`GAUSSIAN_FIGURE_CELLS`] per axis, coloured by its
+/// share of the extinction sum alpha_max rho, opacity 1 - exp(-sum); the file's name.
+fn gaussian_figure(
+    dir: &Path,
+    h: &Histogram,
+    gs: &[&mdtf_pack::GaussianPrimitive],
+    title: &str,
+    note: &str,
+    at: impl Fn(&mdtf_pack::GaussianPrimitive, f64, f64) -> Vec<f64>,
+) -> Result<String, VolumeError> {
+    let n = GAUSSIAN_FIGURE_CELLS;
+    let (x, y) = (&h.axes[0], &h.axes[1]);
+    let centre = |axis: &Axis, i: usize| axis.min + (i as f64 + 0.5) * (axis.max - axis.min) / n as f64;
+    let mut rgba = vec![0f32; 4 * n * n];
+    for (cell, out) in rgba.chunks_exact_mut(4).enumerate() {
+        let (xv, yv) = (centre(x, cell % n), centre(y, cell / n));
+        let (mut depth, mut colour) = (0.0, [0.0f64; 3]);
+        for g in gs {
+            let e = g.alpha_max * g.density(&at(g, xv, yv));
+            depth += e;
+            colour.iter_mut().zip(g.colour).for_each(|(c, gc)| *c += e * gc);
+        }
+        if depth > 0.0 {
+            out[..3].iter_mut().zip(colour).for_each(|(o, c)| *o = (c / depth) as f32);
+            out[3] = (1.0 - (-depth).exp()) as f32;
+        }
+    }
+    let mut labels = Labels::of(h, &format!("Gaussian TF over the ({}, {}) histogram of {title}", x.name, y.name));
+    labels.note = Some(note.into());
+    let overlay = Overlay { x: (x.min, x.max, n), y: (y.min, y.max, n), rgba: &rgba };
+    let file = format!("tf_gaussians_{}_{}.png", x.name, y.name);
+    write_overlay_figure(&dir.join(&file), h, Scale::Log, &labels, &overlay)?;
+    Ok(file)
 }

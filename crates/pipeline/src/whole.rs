@@ -367,14 +367,11 @@ impl<'a> WholeRun<'a> {
             }
             if let Some(g) = &gaussians {
                 crate::gaussians::write(&pdir, g).map_err(at("pack"))?;
-                let written = crate::figures::write_gaussian_figures(
-                    &hdir,
-                    g,
-                    field_pair_hists,
-                    &self.plan.fields,
-                    &self.input_name,
-                )
-                .map_err(at("pack"))?;
+                // scalar data: over the (v, g) histogram; several fields: over their pairs'
+                let hists = if self.plan.fields.is_empty() { &figure_hists[..] } else { field_pair_hists };
+                let written =
+                    crate::figures::write_gaussian_figures(&hdir, g, hists, &self.plan.fields, &self.input_name)
+                        .map_err(at("pack"))?;
                 outputs.extend(written.into_iter().map(|f| format!("histogram/{f}")));
             }
         }

@@ -583,10 +583,15 @@ impl<'a> SlabPasses<'a> {
             .map_err(at("pack"))?;
         let provenance = crate::inputs::provenance(self.p, self.opts, &self.base, &self.input_name);
         writer.finish(&luts, provenance).map_err(at("pack"))?;
-        if profile == Profile::GaussianTf {
-            self.write_gaussians(chans, derived, hvol.as_ref())?;
-        }
         let mut outputs: Vec<String> = vec!["pack/manifest.json".into()];
+        if profile == Profile::GaussianTf {
+            let gaussians = self.write_gaussians(chans, derived, hvol.as_ref())?;
+            let hdir = self.dir.join("histogram");
+            let written =
+                crate::figures::write_gaussian_figures(&hdir, &gaussians, &figure_hists, &[], &self.input_name)
+                    .map_err(at("pack"))?;
+            outputs.extend(written.into_iter().map(|f| format!("histogram/{f}")));
+        }
         if !figure_hists.is_empty() {
             let hists: Vec<&Histogram> = figure_hists.iter().collect();
             let hdir = self.dir.join("histogram");
@@ -599,13 +604,14 @@ impl<'a> SlabPasses<'a> {
     }
 
     /// gaussian-tf's primitives: the TF file's, else a TGTF at each boundary
-    /// the histogram volume shows, else the paper's median default.
+    /// the histogram volume shows, else the paper's median default; written
+    /// into the pack and returned.
     fn write_gaussians(
         &self,
         chans: &mut SlabChannels,
         derived: &Derived,
         hvol: Option<&mdtf_histogram::HistogramVolume>,
-    ) -> Result<(), RunError> {
+    ) -> Result<Vec<mdtf_pack::GaussianPrimitive>, RunError> {
         let gaussians = match (self.tf.as_ref(), hvol) {
             (Some(tf), _) => tf.gaussians(),
             (None, Some(hv)) => {
@@ -619,7 +625,8 @@ impl<'a> SlabPasses<'a> {
             }
             (None, None) => return Err(fail("pack")("the default Gaussians need the histogram volume".into())),
         };
-        crate::gaussians::write(&self.dir.join("pack"), &gaussians).map_err(at("pack"))
+        crate::gaussians::write(&self.dir.join("pack"), &gaussians).map_err(at("pack"))?;
+        Ok(gaussians)
     }
 }
 
