@@ -1500,12 +1500,13 @@ fn run_plan_prints_the_steps_and_the_halo_and_writes_nothing() {
     let text = mdtf_ok(&["run", pipeline.to_str().unwrap(), "--plan", "-o", out.to_str().unwrap()]);
     for line in [
         "2 derive           reads v -> g f2 nx ny nz [g, f2, normal]",
-        "3 prefilter        reads g f2 [exact bilateral: 343 taps per voxel on each of g and f''",
+        // fast mode: the 19 neighbours within 1.5 voxels (1 + 6 + 12)
+        "3 prefilter        reads g f2 [bilateral: 19 taps per voxel on each of g and f''",
         "4 boundary         reads g f2 nx ny nz -> g_hit hit distance dot; frees f2",
         "median of g (the noise floor: g_min, g_hit_min) -> boundary",
-        // the shipped phantom: 1 mm voxels, gauss:1 (4) + the bilateral's box (3) + d_max 15 + 2 for g's
+        // the shipped phantom: 1 mm voxels, gauss:1 (4) + the fast bilateral (2) + d_max 15 + 2 for g's
         // tricubic at the hit
-        "halo of a block: x 24, y 24, z 24 voxels",
+        "halo of a block: x 23, y 23, z 23 voxels",
     ] {
         assert!(text.contains(line), "missing {line:?} in:\n{text}");
     }

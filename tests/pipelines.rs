@@ -141,7 +141,9 @@ fn distance_tf_pack_decodes_to_the_analytic_distance_and_hit_gradient() {
     // the clean-data settings the README gives (no pre-filter, central4): the truth is the
     // unsmoothed sphere's
     let text = std::fs::read_to_string(shipped_pipeline("distance-tf")).unwrap();
-    let clean = text.replace("[prefilter]\nsigma_d = 1.0\nsigma_r = 0.1\n", "").replace("\"gauss:1\"", "\"central4\"");
+    let clean = text
+        .replace("[prefilter]\nsigma_d = 1.0\nsigma_r = 0.1\nmode = \"fast\"\n", "")
+        .replace("\"gauss:1\"", "\"central4\"");
     let file = dir.path().join("distance-tf-clean.toml");
     std::fs::write(&file, clean).unwrap();
     let (p, pack, m) = run_file(&file, "distance-tf", dir.path());

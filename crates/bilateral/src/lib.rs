@@ -152,6 +152,12 @@ fn radius(spacing: [f64; 3], sigma_d: f64, k: f64, mode: Mode) -> ([usize; 3], f
 /// useful sigma_d, and a bound on the neighbour list's memory).
 const MAX_NEIGHBOURS: usize = 255 * 255 * 255;
 
+/// How many neighbours each voxel's sum reads on a grid of `spacing` (world
+/// units per axis) with `params`: the cost of the filter per voxel.
+pub fn taps(spacing: [f64; 3], params: &BilateralParams) -> usize {
+    neighbours(spacing, params.sigma_d, params.k, params.mode).1.len()
+}
+
 /// The neighbours each mode uses, in a fixed order (z, then y, then x).
 fn neighbours(spacing: [f64; 3], sigma_d: f64, k: f64, mode: Mode) -> ([usize; 3], Vec<Neighbour>) {
     let (radius, cut) = self::radius(spacing, sigma_d, k, mode);

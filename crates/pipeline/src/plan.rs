@@ -100,6 +100,8 @@ pub struct Plan {
     pub defer_normals: bool,
     /// Whether g and f'' are pre-filtered before the tracing.
     pub prefilter: bool,
+    /// Neighbours the pre-filter reads per voxel (0 without it): its cost.
+    pub prefilter_taps: usize,
     /// Whether the tracing runs.
     pub trace: bool,
     /// The steps in order.
@@ -233,11 +235,30 @@ impl Plan {
         let trace = traces(&wanted, multi);
         let (derive, derive_fields) = derive_items(&wanted, multi, trace, defer_normals);
         let prefilter = trace && how.prefilter.is_some();
+        let prefilter_taps = match (how.prefilter, prefilter) {
+            (Some(pf), true) => {
+                mdtf_bilateral::taps(geometry.spacing, &crate::boundary_chain::prefilter_params(pf, 1.0))
+            }
+            _ => 0,
+        };
         let steps = channel_steps(&fields, &derive, &derive_fields, defer_normals, prefilter, trace);
         let (reach, halo) = how.reach(&wanted, multi, prefilter, trace, geometry);
         let median_of_g = trace && how.boundary.g_min.is_none();
         let reductions = channel_reductions(&steps, median_of_g, prefilter, multi);
-        Plan { fields, wanted, derive, derive_fields, defer_normals, prefilter, trace, steps, reductions, reach, halo }
+        Plan {
+            fields,
+            wanted,
+            derive,
+            derive_fields,
+            defer_normals,
+            prefilter,
+            prefilter_taps,
+            trace,
+            steps,
+            reductions,
+            reach,
+            halo,
+        }
     }
 
     /// Whether some output reads the channel called `name`.
@@ -460,10 +481,10 @@ impl fmt::Display for Plan {
                 Step::Derive => line += &format!(" [{}]", item_names(&self.derive)),
                 Step::DeriveFields => line += &format!(" [{}]", item_names(&self.derive_fields)),
                 Step::Prefilter => {
-                    let taps: usize = self.reach.prefilter.iter().map(|r| 2 * r + 1).product();
                     line += &format!(
-                        " [exact bilateral: {taps} taps per voxel on each of g and f'', often the costliest step; \
-                         drop [prefilter] on clean data]"
+                        " [bilateral: {} taps per voxel on each of g and f'' (mode \"exact\": the whole box of \
+                         k sigma_d, the costliest step; \"fast\": within 1.5 sigma_d); drop [prefilter] on clean data]",
+                        self.prefilter_taps
                     );
                 }
                 _ => {}
@@ -517,8 +538,8 @@ mod tests {
         let distance = shipped("distance-tf", &[]);
         assert_eq!(distance.derive, [Item::G, Item::F2, Item::Normal]);
         assert!(distance.trace && distance.prefilter && !distance.defer_normals);
-        // gauss:1's 4 voxels + the bilateral's box of 3 + d_max 15 voxels + 2 for g's tricubic at the hit
-        assert_eq!(distance.halo, [24; 3]);
+        // gauss:1's 4 voxels + the fast bilateral's 2 (1.5 sigma_d) + d_max 15 voxels + 2 for g's tricubic at the hit
+        assert_eq!(distance.halo, [23; 3]);
         // f'' is read by the tracing alone: freed after it; g by the histogram too
         assert_eq!(distance.freed_after(Step::Trace), [Channel::F2]);
         assert_eq!(distance.last_reader(Channel::G), Some(Step::Histogram));
@@ -583,6 +604,6 @@ mod tests {
         assert_eq!((plan.reach.prefilter, plan.halo), ([5, 5, 3], [2 + 5 + 17, 2 + 5 + 17, 2 + 3 + 10]));
         assert!(plan.to_string().contains("halo of a block: x 24, y 24, z 15 voxels"), "{plan}");
         // its cost: a box of 11 x 11 x 7 taps
-        assert!(plan.to_string().contains("exact bilateral: 847 taps per voxel"), "{plan}");
+        assert!(plan.to_string().contains("bilateral: 847 taps per voxel"), "{plan}");
     }
 }

@@ -120,7 +120,7 @@ fn shipped(name: &str, sets: &[&str]) -> Pipeline {
 /// pre-filter, derived with central4.
 fn distance_tf_for_clean_data(sets: &[&str]) -> Pipeline {
     let text = std::fs::read_to_string(pipelines_dir().join("distance-tf.toml")).unwrap();
-    let text = text.replace("[prefilter]\nsigma_d = 1.0\nsigma_r = 0.1\n", "");
+    let text = text.replace("[prefilter]\nsigma_d = 1.0\nsigma_r = 0.1\nmode = \"fast\"\n", "");
     let mut sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
     sets.push("derive.kernel=\"central4\"".into());
     let p = parse(&text, &sets).unwrap();
