@@ -56,8 +56,11 @@ pub struct LostBoundary {
     pub share: f64,
 }
 
-/// The peaks of `h` in (floor, cut): local maxima over two bins on each
-/// side holding at least [`LOST_MIN_SHARE`] of the crossings.
+/// The peaks of `h` in (floor, cut): bins highest over the run of bins
+/// around them holding at least half their count (and over two bins on
+/// each side), whose bin and two on each side hold at least
+/// [`LOST_MIN_SHARE`] of the crossings. A noisy boundary's top splits into
+/// local maxima a few bins apart; the half-height run makes it one peak.
 pub(crate) fn lost_boundaries(h: &CrossingHistogram, floor: f64, cut: f64) -> Vec<LostBoundary> {
     let total: u64 = h.counts.iter().sum();
     if total == 0 {
@@ -65,6 +68,13 @@ pub(crate) fn lost_boundaries(h: &CrossingHistogram, floor: f64, cut: f64) -> Ve
     }
     let c = &h.counts;
     let window = |b: usize| b.saturating_sub(2)..(b + 3).min(BINS);
+    // the bins around b holding at least half of its count (and two on each side)
+    let half_run = |b: usize| {
+        let half = |o: &usize| 2 * c[*o] >= c[b];
+        let first = (0..b).rev().take_while(half).last().unwrap_or(b).min(window(b).start);
+        let last = (b + 1..BINS).take_while(half).last().unwrap_or(b).max(window(b).end - 1);
+        first..last + 1
+    };
     (0..BINS)
         .filter(|&b| {
             let centre = h.centre(b);
@@ -72,7 +82,7 @@ pub(crate) fn lost_boundaries(h: &CrossingHistogram, floor: f64, cut: f64) -> Ve
             centre > floor
                 && centre < cut
                 && c[b] > 0
-                && window(b).all(|o| o == b || (o < b && c[o] < c[b]) || (o > b && c[o] <= c[b]))
+                && half_run(b).all(|o| o == b || (o < b && c[o] < c[b]) || (o > b && c[o] <= c[b]))
         })
         .filter_map(|b| {
             let voxels: u64 = c[window(b)].iter().sum();
@@ -107,5 +117,22 @@ mod tests {
         // below the floor the noise's top is no boundary; above the cut nothing is lost
         assert!(lost_boundaries(&h, 10.0, 99.0).is_empty());
         assert!(lost_boundaries(&h, 1.0, 5.0).is_empty());
+    }
+
+    #[test]
+    fn a_noisy_peak_split_in_two_tops_is_one_boundary() {
+        // one boundary whose crossings' g spread over 95..106 with two tops 4 bins apart and a
+        // shallow dip between them (the split seen with g_hit_min above a noisy sphere's peak)
+        let mut h = CrossingHistogram::new(256.0);
+        let counts = [100, 300, 600, 800, 700, 650, 700, 820, 600, 300, 100];
+        for (k, n) in counts.iter().enumerate() {
+            for _ in 0..*n {
+                h.add(95.5 + k as f32);
+            }
+        }
+        let lost = lost_boundaries(&h, 10.0, 150.0);
+        assert_eq!(lost.len(), 1, "{lost:?}");
+        // the higher top
+        assert_eq!(lost[0].g_peak, 102.5);
     }
 }
