@@ -161,12 +161,9 @@ impl DetectedBoundary {
             if !(CORE_T.0..=CORE_T.1).contains(&t) {
                 continue;
             }
-            let g_arch = self.g_peak * arch_shape(t);
-            for j in 0..ag.bins {
-                let g = ag.centre(j);
-                if g >= self.g_floor && g >= g_arch / ARCH_BAND && g <= g_arch * ARCH_BAND {
-                    n += hist.counts[j * av.bins + i] as u64;
-                }
+            let (lo, hi) = core_band(self.g_peak, self.g_floor, t);
+            for j in (0..ag.bins).filter(|&j| (lo..=hi).contains(&ag.centre(j))) {
+                n += hist.counts[j * av.bins + i] as u64;
             }
         }
         n
@@ -202,7 +199,6 @@ pub fn detect(hv: &HistogramVolume) -> Detection {
 /// narrower than `min_sigma` (world units).
 pub fn detect_in(count_vg: &[u64], axes: &[Axis; 2], min_sigma: f64) -> Detection {
     let materials = find_materials(count_vg, axes);
-
     let mut counts = count_vg.to_vec();
     let total = count_vg.iter().sum::<u64>() as f64;
     let whole = Columns::new(count_vg, axes, &materials);
@@ -243,12 +239,9 @@ pub fn detect_in(count_vg: &[u64], axes: &[Axis; 2], min_sigma: f64) -> Detectio
             (false, Some(low), Some(high)) => fit_pair(&whole, low, high),
             _ => None,
         };
-        let stretch = on_whole.as_ref().is_some_and(|arch| {
-            kept.iter().any(|k| {
-                let others: Vec<DetectedBoundary> = kept.iter().filter(|o| !std::ptr::eq(*o, k)).cloned().collect();
-                encloses(k, arch) && runs_past(&whole, k, arch, &others)
-            })
-        });
+        let stretch = on_whole
+            .as_ref()
+            .is_some_and(|arch| kept.iter().any(|k| encloses(k, arch) && runs_past(&whole, k, arch, &kept)));
         if stretch {
             refused.push((best.v_low, best.v_high));
             continue;
@@ -429,8 +422,8 @@ fn fit_pair(columns: &Columns, low: &Material, high: &Material) -> Option<Detect
         (Some(first), Some(last)) => (first..=last)
             .map(|i| {
                 let t = (columns.axes[0].centre(i) - low.value) / span;
-                let g = g_peak * arch_shape(t.clamp(CORE_T.0, CORE_T.1));
-                columns.mass_of_one(i, (g / ARCH_BAND).max(floor), g * ARCH_BAND)
+                let (lo, hi) = core_band(g_peak, floor, t);
+                columns.mass_of_one(i, lo, hi)
             })
             .sum(),
         _ => 0,
@@ -460,6 +453,14 @@ fn coverage(band: &[u64]) -> f64 {
         return 0.0;
     }
     band.iter().filter(|&&n| n * 10 >= median).count() as f64 / band.len() as f64
+}
+
+/// The g range of an arch of peak `g_peak` and noise floor `floor` at `t`
+/// of its value span (clamped to its core, [`CORE_T`]): within a factor
+/// [`ARCH_BAND`] of the arch's g, above the floor.
+fn core_band(g_peak: f64, floor: f64, t: f64) -> (f64, f64) {
+    let g = g_peak * arch_shape(t.clamp(CORE_T.0, CORE_T.1));
+    ((g / ARCH_BAND).max(floor), g * ARCH_BAND)
 }
 
 /// Whether `outer` spans `inner` and more, with one material in common,
@@ -511,17 +512,18 @@ fn runs_past(
     if to <= from {
         return false;
     }
+    // the arches that cross the outer one (not itself, the inner one, or the same arch again)
+    let crossing_arches: Vec<&DetectedBoundary> = others
+        .iter()
+        .filter(|o| !std::ptr::eq(*o, outer) && !std::ptr::eq(*o, inner) && !same_voxels(o, outer))
+        .collect();
     let on_arch = (0..PAST_SAMPLES)
         .filter(|k| {
             let v = from + (to - from) * (*k as f64 + 0.5) / PAST_SAMPLES as f64;
             let (Some(i), Some(g)) = (columns.column(v), outer.g_at(v)) else { return false };
             let floor = outer.g_floor.max(columns.still[i]);
-            // the voxels of the band on no other candidate's arch (arches cross here)
-            let crossing: Vec<f64> = others
-                .iter()
-                .filter(|o| !std::ptr::eq(*o, outer) && !std::ptr::eq(*o, inner) && !same_voxels(o, outer))
-                .filter_map(|o| o.g_at(v))
-                .collect();
+            // the voxels of the band on no crossing arch's band
+            let crossing: Vec<f64> = crossing_arches.iter().filter_map(|o| o.g_at(v)).collect();
             let ag = &columns.axes[1];
             let own = |j: usize| {
                 let x = ag.centre(j);
