@@ -353,8 +353,18 @@ impl<'a> WholeRun<'a> {
         let mut outputs: Vec<String> = vec!["pack/manifest.json".into()];
         let hvol = hvol.as_ref();
         if profile == Profile::ProjectedTetrahedra {
-            self.pack_mesh(tf.as_ref(), hvol, provenance)?;
+            let gaussians = self.pack_mesh(tf.as_ref(), hvol, provenance)?;
             outputs.push("pack/gaussians.json".into());
+            // the (s, g) TF over the (v, g) histogram, as scalar gaussian-tf draws its own
+            let written = crate::figures::write_gaussian_figures(
+                &self.dir.join("histogram"),
+                &gaussians,
+                &figure_hists,
+                &[],
+                &self.input_name,
+            )
+            .map_err(at("pack"))?;
+            outputs.extend(written.into_iter().map(|f| format!("histogram/{f}")));
         } else {
             let (luts, gaussians) = self.pack_textures(tf.as_ref(), hvol, traced, provenance)?;
             table_names = luts.iter().map(|l| l.name.clone()).collect();
@@ -381,13 +391,14 @@ impl<'a> WholeRun<'a> {
 
     /// The mesh pack: the value tetrahedralised, its tables, and the (s, g)
     /// TF the preview draws and a renderer can start from: the TF file's
-    /// Gaussians, else a TGTF at each boundary found (as gaussian-tf's default).
+    /// Gaussians, else a TGTF at each boundary found (as gaussian-tf's
+    /// default). Returns that TF's primitives.
     fn pack_mesh(
         &mut self,
         tf: Option<&TfFile>,
         hvol: Option<&mdtf_histogram::HistogramVolume>,
         provenance: Provenance,
-    ) -> Result<(), RunError> {
+    ) -> Result<Vec<GaussianPrimitive>, RunError> {
         let pdir = self.dir.join("pack");
         let value = self.chans.get("v").ok_or_else(|| fail("pack")("no value volume".into()))?;
         let mesh = mdtf_tetra::tetrahedralise(value, self.p.tetra.tets, "v").map_err(at("pack"))?;
@@ -401,7 +412,8 @@ impl<'a> WholeRun<'a> {
         let tf_gaussians = tf.filter(|t| !t.gaussians().is_empty());
         let g = crate::gaussians::gaussians(tf_gaussians, None, &value_and_g, &["v".into()], "g", (hvol, self.kernel))
             .map_err(fail("pack"))?;
-        crate::gaussians::write(&pdir, &g).map_err(at("pack"))
+        crate::gaussians::write(&pdir, &g).map_err(at("pack"))?;
+        Ok(g)
     }
 
     /// The pack's textures and tables from the channels, which move into it
