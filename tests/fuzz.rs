@@ -229,6 +229,7 @@ impl Seeds {
             input: None,
             input_sha256: None,
             stages: serde_json::Value::Null,
+            ..Default::default()
         };
         std::fs::create_dir(dir.path().join("pk")).unwrap();
         mdtf_pack::pack(&chans, &pack, &luts, &dir.path().join("pk"), provenance, &Default::default()).unwrap();

@@ -29,8 +29,13 @@ fn slicer_3dtf_256(bencher: divan::Bencher) {
     let chans = sphere_channels(n);
     let dir = tempfile::tempdir().expect("tempdir");
     let params = PackParams::new(Profile::Slicer3dtf);
-    let prov =
-        Provenance { mdtf_version: "bench".into(), input: None, input_sha256: None, stages: serde_json::Value::Null };
+    let prov = Provenance {
+        mdtf_version: "bench".into(),
+        input: None,
+        input_sha256: None,
+        stages: serde_json::Value::Null,
+        ..Default::default()
+    };
     bencher
         .counter(ItemsCount::new(n * n * n))
         .bench(|| pack(&chans, &params, &[], dir.path(), prov.clone(), &BTreeMap::new()).map(|m| m.textures.len()));

@@ -228,3 +228,35 @@ pub fn sha256_file(path: &Path) -> std::io::Result<String> {
     }
     Ok(h.finalize().iter().map(|b| format!("{b:02x}")).collect())
 }
+
+/// SHA-256 of an input, hex: of the file, or, for a folder (a DICOM
+/// series, an OME-Zarr store), of its files' relative paths ('/'-separated)
+/// and SHA-256s, one `path sha256` line each in byte order of the paths,
+/// so that the same files give the same hash wherever the folder lies.
+pub fn sha256_path(path: &Path) -> std::io::Result<String> {
+    use sha2::Digest;
+    if !path.is_dir() {
+        return sha256_file(path);
+    }
+    let mut files = Vec::new();
+    let mut pending = vec![path.to_path_buf()];
+    while let Some(dir) = pending.pop() {
+        for entry in std::fs::read_dir(&dir)? {
+            let p = entry?.path();
+            if p.is_dir() {
+                pending.push(p);
+            } else {
+                let rel = p.strip_prefix(path).unwrap_or(&p);
+                let name: Vec<String> =
+                    rel.components().map(|c| c.as_os_str().to_string_lossy().into_owned()).collect();
+                files.push((name.join("/"), p));
+            }
+        }
+    }
+    files.sort();
+    let mut h = sha2::Sha256::new();
+    for (name, p) in &files {
+        h.update(format!("{name} {}\n", sha256_file(p)?));
+    }
+    Ok(h.finalize().iter().map(|b| format!("{b:02x}")).collect())
+}

@@ -72,15 +72,25 @@ pub struct ChannelEntry {
 }
 
 /// Provenance of the pack.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct Provenance {
     /// mdtf version that wrote the pack.
     pub mdtf_version: String,
-    /// Input file, as given.
+    /// Input file or folder, as given (None: a built-in phantom, named in `stages`).
     pub input: Option<String>,
-    /// SHA-256 of the input file, hex.
+    /// SHA-256 of the input, hex (of a folder: see [`crate::sha256_path`]).
     pub input_sha256: Option<String>,
-    /// Parameters of every stage that ran.
+    /// The input's format as read, e.g. "NIfTI", "DICOM", "OME-Zarr".
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input_format: Option<String>,
+    /// The input's grid, voxels (x, y, z).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input_dims: Option<[usize; 3]>,
+    /// The pipeline file the run followed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pipeline: Option<String>,
+    /// Parameters of every stage that ran (a run's pipeline with its
+    /// `--set` overrides; its `input` says what was read).
     pub stages: serde_json::Value,
 }
 
@@ -241,6 +251,9 @@ pub const MANIFEST_SCHEMA: &str = r##"{
         "mdtf_version": {"type": "string"},
         "input": {"type": ["string", "null"]},
         "input_sha256": {"type": ["string", "null"]},
+        "input_format": {"type": "string"},
+        "input_dims": {"type": "array", "items": {"type": "integer", "minimum": 1}, "minItems": 3, "maxItems": 3},
+        "pipeline": {"type": "string"},
         "stages": {"type": "object"}
       }}
   }

@@ -87,7 +87,13 @@ fn every_channel_decodes_within_half_a_step_from_the_manifest_alone() {
         (Profile::PeakFinding, five),
     ] {
         let dir = tempfile::tempdir().unwrap();
-        let prov = Provenance { mdtf_version: "test".into(), input: None, input_sha256: None, stages: Value::Null };
+        let prov = Provenance {
+            mdtf_version: "test".into(),
+            input: None,
+            input_sha256: None,
+            stages: Value::Null,
+            ..Default::default()
+        };
         let params = PackParams { fields: fields.clone(), ..PackParams::new(profile) };
         let m = pack(&chans, &params, &[], dir.path(), prov, &BTreeMap::new()).unwrap();
         if profile == Profile::GaussianTf {
@@ -127,7 +133,13 @@ fn every_dtype_decodes_within_half_a_step() {
     let chans = channels();
     for dtype in [Dtype::U8, Dtype::U16, Dtype::F16, Dtype::F32] {
         let dir = tempfile::tempdir().unwrap();
-        let prov = Provenance { mdtf_version: "test".into(), input: None, input_sha256: None, stages: Value::Null };
+        let prov = Provenance {
+            mdtf_version: "test".into(),
+            input: None,
+            input_sha256: None,
+            stages: Value::Null,
+            ..Default::default()
+        };
         let params = PackParams { dtype: Some(dtype), ..PackParams::new(Profile::Slicer3dtf) };
         let m = pack(&chans, &params, &[], dir.path(), prov, &BTreeMap::new()).unwrap();
         for name in ["v", "f2", "nx"] {
@@ -173,7 +185,13 @@ fn decode_any(dir: &Path, name: &str, dtype: Dtype) -> Vec<Vec<f64>> {
 fn missing_channels_are_named_with_their_stage() {
     let chans: Vec<(String, Volume)> = channels().into_iter().filter(|(c, _)| c != "g_hit" && c != "f2").collect();
     let dir = tempfile::tempdir().unwrap();
-    let prov = Provenance { mdtf_version: "t".into(), input: None, input_sha256: None, stages: Value::Null };
+    let prov = Provenance {
+        mdtf_version: "t".into(),
+        input: None,
+        input_sha256: None,
+        stages: Value::Null,
+        ..Default::default()
+    };
     let e = pack(&chans, &PackParams::new(Profile::DistanceTf), &[], dir.path(), prov.clone(), &BTreeMap::new())
         .unwrap_err()
         .to_string();
@@ -194,7 +212,13 @@ fn texture_by_texture_writing_equals_encoding_in_memory() {
     for profile in [Profile::Slicer3dtf, Profile::DistanceTf] {
         let params = PackParams::new(profile);
         let dir = tempfile::tempdir().unwrap();
-        let prov = Provenance { mdtf_version: "test".into(), input: None, input_sha256: None, stages: Value::Null };
+        let prov = Provenance {
+            mdtf_version: "test".into(),
+            input: None,
+            input_sha256: None,
+            stages: Value::Null,
+            ..Default::default()
+        };
         let manifest = pack(&chans, &params, &[], dir.path(), prov, &BTreeMap::new()).unwrap();
         let encoded = mdtf_pack::encode(&chans, &params, &BTreeMap::new()).unwrap();
         assert_eq!(manifest.textures.len(), encoded.textures.len(), "{profile}");

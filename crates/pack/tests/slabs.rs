@@ -56,6 +56,7 @@ fn a_texture_written_slab_by_slab_equals_the_whole_one() {
         input: None,
         input_sha256: None,
         stages: serde_json::Value::Null,
+        ..Default::default()
     };
     let whole_dir = tempfile::tempdir().unwrap();
     let mut w = PackWriter::new(whole_dir.path(), &params, geo.clone(), &sources);

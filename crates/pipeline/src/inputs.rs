@@ -47,13 +47,21 @@ pub fn resolved_settings(p: &Pipeline, opts: &RunOptions) -> Result<toml::Table,
     Ok(table)
 }
 
-/// The pack's provenance: mdtf's version, the input and its digest, the settings.
-pub(crate) fn provenance(p: &Pipeline, opts: &RunOptions, base: &Path, input_name: &str) -> Provenance {
+/// The pack's provenance: mdtf's version, the input (file or folder, its
+/// format, grid `dims` and digest; or the phantom), the pipeline file and
+/// the settings the run used ([`resolved_settings`]).
+pub(crate) fn provenance(p: &Pipeline, opts: &RunOptions, base: &Path, dims: [usize; 3]) -> Provenance {
+    let file = input_file(p, opts, base);
+    let stages =
+        resolved_settings(p, opts).ok().and_then(|t| serde_json::to_value(t).ok()).unwrap_or(serde_json::Value::Null);
     Provenance {
         mdtf_version: env!("CARGO_PKG_VERSION").into(),
-        input: Some(input_name.to_string()),
-        input_sha256: input_file(p, opts, base).and_then(|f| mdtf_pack::sha256_file(&f).ok()),
-        stages: serde_json::to_value(p).unwrap_or(serde_json::Value::Null),
+        input: file.as_ref().map(|f| f.display().to_string()),
+        input_sha256: file.as_ref().and_then(|f| mdtf_pack::sha256_path(f).ok()),
+        input_format: file.as_ref().and_then(|f| mdtf_volume::Format::of_input(f)).map(|f| f.name().to_string()),
+        input_dims: Some(dims),
+        pipeline: Some(opts.pipeline_path.display().to_string()),
+        stages,
     }
 }
 

@@ -104,6 +104,8 @@ pub struct PageInputs<'a> {
     pub settings: &'a str,
     /// The pack's manifest, when the run wrote a volume pack.
     pub manifest: Option<&'a Manifest>,
+    /// The pack's provenance (of a volume or a mesh pack).
+    pub provenance: Option<&'a mdtf_pack::Provenance>,
     /// The pack's Gaussian primitives (`gaussians.json`), when it has them.
     pub gaussians: Option<&'a [mdtf_pack::GaussianPrimitive]>,
     /// The figures, in order.
@@ -130,7 +132,7 @@ pub fn render(page: &PageInputs) -> String {
         esc(&r.output),
         r.total_seconds
     );
-    input_section(&mut h, r);
+    input_section(&mut h, r, page.provenance);
     warnings_section(&mut h, r);
     boundaries_section(&mut h, r);
     if let Some(g) = page.gaussians {
@@ -168,11 +170,17 @@ figure img{max-width:100%;border:1px solid #ddd}figcaption{font-size:.9rem;color
 pre{background:#f7f7f7;padding:.6rem;overflow-x:auto}.swatch{display:inline-block;width:1em;height:1em;\
 border:1px solid #888;vertical-align:middle}";
 
-fn input_section(h: &mut String, r: &RunReport) {
+fn input_section(h: &mut String, r: &RunReport, provenance: Option<&mdtf_pack::Provenance>) {
     let [nx, ny, nz] = r.dims;
     let [sx, sy, sz] = r.spacing;
     let _ = writeln!(h, "<h2>Input</h2>\n<table>");
     row(h, "file", &esc(&r.input));
+    if let Some(format) = provenance.and_then(|p| p.input_format.as_deref()) {
+        row(h, "format", &esc(format));
+    }
+    if let Some(sha) = provenance.and_then(|p| p.input_sha256.as_deref()) {
+        row(h, "SHA-256", &esc(sha));
+    }
     row(h, "grid", &format!("{nx} x {ny} x {nz} ({} voxels)", nx * ny * nz));
     row(h, "spacing", &format!("{sx} x {sy} x {sz} world units"));
     if !r.fields.is_empty() {

@@ -169,8 +169,12 @@ pub(crate) fn finish(
 /// settings, the pack's manifest (absent for mesh packs) and its Gaussians (gaussian-tf).
 fn write_report_page(report: &RunReport, dir: &Path) -> Result<(), String> {
     let settings = crate::file::to_toml(&report.settings)?;
-    let manifest: Option<mdtf_pack::Manifest> =
-        std::fs::read_to_string(dir.join("pack/manifest.json")).ok().and_then(|t| serde_json::from_str(&t).ok());
+    let manifest_text = std::fs::read_to_string(dir.join("pack/manifest.json")).ok();
+    let manifest: Option<mdtf_pack::Manifest> = manifest_text.as_ref().and_then(|t| serde_json::from_str(t).ok());
+    // a mesh pack's manifest is of its own schema, with the same provenance
+    let provenance: Option<mdtf_pack::Provenance> = manifest_text
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .and_then(|m| serde_json::from_value(m["provenance"].clone()).ok());
     let gaussians: Option<Vec<mdtf_pack::GaussianPrimitive>> =
         std::fs::read_to_string(dir.join("pack/gaussians.json")).ok().and_then(|t| serde_json::from_str(&t).ok());
     let figures = crate::report_page::figures_in(dir);
@@ -178,6 +182,7 @@ fn write_report_page(report: &RunReport, dir: &Path) -> Result<(), String> {
         report,
         settings: &settings,
         manifest: manifest.as_ref(),
+        provenance: provenance.as_ref(),
         gaussians: gaussians.as_deref(),
         figures: &figures,
     };

@@ -348,7 +348,7 @@ impl<'a> WholeRun<'a> {
         let tf = crate::inputs::read_tf(self.p, &self.base)?;
         let pdir = self.dir.join("pack");
         std::fs::create_dir_all(&pdir).map_err(at("pack"))?;
-        let provenance = crate::inputs::provenance(self.p, opts, &self.base, &self.input_name);
+        let provenance = crate::inputs::provenance(self.p, opts, &self.base, self.geo.dims);
         let mut table_names = Vec::new();
         let mut outputs: Vec<String> = vec!["pack/manifest.json".into()];
         let hvol = hvol.as_ref();

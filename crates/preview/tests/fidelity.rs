@@ -25,8 +25,13 @@ fn decoded_pack_renders_like_the_float_fields() {
     ))
     .unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let prov =
-        Provenance { mdtf_version: "t".into(), input: None, input_sha256: None, stages: serde_json::Value::Null };
+    let prov = Provenance {
+        mdtf_version: "t".into(),
+        input: None,
+        input_sha256: None,
+        stages: serde_json::Value::Null,
+        ..Default::default()
+    };
     let params = PackParams::new(Profile::Slicer3dtf);
     pack(&chans, &params, &tf.slicer_luts(), dir.path(), prov, &BTreeMap::new()).unwrap();
     let loaded = load(dir.path()).unwrap();
@@ -67,8 +72,13 @@ fn malformed_manifests_are_refused_not_a_panic() {
     )
     .unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let prov =
-        Provenance { mdtf_version: "t".into(), input: None, input_sha256: None, stages: serde_json::Value::Null };
+    let prov = Provenance {
+        mdtf_version: "t".into(),
+        input: None,
+        input_sha256: None,
+        stages: serde_json::Value::Null,
+        ..Default::default()
+    };
     pack(&chans, &PackParams::new(Profile::Slicer3dtf), &tf.slicer_luts(), dir.path(), prov, &BTreeMap::new()).unwrap();
     let path = dir.path().join("manifest.json");
     let good: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();

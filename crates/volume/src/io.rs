@@ -107,6 +107,33 @@ impl Format {
             Format::OmeZarr => ".ome.zarr",
         }
     }
+
+    /// The format's usual name, e.g. "NIfTI" or "OME-Zarr".
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::Nifti | Format::NiftiGz => "NIfTI",
+            Format::Nrrd | Format::Nhdr => "NRRD",
+            Format::Mha | Format::Mhd => "MetaImage",
+            Format::Tiff => "TIFF",
+            Format::Dicom => "DICOM",
+            Format::OmeZarr => "OME-Zarr",
+        }
+    }
+
+    /// The format [`read`] reads `path` as (None: none it reads): an
+    /// OME-Zarr store, a folder of DICOM or TIFF slices, a DICOM file list,
+    /// else by content, else by extension.
+    pub fn of_input(path: &Path) -> Option<Format> {
+        if crate::ome_zarr::is_store(path) {
+            Some(Format::OmeZarr)
+        } else if path.is_dir() {
+            Some(if crate::dicom::folder_is_dicom(path) { Format::Dicom } else { Format::Tiff })
+        } else if crate::dicom::is_list_name(path) {
+            Some(Format::Dicom)
+        } else {
+            Format::from_content(path).or_else(|| Format::from_path(path))
+        }
+    }
 }
 
 /// Reads any supported file (by content, else extension) as a multi-field volume.
@@ -116,23 +143,13 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
 
 /// [`read`], also returning how the file stores its samples.
 pub fn read_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiField, FileInfo)> {
-    if crate::ome_zarr::is_store(path) {
-        let image = crate::ome_zarr::ZarrImage::open(path, opts.level)?;
-        let mf = image.read(0..image.geometry().dims[2], opts.nan)?;
-        return Ok((mf, image.info().clone()));
-    }
-    if path.is_dir() {
-        // the folder formats: a DICOM series (or export) and TIFF slices
-        return if crate::dicom::folder_is_dicom(path) {
-            read_dicom_with_info(path, opts)
-        } else {
-            read_tiff_with_info(path, opts)
-        };
-    }
-    if crate::dicom::is_list_name(path) {
-        return read_dicom_with_info(path, opts);
-    }
-    match Format::from_content(path).or_else(|| Format::from_path(path)) {
+    let is_store = crate::ome_zarr::is_store(path);
+    match Format::of_input(path) {
+        Some(Format::OmeZarr) if is_store => {
+            let image = crate::ome_zarr::ZarrImage::open(path, opts.level)?;
+            let mf = image.read(0..image.geometry().dims[2], opts.nan)?;
+            Ok((mf, image.info().clone()))
+        }
         Some(Format::Nifti | Format::NiftiGz) => read_nifti_with_info(path, opts),
         Some(Format::Dicom) => read_dicom_with_info(path, opts),
         Some(Format::Nrrd | Format::Nhdr) => read_nrrd_with_info(path, opts),

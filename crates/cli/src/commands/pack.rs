@@ -8,7 +8,7 @@ use mdtf_pipeline::boundary_chain::BoundaryChainParams;
 use mdtf_pipeline::stages::boundary::AlphaMap;
 use mdtf_pipeline::stages::derive::Kernel;
 use mdtf_pipeline::stages::pack::{
-    Dtype, GaussianPrimitive, MANIFEST_SCHEMA, PackParams, Profile, Provenance, TfFile, pack, sha256_file,
+    Dtype, GaussianPrimitive, MANIFEST_SCHEMA, PackParams, Profile, Provenance, TfFile, pack, sha256_path,
 };
 use mdtf_pipeline::{channels, gaussians, pack_inputs};
 use mdtf_volume::{Inputs, OutputFolder, Volume};
@@ -110,14 +110,15 @@ fn given_ranges(args: &PackArgs) -> Result<BTreeMap<String, [f64; 2]>> {
     Ok(ranges)
 }
 
-/// The manifest's provenance: the input (with its checksum when a file), the profile, ranges and kernel.
+/// The manifest's provenance: the input (with its checksum), the profile, ranges and kernel.
 fn provenance(input: &Path, profile: Profile, ranges: &BTreeMap<String, [f64; 2]>, kernel: Kernel) -> Provenance {
     Provenance {
         mdtf_version: env!("CARGO_PKG_VERSION").into(),
         input: Some(input.display().to_string()),
-        input_sha256: if input.is_file() { sha256_file(input).ok() } else { None },
+        input_sha256: sha256_path(input).ok(),
         stages: serde_json::json!({ "pack": { "profile": profile.to_string(), "ranges": ranges },
             "derive": { "kernel": kernel.to_string() } }),
+        ..Default::default()
     }
 }
 

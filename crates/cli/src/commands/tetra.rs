@@ -35,6 +35,7 @@ pub fn run(args: &TetraArgs, progress: &Progress) -> Result<()> {
         input: Some(source.display().to_string()),
         input_sha256: sha256_file(&source).ok(),
         stages: serde_json::json!({ "tetra": params }),
+        ..Default::default()
     };
     progress.step("writing the pack", || write_pack(folder.path(), &mesh, &report, &out, grid.as_ref(), provenance))?;
     folder.publish(&inputs)?;

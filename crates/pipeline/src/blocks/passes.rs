@@ -581,7 +581,7 @@ impl<'a> SlabPasses<'a> {
         let tf = self.tf.as_ref();
         let luts = crate::pack_inputs::luts(profile, tf, &alpha, &stubs, &params.ranges, hvol.as_ref(), derived.kernel)
             .map_err(at("pack"))?;
-        let provenance = crate::inputs::provenance(self.p, self.opts, &self.base, &self.input_name);
+        let provenance = crate::inputs::provenance(self.p, self.opts, &self.base, self.geo.dims);
         writer.finish(&luts, provenance).map_err(at("pack"))?;
         let mut outputs: Vec<String> = vec!["pack/manifest.json".into()];
         if profile == Profile::GaussianTf {
