@@ -112,6 +112,7 @@ pub fn read_input(path: &Path, args: &InputArgs, opts: &ReadOptions) -> Result<(
         scale: None,
         warnings: Vec::new(),
         details: Vec::new(),
+        units: Default::default(),
     };
     Ok((MultiField::from(v), info))
 }

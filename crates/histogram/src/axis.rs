@@ -17,6 +17,9 @@ pub struct Axis {
     pub max: f64,
     /// Number of bins.
     pub bins: usize,
+    /// Unit of the channel's values, e.g. "HU/mm" for g (None: the input does not say).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
 }
 
 impl Axis {
@@ -39,7 +42,7 @@ impl Axis {
     /// in pieces): [0, 8 / g_b], None unless g_b > 0.
     pub fn inverse_gradient_at(g_b: f32, bins: usize) -> Option<Axis> {
         let g_b = g_b as f64;
-        (g_b > 0.0).then(|| Axis { name: "inv_g".into(), min: 0.0, max: 8.0 / g_b, bins })
+        (g_b > 0.0).then(|| Axis { name: "inv_g".into(), min: 0.0, max: 8.0 / g_b, bins, unit: None })
     }
 
     /// A checked axis.
@@ -56,7 +59,7 @@ impl Axis {
                 "axis {name}: range [{min}, {max}] is inverted, degenerate or not finite"
             )));
         }
-        Ok(Axis { name: name.to_string(), min, max, bins })
+        Ok(Axis { name: name.to_string(), min, max, bins, unit: None })
     }
 
     /// The bin of `v`, or None outside the range: floor((v - min) * (bins / (max - min))),

@@ -16,6 +16,14 @@ pub struct Histogram {
 }
 
 impl Histogram {
+    /// Gives each axis the unit of its channel in the input's `units`
+    /// ([`mdtf_volume::Units::of_channel`]; None where the input states none).
+    pub fn set_units(&mut self, units: &mdtf_volume::Units) {
+        for a in &mut self.axes {
+            a.unit = units.of_channel(&a.name);
+        }
+    }
+
     /// Linear index of a bin tuple.
     pub fn index(&self, bins: &[usize]) -> usize {
         let mut idx = 0;

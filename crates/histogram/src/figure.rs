@@ -96,6 +96,26 @@ impl Overlay<'_> {
     }
 }
 
+/// The label of `axis` for histogram figures: its channel's label with the
+/// axis's unit when the input stated one (e.g. "v (HU)", "g = |grad v|
+/// (HU/mm)"), else [`axis_label`]'s generic units.
+pub fn axis_label_of(axis: &crate::Axis) -> String {
+    let quantity = match axis.name.as_str() {
+        "v" => "v",
+        "g" => "g = |grad v|",
+        "f2" => "f'' along the gradient",
+        "inv_g" => "1/g",
+        "g_hit" => "g at the boundary hit",
+        "distance" => "distance to the boundary",
+        "gnorm" => "||G||",
+        other => other,
+    };
+    match &axis.unit {
+        Some(unit) => format!("{quantity} ({unit})"),
+        None => axis_label(&axis.name),
+    }
+}
+
 /// The label of channel `name` with its units, for the axes of histogram figures.
 pub fn axis_label(name: &str) -> String {
     match name {
@@ -111,14 +131,9 @@ pub fn axis_label(name: &str) -> String {
 }
 
 impl Labels {
-    /// Labels for `h` titled `title`, each axis labelled by [`axis_label`].
+    /// Labels for `h` titled `title`, each axis labelled by [`axis_label_of`].
     pub fn of(h: &Histogram, title: &str) -> Labels {
-        Labels {
-            title: title.into(),
-            axes: h.axes.iter().map(|a| axis_label(&a.name)).collect(),
-            note: None,
-            arches: Vec::new(),
-        }
+        Labels { title: title.into(), axes: h.axes.iter().map(axis_label_of).collect(), note: None, arches: Vec::new() }
     }
 }
 

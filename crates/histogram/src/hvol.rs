@@ -86,6 +86,17 @@ pub struct HistogramVolume {
     pub spacing: Option<f64>,
 }
 
+impl HistogramVolume {
+    /// Gives the axes of its counts and of its (v, g) tables the units of
+    /// their channels in the input's `units`.
+    pub fn set_units(&mut self, units: &mdtf_volume::Units) {
+        self.hist.set_units(units);
+        for a in &mut self.vg_axes {
+            a.unit = units.of_channel(&a.name);
+        }
+    }
+}
+
 /// Least share of the voxels a v bin must hold for its mean g and f'' to
 /// enter sigma's estimate.
 pub const SIGMA_MIN_SHARE: f64 = 1e-4;

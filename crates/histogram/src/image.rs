@@ -162,7 +162,7 @@ mod tests {
     #[test]
     fn a_1d_picture_overlays_linear_bars_on_log_bars() {
         let h = Histogram {
-            axes: vec![Axis { name: "v".into(), min: 0.0, max: 5.0, bins: 5 }],
+            axes: vec![Axis { name: "v".into(), min: 0.0, max: 5.0, bins: 5, unit: None }],
             counts: vec![1000, 100, 10, 1, 0],
         };
         let img = h.image(Scale::Log);

@@ -31,7 +31,8 @@ pub use clusters::{
 };
 pub use count::{Histogram, count};
 pub use figure::{
-    ArchMark, FIGURE_SIZE, Labels, Overlay, PLOT_PIXELS, PROJECTIONS_SIZE, SIDE_BY_SIDE_SIZE, axis_label, count_colour,
+    ArchMark, FIGURE_SIZE, Labels, Overlay, PLOT_PIXELS, PROJECTIONS_SIZE, SIDE_BY_SIDE_SIZE, axis_label,
+    axis_label_of, count_colour,
 };
 pub use files::{write_histogram, write_histogram_marked, write_hvol, write_overlay_figure, write_stretched};
 pub use hvol::{

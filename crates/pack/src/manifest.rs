@@ -86,6 +86,10 @@ pub struct Provenance {
     /// The input's grid, voxels (x, y, z).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub input_dims: Option<[usize; 3]>,
+    /// The units the input states for its values and lengths (the
+    /// channels' units follow: g in value units per length unit...).
+    #[serde(default, skip_serializing_if = "mdtf_volume::Units::is_unknown")]
+    pub input_units: mdtf_volume::Units,
     /// The pipeline file the run followed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pipeline: Option<String>,
@@ -253,6 +257,7 @@ pub const MANIFEST_SCHEMA: &str = r##"{
         "input_sha256": {"type": ["string", "null"]},
         "input_format": {"type": "string"},
         "input_dims": {"type": "array", "items": {"type": "integer", "minimum": 1}, "minItems": 3, "maxItems": 3},
+        "input_units": {"type": "object", "properties": {"value": {"type": "string"}, "length": {"type": "string"}}},
         "pipeline": {"type": "string"},
         "stages": {"type": "object"}
       }}

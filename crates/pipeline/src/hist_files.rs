@@ -24,6 +24,19 @@ pub struct Counted {
     pub stretched: Option<(Histogram, Histogram)>,
 }
 
+impl Counted {
+    /// Gives every histogram's axes the units of their channels in the input's `units`.
+    pub fn set_units(&mut self, units: &mdtf_volume::Units) {
+        if let Some(h) = &mut self.hvol {
+            h.set_units(units);
+        }
+        let stretched = self.stretched.iter_mut().flat_map(|(a, b)| [a, b]);
+        for h in self.joint.iter_mut().chain(self.inv_g.iter_mut()).chain(stretched) {
+            h.set_units(units);
+        }
+    }
+}
+
 /// The warning of a run whose histogram volume shows no boundary.
 pub const NO_BOUNDARY_WARNING: &str = "detection: no boundary found in the (v, g) histogram (no pair of materials \
      with an arch between them standing out of the noise; see histogram/hvol.json for the materials found). \

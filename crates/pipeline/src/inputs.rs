@@ -9,7 +9,7 @@ use crate::run::RunOptions;
 use mdtf_datagen::{MultiFieldPhantom, RadialPhantom, add_gaussian_noise, erf_sphere, min_extent};
 use mdtf_pack::{Profile, Provenance, parse_tf};
 use mdtf_volume::dicom::DicomOptions;
-use mdtf_volume::{Geometry, Inputs, MultiField, ReadOptions, Volume};
+use mdtf_volume::{Geometry, Inputs, MultiField, ReadOptions, Units, Volume};
 use std::path::{Path, PathBuf};
 
 /// The plan [`run`](crate::run::run) follows for `p`, with the input's name and grid. It reads
@@ -17,10 +17,10 @@ use std::path::{Path, PathBuf};
 /// writes nothing.
 pub fn plan(p: &Pipeline, opts: &RunOptions) -> Result<(Plan, String, Geometry), RunError> {
     let base = opts.base();
-    let (input, name, _) = load_input(p, opts, &base)?;
+    let (input, meta) = load_input(p, opts, &base)?;
     let fields: Vec<String> = input.fields.iter().map(|f| f.name.clone()).collect();
     let plan = Plan::resolve(p, &fields, &input.geometry).map_err(at("plan"))?;
-    Ok((plan, name, input.geometry))
+    Ok((plan, meta.name, input.geometry))
 }
 
 /// The settings of a run of `p` with every default filled in, as the run
@@ -48,9 +48,9 @@ pub fn resolved_settings(p: &Pipeline, opts: &RunOptions) -> Result<toml::Table,
 }
 
 /// The pack's provenance: mdtf's version, the input (file or folder, its
-/// format, grid `dims` and digest; or the phantom), the pipeline file and
+/// format, grid `dims`, `units` and digest; or the phantom), the pipeline file and
 /// the settings the run used ([`resolved_settings`]).
-pub(crate) fn provenance(p: &Pipeline, opts: &RunOptions, base: &Path, dims: [usize; 3]) -> Provenance {
+pub(crate) fn provenance(p: &Pipeline, opts: &RunOptions, base: &Path, dims: [usize; 3], units: &Units) -> Provenance {
     let file = input_file(p, opts, base);
     let stages =
         resolved_settings(p, opts).ok().and_then(|t| serde_json::to_value(t).ok()).unwrap_or(serde_json::Value::Null);
@@ -60,6 +60,7 @@ pub(crate) fn provenance(p: &Pipeline, opts: &RunOptions, base: &Path, dims: [us
         input_sha256: file.as_ref().and_then(|f| mdtf_pack::sha256_path(f).ok()),
         input_format: file.as_ref().and_then(|f| mdtf_volume::Format::of_input(f)).map(|f| f.name().to_string()),
         input_dims: Some(dims),
+        input_units: units.clone(),
         pipeline: Some(opts.pipeline_path.display().to_string()),
         stages,
     }
@@ -107,15 +108,23 @@ pub(crate) fn read_options(p: &Pipeline) -> ReadOptions {
     }
 }
 
-/// The input volume, its name for the report, and what its reader warned of.
-pub(crate) fn load_input(
-    p: &Pipeline,
-    opts: &RunOptions,
-    base: &Path,
-) -> Result<(MultiField, String, Vec<String>), RunError> {
+/// What a run knows of its input besides the samples.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct InputMeta {
+    /// Its name for figures and reports: the path as given, or the phantom's description.
+    pub(crate) name: String,
+    /// What its reader assumed or repaired.
+    pub(crate) warnings: Vec<String>,
+    /// The units it states for its values and lengths (none for a phantom).
+    pub(crate) units: Units,
+}
+
+/// The input volume and what its reader said of it.
+pub(crate) fn load_input(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(MultiField, InputMeta), RunError> {
     if let Some(f) = input_file(p, opts, base) {
         let (mf, info) = mdtf_volume::read_with_info(&f, &read_options(p)).map_err(at("input"))?;
-        return Ok((mf, f.display().to_string(), info.warnings));
+        let meta = InputMeta { name: f.display().to_string(), warnings: info.warnings, units: info.units };
+        return Ok((mf, meta));
     }
     let i = &p.input;
     if i.size < 8 || i.size > 1024 {
@@ -145,5 +154,5 @@ pub(crate) fn load_input(
             f.data = v.data;
         }
     }
-    Ok((mf, name, Vec::new()))
+    Ok((mf, InputMeta { name, ..Default::default() }))
 }

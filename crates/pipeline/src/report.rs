@@ -34,6 +34,9 @@ pub struct RunReport {
     pub dims: [usize; 3],
     /// Grid spacing, world units.
     pub spacing: [f64; 3],
+    /// The units the input states for its values and lengths (absent when it states none).
+    #[serde(skip_serializing_if = "mdtf_volume::Units::is_unknown")]
+    pub units: mdtf_volume::Units,
     /// The input's fields, when it has more than one.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub fields: Vec<String>,
@@ -83,6 +86,7 @@ impl RunReport {
             input,
             dims: geo.dims,
             spacing: geo.spacing,
+            units: mdtf_volume::Units::default(),
             fields: Vec::new(),
             value_range: None,
             warnings: Vec::new(),

@@ -141,7 +141,7 @@ pub fn render(page: &PageInputs) -> String {
     figures_section(&mut h, page.figures);
     stages_section(&mut h, r);
     if let Some(m) = page.manifest {
-        pack_section(&mut h, m);
+        pack_section(&mut h, m, &r.units);
     }
     let _ = writeln!(
         h,
@@ -182,14 +182,25 @@ fn input_section(h: &mut String, r: &RunReport, provenance: Option<&mdtf_pack::P
         row(h, "SHA-256", &esc(sha));
     }
     row(h, "grid", &format!("{nx} x {ny} x {nz} ({} voxels)", nx * ny * nz));
-    row(h, "spacing", &format!("{sx} x {sy} x {sz} world units"));
+    let length = r.units.length.as_deref().unwrap_or("world units");
+    row(h, "spacing", &format!("{sx} x {sy} x {sz} {length}"));
+    row(h, "units", &esc(&units_line(&r.units)));
     if !r.fields.is_empty() {
         row(h, "fields", &esc(&r.fields.join(", ")));
     }
     if let Some([lo, hi]) = r.value_range {
-        row(h, "value range", &format!("{} .. {} (finite values)", num(lo), num(hi)));
+        row(h, "value range", &format!("{} .. {} {} (finite values)", num(lo), num(hi), esc(r.units.value_name())));
     }
     h.push_str("</table>\n");
+}
+
+/// What the input states of its units, in words.
+fn units_line(u: &mdtf_volume::Units) -> String {
+    let said = |unit: &Option<String>, what: &str| match unit {
+        Some(unit) => format!("{what} in {unit}"),
+        None => format!("{what} in units the input does not state"),
+    };
+    format!("{}; {}", said(&u.value, "values"), said(&u.length, "lengths"))
 }
 
 fn warnings_section(h: &mut String, r: &RunReport) {
@@ -216,15 +227,21 @@ fn boundaries_section(h: &mut String, r: &RunReport) {
                  \"gauss:1.5\"), or a TF of your own (pack.tf) drawn over the (v, g) histogram figure.</p>\n",
             );
         } else {
-            h.push_str(
+            let (v_unit, length) = (r.units.value_name(), r.units.length.as_deref().unwrap_or("world units"));
+            let g_unit = r.units.of_channel("g").unwrap_or_else(|| "per world unit".into());
+            let _ = writeln!(
+                h,
                 "<p>The pairs of materials whose erf-edge arch stands out in the (v, g) histogram, strongest first; \
                  confidence is the share of the voxels above the noise along the arch that it explains. \
                  The default transfer functions give each its colour and surface opacity (what a ray crossing \
                  it accumulates: the smallest inner surface opaque, larger ones fainter, one meeting the \
                  background at most 0.3).</p>\n<table><tr><th>#</th><th>colour</th>\
-                 <th>low material v</th><th>centre v</th><th>high material v</th><th>peak g (per world unit)</th>\
-                 <th>sigma (world units)</th><th>core voxels (within sigma / 2 of its centre)</th><th>confidence</th><th>meets the background</th>\
-                 <th>surface opacity</th></tr>\n",
+                 <th>low material v ({v})</th><th>centre v ({v})</th><th>high material v ({v})</th><th>peak g ({g})</th>\
+                 <th>sigma ({l})</th><th>core voxels (within sigma / 2 of its centre)</th><th>confidence</th><th>meets the background</th>\
+                 <th>surface opacity</th></tr>",
+                v = esc(v_unit),
+                g = esc(&g_unit),
+                l = esc(length),
             );
             let n = r.boundaries.len();
             let opacity = mdtf_pack::boundary_opacities(&crate::pack_inputs::arches_from(&r.boundaries));
@@ -339,7 +356,7 @@ fn stages_section(h: &mut String, r: &RunReport) {
     );
 }
 
-fn pack_section(h: &mut String, m: &Manifest) {
+fn pack_section(h: &mut String, m: &Manifest, units: &mdtf_volume::Units) {
     let _ = writeln!(
         h,
         "<h2>The pack</h2>\n<p>Profile <code>{}</code>, described in full by <code>pack/manifest.json</code>. \
@@ -366,13 +383,15 @@ fn pack_section(h: &mut String, m: &Manifest) {
          <th>scale</th><th>range</th></tr>\n",
     );
     for c in &m.channels {
+        // in the units the input states, where it states them
+        let unit = units.of_channel(&c.name).unwrap_or_else(|| c.units.clone());
         let _ = writeln!(
             h,
             "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}[{}]</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
              <td class=\"n\">{} .. {}</td></tr>",
             esc(&c.name),
             esc(&c.meaning),
-            esc(&c.units),
+            esc(&unit),
             esc(&c.texture),
             c.component,
             num(c.decode.offset),

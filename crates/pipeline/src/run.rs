@@ -78,6 +78,7 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &(dyn Fn(&str) + Sync)) ->
         boundaries: packed.boundaries,
         hvol_built: packed.hvol_built,
         stages: run.stages.0,
+        units: run.units,
         ..RunReport::of(opts, run.input_name, &geo)
     };
     finish(p, opts, out, report, &packed.table_names, start, &run.progress)

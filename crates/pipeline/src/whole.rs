@@ -32,6 +32,8 @@ pub(crate) struct WholeRun<'a> {
     kernel: Kernel,
     /// The input's name in the figures, the manifest and the report.
     pub(crate) input_name: String,
+    /// The units the input states.
+    pub(crate) units: mdtf_volume::Units,
     pub(crate) progress: Progress<'a>,
     pub(crate) stages: Stages,
     pub(crate) warnings: Vec<String>,
@@ -67,7 +69,7 @@ impl<'a> WholeRun<'a> {
         p: &'a Pipeline,
         opts: &RunOptions,
         plan: Plan,
-        (input, input_name, warnings): (MultiField, String, Vec<String>),
+        (input, meta): (MultiField, crate::inputs::InputMeta),
         started: Instant,
         dir: PathBuf,
         progress: Progress<'a>,
@@ -89,10 +91,11 @@ impl<'a> WholeRun<'a> {
             geo,
             plan,
             kernel: p.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
-            input_name,
+            input_name: meta.name,
+            units: meta.units,
             progress,
             stages,
-            warnings,
+            warnings: meta.warnings,
             chans: BTreeMap::new(),
             normal: None,
             // the value volume goes into derive as a one-field MultiField and comes back out: no copy
@@ -254,6 +257,7 @@ impl<'a> WholeRun<'a> {
         std::fs::create_dir_all(&hdir).map_err(at("histogram"))?;
         let err = |e: String| fail("histogram")(e);
         let mut counted = self.count(h)?;
+        counted.set_units(&self.units);
         // the default TF's histogram volume is an output only when the histograms ask for it
         let default_hvol = if h.hvol { None } else { counted.hvol.take() };
         let mut hists =
@@ -348,7 +352,7 @@ impl<'a> WholeRun<'a> {
         let tf = crate::inputs::read_tf(self.p, &self.base)?;
         let pdir = self.dir.join("pack");
         std::fs::create_dir_all(&pdir).map_err(at("pack"))?;
-        let provenance = crate::inputs::provenance(self.p, opts, &self.base, self.geo.dims);
+        let provenance = crate::inputs::provenance(self.p, opts, &self.base, self.geo.dims, &self.units);
         let mut table_names = Vec::new();
         let mut outputs: Vec<String> = vec!["pack/manifest.json".into()];
         let hvol = hvol.as_ref();

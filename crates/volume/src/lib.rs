@@ -37,6 +37,7 @@ mod raw;
 mod samples;
 mod slab_writer;
 mod tiff_stack;
+pub mod units;
 mod volume;
 
 pub use dtype::{Endian, SAMPLE_TYPE_NAMES, SampleType, round_to_type};
@@ -57,4 +58,5 @@ pub use range::{
 pub use raw::{RawSpec, read_raw};
 pub use samples::{FileInfo, NanPolicy, ReadOptions};
 pub use slab_writer::{SlabWriter, write_slabs};
+pub use units::Units;
 pub use volume::{Field, MultiField, Volume};

@@ -45,7 +45,7 @@ pub fn read_nifti(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
 /// [`read_nifti`], also returning how the file stores its samples.
 pub fn read_nifti_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiField, FileInfo)> {
     let (mut stream, geometry) = open_samples(path)?;
-    let (layout, compressed) = (stream.layout, stream.compressed);
+    let (layout, compressed, units) = (stream.layout, stream.compressed, stream.units.clone());
     let arrays = read_decoded(path, &mut stream.src, &layout, compressed, opts)?;
     // Trailing bytes are allowed in NIfTI; draining still checks a gzip CRC.
     drain_rest(path, &mut stream.src, compressed)?;
@@ -54,7 +54,7 @@ pub fn read_nifti_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiFie
         .enumerate()
         .map(|(i, data)| Field { name: if layout.fields == 1 { "value".into() } else { format!("field{i}") }, data })
         .collect();
-    let info = FileInfo::new("NIfTI-1", &layout, compressed);
+    let info = FileInfo { units, ..FileInfo::new("NIfTI-1", &layout, compressed) };
     Ok((MultiField::new(geometry, fields)?, info))
 }
 
@@ -101,7 +101,8 @@ pub(crate) fn open_samples(path: &Path) -> Result<(SampleStream, Geometry)> {
     if skipped < skip {
         return Err(VolumeError::Truncated { path: path.to_path_buf(), expected: layout.byte_len(), found: 0 });
     }
-    Ok((SampleStream { src, layout, compressed }, geometry))
+    let units = crate::Units { value: None, length: crate::units::nifti_length_unit(header.xyzt_units) };
+    Ok((SampleStream { src, layout, compressed, units }, geometry))
 }
 
 fn read_up_to(src: &mut dyn Read, buf: &mut [u8]) -> std::io::Result<usize> {

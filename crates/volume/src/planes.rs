@@ -83,6 +83,14 @@ impl PlaneReader {
         &self.geometry
     }
 
+    /// The units the file states for its values and lengths.
+    pub fn units(&self) -> &crate::Units {
+        match &self.source {
+            Source::Zarr(image) => &image.info().units,
+            Source::Stream(stream) => &stream.units,
+        }
+    }
+
     /// Planes `z` (clamped to the grid) as a volume placed where they lie.
     /// From a stream, planes before those of the previous call's start are
     /// gone: a call asking for them fails, since it reads forward only (an

@@ -49,6 +49,8 @@ pub struct FileInfo {
     /// Further facts of the format, as (name, value) lines (e.g. a DICOM
     /// series' modality and transfer syntax; never a patient attribute).
     pub details: Vec<(String, String)>,
+    /// The units the file states for its values and lengths.
+    pub units: crate::Units,
 }
 
 impl FileInfo {
@@ -61,6 +63,7 @@ impl FileInfo {
             scale: layout.scale,
             warnings: Vec::new(),
             details: Vec::new(),
+            units: crate::Units::default(),
         }
     }
 }
@@ -106,6 +109,8 @@ pub(crate) struct SampleStream {
     pub layout: SampleLayout,
     /// Whether the file stores them gzip-compressed.
     pub compressed: bool,
+    /// The units the header states.
+    pub units: crate::Units,
 }
 
 /// Reads exactly the samples of `layout` from `src` and decodes them, in

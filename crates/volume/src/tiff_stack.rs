@@ -317,6 +317,7 @@ pub fn read_tiff_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiFiel
         scale: None,
         warnings,
         details: Vec::new(),
+        units: crate::Units::default(),
     };
     Ok((MultiField::new(geometry, vec![Field { name: "value".into(), data }])?, info))
 }

@@ -65,6 +65,7 @@ mod store;
 mod trace;
 mod trace_files;
 
+use crate::inputs::InputMeta;
 pub use budget::{TraceBlocks, automatic_budget, automatic_file_budget, fit_slabs, fit_trace, slab_height, slabs};
 pub use item_files::{ItemFiles, automatic_item_budget, derive_item_files, items_unsupported};
 pub use pool::SamplePool;
@@ -155,20 +156,21 @@ impl Source {
     }
 }
 
-/// The input of `p` as a [`Source`], its name for the report and its reader's warnings.
-fn open_source(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(Source, String, Vec<String>), RunError> {
+/// The input of `p` as a [`Source`], with its name, its reader's warnings and its units.
+fn open_source(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(Source, InputMeta), RunError> {
     if let Some(f) = crate::inputs::input_file(p, opts, base)
         && p.input.series.is_none()
         && let Some(r) = PlaneReader::open(&f, &crate::inputs::read_options(p)).map_err(at("input"))?
     {
-        return Ok((Source::Planes(r), f.display().to_string(), Vec::new()));
+        let meta = InputMeta { name: f.display().to_string(), warnings: Vec::new(), units: r.units().clone() };
+        return Ok((Source::Planes(r), meta));
     }
-    let (mf, name, warnings) = crate::inputs::load_input(p, opts, base)?;
+    let (mf, meta) = crate::inputs::load_input(p, opts, base)?;
     if let Some(why) = unsupported(p, mf.fields.len()) {
         return Err(fail("plan")(why));
     }
     let v = mf.into_scalar().map_err(at("input"))?;
-    Ok((Source::Whole(v), name, warnings))
+    Ok((Source::Whole(v), meta))
 }
 
 /// The z-range a pass reads for slab `z` with `halo` planes each side,
@@ -253,6 +255,7 @@ fn run_slabs(
                 SlabSize::Planes(_) | SlabSize::Strips { .. } => None,
             },
         }),
+        units: run.units.clone(),
         ..RunReport::of(opts, run.input_name.clone(), &run.geo)
     };
     let report = RunReport { warnings: run.warnings, stages: run.stages.0, ..report };

@@ -52,6 +52,8 @@ pub(super) struct SlabPasses<'a> {
     tf: Option<TfFile>,
     /// The input's name in the figures, the manifest and the report.
     pub(super) input_name: String,
+    /// The units the input states.
+    pub(super) units: mdtf_volume::Units,
     pub(super) progress: Progress<'a>,
     pub(super) stages: Stages,
     stats: Stats,
@@ -104,7 +106,7 @@ impl<'a> SlabPasses<'a> {
         let base = opts.base();
         progress.stage("input")?;
         let t = Instant::now();
-        let (mut source, input_name, warnings) = open_source(p, opts, &base)?;
+        let (mut source, meta) = open_source(p, opts, &base)?;
         let geo = source.geometry().clone();
         let nz = geo.dims[2];
         let plan = Plan::resolve(p, &[], &geo).map_err(at("plan"))?;
@@ -161,11 +163,12 @@ impl<'a> SlabPasses<'a> {
             hvol_asked,
             hvol_needed,
             tf,
-            input_name,
+            input_name: meta.name,
+            units: meta.units,
             progress,
             stages,
             stats,
-            warnings,
+            warnings: meta.warnings,
             tasks: opts.tasks.as_deref(),
         };
         Ok((run, store))
@@ -544,6 +547,7 @@ impl<'a> SlabPasses<'a> {
     fn write_histograms(&mut self, h: SlabHistograms) -> Result<Written, RunError> {
         let t = Instant::now();
         let mut counted = h.finish(self.geo.spacing)?;
+        counted.set_units(&self.units);
         // the default TF's histogram volume is an output only when the histograms ask for it
         let default_hvol = if self.hvol_asked { None } else { counted.hvol.take() };
         let mut hists = Written::default();
@@ -581,7 +585,7 @@ impl<'a> SlabPasses<'a> {
         let tf = self.tf.as_ref();
         let luts = crate::pack_inputs::luts(profile, tf, &alpha, &stubs, &params.ranges, hvol.as_ref(), derived.kernel)
             .map_err(at("pack"))?;
-        let provenance = crate::inputs::provenance(self.p, self.opts, &self.base, self.geo.dims);
+        let provenance = crate::inputs::provenance(self.p, self.opts, &self.base, self.geo.dims, &self.units);
         writer.finish(&luts, provenance).map_err(at("pack"))?;
         let mut outputs: Vec<String> = vec!["pack/manifest.json".into()];
         if profile == Profile::GaussianTf {

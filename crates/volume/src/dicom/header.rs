@@ -43,6 +43,8 @@ pub struct ImageHeader {
     pub description: String,
     /// Modality, e.g. "CT" or "MR".
     pub modality: String,
+    /// Rescale Type (0028,1054), e.g. "HU" (empty when absent).
+    pub rescale_type: String,
     /// SOPInstanceUID: tells a copied file from another image at the same place.
     pub instance_uid: String,
     /// Transfer syntax UID of the file.
@@ -261,6 +263,7 @@ pub fn read_header(path: &Path) -> Result<Option<ImageHeader>> {
         series_number: int(&obj, tags::SERIES_NUMBER),
         description: text(&obj, tags::SERIES_DESCRIPTION).unwrap_or_default(),
         modality: text(&obj, tags::MODALITY).unwrap_or_default(),
+        rescale_type: text(&obj, tags::RESCALE_TYPE).unwrap_or_default(),
         instance_uid: text(&obj, tags::SOP_INSTANCE_UID).unwrap_or_default(),
         transfer_syntax,
         rows,

@@ -132,6 +132,21 @@ pub fn read_dicom_with_info(input: &Path, opts: &ReadOptions) -> Result<(MultiFi
     Ok((MultiField::from(volume), info))
 }
 
+/// The units of a series: lengths in mm (DICOM's), values in the Rescale
+/// Type when given, else HU for a CT (PS3.3 C.8.2.1: a CT's rescaled
+/// values are Hounsfield units), else unstated.
+fn units_of(first: &header::ImageHeader) -> crate::Units {
+    let rescale_type = first.rescale_type.trim();
+    let value = if !rescale_type.is_empty() {
+        Some(rescale_type.to_string())
+    } else if first.modality.trim() == "CT" {
+        Some("HU".to_string())
+    } else {
+        None
+    };
+    crate::Units { value, length: Some("mm".into()) }
+}
+
 /// What `mdtf info` shows of a series: never a patient attribute.
 fn file_info(files: &[header::ImageHeader], layout: &series::Layout) -> FileInfo {
     let first = &files[0];
@@ -186,5 +201,6 @@ fn file_info(files: &[header::ImageHeader], layout: &series::Layout) -> FileInfo
         scale,
         warnings: layout.warnings.clone(),
         details,
+        units: units_of(first),
     }
 }

@@ -163,6 +163,7 @@ mod tests {
             series_number: None,
             description: String::new(),
             modality: String::new(),
+            rescale_type: String::new(),
             instance_uid: String::new(),
             transfer_syntax: String::new(),
             rows: 1,

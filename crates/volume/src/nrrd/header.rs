@@ -45,6 +45,22 @@ pub struct NrrdHeader {
     pub line_skip: u64,
     /// Field names stored by mdtf (`mdtf_fields:=` key/value).
     pub field_names: Option<Vec<String>>,
+    /// `space units`, as written (a quoted unit per space axis).
+    pub space_units: Option<String>,
+    /// `sample units`: the unit of the values.
+    pub sample_units: Option<String>,
+}
+
+impl NrrdHeader {
+    /// The units the header states: `sample units` for the values, `space
+    /// units` (when every axis has the same) for the lengths.
+    pub fn units(&self) -> crate::Units {
+        let value = self.sample_units.as_deref().map(|u| u.trim().trim_matches('"').trim().to_string());
+        crate::Units {
+            value: value.filter(|u| !u.is_empty()),
+            length: self.space_units.as_deref().and_then(crate::units::nrrd_common_unit),
+        }
+    }
 }
 
 pub(crate) const MAX_HEADER_BYTES: usize = 1 << 20;
@@ -187,6 +203,8 @@ fn parse_header(path: &Path, lines: &[String]) -> Result<NrrdHeader> {
         byte_skip: 0,
         line_skip: 0,
         field_names: None,
+        space_units: None,
+        sample_units: None,
     };
     let mut encoding = None;
     for line in &lines[1..] {
@@ -262,6 +280,8 @@ fn parse_header(path: &Path, lines: &[String]) -> Result<NrrdHeader> {
                 ));
             }
             "kinds" => h.kinds = Some(value.split_whitespace().map(|s| s.to_ascii_lowercase()).collect()),
+            "space units" => h.space_units = Some(value.to_string()),
+            "sample units" | "sampleunits" => h.sample_units = Some(value.to_string()),
             "data file" | "datafile" => {
                 h.data_file = Some(value.to_string());
                 if value.starts_with("LIST") {

@@ -55,7 +55,7 @@ pub fn read_nrrd_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiFiel
     };
     let fields = names.into_iter().zip(arrays).map(|(name, data)| Field { name, data }).collect();
     let format = if h.data_file.is_some() { "NRRD (detached header)" } else { "NRRD" };
-    let info = FileInfo::new(format, &layout, h.encoding == Encoding::Gzip);
+    let info = FileInfo { units: h.units(), ..FileInfo::new(format, &layout, h.encoding == Encoding::Gzip) };
     Ok((MultiField::new(geometry, fields)?, info))
 }
 
@@ -115,7 +115,7 @@ pub(crate) fn open_samples(path: &Path) -> Result<Option<(SampleStream, Geometry
     let mut src: Box<dyn Read + Send> =
         if gzip { Box::new(flate2::bufread::MultiGzDecoder::new(data)) } else { Box::new(data) };
     skip_bytes(&data_path, &mut src, h.byte_skip.max(0) as u64, &layout, gzip)?;
-    Ok(Some((SampleStream { src, layout, compressed: gzip }, geometry)))
+    Ok(Some((SampleStream { src, layout, compressed: gzip, units: h.units() }, geometry)))
 }
 
 fn refuse_extra(path: &Path, layout: &SampleLayout, extra: u64) -> Result<()> {

@@ -180,8 +180,13 @@ impl ZarrImage {
         }
         let units: Vec<&str> =
             (0..3).filter_map(|g| at(Role::Space(g))).filter_map(|a| axes[a].unit.as_deref()).collect();
+        // the length unit, when every space axis states the same one
+        let mut space_unit = None;
         if let Some(u) = units.first() {
             let same = units.iter().all(|v| v == u);
+            if same && units.len() == 3 {
+                space_unit = Some(u.to_string());
+            }
             details.push(("space unit".into(), if same { u.to_string() } else { units.join(", ") }));
             if !same {
                 warnings.push(format!(
@@ -206,6 +211,7 @@ impl ZarrImage {
             scale: None,
             warnings,
             details,
+            units: crate::Units { value: None, length: space_unit.map(|u| crate::units::ngff_length_unit(&u)) },
         };
         Ok(ZarrImage { path: path.to_path_buf(), array, roles, geometry, fields, ty, info })
     }
