@@ -142,7 +142,11 @@ fn several_series_are_listed_and_chosen_by_number_or_uid() {
 #[test]
 fn a_missing_slice_is_refused_or_interpolated_on_request() {
     let w = written();
-    let err = mdtf_err(&["info", case("missing").to_str().unwrap()]);
+    // described by info as resampling would make it; refused where it would be read as data
+    let said = mdtf_ok(&["info", case("missing").to_str().unwrap()]);
+    assert!(said.contains("slice spacing varies: 2.0 mm x5, 4.0 mm") && said.contains("10x12x8"), "{said}");
+    let out = tempfile::tempdir().unwrap();
+    let err = mdtf_err(&["convert", case("missing").to_str().unwrap(), out.path().join("m.nrrd").to_str().unwrap()]);
     assert!(err.contains("slice spacing varies: 2.0 mm x5, 4.0 mm") && err.contains("--resample"), "{err}");
     let (mf, info) = read_with_info(&case("missing"), &read_opts(None, true)).unwrap();
     assert_eq!(mf.geometry.dims, [10, 12, 8]);
@@ -174,10 +178,17 @@ fn two_images_at_one_place_are_refused_and_a_copied_file_is_read_once() {
 }
 
 #[test]
-fn a_gantry_tilt_is_refused_or_sheared_back_onto_the_slice_normal() {
+fn a_gantry_tilt_is_refused_or_shifted_back_onto_the_slice_normal() {
     let w = written();
-    let err = mdtf_err(&["info", case("tilt").to_str().unwrap()]);
-    assert!(err.contains("gantry tilt 14.0 degrees"), "{err}");
+    // refused where it would be read as data, with the option named as each command takes it
+    let p = mdtf_e2e::shipped_pipeline("slicer-3dtf");
+    let (tilt, out) = (case("tilt"), tempfile::tempdir().unwrap());
+    let run = ["run", p.to_str().unwrap(), "--input", tilt.to_str().unwrap(), "-o", out.path().to_str().unwrap()];
+    let err = mdtf_err(&[&run[..], &["-q"]].concat());
+    assert!(err.contains("gantry tilt 14.0 degrees") && err.contains("--set input.resample=true"), "{err}");
+    // described by info, as resampling would make it
+    let said = mdtf_ok(&["info", tilt.to_str().unwrap()]);
+    assert!(said.contains("gantry tilt 14.0 degrees") && said.contains("dims:        16x12x6"), "{said}");
     let mf = read(&case("tilt"), &read_opts(None, true)).unwrap();
     let g = &mf.geometry;
     assert_eq!(g.dims, [16, 12, 6]);

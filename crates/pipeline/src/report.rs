@@ -49,9 +49,9 @@ pub struct RunReport {
     /// The boundary tracing's thresholds and counts, when it ran.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub boundary: Option<BoundarySummary>,
-    /// The boundaries found in the histogram volume, when it was built
-    /// (`[histogram] hvol`): the materials they separate and their peak g.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
+    /// The boundaries found in the histogram volume (empty when none was
+    /// found or it was not built: see `hvol_built`): the materials they
+    /// separate and their peak g.
     pub boundaries: Vec<mdtf_histogram::DetectedBoundary>,
     /// Whether the histogram volume was built (so `boundaries` says what was found).
     pub hvol_built: bool,

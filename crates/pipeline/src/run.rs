@@ -153,7 +153,9 @@ pub(crate) fn finish(
         let refs: Vec<(&Path, &str)> = pictures.iter().map(|(p, c)| (p.as_path(), c.as_str())).collect();
         mdtf_preview::contact_sheet(&refs, 3, 384, &dir.join("contact_sheet.png")).map_err(at("preview"))?;
         let mut stages = Stages(std::mem::take(&mut report.stages));
-        stages.done("preview", t, 512 * 512, vec!["preview.png".into(), "contact_sheet.png".into()]);
+        // the rate is of the input's voxels, as every stage's (the ray caster reads them all)
+        let voxels = report.dims.iter().product();
+        stages.done("preview", t, voxels, vec!["preview.png".into(), "contact_sheet.png".into()]);
         report.stages = stages.0;
     }
     report.total_seconds = start.elapsed().as_secs_f64();

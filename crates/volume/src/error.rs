@@ -27,6 +27,19 @@ pub enum VolumeError {
         /// What is wrong, in words.
         message: String,
     },
+    /// A DICOM stack whose slices do not form a regular grid (uneven gaps,
+    /// a gantry tilt): read only with resampling.
+    #[error(
+        "{path}: bad header: {found}; the slices do not form a regular grid, which mdtf will not guess at: read it with resampling to interpolate it onto a regular grid of {gap_mm} mm (`--resample` for mdtf info, convert and the stage commands; `--set input.resample=true` for mdtf run, or `resample = true` in the pipeline's [input])"
+    )]
+    NeedsResampling {
+        /// The series (folder, list or file) concerned.
+        path: PathBuf,
+        /// What makes it irregular, e.g. "gantry tilt 14.0 degrees (...)".
+        found: String,
+        /// The slice gap of the regular grid resampling would make, mm, as text.
+        gap_mm: String,
+    },
     /// Fewer sample bytes than the header promises.
     #[error(
         "{path}: truncated data: the header (or the raw layout given) promises {expected} bytes of samples, the file holds {found}"

@@ -4,7 +4,7 @@ use crate::args::InfoArgs;
 use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::Result;
-use mdtf_volume::{FileInfo, MultiField, NanPolicy, ReadOptions};
+use mdtf_volume::{FileInfo, MultiField, NanPolicy, ReadOptions, VolumeError};
 use rayon::prelude::*;
 use std::fmt::Write;
 
@@ -19,8 +19,36 @@ pub fn run(args: &InfoArgs, progress: &Progress) -> Result<()> {
     }
     // Keep NaN/Inf so they can be counted; info never passes them on.
     let opts = ReadOptions { nan: NanPolicy::Keep, ..read_options(&args.read) };
-    let (mf, info) = progress.step("reading", || read_input(&args.input, &args.read, &opts))?;
+    let read = progress.step("reading", || -> Result<_> {
+        if args.read.raw_dims.is_some() {
+            return Ok(Ok(read_input(&args.input, &args.read, &opts)?));
+        }
+        Ok(mdtf_volume::read_with_info(&args.input, &opts))
+    })?;
+    let (mf, info, irregular) = match read {
+        Ok((mf, info)) => (mf, info, None),
+        // a tilted or unevenly spaced series: described as resampling would make it
+        Err(VolumeError::NeedsResampling { found, gap_mm, .. }) => {
+            let mut resampling = opts.clone();
+            resampling.dicom.resample = true;
+            let (mf, info) =
+                progress.step("reading with resampling", || read_input(&args.input, &args.read, &resampling))?;
+            (mf, info, Some((found, gap_mm)))
+        }
+        Err(e) => return Err(anyhow::Error::new(e).context("cannot read the input")),
+    };
+    if irregular.is_none() {
+        for w in &info.warnings {
+            eprintln!("warning: {w}");
+        }
+    }
     progress.clear();
+    if let Some((found, gap_mm)) = irregular {
+        println!(
+            "irregular:   {found}; not a regular grid: mdtf reads it only with resampling (--resample; for mdtf \
+             run --set input.resample=true), onto {gap_mm} mm slices as described below"
+        );
+    }
     print!("{}", describe(&args.input.display().to_string(), &mf, &info, args.bins as usize));
     Ok(())
 }
@@ -59,7 +87,9 @@ fn describe(name: &str, mf: &MultiField, info: &FileInfo, bins: usize) -> String
     }
 
     let _ = writeln!(s, "dims:        {} ({} voxels)", g.dims_string(), g.voxel_count());
-    let _ = writeln!(s, "spacing:     {} {} {} (world units)", g.spacing[0], g.spacing[1], g.spacing[2]);
+    let length = info.units.length.as_deref().unwrap_or("world units, unit not stated");
+    let _ = writeln!(s, "spacing:     {} {} {} ({length})", g.spacing[0], g.spacing[1], g.spacing[2]);
+    let _ = writeln!(s, "value unit:  {}", info.units.value.as_deref().unwrap_or("not stated"));
     let _ = writeln!(s, "origin:      {} {} {}", g.origin[0], g.origin[1], g.origin[2]);
     let m = g.world_from_voxel();
     let _ = writeln!(s, "world_from_voxel (RAS):");

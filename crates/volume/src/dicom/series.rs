@@ -462,13 +462,7 @@ pub fn layout(input: &Path, files: &[ImageHeader], resample: bool) -> Result<Lay
     }
     let found = found.join("; ");
     if !resample {
-        return Err(VolumeError::header(
-            input,
-            format!(
-                "{found}; the slices do not form a regular grid, which mdtf will not guess at: read it with resampling (--resample on the command line, `resample = true` in a pipeline's [input]) to interpolate it onto a regular grid of {} mm",
-                mm(common_gap)
-            ),
-        ));
+        return Err(VolumeError::NeedsResampling { path: input.to_path_buf(), found, gap_mm: mm(common_gap) });
     }
     let nz = (extent / common_gap + 1e-6).floor() as usize + 1;
     geometry.dims[2] = nz;
@@ -476,7 +470,7 @@ pub fn layout(input: &Path, files: &[ImageHeader], resample: bool) -> Result<Lay
     warnings.push(format!(
         "{found}: resampled onto a regular grid of {nz} slices at {} mm (linear between slices{})",
         mm(common_gap),
-        if tilted { ", tilt corrected by shearing each slice in-plane" } else { "" }
+        if tilted { ", the tilt undone by shifting each slice in-plane" } else { "" }
     ));
     Ok(Layout { slices, geometry, resampling: Some(Resampling { nz, spacing: common_gap, offsets }), warnings })
 }
