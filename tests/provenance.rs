@@ -171,3 +171,20 @@ fn the_units_an_input_states_label_the_figures_and_the_report() {
     let (units, _) = vg_units(&out);
     assert_eq!(units, [serde_json::json!("HU"), serde_json::json!("HU/mm")]);
 }
+
+#[test]
+fn a_one_value_profile_says_which_of_several_fields_it_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("three.nii.gz");
+    mdtf_ok(&["synth", "multifield", "-o", input.to_str().unwrap(), "--size", "24", "-q"]);
+    let warnings = |pipeline: &str| {
+        let out = dir.path().join(pipeline);
+        provenance(pipeline, &input, &out, &[]);
+        let report: Value = serde_json::from_slice(&std::fs::read(out.join("run_report.json")).unwrap()).unwrap();
+        report["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap().to_string()).collect::<Vec<_>>()
+    };
+    let slicer = warnings("slicer-3dtf");
+    assert!(slicer.iter().any(|w| w.contains("3 fields") && w.contains("uses the first, 'field0'")), "{slicer:?}");
+    let gaussian = warnings("gaussian-tf");
+    assert!(!gaussian.iter().any(|w| w.contains("3 fields")), "{gaussian:?}");
+}

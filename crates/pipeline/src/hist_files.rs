@@ -92,7 +92,8 @@ pub struct Written {
 /// Writes the files of `c` into `hdir` (the output folder's `histogram/`),
 /// titled by `input_name`, with the boundaries found in its histogram
 /// volume, else in `default_hvol` (the default TF's, not an output); a
-/// warning for voxels outside the (v, g) histogram, and one for each
+/// warning for voxels outside the (v, g) histogram beyond its g axis's
+/// designed clip, and one for each
 /// boundary the tracing kept too few voxels of (see [`tracing_losses`]).
 pub fn write(
     hdir: &Path,
@@ -127,11 +128,14 @@ pub fn write(
         let note = crate::figures::clip_note(&hist.axes[1], g_clip, outside);
         write_histogram_marked(hdir, &hist, Scale::Log, input_name, Some(&note), &w.arches).map_err(err)?;
         w.outputs.push("histogram/hist_v_g.png".into());
-        if outside > 0 {
+        // the clip leaves out at most floor(clip % of the voxels) by design (the figure's
+        // note says so); more is worth a warning (values outside the v axis, NaN)
+        let clipped_by_design = (g_clip / 100.0 * c.voxels as f64).floor() as u64;
+        if outside > clipped_by_design {
             warnings.push(format!(
                 "histogram: {outside} of {} voxels lie outside the (v, g) histogram and are not counted \
-                 (its g axis stops at {:.4}, the top {g_clip} % of g clipped as Teem's qbert does; NaN values \
-                 are never counted)",
+                 (its g axis stops at {:.4}, the top {g_clip} % of g clipped as Teem's qbert does, at most \
+                 {clipped_by_design} voxels; NaN values are never counted)",
                 c.voxels, hist.axes[1].max
             ));
         }

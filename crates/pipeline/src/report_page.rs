@@ -52,8 +52,9 @@ const KNOWN_FIGURES: [(&str, &str); 8] = [
     ),
     (
         "boundary/boundary_report.png",
-        "Boundary tracing by distance from the boundary: how many voxels were traced and hit, and \
-         the mean g_hit, per distance.",
+        "Boundary tracing (the distance paper's Fig. 2) over log10(1 - dot), how far the gradient at a \
+         voxel turns from the one at its boundary hit: the share of the hit voxels per bin (and cumulative), \
+         their mean distance to the boundary and their mean g.",
     ),
     (
         "histogram/hist_v_g_hit.png",
@@ -270,15 +271,52 @@ fn boundaries_section(h: &mut String, r: &RunReport) {
         }
     }
     if let Some(b) = &r.boundary {
-        let c = &b.counts;
+        tracing_section(h, b, &r.units);
+    }
+}
+
+/// The tracing's thresholds and what became of the voxels, as tables.
+fn tracing_section(h: &mut String, b: &crate::report::BoundarySummary, units: &mdtf_volume::Units) {
+    let (p, c) = (&b.resolved, &b.counts);
+    let g_unit = units.of_channel("g").unwrap_or_else(|| "value units per world unit".into());
+    let length = units.length.as_deref().unwrap_or("world units");
+    h.push_str(
+        "<h2>Boundary tracing</h2>\n<p>Each voxel with g at or above g_min was traced along its gradient, \
+         towards larger g, to the nearest zero crossing of f''; a crossing whose g is below g_hit_min is \
+         rejected as noise.</p>\n<table><tr><th>setting</th><th>value</th></tr>\n",
+    );
+    for (name, value) in [
+        (
+            "noise floor (twice the median g, at least 1e-3 of the value range per voxel)",
+            format!("{} {g_unit}", num(p.noise_floor)),
+        ),
+        ("g_min (traced from)", format!("{} {g_unit}", num(p.g_min))),
+        ("g_hit_min (kept crossings)", format!("{} {g_unit}", num(p.g_hit_min))),
+        ("step", format!("{} {length}", num(p.step))),
+        ("d_max (longest trace)", format!("{} {length}", num(p.d_max))),
+        ("tolerance of the crossing", format!("{} {length}", num(p.tolerance))),
+        (
+            "Fig. 2 report's g at the voxel / at the hit",
+            format!("{} / {} {g_unit}", num(p.fig2_g_min), num(p.fig2_g_hit_min)),
+        ),
+    ] {
+        row(h, name, &esc(&value));
+    }
+    h.push_str("</table>\n<table><tr><th>voxels</th><th>count</th><th>share</th></tr>\n");
+    let total = (c.not_traced + c.hits + c.no_crossing + c.rejected).max(1) as f64;
+    for (name, n) in [
+        ("hit a boundary (kept)", c.hits),
+        ("traced, no crossing within d_max", c.no_crossing),
+        ("traced, crossing rejected (g below g_hit_min)", c.rejected),
+        ("not traced (g below g_min)", c.not_traced),
+    ] {
         let _ = writeln!(
             h,
-            "<h2>Boundary tracing</h2>\n<p>Every voxel was traced along its gradient to the nearest zero \
-             crossing of f''.</p>\n<pre>{}</pre>\n<pre>{}</pre>",
-            esc(&serde_json::to_string_pretty(&b.resolved).unwrap_or_default()),
-            esc(&serde_json::to_string_pretty(c).unwrap_or_default())
+            "<tr><td>{name}</td><td class=\"n\">{n}</td><td class=\"n\">{:.1} %</td></tr>",
+            100.0 * n as f64 / total
         );
     }
+    h.push_str("</table>\n");
 }
 
 fn gaussians_section(h: &mut String, gaussians: &[mdtf_pack::GaussianPrimitive], fields: &[String]) {

@@ -77,6 +77,8 @@ impl<'a> WholeRun<'a> {
         let geo = input.geometry.clone();
         let mut stages = Stages::default();
         stages.done("input", started, geo.voxel_count(), vec![]);
+        let mut warnings = meta.warnings;
+        warnings.extend(first_field_note(p.pack.profile, &plan.fields));
         let (value, input) = if plan.fields.is_empty() {
             (input.into_scalar().map_err(at("input"))?, None)
         } else {
@@ -95,7 +97,7 @@ impl<'a> WholeRun<'a> {
             units: meta.units,
             progress,
             stages,
-            warnings: meta.warnings,
+            warnings,
             chans: BTreeMap::new(),
             normal: None,
             // the value volume goes into derive as a one-field MultiField and comes back out: no copy
@@ -503,6 +505,24 @@ impl<'a> WholeRun<'a> {
         let g = crate::gaussians::gaussians(tf, mask.as_ref(), pack_chans, &axes, gradient, (hvol, self.kernel))
             .map_err(err)?;
         Ok(Some(g))
+    }
+}
+
+/// What a profile that reads one value makes of an input of several
+/// `fields` (None for one field, and for gaussian-tf, which reads them all).
+fn first_field_note(profile: Profile, fields: &[String]) -> Option<String> {
+    let (first, n) = (fields.first()?, fields.len());
+    let list = fields.join(", ");
+    match profile {
+        Profile::GaussianTf => None,
+        Profile::PeakFinding => Some(format!(
+            "input: {n} fields ({list}): peak-finding's value axis is the first, '{first}', and its 1/g comes from \
+             the gradient of all of them (||G||); gaussian-tf classifies every field"
+        )),
+        _ => Some(format!(
+            "input: {n} fields ({list}): {profile} reads one value and uses the first, '{first}'; gaussian-tf \
+             classifies every field (for another field, give it as a volume of its own)"
+        )),
     }
 }
 
