@@ -398,3 +398,77 @@ fn an_oblique_series_matches_dcm2niix_in_world_space() {
         assert!((ours.geometry.spacing[a] - theirs.geometry.spacing[a]).abs() < 1e-4, "spacing {a}");
     }
 }
+
+/// Writes one CT image per (transfer syntax, bits allocated, pixel representation) with pydicom
+/// (values spanning the stored range, RescaleSlope 0.5 and RescaleIntercept -3) into argv[1], and
+/// prints {file: values pydicom decodes, scaled} as JSON.
+const SAMPLE_LAYOUTS_PY: &str = r#"
+import json, os, sys
+import numpy as np
+import pydicom
+from pydicom.dataset import Dataset, FileMetaDataset
+from pydicom.uid import CTImageStorage, ExplicitVRBigEndian, ExplicitVRLittleEndian, ImplicitVRLittleEndian, generate_uid
+out, result = sys.argv[1], {}
+for syntax, little in [(ExplicitVRLittleEndian, True), (ImplicitVRLittleEndian, True), (ExplicitVRBigEndian, False)]:
+    for bits in (8, 16, 32):
+        for signed in (0, 1):
+            kind = {8: 'i1', 16: 'i2', 32: 'i4'}[bits] if signed else {8: 'u1', 16: 'u2', 32: 'u4'}[bits]
+            info = np.iinfo(np.dtype(kind))
+            # values near both ends of the stored range and between, in every byte
+            lo, hi = max(info.min, -(2**31) + 1), min(info.max, 2**31 - 1)
+            values = np.linspace(lo, hi, 5 * 7).round().astype(kind).reshape(5, 7)
+            meta = FileMetaDataset()
+            meta.MediaStorageSOPClassUID = CTImageStorage
+            meta.MediaStorageSOPInstanceUID = generate_uid()
+            meta.TransferSyntaxUID = syntax
+            ds = Dataset()
+            ds.file_meta = meta
+            ds.SOPClassUID, ds.SOPInstanceUID = CTImageStorage, meta.MediaStorageSOPInstanceUID
+            ds.Modality, ds.SeriesInstanceUID, ds.StudyInstanceUID = "CT", generate_uid(), generate_uid()
+            ds.Rows, ds.Columns, ds.SamplesPerPixel, ds.PhotometricInterpretation = 5, 7, 1, "MONOCHROME2"
+            ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = bits, bits, bits - 1, signed
+            ds.PixelSpacing, ds.RescaleSlope, ds.RescaleIntercept = [1, 1], 0.5, -3
+            ds.PixelData = values.astype(values.dtype.newbyteorder('<' if little else '>')).tobytes()
+            name = f"{syntax.name.replace(' ', '_')}_{bits}_{'signed' if signed else 'unsigned'}.dcm"
+            ds.save_as(os.path.join(out, name), implicit_vr=syntax == ImplicitVRLittleEndian, little_endian=little, enforce_file_format=True)
+            back = pydicom.dcmread(os.path.join(out, name))
+            result[name] = (back.pixel_array.astype(np.float64) * 0.5 - 3).ravel().tolist()
+print(json.dumps(result))
+"#;
+
+#[test]
+fn every_sample_width_byte_order_and_sign_reads_as_pydicom_decodes_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let written: Value = serde_json::from_str(&run_python(SAMPLE_LAYOUTS_PY, &[dir.path().to_str().unwrap()])).unwrap();
+    let files = written.as_object().unwrap();
+    assert_eq!(files.len(), 18, "3 transfer syntaxes x 3 widths x 2 signs");
+    for (name, want) in files {
+        let mf = read(&dir.path().join(name), &ReadOptions::default()).unwrap_or_else(|e| panic!("{name}: {e}"));
+        // f32 holds 24 bits: 32-bit values agree to f32's rounding
+        let (got, want) = (values(&mf), numbers(want));
+        for (g, w) in got.iter().zip(&want) {
+            assert!((g - w).abs() <= w.abs() * 1e-7 + 1e-9, "{name}: {g} vs pydicom's {w}");
+        }
+        assert_eq!(got.len(), want.len(), "{name}");
+    }
+}
+
+#[test]
+fn pydicoms_big_endian_dose_grids_read_as_pydicom_decodes_them() {
+    let script = "import json, sys, pydicom, os; d = os.path.join(os.path.dirname(pydicom.__file__), 'data', 'test_files'); \
+                  print(json.dumps({f: os.path.join(d, f) for f in ['rtdose.dcm', 'rtdose_expb.dcm', 'rtdose_1frame.dcm', 'rtdose_expb_1frame.dcm']}))";
+    let files: Value = serde_json::from_str(&run_python(script, &[])).unwrap();
+    for (name, path) in files.as_object().unwrap() {
+        let path = path.as_str().unwrap();
+        let want = run_python(
+            "import json, sys, pydicom; d = pydicom.dcmread(sys.argv[1]); print(json.dumps((d.pixel_array * float(d.DoseGridScaling)).ravel().tolist()))",
+            &[path],
+        );
+        let mf = read(Path::new(path), &ReadOptions::default()).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let (got, want) = (values(&mf), numbers(&serde_json::from_str(&want).unwrap()));
+        assert_eq!(got.len(), want.len(), "{name}");
+        for (g, w) in got.iter().zip(&want) {
+            assert!((g - w).abs() <= w.abs() * 1e-6, "{name}: {g} vs pydicom's {w}");
+        }
+    }
+}

@@ -196,7 +196,8 @@ fn file_info(files: &[header::ImageHeader], layout: &series::Layout) -> FileInfo
     FileInfo {
         format: what,
         sample_type,
-        endian: Endian::Little,
+        // the file's byte order: only Explicit VR Big Endian (retired) stores big-endian
+        endian: if first.transfer_syntax == "1.2.840.10008.1.2.2" { Endian::Big } else { Endian::Little },
         compressed,
         scale,
         warnings: layout.warnings.clone(),

@@ -76,7 +76,7 @@ fn decode_file(h: &ImageHeader, targets: Vec<Target>) -> Result<()> {
         .flatten()
         .ok_or_else(|| VolumeError::header(&h.path, "the file has no PixelData (7FE0,0010)"))?;
     let bytes: Cow<[u8]> = match element.value() {
-        Value::Primitive(p) => p.to_bytes(),
+        Value::Primitive(p) => little_endian_samples(h, element.vr(), p.to_bytes()),
         _ => Cow::Owned(
             obj.decode_pixel_data()
                 .map_err(|e| {
@@ -110,6 +110,32 @@ fn decode_file(h: &ImageHeader, targets: Vec<Target>) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Explicit VR Big Endian (retired), the one big-endian transfer syntax.
+const EXPLICIT_VR_BIG_ENDIAN: &str = "1.2.840.10008.1.2.2";
+
+/// Native pixel data as little-endian samples. The parser hands OW data as
+/// 16-bit words in the machine's (little-endian) order, whatever the
+/// transfer syntax's, and OB data as the file's bytes. So under Explicit VR
+/// Big Endian a 32-bit sample stored as OW arrives as two swapped words in
+/// big-endian order (its halves must trade places), and a sample wider than
+/// a byte stored as OB arrives big-endian (its bytes must be reversed).
+fn little_endian_samples<'a>(h: &ImageHeader, vr: dicom_core::VR, bytes: Cow<'a, [u8]>) -> Cow<'a, [u8]> {
+    let width = h.sample_bytes();
+    if h.transfer_syntax != EXPLICIT_VR_BIG_ENDIAN || width < 2 {
+        return bytes;
+    }
+    let mut le = bytes.into_owned();
+    match vr {
+        dicom_core::VR::OW if width == 4 => le.chunks_exact_mut(4).for_each(|s| {
+            s.swap(0, 2);
+            s.swap(1, 3);
+        }),
+        dicom_core::VR::OW => {}
+        _ => le.chunks_exact_mut(width).for_each(|s| s.reverse()),
+    }
+    Cow::Owned(le)
 }
 
 /// Stored samples (little-endian, as the parser and decoders hand them) to
