@@ -197,7 +197,7 @@ fn file_info(files: &[header::ImageHeader], layout: &series::Layout) -> FileInfo
         format: what,
         sample_type,
         // the file's byte order: only Explicit VR Big Endian (retired) stores big-endian
-        endian: if first.transfer_syntax == "1.2.840.10008.1.2.2" { Endian::Big } else { Endian::Little },
+        endian: if first.transfer_syntax == pixels::EXPLICIT_VR_BIG_ENDIAN { Endian::Big } else { Endian::Little },
         compressed,
         scale,
         warnings: layout.warnings.clone(),

@@ -113,7 +113,7 @@ fn decode_file(h: &ImageHeader, targets: Vec<Target>) -> Result<()> {
 }
 
 /// Explicit VR Big Endian (retired), the one big-endian transfer syntax.
-const EXPLICIT_VR_BIG_ENDIAN: &str = "1.2.840.10008.1.2.2";
+pub(crate) const EXPLICIT_VR_BIG_ENDIAN: &str = "1.2.840.10008.1.2.2";
 
 /// Native pixel data as little-endian samples. The parser hands OW data as
 /// 16-bit words in the machine's (little-endian) order, whatever the
