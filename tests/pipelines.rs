@@ -333,3 +333,42 @@ fn projected_tetrahedra_pack_holds_the_sphere_s_and_g_at_every_point() {
     assert!((centre - mid).abs() <= 0.05 * (hi - lo) as f64, "TGTF at {centre}, boundary at {mid}");
     assert!(pack.parent().unwrap().join("preview.png").is_file());
 }
+
+#[test]
+fn projected_tetrahedra_meshes_a_volume_over_its_budget_from_block_averages_and_says_so() {
+    // 40^3 gives 39^3 x 6 = 355914 tetrahedra; a budget of 60000 needs 2 x 2 x 2 blocks (19^3 x 6 = 41154)
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("sphere.nii.gz");
+    mdtf_ok(&["synth", "erf-sphere", "-o", input.to_str().unwrap(), "--size", "40", "-q"]);
+    let p = shipped_pipeline("projected-tetrahedra");
+    let (pipe, i) = (p.to_str().unwrap(), input.to_str().unwrap());
+    let budget = "tetra.max_tetrahedra=60000";
+    let plan = mdtf_ok(&["run", pipe, "--input", i, "-o", "unused", "--set", budget, "--plan"]);
+    assert!(plan.contains("355914 tetrahedra") && plan.contains("2 x 2 x 2 blocks, 20 x 20 x 20 points"), "{plan}");
+    let out = dir.path().join("out");
+    mdtf_ok(&["run", pipe, "--input", i, "-o", out.to_str().unwrap(), "--set", budget, "-q"]);
+    let report: Value = serde_json::from_slice(&std::fs::read(out.join("run_report.json")).unwrap()).unwrap();
+    let warned =
+        report["warnings"].as_array().unwrap().iter().any(|w| w.as_str().unwrap().contains("2 x 2 x 2 blocks"));
+    assert!(warned, "{}", report["warnings"]);
+    let m: Value = serde_json::from_slice(&std::fs::read(out.join("pack/manifest.json")).unwrap()).unwrap();
+    assert_eq!(m["mesh"]["points"], 20 * 20 * 20);
+    assert_eq!(m["mesh"]["tetrahedra"], 19 * 19 * 19 * 6);
+    // each point holds the mean of its 2 x 2 x 2 block of voxels, at the block's centre
+    let v = mdtf_volume::read_scalar(&input, &mdtf_volume::ReadOptions::default()).unwrap();
+    let (points, s_g) = (nrrd_f32(&out.join("pack/points.nrrd")), nrrd_f32(&out.join("pack/s_g.nrrd")));
+    let g = &v.geometry;
+    for (n, (xyz, sg)) in points.chunks_exact(3).zip(s_g.chunks_exact(2)).enumerate() {
+        let (bi, bj, bk) = (n % 20, (n / 20) % 20, n / 400);
+        let mut mean = 0.0;
+        for (dz, dy, dx) in (0..8).map(|c| (c / 4, (c / 2) % 2, c % 2)) {
+            mean += v.data[[2 * bk + dz, 2 * bj + dy, 2 * bi + dx]] as f64 / 8.0;
+        }
+        assert!((sg[0] as f64 - mean).abs() <= 1e-3 * mean.abs().max(1.0), "point {n}: {} vs {mean}", sg[0]);
+        let centre = [(2 * bi) as f64 + 0.5, (2 * bj) as f64 + 0.5, (2 * bk) as f64 + 0.5];
+        for a in 0..3 {
+            let want = g.origin[a] + centre[a] * g.spacing[a];
+            assert!((xyz[a] as f64 - want).abs() < 1e-3, "point {n} axis {a}: {} vs {want}", xyz[a]);
+        }
+    }
+}

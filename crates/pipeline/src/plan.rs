@@ -102,6 +102,8 @@ pub struct Plan {
     pub prefilter: bool,
     /// Neighbours the pre-filter reads per voxel (0 without it): its cost.
     pub prefilter_taps: usize,
+    /// The tetrahedral mesh the pack step makes (projected-tetrahedra), in words: its size and budget.
+    pub mesh: Option<String>,
     /// Whether the tracing runs.
     pub trace: bool,
     /// The steps in order.
@@ -190,6 +192,10 @@ impl Plan {
             pack_makes.extend(normals);
         }
         steps.push(PlannedStep { step: Step::Pack, reads: pack_reads, makes: pack_makes });
+        if profile == Profile::ProjectedTetrahedra {
+            plan.mesh = Some(mesh_words(geometry, &p.tetra));
+        }
+        let steps = &mut plan.steps;
         if p.preview {
             steps.push(PlannedStep { step: Step::Preview, reads: BTreeSet::new(), makes: BTreeSet::new() });
         }
@@ -253,6 +259,7 @@ impl Plan {
             defer_normals,
             prefilter,
             prefilter_taps,
+            mesh: None,
             trace,
             steps,
             reductions,
@@ -487,6 +494,11 @@ impl fmt::Display for Plan {
                         self.prefilter_taps
                     );
                 }
+                Step::Pack => {
+                    if let Some(mesh) = &self.mesh {
+                        line += &format!(" [{mesh}]");
+                    }
+                }
                 _ => {}
             }
             writeln!(f, "{}", line.trim_end())?;
@@ -504,6 +516,24 @@ impl fmt::Display for Plan {
             r.kernel,
             r.prefilter,
             if self.trace { r.trace } else { [0; 3] }
+        )
+    }
+}
+
+/// The mesh a volume of `geometry` gives under `tetra`'s scheme and budget, in words.
+fn mesh_words(geometry: &Geometry, tetra: &mdtf_tetra::TetraParams) -> String {
+    let (scheme, budget) = (tetra.tets, tetra.max_tetrahedra);
+    let full = mdtf_tetra::tetrahedra_of(geometry.dims, scheme);
+    let (block, to) = mdtf_tetra::coarsening(geometry.dims, scheme, budget);
+    let budget_words = if budget == 0 { "no budget".to_string() } else { format!("budget {budget}") };
+    if block == 1 {
+        format!("mesh: {full} tetrahedra, one point per voxel ({budget_words}, tetra.max_tetrahedra)")
+    } else {
+        let [x, y, z] = to;
+        format!(
+            "mesh: the grid would give {full} tetrahedra, over the {budget_words} (tetra.max_tetrahedra): the value \
+             averaged over {block} x {block} x {block} blocks, {x} x {y} x {z} points, {} tetrahedra",
+            mdtf_tetra::tetrahedra_of(to, scheme)
         )
     }
 }

@@ -360,7 +360,15 @@ impl<'a> WholeRun<'a> {
         let hvol = hvol.as_ref();
         if profile == Profile::ProjectedTetrahedra {
             let gaussians = self.pack_mesh(tf.as_ref(), hvol, provenance)?;
-            outputs.push("pack/gaussians.json".into());
+            // the mesh pack's files, named in the report as every stage's are
+            let mut files: Vec<String> = std::fs::read_dir(&pdir)
+                .map_err(at("pack"))?
+                .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()))
+                .filter(|name| name != "manifest.json")
+                .map(|name| format!("pack/{name}"))
+                .collect();
+            files.sort();
+            outputs.extend(files);
             // the (s, g) TF over the (v, g) histogram, as scalar gaussian-tf draws its own
             let written = crate::figures::write_gaussian_figures(
                 &self.dir.join("histogram"),
@@ -407,11 +415,15 @@ impl<'a> WholeRun<'a> {
     ) -> Result<Vec<GaussianPrimitive>, RunError> {
         let pdir = self.dir.join("pack");
         let value = self.chans.get("v").ok_or_else(|| fail("pack")("no value volume".into()))?;
-        let mesh = mdtf_tetra::tetrahedralise(value, self.p.tetra.tets, "v").map_err(at("pack"))?;
-        let out = mdtf_tetra::run(&mesh, &self.p.tetra, tf).map_err(at("pack"))?;
+        let tetra = &self.p.tetra;
+        let (mesh, grid, coarsened) =
+            mdtf_tetra::tetrahedralise_within(value, tetra.tets, tetra.max_tetrahedra, "v").map_err(at("pack"))?;
+        let every_voxel = "--set tetra.max_tetrahedra=0 meshes every voxel";
+        self.warnings.extend(coarsened.map(|c| format!("tetra: {} ({every_voxel})", c.note())));
+        let out = mdtf_tetra::run(&mesh, tetra, tf).map_err(at("pack"))?;
         self.warnings.extend(out.notes.iter().map(|n| format!("tetra: {n}")));
         let report = mdtf_tetra::MeshReport::default();
-        mdtf_tetra::write_pack(&pdir, &mesh, &report, &out, Some(&self.geo), provenance).map_err(at("pack"))?;
+        mdtf_tetra::write_pack(&pdir, &mesh, &report, &out, Some(&grid), provenance).map_err(at("pack"))?;
         drop(mesh);
         let value_and_g: Vec<(String, Volume)> =
             ["v", "g"].into_iter().filter_map(|c| self.chans.remove(c).map(|v| (c.to_string(), v))).collect();

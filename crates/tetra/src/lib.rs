@@ -12,6 +12,7 @@
 //! Units: positions and lengths in world units, s in the input's units, g
 //! in s units per world unit.
 
+mod budget;
 mod cells;
 mod from_volume;
 mod gradient;
@@ -21,6 +22,7 @@ mod pack_mesh;
 mod vtk_io;
 pub mod vtu_writer;
 
+pub use budget::{Coarsened, DEFAULT_MAX_TETRAHEDRA, block_average, coarsening, tetrahedra_of, tetrahedralise_within};
 pub use cells::{CellInfo, cell_infos, cull, visible_cells};
 pub use from_volume::{TetScheme, tetrahedralise};
 pub use gradient::{GradientMethod, VertexStars, magnitudes, tet_gradient, vertex_gradients};
@@ -101,6 +103,15 @@ pub struct TetraParams {
     /// The pre-integration tables and their sizes.
     #[serde(default)]
     pub tables: TetTableParams,
+    /// Most tetrahedra a volume is meshed into: above it the volume is
+    /// averaged over blocks of k x k x k voxels first (see [`coarsening`]);
+    /// 0 meshes every voxel. Meshes read from files are kept as they are.
+    #[serde(default = "default_max_tetrahedra")]
+    pub max_tetrahedra: u64,
+}
+
+fn default_max_tetrahedra() -> u64 {
+    DEFAULT_MAX_TETRAHEDRA
 }
 
 fn least_squares() -> GradientMethod {
@@ -118,6 +129,7 @@ impl Default for TetraParams {
             tets: TetScheme::Six,
             gradient: GradientMethod::LeastSquares,
             tables: TetTableParams::default(),
+            max_tetrahedra: DEFAULT_MAX_TETRAHEDRA,
         }
     }
 }

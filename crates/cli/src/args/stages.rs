@@ -396,6 +396,11 @@ pub struct TetraArgs {
     /// Tetrahedra per grid cell with --from-volume: 5 or 6.
     #[arg(long, default_value = "6", value_name = "5|6")]
     pub tets: String,
+    /// With --from-volume, the most tetrahedra to make: a larger grid is
+    /// averaged over k x k x k blocks first (the least k that fits), and the
+    /// run says so; 0 meshes every voxel.
+    #[arg(long, default_value_t = mdtf_pipeline::stages::tetra::DEFAULT_MAX_TETRAHEDRA, value_name = "N")]
+    pub max_tetrahedra: u64,
     /// Point array to use as s (default: the only one-component point array).
     #[arg(long, value_name = "NAME")]
     pub scalar: Option<String>,

@@ -6,7 +6,7 @@ use crate::progress::Progress;
 use anyhow::{Context, Result};
 use mdtf_pipeline::stages::pack::{Provenance, TetTable, sha256_file};
 use mdtf_pipeline::stages::tetra::{
-    MeshReport, TetMesh, TetraOutput, TetraParams, read_mesh, tetrahedralise, write_pack,
+    MeshReport, TetMesh, TetraOutput, TetraParams, read_mesh, tetrahedralise_within, write_pack,
 };
 use mdtf_volume::{Geometry, Inputs, OutputFolder};
 use std::path::{Path, PathBuf};
@@ -52,6 +52,7 @@ fn params(args: &TetraArgs) -> Result<TetraParams> {
         scalar: args.scalar.clone(),
         tets: args.tets.parse().map_err(|e: String| anyhow::anyhow!("--tets: {e}"))?,
         gradient: args.gradient.parse().map_err(|e: String| anyhow::anyhow!("--gradient: {e}"))?,
+        max_tetrahedra: args.max_tetrahedra,
         ..Default::default()
     };
     params.tables.tables = args
@@ -89,8 +90,12 @@ fn mesh_of(args: &TetraArgs, params: &TetraParams, progress: &Progress) -> Resul
             let (mf, _) = read_input(path, &args.read, &read_options(&args.read))?;
             let volume = mf.into_scalar().context("--from-volume takes a one-field volume")?;
             let name = args.scalar.clone().unwrap_or_else(|| "v".into());
-            let mesh = progress.step("meshing", || tetrahedralise(&volume, params.tets, &name))?;
-            Ok(Meshed { mesh, report: MeshReport::default(), grid: Some(volume.geometry), source: path.clone() })
+            let (mesh, grid, coarsened) = progress
+                .step("meshing", || tetrahedralise_within(&volume, params.tets, params.max_tetrahedra, &name))?;
+            if let Some(c) = coarsened {
+                progress.note(&format!("note: {} (--max-tetrahedra 0 meshes every voxel)", c.note()));
+            }
+            Ok(Meshed { mesh, report: MeshReport::default(), grid: Some(grid), source: path.clone() })
         }
         (None, None) => anyhow::bail!("give a mesh (.vtu/.vtk) or --from-volume VOLUME"),
     }
