@@ -363,6 +363,70 @@ fn meshio_meshes_round_trip_through_mdtf_tetra() {
     }
 }
 
+/// Writes a mesh with meshio whose only scalar is a cell array (a material
+/// id per tetrahedron, as FE and CFD meshes carry), and prints with numpy the
+/// volume-weighted mean of the cells around each point, the reference.
+const MESHIO_CELL_DATA: &str = r#"
+import sys, json, meshio, numpy as np
+rng = np.random.default_rng(3)
+n = 5
+g = np.stack(np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing='ij'), -1).reshape(-1, 3).astype(float)
+pts = g * 2.0 + rng.uniform(-0.2, 0.2, g.shape)
+idx = lambda i, j, k: (i * n + j) * n + k
+tets = []
+for i in range(n - 1):
+    for j in range(n - 1):
+        for k in range(n - 1):
+            c = [idx(i + (m >> 2 & 1), j + (m >> 1 & 1), k + (m & 1)) for m in range(8)]
+            for t in ([0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]):
+                tets.append([c[v] for v in t])
+tets = np.array(tets)
+centres = pts[tets].mean(axis=1)
+material = np.where(np.linalg.norm(centres - 4.0, axis=1) < 3.0, 7.0, 1.0)
+m = meshio.Mesh(pts, [("tetra", tets)], cell_data={"material": [material]})
+m.write(sys.argv[1], **({"binary": False} if sys.argv[1].endswith(".vtk") else {}))
+a, b, c, d = (pts[tets[:, q]] for q in range(4))
+vol = np.abs(np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a))) / 6.0
+num, den = np.zeros(len(pts)), np.zeros(len(pts))
+for q in range(4):
+    np.add.at(num, tets[:, q], vol * material)
+    np.add.at(den, tets[:, q], vol)
+print(json.dumps((num / den).tolist()))
+"#;
+
+#[test]
+fn a_mesh_with_only_a_cell_scalar_is_meshed_from_its_volume_weighted_point_means_and_previewed() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["cells.vtu", "cells.vtk"] {
+        let input = dir.path().join(name);
+        let want = floats(&serde_json::from_str(&run_python(MESHIO_CELL_DATA, &[input.to_str().unwrap()])).unwrap());
+        // info lists the cell array; run points to mdtf tetra
+        let info = mdtf_ok(&["info", input.to_str().unwrap()]);
+        assert!(info.contains("cell arrays: 1") && info.contains("material: 1 component(s)"), "{info}");
+        let pipeline = mdtf_e2e::shipped_pipeline("projected-tetrahedra");
+        let out = dir.path().join(format!("run_{name}"));
+        let run = ["run", pipeline.to_str().unwrap(), "--input", input.to_str().unwrap(), "-o", out.to_str().unwrap()];
+        let err = mdtf_e2e::mdtf_err(&run);
+        assert!(err.contains("is a mesh") && err.contains("mdtf tetra"), "{err}");
+        let pack = dir.path().join(format!("pack_{name}"));
+        let said =
+            mdtf_e2e::mdtf(&["tetra", input.to_str().unwrap(), "-o", pack.to_str().unwrap(), "--fb-size", "8,8,8"]);
+        assert!(said.status.success(), "{}", String::from_utf8_lossy(&said.stderr));
+        assert!(String::from_utf8_lossy(&said.stderr).contains("cell array 'material'"), "{name}: says so");
+        let got = floats(&dump(MESHIO_DUMP, &pack.join("mesh.vtu"))["arrays"]["material"]);
+        assert_eq!(got.len(), want.len(), "{name}");
+        for (p, (g, w)) in got.iter().zip(&want).enumerate() {
+            assert!((g - w).abs() <= 1e-5 * w.abs().max(1.0), "{name}: point {p}: {g} vs numpy's {w}");
+        }
+        // the pack previews with the default (s, g) TF written beside it
+        let picture = dir.path().join(format!("{name}.png"));
+        mdtf_ok(&["preview", pack.to_str().unwrap(), "-o", picture.to_str().unwrap(), "-q"]);
+        let (_, _, rgb) = mdtf_e2e::read_rgb_png(&picture);
+        let lit = rgb.chunks_exact(3).filter(|p| p.iter().any(|&c| c > 10)).count();
+        assert!(lit * 50 >= rgb.len() / 3, "{name}: {lit} pixels lit");
+    }
+}
+
 #[test]
 fn nibabel_opens_the_nifti_copies_of_pack_textures() {
     let dir = tempfile::tempdir().unwrap();

@@ -103,6 +103,35 @@ pub fn gaussians(
     Ok(vec![median_tgtf(centre, &ranges)])
 }
 
+/// The (s, g) TF of a mesh read from a file (no volume, no grid): the TF
+/// file's Gaussians, else a TGTF at each boundary found in the (s, g)
+/// histogram of its points (`s`, `g` per point; `spacing`, a typical edge
+/// length in world units, turns the surface opacities into per-unit ones),
+/// else the paper's median TGTF over the points of large g.
+pub fn mesh_gaussians(tf: Option<&TfFile>, s: &[f32], g: &[f32], spacing: f64) -> Vec<GaussianPrimitive> {
+    if let Some(tf) = tf.filter(|t| !t.gaussians().is_empty()) {
+        return tf.gaussians();
+    }
+    let axes = ["v", "g"].map(|name| mdtf_histogram::HvolAxes::spec(name, 256));
+    let counted = match (axes[0].resolve("v", s), axes[1].resolve("g", g)) {
+        (Ok(av), Ok(ag)) => mdtf_histogram::count(&[s, g], vec![av, ag], None).ok(),
+        _ => None,
+    };
+    if let Some(h) = counted {
+        let counts: Vec<u64> = h.counts.iter().map(|&c| c as u64).collect();
+        let axes = [h.axes[0].clone(), h.axes[1].clone()];
+        let found = mdtf_histogram::detect_in(&counts, &axes, 0.0).boundaries;
+        if !found.is_empty() {
+            let grid = Geometry::new([2, 2, 2], [spacing; 3]);
+            return boundary_tgtfs(&crate::pack_inputs::arches_from(&found), &grid);
+        }
+    }
+    let g_cut = 2.0 * mdtf_volume::median(g).unwrap_or(0.0);
+    let strong: Vec<f32> = s.iter().zip(g).filter(|(_, gv)| **gv > g_cut).map(|(v, _)| *v).collect();
+    let centre = mdtf_volume::median(if strong.is_empty() { s } else { &strong }).unwrap_or(0.0);
+    vec![median_tgtf(vec![centre as f64], &[1.0])]
+}
+
 /// Writes `g` as `gaussians.json` in the pack folder `pdir`, atomically.
 pub fn write(pdir: &std::path::Path, g: &[GaussianPrimitive]) -> Result<(), mdtf_volume::VolumeError> {
     mdtf_volume::write_file_atomically(&pdir.join("gaussians.json"), |w| {

@@ -122,6 +122,15 @@ pub(crate) struct InputMeta {
 /// The input volume and what its reader said of it.
 pub(crate) fn load_input(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(MultiField, InputMeta), RunError> {
     if let Some(f) = input_file(p, opts, base) {
+        let extension = f.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+        if extension == "vtu" || extension == "vtk" {
+            return Err(fail("input")(format!(
+                "{} is a mesh: `mdtf run` reads volumes; make a projected-tetrahedra pack of the mesh's own \
+                 tetrahedra with `mdtf tetra {} -o PACK` (and `mdtf preview PACK` to look at it)",
+                f.display(),
+                f.display()
+            )));
+        }
         let (mf, info) = mdtf_volume::read_with_info(&f, &read_options(p)).map_err(at("input"))?;
         let meta = InputMeta { name: f.display().to_string(), warnings: info.warnings, units: info.units };
         return Ok((mf, meta));

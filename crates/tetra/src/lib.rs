@@ -26,7 +26,7 @@ pub use budget::{Coarsened, DEFAULT_MAX_TETRAHEDRA, block_average, coarsening, t
 pub use cells::{CellInfo, cell_infos, cull, visible_cells};
 pub use from_volume::{TetScheme, tetrahedralise};
 pub use gradient::{GradientMethod, VertexStars, magnitudes, tet_gradient, vertex_gradients};
-pub use mesh::{DEGENERATE_RATIO, MeshReport, PointArray, TetMesh, max_edge, six_volume};
+pub use mesh::{DEGENERATE_RATIO, MeshReport, PointArray, TetMesh, cell_to_points, max_edge, six_volume};
 pub use pack_mesh::write_pack;
 pub use vtk_io::{MeshSummary, mesh_summary, read_mesh, write_mesh};
 

@@ -37,6 +37,9 @@ pub struct MeshReport {
     pub skipped_cells: BTreeMap<String, usize>,
     /// Tetrahedra of (numerically) zero volume, skipped.
     pub degenerate_tets: usize,
+    /// The cell array the scalar s was made from, when the mesh has no
+    /// point scalar (see [`crate::cell_to_points`]).
+    pub scalar_from_cells: Option<String>,
 }
 
 impl MeshReport {
@@ -47,8 +50,41 @@ impl MeshReport {
         if self.degenerate_tets > 0 {
             parts.push(format!("{} zero-volume tetrahedra skipped", self.degenerate_tets));
         }
+        if let Some(name) = &self.scalar_from_cells {
+            parts.push(format!(
+                "no point scalar: s is the cell array '{name}' carried to the points (at each point, the mean over \
+                 the tetrahedra around it weighted by their volumes)"
+            ));
+        }
         parts.join("; ")
     }
+}
+
+/// A value per tetrahedron (`values[t]` of `tets[t]`) carried to the
+/// points: at each point the mean over the tetrahedra around it weighted by
+/// their volumes (the integral of the piecewise-constant field over the
+/// point's star over its volume, as VTK's CellDataToPointData does with
+/// volume weights); the plain mean where they all have zero volume, 0 at a
+/// point no tetrahedron uses. Corner numbers outside `points` are left out
+/// (the mesh check refuses them later).
+pub fn cell_to_points(points: &[[f64; 3]], tets: &[[u64; 4]], values: &[f64]) -> Vec<f64> {
+    let (mut sum, mut weight, mut plain, mut count) =
+        (vec![0f64; points.len()], vec![0f64; points.len()], vec![0f64; points.len()], vec![0u32; points.len()]);
+    for (t, &value) in tets.iter().zip(values) {
+        let corner = |c: usize| points.get(t[c] as usize).copied();
+        let (Some(a), Some(b), Some(c), Some(d)) = (corner(0), corner(1), corner(2), corner(3)) else { continue };
+        let volume = six_volume(a, b, c, d).abs() / 6.0;
+        for &p in t {
+            let p = p as usize;
+            sum[p] += volume * value;
+            weight[p] += volume;
+            plain[p] += value;
+            count[p] += 1;
+        }
+    }
+    (0..points.len())
+        .map(|p| if weight[p] > 0.0 { sum[p] / weight[p] } else { plain[p] / count[p].max(1) as f64 })
+        .collect()
 }
 
 /// 6 x the signed volume of the tetrahedron (a, b, c, d).

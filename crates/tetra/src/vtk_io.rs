@@ -31,6 +31,8 @@ pub struct MeshSummary {
     pub cells: std::collections::BTreeMap<String, usize>,
     /// Point arrays: name, components, finite min and max over all components.
     pub arrays: Vec<(String, usize, f64, f64)>,
+    /// Cell arrays, the same way.
+    pub cell_arrays: Vec<(String, usize, f64, f64)>,
     /// Bounding box of the points (min, max), world units.
     pub bounds: ([f64; 3], [f64; 3]),
 }
@@ -53,18 +55,22 @@ pub fn mesh_summary(path: &Path) -> Result<MeshSummary, TetraError> {
     for t in &piece.cells.types {
         *cells.entry(format!("{t:?}")).or_insert(0) += 1;
     }
-    let arrays = point_arrays(path, &piece.data, points)?
-        .into_iter()
-        .map(|a| {
-            let (mn, mx) = a
-                .values
-                .iter()
-                .filter(|v| v.is_finite())
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
-            (a.name, a.components, mn, mx)
-        })
-        .collect();
-    Ok(MeshSummary { points, cells, arrays, bounds: (lo, hi) })
+    let summarise = |arrays: Vec<PointArray>| -> Vec<(String, usize, f64, f64)> {
+        arrays
+            .into_iter()
+            .map(|a| {
+                let (mn, mx) = a
+                    .values
+                    .iter()
+                    .filter(|v| v.is_finite())
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+                (a.name, a.components, mn, mx)
+            })
+            .collect()
+    };
+    let arrays = summarise(point_arrays(path, &piece.data, points)?);
+    let cell_arrays = summarise(data_arrays(path, &piece.data.cell, piece.cells.types.len(), "cell")?);
+    Ok(MeshSummary { points, cells, arrays, cell_arrays, bounds: (lo, hi) })
 }
 
 thread_local! {
@@ -170,7 +176,21 @@ fn piece_to_mesh(
             *report.skipped_cells.entry(format!("{kind:?}")).or_insert(0) += 1;
         }
     }
-    let arrays = point_arrays(path, &piece.data, points.len())?;
+    let mut arrays = point_arrays(path, &piece.data, points.len())?;
+    // no point scalar (or not the one asked for) but a cell scalar: carried to the points
+    let wanted_point = |a: &PointArray| a.components == 1 && scalar.is_none_or(|s| s == a.name);
+    if !arrays.iter().any(wanted_point) {
+        let cells_arrays = data_arrays(path, &piece.data.cell, types.len(), "cell")?;
+        let singles: Vec<&PointArray> =
+            cells_arrays.iter().filter(|a| a.components == 1 && scalar.is_none_or(|s| s == a.name)).collect();
+        if let [one] = singles.as_slice() {
+            let tet_values: Vec<f64> =
+                types.iter().zip(&one.values).filter(|(k, _)| **k == CellType::Tetra).map(|(_, &v)| v).collect();
+            let values = crate::cell_to_points(&points, &raw, &tet_values);
+            arrays.push(PointArray { name: one.name.clone(), components: 1, values });
+            report.scalar_from_cells = Some(one.name.clone());
+        }
+    }
     let present = || {
         let names: Vec<String> = arrays.iter().map(|a| format!("{} ({} comp.)", a.name, a.components)).collect();
         if names.is_empty() { "none".to_string() } else { names.join(", ") }
@@ -255,20 +275,25 @@ fn cell_lists(path: &Path, verts: VertexNumbers, n_cells: usize) -> Result<Vec<V
 
 /// Every numeric point array (legacy attributes and FIELD arrays alike).
 fn point_arrays(path: &Path, data: &Attributes, n_points: usize) -> Result<Vec<PointArray>, TetraError> {
+    data_arrays(path, &data.point, n_points, "point")
+}
+
+/// The numeric arrays of one attribute list (`what`: "point" or "cell"), `n` tuples each.
+fn data_arrays(path: &Path, list: &[Attribute], n: usize, what: &str) -> Result<Vec<PointArray>, TetraError> {
     let mut out = Vec::new();
     let mut push = |name: &str, components: usize, buf: &IOBuffer| -> Result<(), TetraError> {
         let values: Vec<f64> =
-            buf.cast_into::<f64>().ok_or_else(|| read_error(path, format!("point array {name} is not numeric")))?;
-        if components == 0 || values.len() != components * n_points {
+            buf.cast_into::<f64>().ok_or_else(|| read_error(path, format!("{what} array {name} is not numeric")))?;
+        if components == 0 || values.len() != components * n {
             return Err(read_error(
                 path,
-                format!("point array {name} has {} values for {n_points} points x {components}", values.len()),
+                format!("{what} array {name} has {} values for {n} {what}s x {components}", values.len()),
             ));
         }
         out.push(PointArray { name: name.into(), components, values });
         Ok(())
     };
-    for attr in &data.point {
+    for attr in list {
         match attr {
             Attribute::DataArray(DataArray { name, elem, data }) => {
                 if matches!(elem, ElementType::LookupTable) {

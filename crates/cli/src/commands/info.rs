@@ -62,11 +62,17 @@ fn describe_mesh(name: &str, m: &mdtf_pipeline::stages::tetra::MeshSummary) -> S
     let _ = writeln!(s, "cells:       {}", if cells.is_empty() { "none".into() } else { cells.join(", ") });
     let (lo, hi) = m.bounds;
     let _ = writeln!(s, "bounds:      x [{}, {}], y [{}, {}], z [{}, {}]", lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]);
-    let _ = writeln!(s, "point arrays: {}", m.arrays.len());
-    for (name, comps, lo, hi) in &m.arrays {
-        let _ = writeln!(s, "  {name}: {comps} component(s), range [{lo}, {hi}]");
+    for (what, arrays) in [("point", &m.arrays), ("cell", &m.cell_arrays)] {
+        let _ = writeln!(s, "{what} arrays: {}", arrays.len());
+        for (name, comps, lo, hi) in arrays {
+            let _ = writeln!(s, "  {name}: {comps} component(s), range [{lo}, {hi}]");
+        }
     }
-    let _ = writeln!(s, "(mdtf tetra keeps the tetrahedra; a one-component array is the scalar s)");
+    let _ = writeln!(
+        s,
+        "(mdtf tetra keeps the tetrahedra; a one-component point array is the scalar s, else a one-component \
+         cell array carried to the points)"
+    );
     s
 }
 

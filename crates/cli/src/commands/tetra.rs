@@ -38,12 +38,28 @@ pub fn run(args: &TetraArgs, progress: &Progress) -> Result<()> {
         ..Default::default()
     };
     progress.step("writing the pack", || write_pack(folder.path(), &mesh, &report, &out, grid.as_ref(), provenance))?;
+    // the (s, g) TF a renderer and `mdtf preview` start from
+    let spacing = grid.as_ref().map_or_else(|| typical_edge(&mesh), Geometry::min_spacing);
+    let gaussians = mdtf_pipeline::gaussians::mesh_gaussians(tf.as_ref(), &mesh.scalar, &out.g, spacing);
+    mdtf_pipeline::gaussians::write(folder.path(), &gaussians)?;
     folder.publish(&inputs)?;
     for n in &out.notes {
         progress.note(&format!("note: {n}"));
     }
     progress.note(&closing_note(&mesh, &out, &args.output));
     Ok(())
+}
+
+/// The edge of a cube cut into 6 tetrahedra of the mesh's mean volume:
+/// the mesh's typical edge length, world units (1 for an empty mesh).
+fn typical_edge(mesh: &TetMesh) -> f64 {
+    let corner = |i: u32| mesh.points[i as usize];
+    let total: f64 = mesh
+        .tets
+        .iter()
+        .map(|t| mdtf_pipeline::stages::tetra::six_volume(corner(t[0]), corner(t[1]), corner(t[2]), corner(t[3])).abs())
+        .sum();
+    if mesh.tets.is_empty() || total <= 0.0 { 1.0 } else { (total / mesh.tets.len() as f64).cbrt() }
 }
 
 /// The meshing and tables' parameters the flags give.
