@@ -472,3 +472,90 @@ fn pydicoms_big_endian_dose_grids_read_as_pydicom_decodes_them() {
         }
     }
 }
+
+/// Writes a CT series (12 slices of 40 x 40, 1 mm) with pydicom into argv[1]: a blurred ball of
+/// 1000 HU in air (-1000 HU) inside a circular field of view, -1500 (Pixel Padding Value) outside
+/// it; prints the number of padded voxels, then for kernel radii 1 to 6 the number of voxels
+/// within that many voxels of a padded one along each axis (a box): those whose derivatives read
+/// padding.
+const PADDED_SERIES_PY: &str = r#"
+import os, sys
+import numpy as np
+import pydicom
+from math import erf
+from pydicom.dataset import Dataset, FileMetaDataset
+from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, generate_uid
+out = sys.argv[1]
+nx, ny, nz = 40, 40, 12
+z, y, x = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing='ij')
+r = np.sqrt((x - 19.5) ** 2 + (y - 19.5) ** 2 + (z - 5.5) ** 2)
+verf = np.vectorize(erf)
+hu = -1000 + 2000 * 0.5 * (1 + verf((8.0 - r) / (np.sqrt(2) * 1.5)))
+padded = np.hypot(x - 19.5, y - 19.5) > 18.0
+hu = np.where(padded, -1500, np.round(hu)).astype(np.int16)
+series, study = generate_uid(), generate_uid()
+for k in range(nz):
+    meta = FileMetaDataset()
+    meta.MediaStorageSOPClassUID = CTImageStorage
+    meta.MediaStorageSOPInstanceUID = generate_uid()
+    meta.TransferSyntaxUID = ExplicitVRLittleEndian
+    ds = Dataset()
+    ds.file_meta = meta
+    ds.SOPClassUID, ds.SOPInstanceUID = CTImageStorage, meta.MediaStorageSOPInstanceUID
+    ds.Modality, ds.SeriesInstanceUID, ds.StudyInstanceUID, ds.SeriesNumber = "CT", series, study, 1
+    ds.InstanceNumber, ds.ImagePositionPatient, ds.ImageOrientationPatient = k + 1, [0, 0, float(k)], [1, 0, 0, 0, 1, 0]
+    ds.Rows, ds.Columns, ds.SamplesPerPixel, ds.PhotometricInterpretation = ny, nx, 1, "MONOCHROME2"
+    ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 16, 16, 15, 1
+    ds.PixelSpacing, ds.SliceThickness, ds.RescaleSlope, ds.RescaleIntercept = [1, 1], 1, 1, 0
+    ds.add_new(0x00280120, "SS", -1500)
+    ds.PixelData = hu[k].tobytes()
+    ds.save_as(os.path.join(out, f"{k:02d}.dcm"), enforce_file_format=True)
+counts = [int(padded.sum())]
+for r in range(1, 7):
+    near = np.zeros_like(padded)
+    for dz in range(-r, r + 1):
+        for dy in range(-r, r + 1):
+            for dx in range(-r, r + 1):
+                src = padded[max(dz, 0):nz + min(dz, 0), max(dy, 0):ny + min(dy, 0), max(dx, 0):nx + min(dx, 0)]
+                near[max(-dz, 0):nz + min(-dz, 0), max(-dy, 0):ny + min(-dy, 0), max(-dx, 0):nx + min(-dx, 0)] |= src
+    counts.append(int(near.sum()))
+print(*counts)
+"#;
+
+#[test]
+fn a_ct_series_pixel_padding_is_left_out_of_the_histograms_and_the_tracing() {
+    let dir = tempfile::tempdir().unwrap();
+    let series = dir.path().join("series");
+    std::fs::create_dir(&series).unwrap();
+    let counts = run_python(PADDED_SERIES_PY, &[series.to_str().unwrap()]);
+    let counts: Vec<u64> = counts.split_whitespace().map(|n| n.parse().unwrap()).collect();
+    let padded = counts[0];
+    let info = mdtf_ok(&["info", series.to_str().unwrap()]);
+    assert!(info.contains("pixel padding:") && info.contains("stored -1500"), "{info}");
+    for (pipeline, extra) in [("slicer-3dtf", &[][..]), ("distance-tf", &["--slab-planes", "5"][..])] {
+        let out = dir.path().join(pipeline);
+        let p = mdtf_e2e::shipped_pipeline(pipeline);
+        let mut args =
+            vec!["run", p.to_str().unwrap(), "--input", series.to_str().unwrap(), "-o", out.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        args.push("-q");
+        mdtf_ok(&args);
+        // the kernel's radius, as the plan states it ("kernel [r, r, r]")
+        let plan =
+            mdtf_ok(&["run", p.to_str().unwrap(), "--input", series.to_str().unwrap(), "-o", "unused", "--plan"]);
+        let radius: usize = plan.split("(kernel [").nth(1).and_then(|r| r.split(',').next()).unwrap().parse().unwrap();
+        let near = counts[radius];
+        let report: Value = serde_json::from_slice(&std::fs::read(out.join("run_report.json")).unwrap()).unwrap();
+        let said = format!("{padded} of 19200 voxels");
+        let warnings = report["warnings"].as_array().unwrap();
+        assert!(warnings.iter().any(|w| w.as_str().unwrap().contains(&said)), "{pipeline}: {warnings:?}");
+        // 19200 voxels, so the g axis clips none (0.002 % of them is less than one): exact
+        let hist: Value = serde_json::from_slice(&std::fs::read(out.join("histogram/hist_v_g.json")).unwrap()).unwrap();
+        assert_eq!(hist["total"].as_u64().unwrap(), 19200 - near, "{pipeline}: voxels counted");
+        if pipeline == "distance-tf" {
+            // no voxel whose derivatives read padding is traced
+            let traced = report["boundary"]["counts"]["not_traced"].as_u64().unwrap();
+            assert!(traced >= near, "{pipeline}: {traced} not traced");
+        }
+    }
+}

@@ -221,7 +221,7 @@ impl Seeds {
             &chans,
             &pack.ranges,
             None,
-            mdtf_derive::DEFAULT_KERNEL,
+            &mdtf_derive::DeriveParams::default(),
         )
         .unwrap();
         let provenance = mdtf_pack::Provenance {

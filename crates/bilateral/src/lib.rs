@@ -115,8 +115,8 @@ pub enum BilateralError {
         /// The most neighbours allowed.
         max: usize,
     },
-    /// The input holds NaN or infinite samples.
-    #[error("the input holds NaN or infinite samples")]
+    /// The input holds infinite samples (NaN samples are no data and skipped).
+    #[error("the input holds infinite samples")]
     NonFinite,
     /// A spacing is zero, negative or not finite.
     #[error("spacing {0:?} must be positive and finite")]
@@ -215,8 +215,13 @@ pub fn run_on(g: &Geometry, input: &[f32], params: &BilateralParams) -> Result<V
     if g.spacing.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
         return Err(BilateralError::BadSpacing(g.spacing));
     }
-    let Some((lo, hi)) = mdtf_volume::finite_range(input) else {
+    // NaN is no data (scanner padding left out by derive): skipped; an infinity is refused
+    if input.par_iter().any(|v| v.is_infinite()) {
         return Err(BilateralError::NonFinite);
+    }
+    let Some((lo, hi)) = mdtf_volume::finite_sample_range(input) else {
+        // no data at all: nothing to filter
+        return Volume::from_samples(g.clone(), input.to_vec()).map_err(|e| BilateralError::BadInput(e.to_string()));
     };
     // checked before the neighbour list is built: a huge sigma_d would
     // otherwise ask for a list larger than memory
@@ -322,8 +327,11 @@ fn filter_row(dims: [usize; 3], j: usize, nbrs: &[Neighbour], inv_2sr2: f32, s: 
         let shifted = &planes[(dz + rz) as usize][start as usize..start as usize + nx];
         let wd = n.w;
         for (((nu, de), &v), &c) in num.iter_mut().zip(den.iter_mut()).zip(shifted).zip(centre) {
+            // a NaN neighbour is no data (scanner padding): weight 0; a NaN centre stays NaN
+            let data = !v.is_nan();
+            let v = if data { v } else { c };
             let d = v - c;
-            let wt = wd * fastexp::exp_neg(d * d * inv_2sr2);
+            let wt = if data { wd * fastexp::exp_neg(d * d * inv_2sr2) } else { 0.0 };
             *nu += wt * v;
             *de += wt;
         }

@@ -32,6 +32,9 @@ impl CrossingHistogram {
     /// Counts one crossing's g (above the axis: the last bin).
     #[inline]
     pub(crate) fn add(&mut self, g_hit: f32) {
+        if g_hit.is_nan() {
+            return;
+        }
         let b = (g_hit / self.max * BINS as f32) as usize;
         self.counts[b.min(BINS - 1)] += 1;
     }

@@ -194,7 +194,8 @@ fn at_hit(f: &Fields, s: &TraceSettings, c: &Crossing) -> Trace {
     let Crossing { distance: d, hit, n } = *c;
     // Tricubic: trilinear interpolation flattens g's peak by up to 4% at sigma = 3 voxels.
     let g_hit = f.g.tricubic(hit);
-    if g_hit < s.g_hit_min {
+    // NaN where the crossing's neighbourhood is scanner padding (no data): rejected too
+    if g_hit.is_nan() || g_hit < s.g_hit_min {
         return Trace { code: HitCode::Rejected, distance: crate::NO_BOUNDARY, g_hit, dot: 0.0 };
     }
     let nh = Grid::trilinear3(&f.n, hit);

@@ -113,6 +113,7 @@ pub fn read_input(path: &Path, args: &InputArgs, opts: &ReadOptions) -> Result<(
         warnings: Vec::new(),
         details: Vec::new(),
         units: Default::default(),
+        padding: None,
     };
     Ok((MultiField::from(v), info))
 }

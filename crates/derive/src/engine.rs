@@ -18,6 +18,7 @@ use crate::fused::{self, Combinations, Spare};
 use crate::items::Needs;
 use crate::kernel::{AxisTaps, Taps};
 use crate::measures::Layout;
+use crate::padding::PaddingMask;
 
 /// Taps along x, y and z (in world units) for one field.
 #[derive(Debug, Clone)]
@@ -166,6 +167,8 @@ pub(crate) struct Engine<'a> {
     /// The caller writes g, normal and f'' straight from the y-then-z
     /// combinations ([`RowSet::fused_g_normal_f2`]): no x pass here.
     fused: bool,
+    /// Scanner padding whose derivatives are NaN.
+    padding: Option<PaddingMask<'a>>,
 }
 
 const C00: usize = 0;
@@ -254,7 +257,26 @@ impl<'a> Engine<'a> {
         let z_identity = fields.iter().all(|f| identity(&f.stencil.z.d0));
         let borrow_y0 = fused && y_identity;
         let pad = if fused { 0 } else { fields.iter().map(|f| f.stencil.x.radius()).max().unwrap_or(0) };
-        Engine { fields, dims, border, needs, epsilon, ry, x_identity, borrow_y0, pad, z_identity, fused }
+        Engine {
+            fields,
+            dims,
+            border,
+            needs,
+            epsilon,
+            ry,
+            x_identity,
+            borrow_y0,
+            pad,
+            z_identity,
+            fused,
+            padding: None,
+        }
+    }
+
+    /// The engine with scanner padding left out of its outputs (see [`PaddingMask`]).
+    pub fn with_padding(mut self, padding: Option<PaddingMask<'a>>) -> Engine<'a> {
+        self.padding = padding;
+        self
     }
 
     /// Whether the fused g / normal / f'' loop can serve these fields: one
@@ -500,4 +522,7 @@ pub(crate) fn compute_slice(
     outs: &mut [&mut [f32]],
 ) {
     engine.slice(k, scratch, |j, rows, spare| layout.write_row(rows, j, outs, spare));
+    if let Some(padding) = &engine.padding {
+        padding.apply(k, outs);
+    }
 }

@@ -19,6 +19,7 @@ mod fused;
 mod items;
 mod kernel;
 mod measures;
+mod padding;
 mod view;
 
 pub use border::{BORDER_NAMES, Border};
@@ -29,6 +30,7 @@ pub use view::{FieldView, FieldsView};
 use engine::{Engine, FieldInput, Stencil};
 use mdtf_volume::{Field, MultiField};
 use measures::{Layout, finish_shade};
+use padding::PaddingMask;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -46,11 +48,21 @@ pub struct DeriveParams {
     /// g below this counts as zero for normal, f2 and inv_g (value units per world unit).
     /// Default (None): 1e-6 x value range / smallest spacing.
     pub epsilon: Option<f32>,
+    /// Values of the first field that are scanner padding, not data
+    /// (inclusive range, input units): every derived sample whose kernel
+    /// reads one is NaN (see the `padding` module). None: no padding.
+    pub padding: Option<[f32; 2]>,
 }
 
 impl Default for DeriveParams {
     fn default() -> Self {
-        DeriveParams { items: vec![Item::G, Item::F2], kernel: DEFAULT_KERNEL, border: Border::Clamp, epsilon: None }
+        DeriveParams {
+            items: vec![Item::G, Item::F2],
+            kernel: DEFAULT_KERNEL,
+            border: Border::Clamp,
+            epsilon: None,
+            padding: None,
+        }
     }
 }
 
@@ -348,7 +360,10 @@ fn prepare<'a>(input: &FieldsView<'a>, params: &DeriveParams) -> Result<Prepared
     });
 
     let fused = measures::fusable_items(&items) && Engine::fusable(&fields);
-    let engine = Engine::new(fields, g.dims, params.border, Needs::of(&items), epsilon, fused);
+    let radius = [0, 1, 2].map(|a| base[a].radius());
+    let padding =
+        params.padding.zip(input.fields.first()).map(|(range, f)| PaddingMask::new(f.samples, g.dims, range, radius));
+    let engine = Engine::new(fields, g.dims, params.border, Needs::of(&items), epsilon, fused).with_padding(padding);
     let layout = Layout::new(&items, m, epsilon, fused);
     Ok(Prepared { items, layout, engine })
 }

@@ -65,6 +65,7 @@ impl BoundaryChainParams {
             kernel: self.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
             border: self.border.unwrap_or(defaults.border),
             epsilon: self.epsilon,
+            padding: None,
         }
     }
 }

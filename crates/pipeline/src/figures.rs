@@ -27,10 +27,11 @@ pub fn boundary_arches(boundaries: &[DetectedBoundary]) -> Vec<ArchMark> {
 
 /// The note under a histogram figure whose second axis `axis` (g, g_hit)
 /// was clipped at its top `percent` % (Teem qbert's rule), leaving `outside` voxels out.
-pub fn clip_note(axis: &mdtf_histogram::Axis, percent: f64, outside: u64) -> String {
+pub fn clip_note(axis: &mdtf_histogram::Axis, percent: f64, outside: u64, without: u64) -> String {
+    let padding = if without > 0 { format!(", {without} of them without g (scanner padding)") } else { String::new() };
     format!(
-        "{} axis up to {:.4}: its top {percent} % clipped (as Teem's qbert does), {outside} voxels above it not drawn",
-        axis.name, axis.max
+        "{} axis {:.4} to {:.4}: {percent} % clipped at each end (as Teem's qbert does); {outside} voxels not drawn{padding}",
+        axis.name, axis.min, axis.max
     )
 }
 

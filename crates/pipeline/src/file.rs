@@ -38,6 +38,12 @@ pub struct InputSection {
     /// NaN or infinite samples: "refuse" the file (default), "zero" them, or
     /// "keep" them (the stages then refuse them).
     pub nan: mdtf_volume::NanPolicy,
+    /// Values that are scanner padding, not data: one value or an inclusive
+    /// range `[low, high]`, input units (after the file's rescaling). Every
+    /// derivative whose kernel reads one is NaN, so padding is in no
+    /// histogram, statistic or trace. A DICOM series' Pixel Padding Value
+    /// (and Range Limit) is used when this is not given.
+    pub padding: Option<Padding>,
     /// Phantom to synthesise when there is no file.
     pub phantom: PhantomKind,
     /// Phantom grid size (cube).
@@ -46,6 +52,26 @@ pub struct InputSection {
     pub sigma: f64,
     /// Gaussian noise added to the phantom (value units), 0 for none.
     pub noise: f64,
+}
+
+/// Scanner padding values: one value or an inclusive range.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Padding {
+    /// One value, e.g. -2000.
+    Value(f64),
+    /// An inclusive range [low, high].
+    Range([f64; 2]),
+}
+
+impl Padding {
+    /// The inclusive range of padding values (low first).
+    pub fn range(self) -> [f64; 2] {
+        match self {
+            Padding::Value(v) => [v, v],
+            Padding::Range([a, b]) => [a.min(b), a.max(b)],
+        }
+    }
 }
 
 /// An optional value given either as a TOML integer or as a string.
@@ -70,6 +96,7 @@ impl Default for InputSection {
             resample: false,
             level: 0,
             nan: mdtf_volume::NanPolicy::Refuse,
+            padding: None,
             phantom: PhantomKind::ErfSphere,
             size: 128,
             sigma: 3.0,

@@ -48,7 +48,7 @@ pub fn gaussians(
     chans: &[(String, Volume)],
     fields: &[String],
     gradient: &str,
-    boundaries_from: (Option<&HistogramVolume>, mdtf_derive::Kernel),
+    boundaries_from: (Option<&HistogramVolume>, &mdtf_derive::DeriveParams),
 ) -> Result<Vec<GaussianPrimitive>, String> {
     if let Some(tf) = tf {
         return Ok(tf.gaussians());
@@ -70,8 +70,8 @@ pub fn gaussians(
         return Ok(vec![p]);
     }
     if let [value] = &data[..] {
-        let (hvol, kernel) = boundaries_from;
-        let arches = crate::pack_inputs::detected_arches(value, hvol, kernel, false).map_err(|e| e.to_string())?;
+        let (hvol, derive) = boundaries_from;
+        let arches = crate::pack_inputs::detected_arches(value, hvol, derive, false).map_err(|e| e.to_string())?;
         if !arches.is_empty() {
             return Ok(boundary_tgtfs(&arches, &value.geometry));
         }

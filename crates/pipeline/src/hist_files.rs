@@ -14,6 +14,9 @@ use std::path::Path;
 pub struct Counted {
     /// Voxels of the input grid.
     pub voxels: usize,
+    /// Voxels without a finite g (scanner padding and the voxels within the
+    /// kernel's reach of it): in no histogram, by design.
+    pub without_g: u64,
     /// The histogram volume, when asked for.
     pub hvol: Option<HistogramVolume>,
     /// The (v, g) histogram.
@@ -123,20 +126,22 @@ pub fn write(
         w.hvol = Some(hv);
     }
     if let Some(hist) = c.joint {
-        let g_clip = AxisSpec::qbert("g").clip_percent.1;
+        let (low_clip, g_clip) = AxisSpec::qbert("g").clip_percent;
         let outside = c.voxels as u64 - hist.total();
-        let note = crate::figures::clip_note(&hist.axes[1], g_clip, outside);
+        let note = crate::figures::clip_note(&hist.axes[1], g_clip, outside, c.without_g);
         write_histogram_marked(hdir, &hist, Scale::Log, input_name, Some(&note), &w.arches).map_err(err)?;
         w.outputs.push("histogram/hist_v_g.png".into());
-        // the clip leaves out at most floor(clip % of the voxels) by design (the figure's
-        // note says so); more is worth a warning (values outside the v axis, NaN)
-        let clipped_by_design = (g_clip / 100.0 * c.voxels as f64).floor() as u64;
+        // the clip leaves out at most floor(clip % of the finite g) at each end by design (the
+        // figure's note says so), the padding its voxels; more is worth a warning (v outside its axis)
+        let finite = (c.voxels as u64).saturating_sub(c.without_g) as f64;
+        let clip = |percent: f64| (percent / 100.0 * finite).floor() as u64;
+        let clipped_by_design = clip(low_clip) + clip(g_clip) + c.without_g;
         if outside > clipped_by_design {
             warnings.push(format!(
                 "histogram: {outside} of {} voxels lie outside the (v, g) histogram and are not counted \
-                 (its g axis stops at {:.4}, the top {g_clip} % of g clipped as Teem's qbert does, at most \
-                 {clipped_by_design} voxels; NaN values are never counted)",
-                c.voxels, hist.axes[1].max
+                 (its g axis {:.4} to {:.4}, {g_clip} % of g clipped at each end as Teem's qbert does; {} voxels \
+                 without g, the scanner padding's; NaN values are never counted)",
+                c.voxels, hist.axes[1].min, hist.axes[1].max, c.without_g
             ));
         }
         w.figure_hists.push(hist);

@@ -117,6 +117,44 @@ pub(crate) struct InputMeta {
     pub(crate) warnings: Vec<String>,
     /// The units it states for its values and lengths (none for a phantom).
     pub(crate) units: Units,
+    /// Values that are scanner padding, not data (inclusive range, input
+    /// units): the pipeline's `input.padding`, else the file's (DICOM's
+    /// Pixel Padding Value).
+    pub(crate) padding: Option<[f64; 2]>,
+    /// Where the padding values come from, in words.
+    pub(crate) padding_source: &'static str,
+}
+
+impl InputMeta {
+    /// The sentence for the run report on `padded` of `voxels` voxels being
+    /// padding (None without padding values).
+    pub(crate) fn padding_note(&self, padded: u64, voxels: usize) -> Option<String> {
+        let [lo, hi] = self.padding?;
+        let values = if lo == hi { format!("{lo}") } else { format!("{lo} to {hi}") };
+        Some(format!(
+            "input: {padded} of {voxels} voxels ({:.1} %) are scanner padding (value {values}, {}): left out of the \
+             derivatives, histograms, statistics and tracing, with every voxel within the derivative kernel's \
+             reach of them",
+            100.0 * padded as f64 / voxels.max(1) as f64,
+            self.padding_source
+        ))
+    }
+}
+
+/// The padding values of a run (the pipeline's, else the file's) and where they come from.
+pub(crate) fn padding_of(p: &Pipeline, file: Option<[f64; 2]>) -> (Option<[f64; 2]>, &'static str) {
+    match (p.input.padding, file) {
+        (Some(given), _) => (Some(given.range()), "input.padding"),
+        (None, Some(range)) => (Some(range), "the DICOM Pixel Padding Value"),
+        (None, None) => (None, ""),
+    }
+}
+
+/// How many of `samples` lie in the padding `range` (inclusive).
+pub(crate) fn count_padding(samples: &[f32], range: [f64; 2]) -> u64 {
+    use rayon::prelude::*;
+    let [lo, hi] = range.map(|x| x as f32);
+    samples.par_iter().filter(|&&v| v >= lo && v <= hi).count() as u64
 }
 
 /// The input volume and what its reader said of it.
@@ -132,7 +170,14 @@ pub(crate) fn load_input(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result
             )));
         }
         let (mf, info) = mdtf_volume::read_with_info(&f, &read_options(p)).map_err(at("input"))?;
-        let meta = InputMeta { name: f.display().to_string(), warnings: info.warnings, units: info.units };
+        let (padding, padding_source) = padding_of(p, info.padding);
+        let meta = InputMeta {
+            name: f.display().to_string(),
+            warnings: info.warnings,
+            units: info.units,
+            padding,
+            padding_source,
+        };
         return Ok((mf, meta));
     }
     let i = &p.input;
@@ -163,5 +208,6 @@ pub(crate) fn load_input(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result
             f.data = v.data;
         }
     }
-    Ok((mf, InputMeta { name, ..Default::default() }))
+    let (padding, padding_source) = padding_of(p, None);
+    Ok((mf, InputMeta { name, padding, padding_source, ..Default::default() }))
 }

@@ -13,38 +13,40 @@ use mdtf_pack::{
 use mdtf_volume::Volume;
 use std::collections::BTreeMap;
 
-/// `hvol` when the caller has it, else the histogram volume of `v` (derived with `kernel`).
+/// `hvol` when the caller has it, else the histogram volume of `v` (derived as `derive` says: kernel, padding).
 fn hvol_or_computed<'a>(
     hvol: Option<&'a HistogramVolume>,
     v: &Volume,
-    kernel: mdtf_derive::Kernel,
+    derive: &mdtf_derive::DeriveParams,
 ) -> Result<std::borrow::Cow<'a, HistogramVolume>, crate::error::StageError> {
     Ok(match hvol {
         Some(h) => std::borrow::Cow::Borrowed(h),
-        None => std::borrow::Cow::Owned(hvol_of(v, kernel)?),
+        None => std::borrow::Cow::Owned(hvol_of(v, derive)?),
     })
 }
 
 /// The histogram volume of the value volume `v`, its g and f'' derived
-/// with `kernel` slice by slice (the default TFs' source when the run has
+/// as `derive` says, slice by slice (the default TFs' source when the run has
 /// no f'' left).
-pub(crate) fn hvol_of(v: &Volume, kernel: mdtf_derive::Kernel) -> Result<HistogramVolume, crate::error::StageError> {
+pub(crate) fn hvol_of(
+    v: &Volume,
+    derive: &mdtf_derive::DeriveParams,
+) -> Result<HistogramVolume, crate::error::StageError> {
     let input = mdtf_volume::MultiField::from(v.clone());
-    let derive = mdtf_derive::DeriveParams { kernel, ..Default::default() };
-    crate::hvol_streamed::histogram_volume_derived(&input, &derive, &HvolParams::on_grid(v.geometry.spacing))
+    crate::hvol_streamed::histogram_volume_derived(&input, derive, &HvolParams::on_grid(v.geometry.spacing))
 }
 
 /// The arches of the boundaries found in the histogram volume of the value
-/// volume `v` (`hvol` when the caller has it, else derived with `kernel`),
+/// volume `v` (`hvol` when the caller has it, else derived as `derive` says),
 /// strongest first; with `fallback`, the fallback boundary when none is
 /// found (see [`arches_of`]).
 pub fn detected_arches(
     v: &Volume,
     hvol: Option<&HistogramVolume>,
-    kernel: mdtf_derive::Kernel,
+    derive: &mdtf_derive::DeriveParams,
     fallback: bool,
 ) -> Result<Vec<BoundaryArch>, crate::error::StageError> {
-    let hv = hvol_or_computed(hvol, v, kernel)?;
+    let hv = hvol_or_computed(hvol, v, derive)?;
     Ok(if fallback { arches_of(&hv) } else { arches_from(&detect_boundaries(&hv)) })
 }
 
@@ -145,7 +147,7 @@ pub fn range_of(
 /// The lookup tables of `profile`: from `tf` when given; otherwise for
 /// slicer-3dtf the default TF of the boundaries found in the histogram
 /// volume (`hvol` when the caller already has it, else computed, with
-/// derivatives by `kernel`; see [`mdtf_pack::boundary_tf`]), or its plain
+/// derivatives as `derive` says; see [`mdtf_pack::boundary_tf`]), or its plain
 /// tent opacity where none is found. distance-tf always gets `alpha_d` from
 /// `alpha` over [0, d_max], the paper's domain (the top of the distance's
 /// code range; without one, the largest distance measured), and `alpha_u`
@@ -164,7 +166,7 @@ pub fn luts(
     chans: &[(String, Volume)],
     ranges: &BTreeMap<String, [f64; 2]>,
     hvol: Option<&HistogramVolume>,
-    kernel: mdtf_derive::Kernel,
+    derive: &mdtf_derive::DeriveParams,
 ) -> Result<Vec<Lut>, crate::error::StageError> {
     let get = |n: &str| chans.iter().find(|(c, _)| c == n).map(|(_, v)| v);
     let mut out = Vec::new();
@@ -240,7 +242,7 @@ pub fn luts(
                 out.push(tf.distance_alpha_u());
             } else if let Some(v) = get("v") {
                 // without a TF: alpha_u from the boundaries the histogram volume shows
-                let hv = hvol_or_computed(hvol, v, kernel)?;
+                let hv = hvol_or_computed(hvol, v, derive)?;
                 let arches = arches_of(&hv);
                 if !arches.is_empty() {
                     let spacing = v.geometry.min_spacing();
@@ -277,7 +279,7 @@ pub fn luts(
                 && let (Some(v), Some(r)) = (get("v"), ranges.get("inv_g"))
             {
                 // scalar data without a TF: a thin widget at each boundary the histogram volume shows
-                let hv = hvol_or_computed(hvol, v, kernel)?;
+                let hv = hvol_or_computed(hvol, v, derive)?;
                 let arches = arches_of(&hv);
                 let default = boundary_isosurface_tf(&arches, [hv.vg_axes[0].min, hv.vg_axes[0].max]);
                 if let Some(mut lut) = default.peak_finding_tf2d(*r, [1024, 1024]) {
@@ -295,7 +297,7 @@ pub fn luts(
                 && let Some((lo, hi)) = first.finite_range()
             {
                 // multi-field data without a TF: thin widgets at the boundaries of the first field
-                let arches = detected_arches(first, None, kernel, true)?;
+                let arches = detected_arches(first, None, derive, true)?;
                 let (lo, hi) = (lo as f64, hi as f64);
                 let default = multi_field_isosurface_tf(&arches, [lo, hi], hi - lo);
                 if let Some(mut lut) = default.peak_finding_tf2d(*r, [1024, 1024]) {

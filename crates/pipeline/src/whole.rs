@@ -12,7 +12,7 @@ use crate::progress::Progress;
 use crate::report::{BoundarySummary, Stages, Traced};
 use crate::run::RunOptions;
 use mdtf_boundary::BoundaryInput;
-use mdtf_derive::{DeriveParams, Item, Kernel};
+use mdtf_derive::{DeriveParams, Item};
 use mdtf_histogram::{Axis, AxisSpec, Histogram, HvolParams, count, histogram_volume, hit_mask};
 use mdtf_pack::{GaussianPrimitive, Lut, PackParams, PackWriter, Profile, Provenance, TfFile};
 use mdtf_volume::{Geometry, MultiField, Volume, WriteOptions};
@@ -29,7 +29,8 @@ pub(crate) struct WholeRun<'a> {
     dir: PathBuf,
     geo: Geometry,
     plan: Plan,
-    kernel: Kernel,
+    /// How the value is derived wherever it is (kernel, scanner padding); its items are each call's.
+    derive: DeriveParams,
     /// The input's name in the figures, the manifest and the report.
     pub(crate) input_name: String,
     /// The units the input states.
@@ -77,7 +78,13 @@ impl<'a> WholeRun<'a> {
         let geo = input.geometry.clone();
         let mut stages = Stages::default();
         stages.done("input", started, geo.voxel_count(), vec![]);
+        let padded = match (meta.padding, input.fields.first()) {
+            (Some(range), Some(f)) => f.data.as_slice().map_or(0, |s| crate::inputs::count_padding(s, range)),
+            _ => 0,
+        };
+        let padding_note = meta.padding_note(padded, geo.voxel_count());
         let mut warnings = meta.warnings;
+        warnings.extend(padding_note);
         warnings.extend(first_field_note(p.pack.profile, &plan.fields));
         let (value, input) = if plan.fields.is_empty() {
             (input.into_scalar().map_err(at("input"))?, None)
@@ -92,7 +99,11 @@ impl<'a> WholeRun<'a> {
             finite_range: value.finite_range().map(|(lo, hi)| [lo as f64, hi as f64]),
             geo,
             plan,
-            kernel: p.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
+            derive: DeriveParams {
+                kernel: p.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
+                padding: meta.padding.map(|r| r.map(|x| x as f32)),
+                ..Default::default()
+            },
             input_name: meta.name,
             units: meta.units,
             progress,
@@ -127,7 +138,7 @@ impl<'a> WholeRun<'a> {
         if !items.is_empty() {
             self.progress.stage("derive")?;
             let t = Instant::now();
-            let d = DeriveParams { items, kernel: self.kernel, ..Default::default() };
+            let d = DeriveParams { items, ..self.derive.clone() };
             let out = mdtf_derive::run(&self.value, &d).map_err(at("derive"))?;
             // every component is a channel of its own name (g, f2, gx, hxx, ...)
             for (item, mf) in out.items {
@@ -144,7 +155,7 @@ impl<'a> WholeRun<'a> {
         {
             self.progress.stage("derive (multi-field)")?;
             let t = Instant::now();
-            let d = DeriveParams { items: multi_items, kernel: self.kernel, ..Default::default() };
+            let d = DeriveParams { items: multi_items, padding: None, ..self.derive.clone() };
             let out = mdtf_derive::run(mf, &d).map_err(at("derive"))?;
             // gnorm, inv_g, and the Jacobian's d{field}/d{axis}
             self.chans.extend(out.items.into_iter().flat_map(|(_, m)| m.into_volumes()));
@@ -289,7 +300,11 @@ impl<'a> WholeRun<'a> {
         let axis =
             |name: &str, data: &Volume| AxisSpec::qbert(name).resolve(name, data.samples()).map_err(at("histogram"));
         let axes: Vec<Axis> = vec![axis("v", v)?, axis("g", g)?];
-        let mut counted = Counted { voxels: self.voxels(), ..Default::default() };
+        let without_g = {
+            use rayon::prelude::*;
+            g.samples().par_iter().filter(|x| !x.is_finite()).count() as u64
+        };
+        let mut counted = Counted { voxels: self.voxels(), without_g, ..Default::default() };
         // asked for, or read by the default TF (no TF file given); once the
         // tracing has freed f'', of v derived again, as the pack would
         if h.hvol || self.p.pack.tf.is_none() {
@@ -302,7 +317,7 @@ impl<'a> WholeRun<'a> {
                     &HvolParams::on_grid(v.geometry.spacing),
                 )
                 .map_err(at("histogram"))?,
-                None => crate::pack_inputs::hvol_of(v, self.kernel).map_err(at("histogram"))?,
+                None => crate::pack_inputs::hvol_of(v, &self.derive).map_err(at("histogram"))?,
             });
         }
         if h.joint {
@@ -428,7 +443,7 @@ impl<'a> WholeRun<'a> {
         let value_and_g: Vec<(String, Volume)> =
             ["v", "g"].into_iter().filter_map(|c| self.chans.remove(c).map(|v| (c.to_string(), v))).collect();
         let tf_gaussians = tf.filter(|t| !t.gaussians().is_empty());
-        let g = crate::gaussians::gaussians(tf_gaussians, None, &value_and_g, &["v".into()], "g", (hvol, self.kernel))
+        let g = crate::gaussians::gaussians(tf_gaussians, None, &value_and_g, &["v".into()], "g", (hvol, &self.derive))
             .map_err(fail("pack"))?;
         crate::gaussians::write(&pdir, &g).map_err(at("pack"))?;
         Ok(g)
@@ -453,7 +468,7 @@ impl<'a> WholeRun<'a> {
             .collect();
         let ranges = crate::pack_inputs::ranges(&pack_chans, &BTreeMap::new(), traced.d_max).map_err(at("pack"))?;
         let alpha = self.p.pack.alpha_map();
-        let luts = crate::pack_inputs::luts(profile, tf, &alpha, &pack_chans, &ranges, hvol, self.kernel)
+        let luts = crate::pack_inputs::luts(profile, tf, &alpha, &pack_chans, &ranges, hvol, &self.derive)
             .map_err(at("pack"))?;
         let gaussians = self.gaussians(tf, hvol, &pack_chans)?;
         let params =
@@ -471,7 +486,7 @@ impl<'a> WholeRun<'a> {
                     Some(v) => MultiField::from(v),
                     None => MultiField { geometry: self.geo.clone(), fields: std::mem::take(&mut self.value.fields) },
                 };
-                pack_chans.extend(derive_normals(&value, self.kernel)?);
+                pack_chans.extend(derive_normals(&value, &self.derive)?);
                 if layouts[i..].iter().any(|l| uses(l, "v")) {
                     pack_chans.push(("v".into(), value.into_scalar().map_err(at("pack"))?));
                 }
@@ -514,7 +529,7 @@ impl<'a> WholeRun<'a> {
         } else {
             (self.plan.fields.clone(), "gnorm")
         };
-        let g = crate::gaussians::gaussians(tf, mask.as_ref(), pack_chans, &axes, gradient, (hvol, self.kernel))
+        let g = crate::gaussians::gaussians(tf, mask.as_ref(), pack_chans, &axes, gradient, (hvol, &self.derive))
             .map_err(err)?;
         Ok(Some(g))
     }
@@ -539,8 +554,8 @@ fn first_field_note(profile: Profile, fields: &[String]) -> Option<String> {
 }
 
 /// The unit normals (nx, ny, nz) of a one-field `value`, named.
-fn derive_normals(value: &MultiField, kernel: Kernel) -> Result<Vec<(String, Volume)>, RunError> {
-    let d = DeriveParams { items: vec![Item::Normal], kernel, ..Default::default() };
+fn derive_normals(value: &MultiField, derive: &DeriveParams) -> Result<Vec<(String, Volume)>, RunError> {
+    let d = DeriveParams { items: vec![Item::Normal], ..derive.clone() };
     let out = mdtf_derive::run(value, &d).map_err(at("derive"))?;
     Ok(out.items.into_iter().flat_map(|(_, mf)| mf.into_volumes()).collect())
 }

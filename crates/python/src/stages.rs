@@ -60,7 +60,7 @@ pub fn derive<'py>(
         Some(b) => parse_choice("border", b, mdtf_pipeline::stages::derive::BORDER_NAMES)?,
         None => mdtf_pipeline::stages::derive::Border::default(),
     };
-    let params = DeriveParams { items, kernel: self::kernel(kernel)?, border, epsilon };
+    let params = DeriveParams { items, kernel: self::kernel(kernel)?, border, epsilon, padding: None };
     let views = views(&fields)?;
     let Some((_, first)) = views.first() else { return Err(value_error("derive: give at least one field")) };
     let geo = geometry(shape(first), spacing, [0.0; 3])?;

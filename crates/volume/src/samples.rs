@@ -51,6 +51,9 @@ pub struct FileInfo {
     pub details: Vec<(String, String)>,
     /// The units the file states for its values and lengths.
     pub units: crate::Units,
+    /// Values that are scanner padding, not data (inclusive range, in the
+    /// values as read, rescaled): DICOM's Pixel Padding Value (and Range Limit).
+    pub padding: Option<[f64; 2]>,
 }
 
 impl FileInfo {
@@ -64,6 +67,7 @@ impl FileInfo {
             warnings: Vec::new(),
             details: Vec::new(),
             units: crate::Units::default(),
+            padding: None,
         }
     }
 }

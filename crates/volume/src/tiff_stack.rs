@@ -318,6 +318,7 @@ pub fn read_tiff_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiFiel
         warnings,
         details: Vec::new(),
         units: crate::Units::default(),
+        padding: None,
     };
     Ok((MultiField::new(geometry, vec![Field { name: "value".into(), data }])?, info))
 }

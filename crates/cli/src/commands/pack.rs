@@ -43,8 +43,9 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
     let provenance = provenance(input, profile, &ranges, kernel);
     let tf = read_tf(args.tf.as_deref())?;
     let alpha: AlphaMap = args.alpha.parse().map_err(anyhow::Error::msg)?;
-    let luts = progress
-        .step("lookup tables", || pack_inputs::luts(profile, tf.as_ref(), &alpha, &chans, &ranges, None, kernel))?;
+    let luts = progress.step("lookup tables", || {
+        pack_inputs::luts(profile, tf.as_ref(), &alpha, &chans, &ranges, None, &derive_with(kernel))
+    })?;
     let gaussians = gaussians_of(args, profile, tf.as_ref(), &chans, &fields, kernel, progress)?;
     let params = PackParams { profile, ranges, fields, dtype: dtype(args)?, nifti: args.nifti };
     let m = progress.step("packing", || pack(&chans, &params, &luts, folder.path(), provenance, &BTreeMap::new()))?;
@@ -110,6 +111,11 @@ fn given_ranges(args: &PackArgs) -> Result<BTreeMap<String, [f64; 2]>> {
     Ok(ranges)
 }
 
+/// Derive's parameters with `kernel` (for what the pack derives again: the default TFs' histogram volume).
+fn derive_with(kernel: Kernel) -> mdtf_pipeline::stages::derive::DeriveParams {
+    mdtf_pipeline::stages::derive::DeriveParams { kernel, ..Default::default() }
+}
+
 /// The manifest's provenance: the input (with its checksum), the profile, ranges and kernel.
 fn provenance(input: &Path, profile: Profile, ranges: &BTreeMap<String, [f64; 2]>, kernel: Kernel) -> Provenance {
     Provenance {
@@ -162,7 +168,8 @@ fn gaussians_of(
     };
     let (axes, gradient) = if fields.is_empty() { (vec!["v".to_string()], "g") } else { (fields.to_vec(), "gnorm") };
     let primitives = progress.step("Gaussian primitives", || {
-        gaussians::gaussians(tf, mask.as_ref(), chans, &axes, gradient, (None, kernel)).map_err(anyhow::Error::msg)
+        gaussians::gaussians(tf, mask.as_ref(), chans, &axes, gradient, (None, &derive_with(kernel)))
+            .map_err(anyhow::Error::msg)
     })?;
     Ok(Some(primitives))
 }

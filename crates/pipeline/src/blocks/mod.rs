@@ -162,7 +162,9 @@ fn open_source(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(Source, 
         && p.input.series.is_none()
         && let Some(r) = PlaneReader::open(&f, &crate::inputs::read_options(p)).map_err(at("input"))?
     {
-        let meta = InputMeta { name: f.display().to_string(), warnings: Vec::new(), units: r.units().clone() };
+        let (padding, padding_source) = crate::inputs::padding_of(p, None);
+        let units = r.units().clone();
+        let meta = InputMeta { name: f.display().to_string(), warnings: Vec::new(), units, padding, padding_source };
         return Ok((Source::Planes(r), meta));
     }
     let (mf, meta) = crate::inputs::load_input(p, opts, base)?;

@@ -15,7 +15,7 @@ use crate::progress::Progress;
 use crate::report::{BoundarySummary, Stages, Traced};
 use crate::run::{RunError, RunOptions, at, fail};
 use mdtf_boundary::{Crossings, ReportAccumulator, ResolvedParams, TraceCounts};
-use mdtf_derive::{DeriveParams, Item, Kernel};
+use mdtf_derive::{DeriveParams, Item};
 use mdtf_histogram::{ChannelStats, Histogram};
 use mdtf_pack::{PackParams, PackWriter, Profile, TfFile};
 use mdtf_volume::{Geometry, KeyBuckets, Volume, overlapped};
@@ -54,6 +54,8 @@ pub(super) struct SlabPasses<'a> {
     pub(super) input_name: String,
     /// The units the input states.
     pub(super) units: mdtf_volume::Units,
+    /// Values that are scanner padding (inclusive range, input units).
+    pub(super) padding: Option<[f64; 2]>,
     pub(super) progress: Progress<'a>,
     pub(super) stages: Stages,
     stats: Stats,
@@ -63,7 +65,8 @@ pub(super) struct SlabPasses<'a> {
 
 /// What the derive pass found.
 pub(super) struct Derived {
-    kernel: Kernel,
+    /// How the value was derived (kernel, scanner padding), for what derives it again.
+    derive: DeriveParams,
     /// The first radix pass of g's median, when g was derived.
     g_buckets: Option<KeyBuckets>,
     /// The smallest positive 1/g (infinite without one).
@@ -137,6 +140,7 @@ impl<'a> SlabPasses<'a> {
         let mut store = ChannelStore::create(dir.join(".slabs"), geo.clone()).map_err(at("input"))?;
         let mut stats = Stats::new(&["v", "g", "f2", "g_hit", "g_prefiltered", "inv_g"], geo.voxel_count());
         let mut writer = store.writer(&["v"]).map_err(io("input"))?;
+        let mut padded = 0u64;
         // a slab is read while the one before is summarised and stored
         overlapped(
             slabs.len(),
@@ -144,12 +148,17 @@ impl<'a> SlabPasses<'a> {
             &mut |k, _| Ok((slabs[k].start, source.read(slabs[k].clone())?)),
             &mut |(first, v)| {
                 stats.add("v", v.samples());
+                if let Some(range) = meta.padding {
+                    padded += crate::inputs::count_padding(v.samples(), range);
+                }
                 writer.put_volume("v", first, &v).map_err(io("input"))?;
                 Ok(None)
             },
         )?;
         let mut stages = Stages::default();
         stages.done("input", t, geo.voxel_count(), vec![]);
+        let mut warnings = meta.warnings.clone();
+        warnings.extend(meta.padding_note(padded, geo.voxel_count()));
         let run = SlabPasses {
             p,
             opts,
@@ -165,10 +174,11 @@ impl<'a> SlabPasses<'a> {
             tf,
             input_name: meta.name,
             units: meta.units,
+            padding: meta.padding,
             progress,
             stages,
             stats,
-            warnings: meta.warnings,
+            warnings,
             tasks: opts.tasks.as_deref(),
         };
         Ok((run, store))
@@ -190,8 +200,7 @@ impl<'a> SlabPasses<'a> {
     /// statistics. With tasks, the tasks store every derived channel and the
     /// later passes read them instead.
     pub(super) fn derive(&mut self, mut store: ChannelStore) -> Result<(SlabChannels, Derived), RunError> {
-        let kernel = self.p.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL);
-        let groups = self.derive_groups(kernel);
+        let groups = self.derive_groups();
         let derive_start = Instant::now();
         if let Some(tasks) = self.tasks {
             self.progress.stage("derive (tasks)")?;
@@ -203,7 +212,8 @@ impl<'a> SlabPasses<'a> {
             SlabChannels::new(store, groups, self.plan.reach.kernel[2], nz).cancelled_by(self.opts.cancel.clone());
         let summarised: Vec<&str> = ["g", "f2", "inv_g"].into_iter().filter(|c| chans.has(c)).collect();
         let g_buckets = summarised.contains(&"g").then(KeyBuckets::new);
-        let mut derived = Derived { kernel, g_buckets, smallest_inv_g: f32::INFINITY };
+        let derive = DeriveParams { items: Vec::new(), ..self.derive_params() };
+        let mut derived = Derived { derive, g_buckets, smallest_inv_g: f32::INFINITY };
         // g waits on disk for the second radix pass of its median before the tracing: reading
         // it back costs less than deriving every slab again (it goes once the median is known)
         let keep_g = self.median_reads_stored_g() && derived.g_buckets.is_some();
@@ -237,6 +247,19 @@ impl<'a> SlabPasses<'a> {
         Ok((chans, derived))
     }
 
+    /// How every slab derives the value: the kernel, the whole volume's
+    /// epsilon (the same in every slab) and the scanner padding.
+    fn derive_params(&self) -> DeriveParams {
+        let span = self.stats.range("v").map_or(0.0, |(lo, hi)| hi - lo);
+        DeriveParams {
+            items: Vec::new(),
+            kernel: self.p.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
+            epsilon: Some(mdtf_derive::default_epsilon(span, self.geo.min_spacing())),
+            border: mdtf_derive::Border::Clamp,
+            padding: self.padding.map(|r| r.map(|x| x as f32)),
+        }
+    }
+
     /// Whether the derive pass stores g for the second pass of its median,
     /// the tracing's noise floor (the tracing of g itself, not of the
     /// pre-filtered g, and in this process: tasks store every channel).
@@ -247,14 +270,8 @@ impl<'a> SlabPasses<'a> {
     /// The derive groups of the whole run: the plan's items (with g and f''
     /// for the default TF's histogram volume, which the whole run derives
     /// on its own from the value), then the deferred normals.
-    fn derive_groups(&self, kernel: Kernel) -> Vec<DeriveParams> {
-        let span = self.stats.range("v").map_or(0.0, |(lo, hi)| hi - lo);
-        let derive = |items: Vec<Item>| DeriveParams {
-            items,
-            kernel,
-            epsilon: Some(mdtf_derive::default_epsilon(span, self.geo.min_spacing())),
-            ..Default::default()
-        };
+    fn derive_groups(&self) -> Vec<DeriveParams> {
+        let derive = |items: Vec<Item>| DeriveParams { items, ..self.derive_params() };
         let mut groups = vec![derive(self.plan.derive.clone())];
         if self.hvol_needed {
             for item in [Item::G, Item::F2] {
@@ -548,6 +565,7 @@ impl<'a> SlabPasses<'a> {
         let t = Instant::now();
         let mut counted = h.finish(self.geo.spacing)?;
         counted.set_units(&self.units);
+        counted.without_g = self.stats.not_finite("g");
         // the default TF's histogram volume is an output only when the histograms ask for it
         let default_hvol = if self.hvol_asked { None } else { counted.hvol.take() };
         let mut hists = Written::default();
@@ -583,8 +601,9 @@ impl<'a> SlabPasses<'a> {
             profile.channels(&[]).into_iter().map(|c| (c, Volume::zeros(self.geo.z_slab(0..1)))).collect();
         let alpha = self.p.pack.alpha_map();
         let tf = self.tf.as_ref();
-        let luts = crate::pack_inputs::luts(profile, tf, &alpha, &stubs, &params.ranges, hvol.as_ref(), derived.kernel)
-            .map_err(at("pack"))?;
+        let luts =
+            crate::pack_inputs::luts(profile, tf, &alpha, &stubs, &params.ranges, hvol.as_ref(), &derived.derive)
+                .map_err(at("pack"))?;
         let provenance = crate::inputs::provenance(self.p, self.opts, &self.base, self.geo.dims, &self.units);
         writer.finish(&luts, provenance).map_err(at("pack"))?;
         let mut outputs: Vec<String> = vec!["pack/manifest.json".into()];

@@ -38,6 +38,11 @@ impl Stats {
     pub(super) fn range(&self, name: &str) -> Option<(f32, f32)> {
         self.0.get(name).and_then(ChannelStats::finite_range)
     }
+
+    /// Samples of channel `name` that were not finite (all, when it was never summarised).
+    pub(super) fn not_finite(&self, name: &str) -> u64 {
+        self.1 as u64 - self.0.get(name).map_or(0, ChannelStats::finite_count)
+    }
 }
 
 /// The tracing's whole-volume statistics of the g it traces (`g_name`):

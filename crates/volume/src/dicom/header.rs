@@ -45,6 +45,9 @@ pub struct ImageHeader {
     pub modality: String,
     /// Rescale Type (0028,1054), e.g. "HU" (empty when absent).
     pub rescale_type: String,
+    /// Pixel Padding Value (0028,0120) and Pixel Padding Range Limit
+    /// (0028,0121), stored values (before rescaling), read with the pixels' sign.
+    pub padding: Option<(i64, Option<i64>)>,
     /// SOPInstanceUID: tells a copied file from another image at the same place.
     pub instance_uid: String,
     /// Transfer syntax UID of the file.
@@ -264,6 +267,14 @@ pub fn read_header(path: &Path) -> Result<Option<ImageHeader>> {
         description: text(&obj, tags::SERIES_DESCRIPTION).unwrap_or_default(),
         modality: text(&obj, tags::MODALITY).unwrap_or_default(),
         rescale_type: text(&obj, tags::RESCALE_TYPE).unwrap_or_default(),
+        padding: {
+            // US or SS as the pixels are: an implicit-VR file gives US, so a signed one is wrapped back
+            let signed = uint(&obj, tags::PIXEL_REPRESENTATION) == Some(1);
+            let bits = uint(&obj, tags::BITS_ALLOCATED).unwrap_or(16).min(63);
+            let stored = |v: i64| if signed && v >= 1 << (bits - 1) && v < 1 << bits { v - (1 << bits) } else { v };
+            let value = int(&obj, tags::PIXEL_PADDING_VALUE).map(stored);
+            value.map(|v| (v, int(&obj, tags::PIXEL_PADDING_RANGE_LIMIT).map(stored)))
+        },
         instance_uid: text(&obj, tags::SOP_INSTANCE_UID).unwrap_or_default(),
         transfer_syntax,
         rows,

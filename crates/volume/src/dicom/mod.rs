@@ -147,6 +147,17 @@ fn units_of(first: &header::ImageHeader) -> crate::Units {
     crate::Units { value, length: Some("mm".into()) }
 }
 
+/// The values a series' Pixel Padding Value (and Range Limit) stand for
+/// once rescaled, over every slice's rescale (`scales`: slope, intercept):
+/// the smallest range holding them all.
+fn padding_of(first: &header::ImageHeader, scales: &[(f64, f64)]) -> Option<[f64; 2]> {
+    let (value, limit) = first.padding?;
+    let ends = [value, limit.unwrap_or(value)];
+    let rescaled = scales.iter().flat_map(|&(slope, intercept)| ends.map(|v| slope * v as f64 + intercept));
+    let (lo, hi) = rescaled.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(v), h.max(v)));
+    (lo <= hi).then_some([lo, hi])
+}
+
 /// What `mdtf info` shows of a series: never a patient attribute.
 fn file_info(files: &[header::ImageHeader], layout: &series::Layout) -> FileInfo {
     let first = &files[0];
@@ -185,6 +196,10 @@ fn file_info(files: &[header::ImageHeader], layout: &series::Layout) -> FileInfo
             ),
         ));
     }
+    if let Some((value, limit)) = first.padding {
+        let stored = limit.map_or(format!("{value}"), |l| format!("{value} to {l}"));
+        details.push(("pixel padding".to_string(), format!("stored {stored}: no data (left out by mdtf run)")));
+    }
     if let Some(t) = first.slice_thickness {
         details.push(("slice thickness".to_string(), format!("{} mm", series::mm(t))));
     }
@@ -203,5 +218,6 @@ fn file_info(files: &[header::ImageHeader], layout: &series::Layout) -> FileInfo
         warnings: layout.warnings.clone(),
         details,
         units: units_of(first),
+        padding: padding_of(first, &scales),
     }
 }

@@ -190,6 +190,7 @@ mod tests {
             description: String::new(),
             modality: String::new(),
             rescale_type: String::new(),
+            padding: None,
             instance_uid: String::new(),
             transfer_syntax: String::new(),
             rows: 1,

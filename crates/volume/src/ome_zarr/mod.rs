@@ -212,6 +212,7 @@ impl ZarrImage {
             warnings,
             details,
             units: crate::Units { value: None, length: space_unit.map(|u| crate::units::ngff_length_unit(&u)) },
+            padding: None,
         };
         Ok(ZarrImage { path: path.to_path_buf(), array, roles, geometry, fields, ty, info })
     }
