@@ -427,6 +427,54 @@ fn a_mesh_with_only_a_cell_scalar_is_meshed_from_its_volume_weighted_point_means
     }
 }
 
+/// Writes with nibabel into argv[1] `oblique.nii.gz` (axes rotated 30 degrees about z and 20 about
+/// x, spacing 1 x 1.2 x 1.5) and `flipped.nii.gz` (x reversed) holding one volume without symmetry:
+/// an off-centre ellipsoid and a small ball beside it.
+const ORIENTED_VOLUMES_PY: &str = r#"
+import sys, math
+import numpy as np, nibabel as nib
+erf = np.vectorize(math.erf)
+n = 48
+z, y, x = np.meshgrid(np.arange(32), np.arange(40), np.arange(n), indexing='ij')
+# an off-centre ellipsoid and a small ball beside it: no symmetry
+d = np.sqrt(((x - 30) / 14.0) ** 2 + ((y - 18) / 7.0) ** 2 + ((z - 14) / 6.0) ** 2)
+v = 255 * 0.5 * (1 + erf((1 - d) * 6 / np.sqrt(2) / 1.5))
+b = np.sqrt((x - 10) ** 2 + (y - 30) ** 2 + (z - 20) ** 2)
+v = np.maximum(v, 255 * 0.5 * (1 + erf((5 - b) / np.sqrt(2) / 1.2)))
+data = np.transpose(v, (2, 1, 0)).astype(np.float32)
+def rot(ax, deg):
+    t = np.radians(deg); c, s = np.cos(t), np.sin(t)
+    m = np.eye(3); i, j = [(1, 2), (0, 2), (0, 1)][ax]
+    m[i, i] = c; m[j, j] = c; m[i, j] = -s; m[j, i] = s
+    return m
+a = np.eye(4); a[:3, :3] = rot(2, 30) @ rot(0, 20) @ np.diag([1.0, 1.2, 1.5]); a[:3, 3] = [-20, 5, 7]
+nib.save(nib.Nifti1Image(data, a), sys.argv[1] + '/oblique.nii.gz')
+f = np.eye(4); f[:3, :3] = np.diag([-1.0, 1.0, 1.0]); f[:3, 3] = [47, 0, 0]
+nib.save(nib.Nifti1Image(data, f), sys.argv[1] + '/flipped.nii.gz')
+"#;
+
+#[test]
+fn the_mesh_preview_of_a_volume_sees_it_as_the_volume_preview_does_on_oblique_and_flipped_grids() {
+    let dir = tempfile::tempdir().unwrap();
+    run_python(ORIENTED_VOLUMES_PY, &[dir.path().to_str().unwrap()]);
+    let foreground = |pipeline: &str, input: &Path| -> Vec<bool> {
+        let out = dir.path().join(format!("{pipeline}-{}", input.file_name().unwrap().to_str().unwrap()));
+        let p = mdtf_e2e::shipped_pipeline(pipeline);
+        mdtf_ok(&["run", p.to_str().unwrap(), "--input", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q"]);
+        let (_, _, rgb) = mdtf_e2e::read_rgb_png(&out.join("preview.png"));
+        rgb.chunks_exact(3).map(|p| p.iter().any(|&c| c > 10)).collect()
+    };
+    for name in ["oblique.nii.gz", "flipped.nii.gz"] {
+        let input = dir.path().join(name);
+        // gaussian-tf draws the same TGTF at the same boundary as the mesh's default (s, g) TF
+        let (volume, mesh) = (foreground("gaussian-tf", &input), foreground("projected-tetrahedra", &input));
+        let both = volume.iter().zip(&mesh).filter(|(a, b)| **a && **b).count();
+        let either = volume.iter().zip(&mesh).filter(|(a, b)| **a || **b).count();
+        let iou = both as f64 / either.max(1) as f64;
+        assert!(iou >= 0.9, "{name}: foreground IoU {iou} of the volume and mesh previews");
+    }
+}
+
 #[test]
 fn nibabel_opens_the_nifti_copies_of_pack_textures() {
     let dir = tempfile::tempdir().unwrap();

@@ -1,7 +1,10 @@
 //! A projected-tetrahedra pack seen by the ray caster: its mesh's per-point
 //! s and g resampled onto a regular grid over the mesh's bounding box,
 //! linearly inside each tetrahedron (the field a projected-tetrahedra
-//! renderer integrates), as the channels `v` and `g`.
+//! renderer integrates), as the channels `v` and `g`. The grid's axes are
+//! those of the pack's geometry (the volume the mesh was made from, oblique
+//! or flipped as it may be; the world axes for a mesh read from a file), so
+//! that a volume and the mesh made from it are seen the same way.
 
 use crate::PreviewError;
 use mdtf_pack::{Manifest, MeshArrayEntry};
@@ -41,8 +44,20 @@ pub fn mesh_channels(dir: &Path, manifest: &Manifest, cap: usize) -> Result<BTre
     if let Some(bad) = tets.iter().flatten().find(|&&i| i as usize >= points.len()) {
         return Err(PreviewError::Pack(format!("tets.nrrd names point {bad} of {}", points.len())));
     }
-    let grid = mesh_grid(&points, cap).ok_or_else(|| PreviewError::Pack("the mesh has no finite points".into()))?;
-    let [vs, vg] = resample(&points, &tets, [&s, &g], &grid);
+    // the points along the pack grid's own axes, from its origin
+    let frame = &manifest.geometry;
+    let axes: [[f64; 3]; 3] = [0, 1, 2].map(|a| {
+        let column = [0, 1, 2].map(|r| frame.world_from_voxel[r][a]);
+        let length = column.iter().map(|c| c * c).sum::<f64>().sqrt();
+        if length > 0.0 { column.map(|c| c / length) } else { [0, 1, 2].map(|r| f64::from(u8::from(r == a))) }
+    });
+    let local: Vec<[f64; 3]> =
+        points.iter().map(|p| axes.map(|d| (0..3).map(|r| d[r] * (p[r] - frame.origin[r])).sum::<f64>())).collect();
+    let boxed = mesh_grid(&local, cap).ok_or_else(|| PreviewError::Pack("the mesh has no finite points".into()))?;
+    let [vs, vg] = resample(&local, &tets, [&s, &g], &boxed);
+    // the same grid in the world: its corner along the pack's axes
+    let corner = [0, 1, 2].map(|r| frame.origin[r] + (0..3).map(|a| boxed.origin[a] * axes[a][r]).sum::<f64>());
+    let grid = Geometry { origin: corner, directions: axes, ..boxed };
     let volume = |samples: Vec<f32>| {
         let [nx, ny, nz] = grid.dims;
         let data = ndarray::Array3::from_shape_vec((nz, ny, nx), samples)
