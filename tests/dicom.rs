@@ -510,6 +510,10 @@ for k in range(nz):
     ds.add_new(0x00280120, "SS", -1500)
     ds.PixelData = hu[k].tobytes()
     ds.save_as(os.path.join(out, f"{k:02d}.dcm"), enforce_file_format=True)
+# the same scan as a scanner with no field of view would store it: air where the padding is
+import nibabel as nib
+air = np.where(padded, -1000, hu).astype(np.int16)
+nib.save(nib.Nifti1Image(np.transpose(air, (2, 1, 0)), np.diag([-1.0, -1.0, 1.0, 1.0])), os.path.join(out, "..", "air.nii.gz"))
 counts = [int(padded.sum())]
 for r in range(1, 7):
     near = np.zeros_like(padded)
@@ -552,6 +556,33 @@ fn a_ct_series_pixel_padding_is_left_out_of_the_histograms_and_the_tracing() {
         // 19200 voxels, so the g axis clips none (0.002 % of them is less than one): exact
         let hist: Value = serde_json::from_slice(&std::fs::read(out.join("histogram/hist_v_g.json")).unwrap()).unwrap();
         assert_eq!(hist["total"].as_u64().unwrap(), 19200 - near, "{pipeline}: voxels counted");
+        if pipeline == "slicer-3dtf" {
+            // the preview shows the ball, not the field of view: as it does where the padding is air
+            let air = dir.path().join("air");
+            let input = dir.path().join("air.nii.gz");
+            mdtf_ok(&[
+                "run",
+                p.to_str().unwrap(),
+                "--input",
+                input.to_str().unwrap(),
+                "-o",
+                air.to_str().unwrap(),
+                "-q",
+            ]);
+            // the lit pixels' box (a shaded surface's speckle differs pixel by pixel; the field of view's
+            // cylinder would widen the box to the picture's width)
+            let lit_box = |picture: &Path| -> [usize; 4] {
+                let (w, _, rgb) = mdtf_e2e::read_rgb_png(picture);
+                let lit = rgb.chunks_exact(3).enumerate().filter(|(_, p)| p.iter().any(|&c| c > 10));
+                lit.fold([usize::MAX, usize::MAX, 0, 0], |[x0, y0, x1, y1], (i, _)| {
+                    let (x, y) = (i % w as usize, i / w as usize);
+                    [x0.min(x), y0.min(y), x1.max(x), y1.max(y)]
+                })
+            };
+            let (padded_box, air_box) = (lit_box(&out.join("preview.png")), lit_box(&air.join("preview.png")));
+            let apart = padded_box.iter().zip(&air_box).map(|(a, b)| a.abs_diff(*b)).max().unwrap();
+            assert!(apart <= 8, "lit box {padded_box:?} with padding, {air_box:?} with air there");
+        }
         if pipeline == "distance-tf" {
             // no voxel whose derivatives read padding is traced
             let traced = report["boundary"]["counts"]["not_traced"].as_u64().unwrap();
