@@ -233,9 +233,13 @@ fn the_cli_converts_both_ways_and_never_replaces_a_store_it_did_not_make() {
     assert_eq!(samples(&a), samples(&b));
     let info = mdtf_ok(&["info", &p("s.ome.zarr")]);
     assert!(info.contains("OME-Zarr 0.5 (Zarr v3)") && info.contains("levels:") && info.contains("24x24x24"), "{info}");
-    // written again over its own store: replaced
+    // written again over its own store: replaced, in the input's own u16 without --type
     mdtf_ok(&["convert", &p("s.nii.gz"), &p("s.ome.zarr"), "-q"]);
     assert_eq!(read("s.ome.zarr").fields.len(), 1);
+    let dtype =
+        run_python("import sys, zarr; print(zarr.open_group(sys.argv[1], mode='r')['0'].dtype)", &[&p("s.ome.zarr")]);
+    assert_eq!(dtype.trim(), "uint16", "the input's type kept");
+    assert_eq!(samples(&read("s.ome.zarr")), samples(&read("s.nii.gz")));
 
     // a store another tool wrote is refused as an output, and left as it was
     run_python(WRITE_ZARR_PYTHON, &[dir.path().to_str().unwrap()]);

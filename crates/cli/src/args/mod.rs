@@ -245,10 +245,11 @@ pub struct ConvertArgs {
     pub input: PathBuf,
     /// Output volume; its extension picks the format. Never the input itself.
     pub output: PathBuf,
-    /// Sample type to write. Default: f32. Integer types need integer values in range
-    /// (they are refused otherwise; quantisation is the pack stage's job).
-    #[arg(long = "type", value_enum, default_value_t = OutType::F32)]
-    pub out_type: OutType,
+    /// Sample type to write. Default: the input's own when it stores u8 or u16 without
+    /// rescaling (the values are then those integers), else f32. Integer types need integer
+    /// values in range (they are refused otherwise; quantisation is the pack stage's job).
+    #[arg(long = "type", value_enum)]
+    pub out_type: Option<OutType>,
     /// Gzip NRRD data.
     #[arg(long)]
     pub gzip: bool,
