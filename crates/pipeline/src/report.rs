@@ -62,6 +62,9 @@ pub struct RunReport {
     pub stages: Vec<StageReport>,
     /// Total wall time, seconds.
     pub total_seconds: f64,
+    /// Peak resident memory of the whole run, MiB (Linux; 0 elsewhere): the
+    /// stages' peaks and what came after the last (report, publishing).
+    pub peak_mib: f64,
     /// The settings the run used, every default filled in ([`resolved_settings`](crate::inputs::resolved_settings)).
     pub settings: toml::Table,
 }
@@ -96,6 +99,7 @@ impl RunReport {
             slabs: None,
             stages: Vec::new(),
             total_seconds: 0.0,
+            peak_mib: 0.0,
             settings: toml::Table::new(),
         }
     }

@@ -389,8 +389,8 @@ fn stages_section(h: &mut String, r: &RunReport) {
     }
     let _ = writeln!(
         h,
-        "<tr><th>total</th><td class=\"n\">{:.3}</td><td></td><td></td><td></td></tr></table>",
-        r.total_seconds
+        "<tr><th>total</th><td class=\"n\">{:.3}</td><td></td><td class=\"n\">{:.0}</td><td></td></tr></table>",
+        r.total_seconds, r.peak_mib
     );
 }
 

@@ -159,6 +159,7 @@ pub(crate) fn finish(
         report.stages = stages.0;
     }
     report.total_seconds = start.elapsed().as_secs_f64();
+    report.peak_mib = crate::report::peak_mib();
     report.settings = resolved_settings(p, opts).map_err(fail("report"))?;
     let json = serde_json::to_string_pretty(&report).map_err(at("report"))?;
     write_file_atomically(&dir.join("run_report.json"), |w| w.write_all(json.as_bytes())).map_err(at("report"))?;

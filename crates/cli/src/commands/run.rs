@@ -106,5 +106,5 @@ fn stage_table(report: &RunReport) -> String {
     for s in &report.stages {
         table += &format!("{:<22} {:>9.3} {:>12.1} {:>10.0}\n", s.stage, s.seconds, s.mvoxel_per_s, s.peak_mib);
     }
-    table + &format!("{:<22} {:>9.3}\n", "total", report.total_seconds)
+    table + &format!("{:<22} {:>9.3} {:>12} {:>10.0}\n", "total", report.total_seconds, "", report.peak_mib)
 }
