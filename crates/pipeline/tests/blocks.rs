@@ -38,7 +38,9 @@ fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
                         s.as_object_mut().unwrap().remove(k);
                     }
                 }
-                r.as_object_mut().unwrap().remove("total_seconds");
+                for k in ["total_seconds", "peak_mib"] {
+                    r.as_object_mut().unwrap().remove(k);
+                }
                 // how the run was cut is recorded by slab-by-slab runs only
                 r.as_object_mut().unwrap().remove("slabs");
                 out.insert(rel, serde_json::to_vec_pretty(&keys_sorted(r)).unwrap());
