@@ -590,3 +590,14 @@ fn a_ct_series_pixel_padding_is_left_out_of_the_histograms_and_the_tracing() {
         }
     }
 }
+
+#[test]
+fn pydicoms_deflated_image_reads_as_pydicom_decodes_it() {
+    let script = "import json, sys, pydicom, os; f = os.path.join(os.path.dirname(pydicom.__file__), 'data', 'test_files', 'image_dfl.dcm'); \
+                  d = pydicom.dcmread(f); print(json.dumps({'path': f, 'syntax': str(d.file_meta.TransferSyntaxUID), 'values': d.pixel_array.ravel().tolist()}))";
+    let theirs: Value = serde_json::from_str(&run_python(script, &[])).unwrap();
+    assert_eq!(theirs["syntax"], "1.2.840.10008.1.2.1.99", "Deflated Explicit VR Little Endian");
+    let mf = read(Path::new(theirs["path"].as_str().unwrap()), &ReadOptions::default()).unwrap();
+    assert_eq!(mf.geometry.dims, [512, 512, 1]);
+    assert_eq!(values(&mf), numbers(&theirs["values"]));
+}

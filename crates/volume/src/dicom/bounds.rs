@@ -22,7 +22,7 @@ fn long_vr(vr: &[u8; 2]) -> bool {
     !SHORT_VRS.contains(&vr)
 }
 /// Deflated Explicit VR Little Endian: the dataset is a zlib stream, not walkable.
-const DEFLATED: &str = "1.2.840.10008.1.2.1.99";
+pub(crate) const DEFLATED: &str = "1.2.840.10008.1.2.1.99";
 
 struct Walker {
     src: BufReader<std::fs::File>,

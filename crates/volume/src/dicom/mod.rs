@@ -173,7 +173,7 @@ fn file_info(files: &[header::ImageHeader], layout: &series::Layout) -> FileInfo
     let constant = scales.windows(2).all(|w| w[0] == w[1]);
     let scale = (constant && scales[0] != (1.0, 0.0)).then_some(scales[0]);
     // `compressed` means zlib; JPEG and RLE are named by the transfer syntax line
-    let compressed = first.transfer_syntax == "1.2.840.10008.1.2.1.99";
+    let compressed = first.transfer_syntax == bounds::DEFLATED;
     let what = if files.len() == 1 && first.frames.len() > 1 {
         format!("DICOM, one file of {} frames", first.frames.len())
     } else if files.len() == 1 {

@@ -43,9 +43,10 @@ pub fn decode_into(files: &[ImageHeader], slices: &[SliceRef], out: &mut [f32]) 
 /// declares, before the volume is allocated for them.
 pub fn check_native_sizes(files: &[ImageHeader]) -> Result<()> {
     for h in files {
+        // a deflated file holds its pixels compressed: its length says nothing of them
         let native = dicom_transfer_syntax_registry::TransferSyntaxRegistry
             .get(&h.transfer_syntax)
-            .is_some_and(|ts| !ts.is_encapsulated_pixel_data());
+            .is_some_and(|ts| !ts.is_encapsulated_pixel_data() && h.transfer_syntax != super::bounds::DEFLATED);
         let needed = h.rows as u64 * h.cols as u64 * h.sample_bytes() as u64 * h.frames.len() as u64;
         let len = std::fs::metadata(&h.path).map_err(|e| VolumeError::io(&h.path, e))?.len();
         if native && len < needed {
