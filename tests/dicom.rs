@@ -601,3 +601,17 @@ fn pydicoms_deflated_image_reads_as_pydicom_decodes_it() {
     assert_eq!(mf.geometry.dims, [512, 512, 1]);
     assert_eq!(values(&mf), numbers(&theirs["values"]));
 }
+
+#[test]
+fn pydicoms_one_bit_segmentations_read_as_0_and_1_as_pydicom_decodes_them() {
+    for name in ["liver_1frame.dcm", "liver_expb_1frame.dcm"] {
+        let script = "import json, sys, pydicom, os; f = os.path.join(os.path.dirname(pydicom.__file__), 'data', 'test_files', sys.argv[1]); \
+                      d = pydicom.dcmread(f); print(json.dumps({'path': f, 'bits': d.BitsAllocated, 'values': d.pixel_array.ravel().tolist()}))";
+        let theirs: Value = serde_json::from_str(&run_python(script, &[name])).unwrap();
+        assert_eq!(theirs["bits"], 1, "{name}");
+        let mf = read(Path::new(theirs["path"].as_str().unwrap()), &ReadOptions::default()).unwrap();
+        let want = numbers(&theirs["values"]);
+        assert!(want.contains(&1.0) && want.contains(&0.0), "{name}: a mask of both values");
+        assert_eq!(values(&mf), want, "{name}");
+    }
+}

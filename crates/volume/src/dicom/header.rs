@@ -84,6 +84,13 @@ impl ImageHeader {
         usize::from(self.bits_allocated / 8)
     }
 
+    /// Bytes of pixel data `frames` frames hold: 1-bit samples are packed
+    /// across frames (PS3.5 8.1.1), the others a whole number of bytes each.
+    pub fn pixel_bytes(&self, frames: usize) -> u64 {
+        let samples = self.rows as u64 * self.cols as u64 * frames as u64;
+        if self.bits_allocated == 1 { samples.div_ceil(8) } else { samples * self.sample_bytes() as u64 }
+    }
+
     /// Columns and rows of one slice: a mosaic's tile, else the image.
     pub fn slice_dims(&self) -> (usize, usize) {
         match &self.mosaic {
@@ -188,10 +195,8 @@ pub fn read_header(path: &Path) -> Result<Option<ImageHeader>> {
     let bad = |m: String| VolumeError::header(path, m);
     let cols = uint(&obj, tags::COLUMNS).ok_or_else(|| bad("Rows is present but Columns is missing".into()))?;
     let bits_allocated = uint(&obj, tags::BITS_ALLOCATED).unwrap_or(16) as u16;
-    if !matches!(bits_allocated, 8 | 16 | 32) {
-        return Err(bad(format!(
-            "BitsAllocated {bits_allocated} is not 8, 16 or 32 (1 is a binary segmentation, not an image mdtf reads)"
-        )));
+    if !matches!(bits_allocated, 1 | 8 | 16 | 32) {
+        return Err(bad(format!("BitsAllocated {bits_allocated} is not 1, 8, 16 or 32")));
     }
     let bits_stored = uint(&obj, tags::BITS_STORED).map_or(bits_allocated, |b| b as u16);
     let high_bit = uint(&obj, tags::HIGH_BIT).map_or(bits_stored.saturating_sub(1), |b| b as u16);

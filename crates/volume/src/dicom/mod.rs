@@ -162,7 +162,7 @@ fn padding_of(first: &header::ImageHeader, scales: &[(f64, f64)]) -> Option<[f64
 fn file_info(files: &[header::ImageHeader], layout: &series::Layout) -> FileInfo {
     let first = &files[0];
     let sample_type = match (first.bits_allocated, first.signed) {
-        (8, false) => SampleType::U8,
+        (1 | 8, false) => SampleType::U8,
         (8, true) => SampleType::I8,
         (16, false) => SampleType::U16,
         (16, true) => SampleType::I16,
@@ -187,6 +187,9 @@ fn file_info(files: &[header::ImageHeader], layout: &series::Layout) -> FileInfo
         ("transfer syntax".to_string(), first.transfer_syntax_name()),
         ("bits stored".to_string(), format!("{} of {}", first.bits_stored, first.bits_allocated)),
     ];
+    if first.bits_allocated == 1 {
+        details.push(("binary".to_string(), "1-bit samples (a segmentation mask): read as 0 and 1".to_string()));
+    }
     if let Some(m) = &first.mosaic {
         details.push((
             "mosaic".to_string(),

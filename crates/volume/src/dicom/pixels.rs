@@ -47,7 +47,7 @@ pub fn check_native_sizes(files: &[ImageHeader]) -> Result<()> {
         let native = dicom_transfer_syntax_registry::TransferSyntaxRegistry
             .get(&h.transfer_syntax)
             .is_some_and(|ts| !ts.is_encapsulated_pixel_data() && h.transfer_syntax != super::bounds::DEFLATED);
-        let needed = h.rows as u64 * h.cols as u64 * h.sample_bytes() as u64 * h.frames.len() as u64;
+        let needed = h.pixel_bytes(h.frames.len());
         let len = std::fs::metadata(&h.path).map_err(|e| VolumeError::io(&h.path, e))?.len();
         if native && len < needed {
             return Err(pixel_shortage(h, len, needed));
@@ -94,9 +94,21 @@ fn decode_file(h: &ImageHeader, targets: Vec<Target>) -> Result<()> {
     };
     let plane = h.rows as usize * h.cols as usize;
     let frame_bytes = plane * h.sample_bytes();
-    let needed = frame_bytes as u64 * h.frames.len() as u64;
+    let needed = h.pixel_bytes(h.frames.len());
     if (bytes.len() as u64) < needed {
         return Err(pixel_shortage(h, bytes.len() as u64, needed));
+    }
+    if h.bits_allocated == 1 {
+        // a binary mask (a segmentation): bit k of the stream, least significant first, is sample k
+        for t in targets {
+            let first = t.frame * plane;
+            for (p, d) in t.plane.iter_mut().enumerate() {
+                let bit = first + p;
+                let stored = (bytes[bit / 8] >> (bit % 8)) & 1;
+                *d = (f64::from(stored) * t.rescale.0 + t.rescale.1) as f32;
+            }
+        }
+        return Ok(());
     }
     for t in targets {
         match &h.mosaic {
