@@ -96,38 +96,33 @@ impl Overlay<'_> {
     }
 }
 
-/// The label of `axis` for histogram figures: its channel's label with the
-/// axis's unit when the input stated one (e.g. "v (HU)", "g = |grad v|
-/// (HU/mm)"), else [`axis_label`]'s generic units.
-pub fn axis_label_of(axis: &crate::Axis) -> String {
-    let quantity = match axis.name.as_str() {
-        "v" => "v",
-        "g" => "g = |grad v|",
-        "f2" => "f'' along the gradient",
-        "inv_g" => "1/g",
-        "g_hit" => "g at the boundary hit",
-        "distance" => "distance to the boundary",
-        "gnorm" => "||G||",
-        other => other,
-    };
-    match &axis.unit {
-        Some(unit) => format!("{quantity} ({unit})"),
-        None => axis_label(&axis.name),
+/// A channel's quantity and its generic unit (when the input states none),
+/// for the axes of histogram figures.
+fn quantity_and_unit(name: &str) -> (&str, &str) {
+    match name {
+        "v" => ("v", "input units"),
+        "g" => ("g = |grad v|", "input units per world unit"),
+        "f2" => ("f'' along the gradient", "input units per world unit^2"),
+        "inv_g" => ("1/g", "world units per input unit; of several fields 1/sqrt(||G||), world units"),
+        "g_hit" => ("g at the boundary hit", "input units per world unit"),
+        "distance" => ("distance to the boundary", "world units"),
+        "gnorm" => ("||G||", "per world unit^2"),
+        other => (other, "field units"),
     }
 }
 
-/// The label of channel `name` with its units, for the axes of histogram figures.
+/// The label of `axis` for histogram figures: its channel's quantity with
+/// the axis's unit when the input stated one (e.g. "v (HU)", "g = |grad v|
+/// (HU/mm)"), else [`axis_label`]'s generic units.
+pub fn axis_label_of(axis: &crate::Axis) -> String {
+    let (quantity, generic) = quantity_and_unit(&axis.name);
+    format!("{quantity} ({})", axis.unit.as_deref().unwrap_or(generic))
+}
+
+/// The label of channel `name` with its generic units, for the axes of histogram figures.
 pub fn axis_label(name: &str) -> String {
-    match name {
-        "v" => "v (input units)".into(),
-        "g" => "g = |grad v| (input units per world unit)".into(),
-        "f2" => "f'' along the gradient (input units per world unit^2)".into(),
-        "inv_g" => "1/g (world units per input unit; of several fields 1/sqrt(||G||), world units)".into(),
-        "g_hit" => "g at the boundary hit (input units per world unit)".into(),
-        "distance" => "distance to the boundary (world units)".into(),
-        "gnorm" => "||G|| (per world unit^2)".into(),
-        other => format!("{other} (field units)"),
-    }
+    let (quantity, unit) = quantity_and_unit(name);
+    format!("{quantity} ({unit})")
 }
 
 impl Labels {

@@ -82,32 +82,34 @@ pub fn gaussians(
         }
     }
     let g = get(gradient)?.samples();
-    let median = mdtf_volume::median;
-    let g_cut = 2.0 * median(g).unwrap_or(0.0);
-    let structured = g.iter().filter(|&&x| x > g_cut).count();
-    let use_all = structured * 100 < g.len();
     let mut centre = Vec::new();
     let mut ranges = Vec::new();
     for (a, s) in samples.iter().enumerate() {
-        let picked: Vec<f32>;
-        let over = if use_all {
-            *s
-        } else {
-            picked = s.iter().zip(g).filter(|(_, gv)| **gv > g_cut).map(|(v, _)| *v).collect();
-            &picked[..]
-        };
-        let m = median(over).ok_or(format!("channel '{}' has no finite sample", fields[a]))?;
+        let m = median_at_large_g(s, g).ok_or(format!("channel '{}' has no finite sample", fields[a]))?;
         centre.push(m as f64);
         ranges.push(mdtf_volume::finite_sample_range(s).map_or(1.0, |(lo, hi)| (hi - lo) as f64));
     }
     Ok(vec![median_tgtf(centre, &ranges)])
 }
 
+/// The median of `values` over the samples whose gradient `g` exceeds twice
+/// the gradient's median (over all samples when fewer than 1 % do): the
+/// centre of the paper's default TGTF. None without a finite value.
+fn median_at_large_g(values: &[f32], g: &[f32]) -> Option<f32> {
+    let g_cut = 2.0 * mdtf_volume::median(g).unwrap_or(0.0);
+    let structured = g.iter().filter(|&&x| x > g_cut).count();
+    if structured * 100 < g.len() {
+        return mdtf_volume::median(values);
+    }
+    let picked: Vec<f32> = values.iter().zip(g).filter(|(_, gv)| **gv > g_cut).map(|(v, _)| *v).collect();
+    mdtf_volume::median(&picked)
+}
+
 /// The (s, g) TF of a mesh read from a file (no volume, no grid): the TF
 /// file's Gaussians, else a TGTF at each boundary found in the (s, g)
 /// histogram of its points (`s`, `g` per point; `spacing`, a typical edge
 /// length in world units, turns the surface opacities into per-unit ones),
-/// else the paper's median TGTF over the points of large g.
+/// else the paper's median TGTF ([`median_at_large_g`] of the points).
 pub fn mesh_gaussians(tf: Option<&TfFile>, s: &[f32], g: &[f32], spacing: f64) -> Vec<GaussianPrimitive> {
     if let Some(tf) = tf.filter(|t| !t.gaussians().is_empty()) {
         return tf.gaussians();
@@ -126,10 +128,7 @@ pub fn mesh_gaussians(tf: Option<&TfFile>, s: &[f32], g: &[f32], spacing: f64) -
             return boundary_tgtfs(&crate::pack_inputs::arches_from(&found), &grid);
         }
     }
-    let g_cut = 2.0 * mdtf_volume::median(g).unwrap_or(0.0);
-    let strong: Vec<f32> = s.iter().zip(g).filter(|(_, gv)| **gv > g_cut).map(|(v, _)| *v).collect();
-    let centre = mdtf_volume::median(if strong.is_empty() { s } else { &strong }).unwrap_or(0.0);
-    vec![median_tgtf(vec![centre as f64], &[1.0])]
+    vec![median_tgtf(vec![median_at_large_g(s, g).unwrap_or(0.0) as f64], &[1.0])]
 }
 
 /// Writes `g` as `gaussians.json` in the pack folder `pdir`, atomically.

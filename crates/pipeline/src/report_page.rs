@@ -183,7 +183,7 @@ fn input_section(h: &mut String, r: &RunReport, provenance: Option<&mdtf_pack::P
         row(h, "SHA-256", &esc(sha));
     }
     row(h, "grid", &format!("{nx} x {ny} x {nz} ({} voxels)", nx * ny * nz));
-    let length = r.units.length.as_deref().unwrap_or("world units");
+    let length = r.units.lengths_name();
     row(h, "spacing", &format!("{sx} x {sy} x {sz} {length}"));
     row(h, "units", &esc(&units_line(&r.units)));
     if !r.fields.is_empty() {
@@ -193,6 +193,11 @@ fn input_section(h: &mut String, r: &RunReport, provenance: Option<&mdtf_pack::P
         row(h, "value range", &format!("{} .. {} {} (finite values)", num(lo), num(hi), esc(r.units.value_name())));
     }
     h.push_str("</table>\n");
+}
+
+/// The unit of g: the input's (e.g. "HU/mm"), else the generic one.
+fn g_unit(units: &mdtf_volume::Units) -> String {
+    units.of_channel("g").unwrap_or_else(|| "value units per world unit".into())
 }
 
 /// What the input states of its units, in words.
@@ -228,8 +233,7 @@ fn boundaries_section(h: &mut String, r: &RunReport) {
                  \"gauss:1.5\"), or a TF of your own (pack.tf) drawn over the (v, g) histogram figure.</p>\n",
             );
         } else {
-            let (v_unit, length) = (r.units.value_name(), r.units.length.as_deref().unwrap_or("world units"));
-            let g_unit = r.units.of_channel("g").unwrap_or_else(|| "per world unit".into());
+            let (v_unit, length, g_unit) = (r.units.value_name(), r.units.lengths_name(), g_unit(&r.units));
             let _ = writeln!(
                 h,
                 "<p>The pairs of materials whose erf-edge arch stands out in the (v, g) histogram, strongest first; \
@@ -278,8 +282,7 @@ fn boundaries_section(h: &mut String, r: &RunReport) {
 /// The tracing's thresholds and what became of the voxels, as tables.
 fn tracing_section(h: &mut String, b: &crate::report::BoundarySummary, units: &mdtf_volume::Units) {
     let (p, c) = (&b.resolved, &b.counts);
-    let g_unit = units.of_channel("g").unwrap_or_else(|| "value units per world unit".into());
-    let length = units.length.as_deref().unwrap_or("world units");
+    let (g_unit, length) = (g_unit(units), units.lengths_name());
     h.push_str(
         "<h2>Boundary tracing</h2>\n<p>Each voxel with g at or above g_min was traced along its gradient, \
          towards larger g, to the nearest zero crossing of f''; a crossing whose g is below g_hit_min is \

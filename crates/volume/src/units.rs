@@ -31,6 +31,11 @@ impl Units {
         self.length.as_deref().unwrap_or("world unit")
     }
 
+    /// The length unit for amounts, or "world units" when the file does not say.
+    pub fn lengths_name(&self) -> &str {
+        self.length.as_deref().unwrap_or("world units")
+    }
+
     /// The unit of the channel `name` ("v", "g", "g_hit", "f2", "inv_g",
     /// "distance", "gnorm"), e.g. "HU/mm" for g; None when the file states
     /// no unit, or for a channel not listed.

@@ -136,17 +136,18 @@ pub(crate) const EXPLICIT_VR_BIG_ENDIAN: &str = "1.2.840.10008.1.2.2";
 /// a byte stored as OB arrives big-endian (its bytes must be reversed).
 fn little_endian_samples<'a>(h: &ImageHeader, vr: dicom_core::VR, bytes: Cow<'a, [u8]>) -> Cow<'a, [u8]> {
     let width = h.sample_bytes();
-    if h.transfer_syntax != EXPLICIT_VR_BIG_ENDIAN || width < 2 {
+    // already little-endian: any other syntax, single bytes, 16-bit words as OW
+    if h.transfer_syntax != EXPLICIT_VR_BIG_ENDIAN || width < 2 || (vr == dicom_core::VR::OW && width == 2) {
         return bytes;
     }
     let mut le = bytes.into_owned();
-    match vr {
-        dicom_core::VR::OW if width == 4 => le.chunks_exact_mut(4).for_each(|s| {
+    if vr == dicom_core::VR::OW {
+        le.chunks_exact_mut(4).for_each(|s| {
             s.swap(0, 2);
             s.swap(1, 3);
-        }),
-        dicom_core::VR::OW => {}
-        _ => le.chunks_exact_mut(width).for_each(|s| s.reverse()),
+        });
+    } else {
+        le.chunks_exact_mut(width).for_each(|s| s.reverse());
     }
     Cow::Owned(le)
 }
