@@ -47,9 +47,16 @@
 //!    share is that one again, and not taken; and a pair that, fitted on
 //!    the whole histogram, is a taken arch's stretch in the sense above is
 //!    what the removal left of that arch, and not taken;
-//! 5. at most [`MAX_BOUNDARIES`] are taken, then listed strongest (most
+//! 5. the arches standing alone above the taken ones are then found as
+//!    the `isolated` submodule reads them: a small object of high contrast
+//!    (the air of a sinus in bone) draws an arch of a few hundred voxels
+//!    over the strong ones, which the feet of those outnumber in rule 2's
+//!    share. A taken arch that ran on such an arch's voxels ([`same_voxels`])
+//!    took them for its top and is fitted again without them (the head
+//!    holder's arch, under the skin's band, had taken the sinus's top);
+//! 6. at most [`MAX_BOUNDARIES`] are taken, then listed strongest (most
 //!    voxels in the core) first;
-//! 6. a boundary meets the background when one of its materials is the
+//! 7. a boundary meets the background when one of its materials is the
 //!    surround: the material nearest the value most voxels hold, or, while
 //!    no boundary has that one as a side, its neighbour in value with more
 //!    still voxels (a scanner's padding meets the air inside its field of
@@ -63,6 +70,8 @@ use crate::hvol::HistogramVolume;
 use crate::materials::{Material, find_materials};
 use mdtf_volume::arch_shape;
 use serde::Serialize;
+
+mod isolated;
 
 /// Values along an arch at which its fit is measured.
 pub const ARCH_SAMPLES: usize = 29;
@@ -125,7 +134,7 @@ pub struct DetectedBoundary {
     /// How sure the detection is, 0 to 1: the share of the voxels above the
     /// floor along its arch that the arch explains (see the module docs).
     pub confidence: f64,
-    /// One of its two materials is the surround (rule 6 of the module docs):
+    /// One of its two materials is the surround (rule 7 of the module docs):
     /// the surface a ray from outside meets first.
     pub meets_background: bool,
 }
@@ -199,18 +208,45 @@ pub fn detect(hv: &HistogramVolume) -> Detection {
 /// narrower than `min_sigma` (world units).
 pub fn detect_in(count_vg: &[u64], axes: &[Axis; 2], min_sigma: f64) -> Detection {
     let materials = find_materials(count_vg, axes);
+    let (mut kept, residual) = take_arches(count_vg, axes, &materials, min_sigma, Vec::new());
+    let isolated = isolated::find(count_vg, &residual, axes, &materials, &kept, min_sigma);
+    if !isolated.is_empty() {
+        kept = refit_beside(count_vg, axes, &materials, min_sigma, kept, &isolated);
+        kept.extend(isolated);
+    }
+    kept.sort_by(|a, b| b.core_voxels.cmp(&a.core_voxels).then(a.v_centre.total_cmp(&b.v_centre)));
+    if let Some(surround) = surround_material(&materials, mode_value(count_vg, axes), &kept) {
+        for b in &mut kept {
+            b.meets_background = b.v_low == surround || b.v_high == surround;
+        }
+    }
+    Detection { materials, boundaries: kept }
+}
+
+/// Rules 2 to 4 of the module docs over `count_vg`, after the arches
+/// `given` (taken as they are, their voxels removed first): the boundaries
+/// taken, `given` first, and the counts their arches leave.
+fn take_arches(
+    count_vg: &[u64],
+    axes: &[Axis; 2],
+    materials: &[Material],
+    min_sigma: f64,
+    given: Vec<DetectedBoundary>,
+) -> (Vec<DetectedBoundary>, Vec<u64>) {
     let mut counts = count_vg.to_vec();
+    for b in &given {
+        explain_away(&mut counts, axes, b);
+    }
     let total = count_vg.iter().sum::<u64>() as f64;
-    let whole = Columns::new(count_vg, axes, &materials);
-    let mut kept: Vec<DetectedBoundary> = Vec::new();
+    let whole_counts = counts.clone();
+    let whole = Columns::new(&whole_counts, axes, materials);
+    let first_taken = given.len();
+    let mut kept = given;
     // pairs found to be a stretch of a kept boundary's arch
     let mut refused: Vec<(f64, f64)> = Vec::new();
     while kept.len() < MAX_BOUNDARIES {
-        let columns = Columns::new(&counts, axes, &materials);
-        let candidates: Vec<DetectedBoundary> = materials
-            .iter()
-            .enumerate()
-            .flat_map(|(a, low)| materials[a + 1..].iter().map(move |high| (low, high)))
+        let columns = Columns::new(&counts, axes, materials);
+        let candidates: Vec<DetectedBoundary> = material_pairs(materials)
             .filter(|(low, high)| {
                 let taken = |k: &(f64, f64)| *k == (low.value, high.value);
                 !kept.iter().map(|k| (k.v_low, k.v_high)).any(|k| taken(&k)) && !refused.iter().any(taken)
@@ -235,8 +271,8 @@ pub fn detect_in(count_vg: &[u64], axes: &[Axis; 2], min_sigma: f64) -> Detectio
         // of theirs: fitted on the whole histogram, such a pair is a stretch
         // of a kept arch that runs on past it, and no boundary of its own
         let material = |v: f64| materials.iter().find(|m| m.value == v);
-        let on_whole = match (kept.is_empty(), material(best.v_low), material(best.v_high)) {
-            (false, Some(low), Some(high)) => fit_pair(&whole, low, high),
+        let on_whole = match (kept.len() > first_taken, material(best.v_low), material(best.v_high)) {
+            (true, Some(low), Some(high)) => fit_pair(&whole, low, high),
             _ => None,
         };
         let stretch = on_whole
@@ -255,13 +291,43 @@ pub fn detect_in(count_vg: &[u64], axes: &[Axis; 2], min_sigma: f64) -> Detectio
         }
         kept.push(best);
     }
-    kept.sort_by(|a, b| b.core_voxels.cmp(&a.core_voxels).then(a.v_centre.total_cmp(&b.v_centre)));
-    if let Some(surround) = surround_material(&materials, mode_value(count_vg, axes), &kept) {
-        for b in &mut kept {
-            b.meets_background = b.v_low == surround || b.v_high == surround;
-        }
+    (kept, counts)
+}
+
+/// The `taken` arches with those that run on an `isolated` arch's voxels
+/// ([`same_voxels`]) fitted again on the histogram without them: such an
+/// arch took them for its top (a head holder's arch, under the skin's
+/// band, for the sinus's over both). One whose pair is then no boundary
+/// is dropped.
+fn refit_beside(
+    count_vg: &[u64],
+    axes: &[Axis; 2],
+    materials: &[Material],
+    min_sigma: f64,
+    taken: Vec<DetectedBoundary>,
+    isolated: &[DetectedBoundary],
+) -> Vec<DetectedBoundary> {
+    let mut counts = count_vg.to_vec();
+    for b in isolated {
+        explain_away(&mut counts, axes, b);
     }
-    Detection { materials, boundaries: kept }
+    let columns = Columns::new(&counts, axes, materials);
+    let material = |v: f64| materials.iter().find(|m| m.value == v);
+    taken
+        .into_iter()
+        .filter_map(|b| {
+            if !isolated.iter().any(|i| same_voxels(i, &b)) {
+                return Some(b);
+            }
+            let arch = fit_pair(&columns, material(b.v_low)?, material(b.v_high)?)?;
+            (arch.sigma >= min_sigma).then_some(DetectedBoundary { meets_background: b.meets_background, ..arch })
+        })
+        .collect()
+}
+
+/// Every pair of `materials` (low, high), in increasing value of both.
+fn material_pairs(materials: &[Material]) -> impl Iterator<Item = (&Material, &Material)> {
+    materials.iter().enumerate().flat_map(|(a, low)| materials[a + 1..].iter().map(move |high| (low, high)))
 }
 
 /// Removes from `counts` the voxels on boundary `b`'s arch (within a factor
@@ -416,9 +482,16 @@ fn fit_pair(columns: &Columns, low: &Material, high: &Material) -> Option<Detect
     if confidence < MIN_CONFIDENCE || g_peak < MIN_PEAK_OVER_NOISE * noise {
         return None;
     }
-    // the voxels on the arch within half a sigma of its centre (its core)
+    Some(arch_between(low, high, g_peak, floor, core_voxels(columns, low, high, g_peak, floor), confidence))
+}
+
+/// Voxels of `columns` on the core of the arch from `low` to `high` of
+/// peak `g_peak` over the noise floor `floor` (within half a sigma of its
+/// centre, [`CORE_T`]).
+fn core_voxels(columns: &Columns, low: &Material, high: &Material, g_peak: f64, floor: f64) -> u64 {
+    let span = high.value - low.value;
     let (first, last) = (columns.column(low.value + span * CORE_T.0), columns.column(low.value + span * CORE_T.1));
-    let core_voxels = match (first, last) {
+    match (first, last) {
         (Some(first), Some(last)) => (first..=last)
             .map(|i| {
                 let t = (columns.axes[0].centre(i) - low.value) / span;
@@ -427,8 +500,21 @@ fn fit_pair(columns: &Columns, low: &Material, high: &Material) -> Option<Detect
             })
             .sum(),
         _ => 0,
-    };
-    Some(DetectedBoundary {
+    }
+}
+
+/// The boundary from `low` to `high` of peak gradient `g_peak`, noise floor
+/// `floor`, `core_voxels` and `confidence` (not yet known to meet the background).
+fn arch_between(
+    low: &Material,
+    high: &Material,
+    g_peak: f64,
+    floor: f64,
+    core_voxels: u64,
+    confidence: f64,
+) -> DetectedBoundary {
+    let span = high.value - low.value;
+    DetectedBoundary {
         v_low: low.value,
         v_low_spread: low.spread,
         v_high: high.value,
@@ -440,7 +526,7 @@ fn fit_pair(columns: &Columns, low: &Material, high: &Material) -> Option<Detect
         g_floor: floor,
         confidence,
         meets_background: false,
-    })
+    }
 }
 
 /// The share of an arch's sampled values whose band holds at least a tenth
@@ -625,7 +711,7 @@ fn mode_value(count_vg: &[u64], axes: &[Axis; 2]) -> f64 {
     av.centre(mode)
 }
 
-/// The value of the surround's material (rule 6 of the module docs): the
+/// The value of the surround's material (rule 7 of the module docs): the
 /// material nearest `background`; while none of the `boundaries` has it as
 /// one side, its neighbour in value holding more still voxels (a scanner's
 /// padding, the commonest value, meets the air inside its field of view
