@@ -190,8 +190,9 @@ fn a_head_ct_phantom_with_padding_and_a_holder_shows_its_bone_through_the_skin()
 
 /// The default distance-tf run on an erf sphere (96^3, radius 28.8, sigma 3, 0 to 255) with noise
 /// of sd `noise` and the extra settings `set`: the share of the shell's voxels (|x| <= sigma, x the
-/// analytic signed distance) the tracing kept (distance >= 0), and the run's warnings.
-fn traced_shell(noise: f64, set: &[&str]) -> (f64, Vec<String>) {
+/// analytic signed distance) the tracing kept (distance >= 0), the run's warnings and the tracing's
+/// resolved settings.
+fn traced_shell(noise: f64, set: &[&str]) -> (f64, Vec<String>, serde_json::Value) {
     let dir = tempfile::tempdir().unwrap();
     let (input, truth) = (dir.path().join("sphere.nii.gz"), dir.path().join("truth"));
     let (i, t, n) = (input.to_str().unwrap(), truth.to_str().unwrap(), noise.to_string());
@@ -210,7 +211,8 @@ fn traced_shell(noise: f64, set: &[&str]) -> (f64, Vec<String>) {
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("run_report.json")).unwrap()).unwrap();
     let warnings = report["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap().to_string()).collect();
-    (kept as f64 / shell.iter().filter(|&&s| s).count() as f64, warnings)
+    let resolved = report["boundary"]["resolved"].clone();
+    (kept as f64 / shell.iter().filter(|&&s| s).count() as f64, warnings, resolved)
 }
 
 /// Whether one of `warnings` says the tracing lost the sphere's boundary (its materials, 0 and
@@ -228,13 +230,21 @@ fn the_default_distance_tf_traces_a_noisy_sphere_or_names_the_boundary_it_lost()
     // noise of 5, 10 and 15 % of the contrast: the shipped pipeline (bilateral pre-filter, gauss:1)
     // keeps at least 80 % of the shell, or says which boundary it lost
     for noise in [12.75, 25.5, 38.25] {
-        let (share, warnings) = traced_shell(noise, &[]);
-        eprintln!("noise {noise}: {share} of the shell traced; {warnings:?}");
+        let (share, warnings, resolved) = traced_shell(noise, &[]);
+        eprintln!("noise {noise}: {share} of the shell traced; {warnings:?}; {resolved}");
         assert!(share >= 0.8 || names_the_lost_sphere(&warnings), "noise {noise}: {share}, {warnings:?}");
+        // the thresholds follow the boundary found before the tracing, not the noise: g_hit_min at
+        // most half its peak g (255 / (sqrt(2 pi) sigma) with the gauss:1 kernel's blur, sigma =
+        // sqrt(3^2 + 1^2) voxels, is 32.2), and the Fig. 2 range the materials' span (255, where
+        // the min-max range grows with the noise to 583 at 15 %)
+        let g_true = 255.0 / ((2.0 * std::f64::consts::PI).sqrt() * 10f64.sqrt());
+        let (g_hit_min, range) = (resolved["g_hit_min"].as_f64().unwrap(), resolved["fig2_range"].as_f64().unwrap());
+        assert!(g_hit_min <= 0.55 * g_true, "noise {noise}: g_hit_min {g_hit_min}");
+        assert!((range / 255.0 - 1.0).abs() <= 0.15, "noise {noise}: Fig. 2 range {range}");
     }
     // the other side: a g_hit_min above the boundary's peak g (34) rejects its crossings, and the
     // run names the boundary it lost
-    let (share, warnings) = traced_shell(25.5, &["boundary.g_hit_min=60"]);
+    let (share, warnings, _) = traced_shell(25.5, &["boundary.g_hit_min=60"]);
     assert!(share < 0.8, "{share}");
     assert!(names_the_lost_sphere(&warnings), "{warnings:?}");
 }

@@ -25,8 +25,13 @@
 //! floor is `max(2 x median g, 1e-3 x value range / L_min)` (the median g of
 //! a scan is the noise's, since most voxels lie inside materials; the
 //! second term keeps rounding noise of clean phantoms out), `g_min` is the
-//! floor and `g_hit_min` twice it. The Fig. 2 thresholds (scaled by the
-//! value range / 255) filter the report only. Voxels at or above the floor
+//! floor and `g_hit_min` twice it, or, when the boundaries found in the (v,
+//! g) histogram before the tracing are given ([`Detected`]), at most half
+//! the least peak g among them (not below the floor): a boundary found
+//! keeps its crossings even where the median g of a scan's noise is high.
+//! The Fig. 2 thresholds (scaled by the value range / 255, the range being
+//! the span of the boundaries' materials when given: noise stretches the
+//! min-max range) filter the report only. Voxels at or above the floor
 //! are traced even when larger thresholds are given, and a boundary whose
 //! crossings all fall below them is reported in
 //! [`BoundaryOutput::warnings`] (see [`LostBoundary`]).
@@ -70,6 +75,21 @@ pub const NOISE_FLOOR_MEDIANS: f64 = 2.0;
 pub const NOISE_FLOOR_RANGE_FRACTION: f64 = 1e-3;
 /// The default g_hit_min is this many noise floors.
 pub const G_HIT_MIN_FLOORS: f64 = 2.0;
+/// With boundaries found before the tracing, the default g_hit_min is at
+/// most this share of the least peak g among them.
+pub const G_HIT_MIN_PEAK_SHARE: f64 = 0.5;
+
+/// What boundary detection in the (v, g) histogram found before the
+/// tracing, for the tracing's defaults (see the crate docs).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Detected {
+    /// The least peak gradient G of the boundaries found, value units per
+    /// world unit (None: none found).
+    pub least_g_peak: Option<f64>,
+    /// The values of the lowest and the highest material of the boundaries
+    /// found, value units (None: none found).
+    pub material_range: Option<[f64; 2]>,
+}
 
 /// Parameters of the boundary stage (shared by `mdtf boundary` and pipeline files).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -198,6 +218,14 @@ pub struct ResolvedParams {
     pub fig2_g_min: f64,
     /// The Fig. 2 report's threshold at the boundary (20 x value range / 255).
     pub fig2_g_hit_min: f64,
+    /// The value range the Fig. 2 thresholds scale by: the span of the
+    /// materials of the boundaries found, or else the data's min-max range.
+    pub fig2_range: f64,
+    /// `fig2_range` is the span of the boundaries' materials.
+    pub fig2_range_of_boundaries: bool,
+    /// The default g_hit_min was lowered to keep the boundaries found
+    /// (half the least peak g among them).
+    pub g_hit_min_of_boundaries: bool,
     /// Step, world units.
     pub step: f64,
     /// d_max, world units.
@@ -255,14 +283,33 @@ pub fn resolve(
     value_range: f64,
     noise_floor: f64,
 ) -> Result<ResolvedParams, BoundaryError> {
+    resolve_detected(params, geometry, value_range, noise_floor, &Detected::default())
+}
+
+/// [`resolve`] with the boundaries found before the tracing (see the crate docs).
+pub fn resolve_detected(
+    params: &BoundaryParams,
+    geometry: &Geometry,
+    value_range: f64,
+    noise_floor: f64,
+    detected: &Detected,
+) -> Result<ResolvedParams, BoundaryError> {
     let l_min = geometry.min_spacing();
-    let scale = value_range / 255.0;
+    let of_boundaries = detected.material_range.map(|[lo, hi]| hi - lo).filter(|&s| s > 0.0 && s <= value_range);
+    let fig2_range = of_boundaries.unwrap_or(value_range);
+    let scale = fig2_range / 255.0;
+    let of_floor = G_HIT_MIN_FLOORS * noise_floor;
+    let of_peaks = detected.least_g_peak.map(|g| (G_HIT_MIN_PEAK_SHARE * g).max(noise_floor));
+    let lowered = params.g_hit_min.is_none() && of_peaks.is_some_and(|g| g < of_floor);
     let r = ResolvedParams {
         noise_floor,
         g_min: params.g_min.unwrap_or(noise_floor),
-        g_hit_min: params.g_hit_min.unwrap_or(G_HIT_MIN_FLOORS * noise_floor),
+        g_hit_min: params.g_hit_min.unwrap_or(of_peaks.map_or(of_floor, |g| g.min(of_floor))),
         fig2_g_min: FIG2_G_MIN_8BIT * scale,
         fig2_g_hit_min: FIG2_G_HIT_MIN_8BIT * scale,
+        fig2_range,
+        fig2_range_of_boundaries: of_boundaries.is_some(),
+        g_hit_min_of_boundaries: lowered,
         step: params.step.unwrap_or(l_min / 5.0),
         d_max: params.d_max.unwrap_or(default_d_max(geometry)),
         tolerance: params.tolerance * l_min,
@@ -304,6 +351,16 @@ pub fn run(input: &BoundaryInput, params: &BoundaryParams) -> Result<BoundaryOut
     run_block(input, params, 0)
 }
 
+/// [`run`] with the boundaries found before the tracing (see the crate docs).
+pub fn run_detected(
+    input: &BoundaryInput,
+    params: &BoundaryParams,
+    detected: &Detected,
+) -> Result<BoundaryOutput, BoundaryError> {
+    let stats = VolumeStats { detected: *detected, ..VolumeStats::of(input.g, input.value_range) };
+    trace_whole(input, params, 0, &stats)
+}
+
 /// What the tracing of a block takes from the whole volume (reductions of a
 /// first pass), so that a slab-by-slab run gives the whole-volume run's bits.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -314,13 +371,16 @@ pub struct VolumeStats {
     pub noise_floor: f64,
     /// Largest finite g of the whole volume (0 without one): the axis of the crossings' histogram.
     pub g_max: f32,
+    /// The boundaries found before the tracing (none: the defaults of the noise floor alone).
+    #[serde(default)]
+    pub detected: Detected,
 }
 
 impl VolumeStats {
     /// The statistics of a whole g volume whose data span `value_range`.
     pub fn of(g: &Volume, value_range: f64) -> VolumeStats {
         let noise_floor = noise_floor(g.samples(), value_range, g.geometry.min_spacing());
-        VolumeStats { value_range, noise_floor, g_max: g_max(g.samples()) }
+        VolumeStats { value_range, noise_floor, g_max: g_max(g.samples()), detected: Detected::default() }
     }
 }
 
@@ -442,7 +502,7 @@ pub fn trace_block_into(
             )));
         }
     }
-    let r = resolve(params, geo, stats.value_range, stats.noise_floor)?;
+    let r = resolve_detected(params, geo, stats.value_range, stats.noise_floor, &stats.detected)?;
     fn grid(v: &Array3<f32>, dims: [usize; 3], first: [usize; 3]) -> Grid<'_> {
         Grid::at(v.as_slice().unwrap_or(&[]), dims, first)
     }
@@ -512,10 +572,19 @@ pub fn run_block(
     params: &BoundaryParams,
     first_plane: usize,
 ) -> Result<BoundaryOutput, BoundaryError> {
-    let stats = VolumeStats::of(input.g, input.value_range);
+    trace_whole(input, params, first_plane, &VolumeStats::of(input.g, input.value_range))
+}
+
+/// Traces every voxel of a block whose first plane is `first_plane`, with the defaults of `stats`.
+fn trace_whole(
+    input: &BoundaryInput,
+    params: &BoundaryParams,
+    first_plane: usize,
+    stats: &VolumeStats,
+) -> Result<BoundaryOutput, BoundaryError> {
     let place = BlockPlace::z_slab(first_plane, input.g.geometry.dims);
     let BlockTrace { distance, g_hit, hit, dot, counts, crossings, resolved: r } =
-        trace_block(input, params, &place, &stats)?;
+        trace_block(input, params, &place, stats)?;
     let maps = hit_maps(params, r.d_max);
     let hit_mask = |f: &HitMap| {
         let data = ndarray::Zip::from(&distance.data).and(&hit.data).map_collect(|&d, &h| f.at(d, h));

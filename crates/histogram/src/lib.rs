@@ -22,8 +22,8 @@ mod rgb;
 pub use axis::{Axis, AxisSpec, DEFAULT_BINS, MAX_INTEGER_BINS};
 pub use boundaries::{
     ARCH_BAND, ARCH_SAMPLES, ARCH_T, CORE_T, DetectedBoundary, Detection, FALLBACK_G_QUANTILE, FALLBACK_HIGH_QUANTILE,
-    MAX_BOUNDARIES, MIN_CONFIDENCE, MIN_CORE_SHARE, MIN_PEAK_OVER_NOISE, background_value, detect, detect_boundaries,
-    detect_in, fallback_boundary,
+    MAX_BOUNDARIES, MIN_CONFIDENCE, MIN_CORE_SHARE, MIN_PEAK_OVER_NOISE, MIN_SIGMA_SPACINGS, background_value, detect,
+    detect_boundaries, detect_in, fallback_boundary,
 };
 pub use clusters::{
     CLUSTER_BINS, CLUSTER_MASK, CORE_BIT, CORE_DENSITY, Cluster, JointClusters, MAX_CLUSTERS, MERGE_RATIO,

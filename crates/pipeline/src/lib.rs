@@ -29,6 +29,7 @@ pub mod inputs;
 pub mod materials;
 pub mod pack_inputs;
 pub mod plan;
+pub mod pre_detect;
 pub(crate) mod progress;
 pub mod report;
 pub mod report_page;

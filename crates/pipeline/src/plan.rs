@@ -250,8 +250,7 @@ impl Plan {
         let steps = channel_steps(&fields, &derive, &derive_fields, defer_normals, prefilter, trace);
         let (reach, halo) = how.reach(&wanted, multi, prefilter, trace, geometry);
         let median_of_g = trace && how.boundary.g_min.is_none();
-        let reductions = channel_reductions(&steps, median_of_g, prefilter, multi);
-        Plan {
+        let mut plan = Plan {
             fields,
             wanted,
             derive,
@@ -262,10 +261,20 @@ impl Plan {
             mesh: None,
             trace,
             steps,
-            reductions,
+            reductions: Vec::new(),
             reach,
             halo,
-        }
+        };
+        let before_trace = plan.detects_before_tracing();
+        plan.reductions = channel_reductions(&plan.steps, median_of_g, before_trace, prefilter, multi);
+        plan
+    }
+
+    /// Whether the tracing's defaults take the boundaries found in the (v,
+    /// g) histogram before it (`crate::pre_detect`): one field, traced, its
+    /// value kept for the outputs.
+    pub fn detects_before_tracing(&self) -> bool {
+        self.trace && self.fields.is_empty() && self.wants("v")
     }
 
     /// Whether some output reads the channel called `name`.
@@ -437,8 +446,15 @@ fn pipeline_reductions(p: &Pipeline, steps: &[PlannedStep]) -> Vec<Reduction> {
 }
 
 /// The whole-volume reductions the steps that make channels wait for
-/// (`median_of_g`: the tracing takes its noise floor from the data).
-fn channel_reductions(steps: &[PlannedStep], median_of_g: bool, prefilter: bool, multi: bool) -> Vec<Reduction> {
+/// (`median_of_g`: the tracing takes its noise floor from the data;
+/// `boundaries`: and its g_hit_min's cap from the boundaries found before it).
+fn channel_reductions(
+    steps: &[PlannedStep],
+    median_of_g: bool,
+    boundaries: bool,
+    prefilter: bool,
+    multi: bool,
+) -> Vec<Reduction> {
     let has = |s: Step| steps.iter().any(|x| x.step == s);
     let mut out = Vec::new();
     let mut add = |what: &str, before: Vec<Step>| {
@@ -461,6 +477,9 @@ fn channel_reductions(steps: &[PlannedStep], median_of_g: bool, prefilter: bool,
     }
     if median_of_g {
         add("median of g (the noise floor: g_min, g_hit_min)", vec![Step::Trace]);
+    }
+    if boundaries {
+        add("(v, g) counts and their boundaries (g_hit_min's cap, the Fig. 2 range)", vec![Step::Trace]);
     }
     out
 }

@@ -294,13 +294,27 @@ fn tracing_section(h: &mut String, b: &crate::report::BoundarySummary, units: &m
             format!("{} {g_unit}", num(p.noise_floor)),
         ),
         ("g_min (traced from)", format!("{} {g_unit}", num(p.g_min))),
-        ("g_hit_min (kept crossings)", format!("{} {g_unit}", num(p.g_hit_min))),
+        (
+            match p.g_hit_min_of_boundaries {
+                true => {
+                    "g_hit_min (kept crossings; half the least peak g of the boundaries found, under twice the floor)"
+                }
+                false => "g_hit_min (kept crossings)",
+            },
+            format!("{} {g_unit}", num(p.g_hit_min)),
+        ),
         ("step", format!("{} {length}", num(p.step))),
         ("d_max (longest trace)", format!("{} {length}", num(p.d_max))),
         ("tolerance of the crossing", format!("{} {length}", num(p.tolerance))),
         (
-            "Fig. 2 report's g at the voxel / at the hit",
-            format!("{} / {} {g_unit}", num(p.fig2_g_min), num(p.fig2_g_hit_min)),
+            "Fig. 2 report's g at the voxel / at the hit (the paper's 5 / 20 on 8-bit data, times the range / 255)",
+            format!(
+                "{} / {} {g_unit} (range {}: {})",
+                num(p.fig2_g_min),
+                num(p.fig2_g_hit_min),
+                num(p.fig2_range),
+                if p.fig2_range_of_boundaries { "the span of the boundaries' materials" } else { "min to max" }
+            ),
         ),
     ] {
         row(h, name, &esc(&value));

@@ -215,8 +215,14 @@ impl<'a> WholeRun<'a> {
         };
         self.progress.stage("boundary")?;
         let t = Instant::now();
-        let out = mdtf_boundary::run(&BoundaryInput { g, f2, normal: nm, value_range }, &self.p.boundary)
-            .map_err(at("boundary"))?;
+        // the boundaries of the (v, g) histogram of the unfiltered g, as the default TF reads them
+        let detected = match (self.plan.detects_before_tracing(), self.chans.get("v")) {
+            (true, Some(v)) => crate::pre_detect::detected_of(v.samples(), g0.samples(), v.geometry.min_spacing())
+                .map_err(at("boundary"))?,
+            _ => mdtf_boundary::Detected::default(),
+        };
+        let input = BoundaryInput { g, f2, normal: nm, value_range };
+        let out = mdtf_boundary::run_detected(&input, &self.p.boundary, &detected).map_err(at("boundary"))?;
         self.warnings.extend(out.warnings.iter().map(|w| format!("boundary: {w}")));
         let traced = Traced {
             d_max: Some(out.resolved.d_max),

@@ -128,7 +128,9 @@ paper traces both rays and keeps that one; the result is the same. The ray steps
 --d-max, sampling f'' trilinearly; at the first sign change of f'' the zero crossing is refined to\n\
 --tolerance and g is read there (tricubic). Crossings whose g is below --g-hit-min are rejected.\n\n\
 Thresholds: by default from the data. The noise floor is max(2 x median g, 1e-3 x value range /\n\
-L_min); --g-min defaults to it, --g-hit-min to twice it. The paper's 5 and 20 (8-bit data, scaled by\n\
+L_min); --g-min defaults to it, --g-hit-min to twice it (mdtf run lowers that to half the least\n\
+peak g of the boundaries its (v, g) histogram shows, and scales the Fig. 2 thresholds by the span of\n\
+their materials). The paper's 5 and 20 (8-bit data, scaled by\n\
 value range / 255) filter the --report statistics only: as output thresholds they cut real, weaker\n\
 boundaries. Voxels above the noise floor are traced whatever the thresholds, and a boundary whose\n\
 crossings all fall below them is named in a warning.\n\n\

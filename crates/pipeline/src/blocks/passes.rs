@@ -14,12 +14,12 @@ use crate::plan::Plan;
 use crate::progress::Progress;
 use crate::report::{BoundarySummary, Stages, Traced};
 use crate::run::{RunError, RunOptions, at, fail};
-use mdtf_boundary::{Crossings, ReportAccumulator, ResolvedParams, TraceCounts};
+use mdtf_boundary::{Crossings, ReportAccumulator, ResolvedParams, TraceCounts, VolumeStats};
 use mdtf_derive::{DeriveParams, Item};
 use mdtf_histogram::{ChannelStats, Histogram};
 use mdtf_pack::{PackParams, PackWriter, Profile, TfFile};
 use mdtf_volume::{Geometry, KeyBuckets, Volume, overlapped};
-use reductions::{SlabHistograms, Stats, g_stats};
+use reductions::{SlabHistograms, Stats, detected_before_tracing, g_stats};
 use std::collections::BTreeMap;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -303,7 +303,14 @@ impl<'a> SlabPasses<'a> {
         let traced_buckets = derived.g_buckets.as_ref().filter(|_| !prefiltered);
         let l_min = self.geo.min_spacing();
         let value_range = self.value_range();
-        let stats = g_stats(chans, g, traced_buckets, &self.slabs, value_range, l_min, &self.stats)?;
+        let detected = match self.plan.detects_before_tracing() {
+            true => detected_before_tracing(chans, &self.slabs, &self.stats, l_min)?,
+            false => Default::default(),
+        };
+        let stats = VolumeStats {
+            detected,
+            ..g_stats(chans, g, traced_buckets, &self.slabs, value_range, l_min, &self.stats)?
+        };
         if self.median_reads_stored_g() {
             chans.store.remove("g");
         }

@@ -76,7 +76,32 @@ pub(super) fn g_stats(
         }
     };
     let noise_floor = mdtf_boundary::noise_floor_of_median(median, value_range, l_min);
-    Ok(VolumeStats { value_range, noise_floor, g_max })
+    Ok(VolumeStats { value_range, noise_floor, g_max, detected: mdtf_boundary::Detected::default() })
+}
+
+/// What boundary detection finds in the (v, g) histogram of every voxel
+/// (`crate::pre_detect`), counted slab by slab over the axes of `stats`;
+/// nothing when those hold no statistics of v and g or the store neither.
+pub(super) fn detected_before_tracing(
+    chans: &mut SlabChannels,
+    slabs: &[Range<usize>],
+    stats: &Stats,
+    spacing: f64,
+) -> Result<mdtf_boundary::Detected, RunError> {
+    use crate::pre_detect::{HVOL_BINS, VgCounts};
+    let axis = |name: &str| stats.axis(&HvolAxes::spec(name, HVOL_BINS), name).ok();
+    let (Some(av), Some(ag)) = (axis("v"), axis("g")) else { return Ok(Default::default()) };
+    if !(chans.has("v") && chans.has("g")) {
+        return Ok(Default::default());
+    }
+    let mut counts = VgCounts::new(av, ag);
+    let mut v = Vec::new();
+    for z in slabs {
+        chans.samples_into("v", z.clone(), &mut v).map_err(fail("boundary"))?;
+        let g = chans.samples("g", z.clone()).map_err(fail("boundary"))?;
+        counts.add(&v, g).map_err(at("boundary"))?;
+    }
+    Ok(counts.detected(spacing))
 }
 
 /// The histograms of the pipeline (and the histogram volume when it is
