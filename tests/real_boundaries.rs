@@ -88,6 +88,15 @@ fn shows_in_their_own_colours(name: &str, pairs: &[(f64, f64)]) {
 fn the_engine_block_and_its_inserts_show_in_their_own_colours() {
     // air | cast block
     shows_in_their_own_colours("engine.nii.gz", &[(0.0, 144.0)]);
+    // the one-value TFs too: the inserts' isovalue (air | inserts, 0 to 229) is not their centre,
+    // 114.5, where the block's surface lies as well (one blue block), but between 144 and 229
+    for pipeline in ["gaussian-tf", "peak-finding"] {
+        let dir = tempfile::tempdir().unwrap();
+        run(pipeline, &real("engine.nii.gz"), dir.path());
+        let (shares, lit) = colour_shares(&dir.path().join("preview.png"));
+        eprintln!("engine {pipeline}: {shares:?} of {lit}");
+        assert!(shares[0] >= 0.05 && shares[1] >= 0.05, "engine {pipeline}: {shares:?}");
+    }
 }
 
 #[test]

@@ -183,11 +183,36 @@ pub fn boundary_tf(v: &LutAxis, g: &LutAxis, tent: Tent, arches: &[BoundaryArch]
     }
 }
 
-/// A TF of thin widgets, one per boundary, at its centre value: the
+/// The value at which a one-value (isosurface) TF shows boundary `k` of
+/// `arches`: its centre, unless that lies within the span of another
+/// boundary sharing one of its materials (an engine's dense inserts meet
+/// the air, 0 to 229, and the cast block meets it too, 0 to 144: at 114.5
+/// both surfaces lie), then halfway between the two other materials (186.5:
+/// only the inserts' surface), where that lies in fewer other spans.
+pub fn isovalue(arches: &[BoundaryArch], k: usize) -> f64 {
+    let a = &arches[k];
+    let centre = 0.5 * (a.v_low + a.v_high);
+    let others = || arches.iter().enumerate().filter(move |&(j, _)| j != k).map(|(_, b)| b);
+    let spans_holding = |v: f64| others().filter(|b| b.v_low < v && v < b.v_high).count();
+    let nested = others().filter(|b| b.v_low < centre && centre < b.v_high);
+    let shifted = nested
+        .filter_map(|b| match (b.v_low == a.v_low, b.v_high == a.v_high) {
+            (true, false) if b.v_high < a.v_high => Some(0.5 * (b.v_high + a.v_high)),
+            (false, true) if b.v_low > a.v_low => Some(0.5 * (a.v_low + b.v_low)),
+            _ => None,
+        })
+        .min_by_key(|&v| spans_holding(v));
+    match shifted {
+        Some(v) if spans_holding(v) < spans_holding(centre) => v,
+        _ => centre,
+    }
+}
+
+/// A TF of thin widgets, one per boundary, at its [`isovalue`]: the
 /// isosurfaces multidimensional peak finding renders (through
 /// [`TfFile::peak_finding_tf2d`]). Each is a constant rectangle
 /// [`ISOSURFACE_HALF_WIDTH`] of the boundary's value span wide on each side
-/// of its centre (at least one of the 1024 cells of `v_range`), over g from
+/// of that value (at least one of the 1024 cells of `v_range`), over g from
 /// 0.3 to 1.3 times its peak g, with the boundary's colour and its surface
 /// opacity as the widget's opacity (peak finding keeps a peak's opacity
 /// whatever the step, so that is what a ray crossing it accumulates).
@@ -200,7 +225,7 @@ pub fn boundary_isosurface_tf(arches: &[BoundaryArch], v_range: [f64; 2]) -> TfF
         .enumerate()
         .map(|(k, (a, &alpha))| PlacedWidget {
             shape: Widget::Rectangle(Rectangle {
-                centre: [(a.v_low + a.v_high) / 2.0, 0.8 * a.g_peak],
+                centre: [isovalue(arches, k), 0.8 * a.g_peak],
                 half_size: [(ISOSURFACE_HALF_WIDTH * (a.v_high - a.v_low)).max(cell), 0.5 * a.g_peak],
                 falloff: Falloff::Constant,
                 alpha,
@@ -340,6 +365,35 @@ mod tests {
         assert_eq!(boundary_opacities(&[arch(40_000, true), arch(10_000, true)]), vec![0.25, 1.0]);
         // the least is a floor
         assert_eq!(boundary_opacities(&[arch(1_000_000, false), arch(1_000, false)]), vec![MIN_BOUNDARY_OPACITY, 1.0]);
+    }
+
+    #[test]
+    fn an_isovalue_leaves_the_span_of_a_boundary_sharing_a_material_where_fewer_pass() {
+        let arch = |v_low, v_high| BoundaryArch {
+            v_low,
+            v_high,
+            g_peak: 1.0,
+            core_voxels: 1,
+            g_floor: 0.0,
+            meets_background: false,
+            v_low_spread: 0.0,
+            v_high_spread: 0.0,
+            fallback: false,
+        };
+        // an engine: the block (0 | 144) and the inserts (0 | 229) meet the air; the inserts'
+        // centre, 114.5, lies on the block's surface too: halfway between 144 and 229 only theirs
+        let engine = [arch(0.0, 144.0), arch(0.0, 229.0)];
+        assert_eq!((isovalue(&engine, 0), isovalue(&engine, 1)), (72.0, 186.5));
+        // sharing the high material: halfway between the two low ones
+        let shared_high = [arch(60.0, 200.0), arch(0.0, 200.0)];
+        assert_eq!(isovalue(&shared_high, 1), 30.0);
+        // a head: the holder (-1000 | 250) around the skin's centre (-1000 | 40) would move to 145,
+        // on the skull's span (40 | 1400) instead: as many other boundaries pass there, it stays
+        let head = [arch(-1000.0, 40.0), arch(-1000.0, 250.0), arch(40.0, 1400.0)];
+        assert_eq!(isovalue(&head, 1), -375.0);
+        // nested without a shared material (a sinus's air | bone around everything): the centre
+        let nested = [arch(-1000.0, 1400.0), arch(40.0, 600.0)];
+        assert_eq!(isovalue(&nested, 1), 320.0);
     }
 
     #[test]

@@ -24,7 +24,7 @@ mod writer;
 pub use boundary_tf::{
     ARCH_RATIO, BOUNDARY_PALETTE, BoundaryArch, FALLBACK_OPACITY, ISOSURFACE_HALF_WIDTH, MAX_BOUNDARY_OPACITY,
     MIN_BOUNDARY_OPACITY, OUTER_BOUNDARY_OPACITY, Tent, boundary_alpha_u, boundary_colour, boundary_isosurface_tf,
-    boundary_opacities, boundary_tf, multi_field_isosurface_tf, per_voxel_opacities,
+    boundary_opacities, boundary_tf, isovalue, multi_field_isosurface_tf, per_voxel_opacities,
 };
 pub use gaussian::{
     ERF_DOMAIN, ERF_SIZE, FitError, GaussianPrimitive, IGAUSS_DOMAIN, IGAUSS_SIZE, erf_difference,

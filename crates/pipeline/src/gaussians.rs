@@ -5,7 +5,8 @@
 //! GTF fitted to the voxels of a mask (the paper's section 6: the mean and
 //! covariance of a probed region); on scalar data, the boundaries found in
 //! the histogram volume: one triangular GTF of the paper's form (K = 1) at
-//! each boundary's centre value, in its colour, with the extinction per
+//! each boundary's isovalue ([`mdtf_pack::isovalue`]: its centre value, or
+//! where fewer other boundaries pass), in its colour, with the extinction per
 //! voxel that accumulates the boundary's surface opacity over the two world
 //! units of path a head-on ray spends in it (see
 //! [`mdtf_pack::boundary_opacities`]); on multi-field data, one Gaussian per
@@ -161,8 +162,8 @@ pub(crate) fn boundary_tgtfs(arches: &[BoundaryArch], geometry: &mdtf_volume::Ge
         .iter()
         .zip(per_voxel)
         .enumerate()
-        .map(|(k, (a, alpha_max))| GaussianPrimitive {
-            centre: vec![0.5 * (a.v_low + a.v_high)],
+        .map(|(k, (_, alpha_max))| GaussianPrimitive {
+            centre: vec![mdtf_pack::isovalue(arches, k)],
             k: vec![vec![1.0]],
             alpha_max,
             colour: mdtf_pack::boundary_colour(k, arches.len()),

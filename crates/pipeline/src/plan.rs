@@ -199,7 +199,7 @@ impl Plan {
         if p.preview {
             steps.push(PlannedStep { step: Step::Preview, reads: BTreeSet::new(), makes: BTreeSet::new() });
         }
-        let later = pipeline_reductions(p, &plan.steps);
+        let later = pipeline_reductions(p, &plan.steps, plan.detects_before_tracing());
         plan.reductions.extend(later);
         Ok(plan)
     }
@@ -250,7 +250,8 @@ impl Plan {
         let steps = channel_steps(&fields, &derive, &derive_fields, defer_normals, prefilter, trace);
         let (reach, halo) = how.reach(&wanted, multi, prefilter, trace, geometry);
         let median_of_g = trace && how.boundary.g_min.is_none();
-        let mut plan = Plan {
+        let reductions = channel_reductions(&steps, median_of_g, prefilter, multi);
+        Plan {
             fields,
             wanted,
             derive,
@@ -261,20 +262,18 @@ impl Plan {
             mesh: None,
             trace,
             steps,
-            reductions: Vec::new(),
+            reductions,
             reach,
             halo,
-        };
-        let before_trace = plan.detects_before_tracing();
-        plan.reductions = channel_reductions(&plan.steps, median_of_g, before_trace, prefilter, multi);
-        plan
+        }
     }
 
     /// Whether the tracing's defaults take the boundaries found in the (v,
-    /// g) histogram before it (`crate::pre_detect`): one field, traced, its
-    /// value kept for the outputs.
+    /// g) histogram before it (`crate::pre_detect`): a pipeline run on one
+    /// field that traces, keeps its value and has a histogram step (whose
+    /// boundaries those are); not the tracing stage alone.
     pub fn detects_before_tracing(&self) -> bool {
-        self.trace && self.fields.is_empty() && self.wants("v")
+        self.trace && self.fields.is_empty() && self.wants("v") && self.steps.iter().any(|s| s.step == Step::Histogram)
     }
 
     /// Whether some output reads the channel called `name`.
@@ -427,14 +426,18 @@ fn wanted_from(wanted: &BTreeSet<Channel>, multi: bool, producer: Producer) -> b
 }
 
 /// The whole-volume reductions the steps of a pipeline's plan wait for
-/// beyond those of the steps that make its channels.
-fn pipeline_reductions(p: &Pipeline, steps: &[PlannedStep]) -> Vec<Reduction> {
+/// beyond those of the steps that make its channels (`detects_before_tracing`:
+/// [`Plan::detects_before_tracing`]).
+fn pipeline_reductions(p: &Pipeline, steps: &[PlannedStep], detects_before_tracing: bool) -> Vec<Reduction> {
     let mut out = Vec::new();
     let mut add = |what: &str, before: Step| {
         if steps.iter().any(|x| x.step == before) {
             out.push(Reduction { what: what.to_string(), before: vec![before] });
         }
     };
+    if detects_before_tracing {
+        add("(v, g) counts and their boundaries (g_hit_min's cap, the Fig. 2 range)", Step::Trace);
+    }
     if p.histogram.is_some() {
         add("exact percentiles of g (the histogram's g axis, as Teem's qbert clips it)", Step::Histogram);
     }
@@ -446,15 +449,8 @@ fn pipeline_reductions(p: &Pipeline, steps: &[PlannedStep]) -> Vec<Reduction> {
 }
 
 /// The whole-volume reductions the steps that make channels wait for
-/// (`median_of_g`: the tracing takes its noise floor from the data;
-/// `boundaries`: and its g_hit_min's cap from the boundaries found before it).
-fn channel_reductions(
-    steps: &[PlannedStep],
-    median_of_g: bool,
-    boundaries: bool,
-    prefilter: bool,
-    multi: bool,
-) -> Vec<Reduction> {
+/// (`median_of_g`: the tracing takes its noise floor from the data).
+fn channel_reductions(steps: &[PlannedStep], median_of_g: bool, prefilter: bool, multi: bool) -> Vec<Reduction> {
     let has = |s: Step| steps.iter().any(|x| x.step == s);
     let mut out = Vec::new();
     let mut add = |what: &str, before: Vec<Step>| {
@@ -477,9 +473,6 @@ fn channel_reductions(
     }
     if median_of_g {
         add("median of g (the noise floor: g_min, g_hit_min)", vec![Step::Trace]);
-    }
-    if boundaries {
-        add("(v, g) counts and their boundaries (g_hit_min's cap, the Fig. 2 range)", vec![Step::Trace]);
     }
     out
 }
