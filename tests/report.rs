@@ -141,9 +141,13 @@ fn assert_page_matches_its_run(name: &str, out: &Path, seen: &Value) {
         .iter()
         .find(|l| l["name"] == "tf2d_default")
         .and_then(|l| l["meaning"].as_str().map(String::from));
+    let gaussians: Option<Vec<Value>> = std::fs::read_to_string(out.join("pack/gaussians.json"))
+        .ok()
+        .map(|t| serde_json::from_str(&t).unwrap())
+        .filter(|_| m["profile"] == "gaussian-tf");
     for (k, b) in boundaries.iter().enumerate() {
         let rows = rows_starting(seen, &(k + 1).to_string());
-        if let (Some(meaning), Some(row)) = (&tf_meaning, rows.iter().find(|r| r.len() == 11))
+        if let (Some(meaning), Some(row)) = (&tf_meaning, rows.iter().find(|r| r.len() == 12))
             && meaning.contains("surface opacity")
         {
             let listed = meaning.split("surface opacity ").nth(k + 1).map(|t| &t[..5]);
@@ -152,9 +156,17 @@ fn assert_page_matches_its_run(name: &str, out: &Path, seen: &Value) {
         let centre = b["v_centre"].as_f64().unwrap();
         let g = b["g_peak"].as_f64().unwrap();
         assert!(
-            rows.iter().any(|r| r.len() == 11 && close(number(r[3]), centre) && close(number(r[5]), g)),
+            rows.iter().any(|r| r.len() == 12 && close(number(r[3]), centre) && close(number(r[5]), g)),
             "{name}: boundary {k} (centre {centre}, G {g}) in {rows:?}"
         );
+        // a gaussian-tf pack's k-th triangular Gaussian sits at the isovalue the page lists
+        if let Some(tgtf) = gaussians.as_ref().and_then(|g| g.get(k)) {
+            let at = tgtf["centre"][0].as_f64().unwrap();
+            assert!(
+                rows.iter().any(|r| r.len() == 12 && close(number(r[11]), at)),
+                "{name}: TGTF {k} at {at} in {rows:?}"
+            );
+        }
     }
     let text: String = seen["tables"].as_array().unwrap().iter().map(|t| t.as_str().unwrap()).collect();
     let [nx, ny, nz] = [0, 1, 2].map(|i| report["dims"][i].as_u64().unwrap());
@@ -175,6 +187,28 @@ fn the_distance_tf_report_shows_every_figure_and_decodes_as_the_manifest() {
     let report: Value = serde_json::from_str(&std::fs::read_to_string(out.join("run_report.json")).unwrap()).unwrap();
     assert_eq!(report["boundaries"].as_array().map(Vec::len), Some(3), "the shells' three boundaries");
     assert!(seen["title"].as_str().unwrap().contains("Shells phantom, 96^3"), "{}", seen["title"]);
+}
+
+#[test]
+fn the_gaussian_tf_report_lists_the_isovalues_its_gaussians_sit_at() {
+    // the engine's inserts (air | inserts, 0 to 229) are shown between the block's value and
+    // theirs, not at their centre, 114.5, where the block's surface lies too
+    let engine = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/real/engine.nii.gz");
+    let (dir, seen) = run_and_open("gaussian-tf-engine", "gaussian-tf", Some(&engine), &[]);
+    let out = dir.path().join("out");
+    assert_page_matches_its_run("engine", &out, &seen);
+    let report: Value = serde_json::from_str(&std::fs::read_to_string(out.join("run_report.json")).unwrap()).unwrap();
+    let gaussians: Vec<Value> =
+        serde_json::from_str(&std::fs::read_to_string(out.join("pack/gaussians.json")).unwrap()).unwrap();
+    let boundaries = report["boundaries"].as_array().unwrap();
+    assert_eq!(gaussians.len(), boundaries.len());
+    let moved = gaussians.iter().zip(boundaries).any(|(g, b)| {
+        let (at, centre, high) =
+            (g["centre"][0].as_f64().unwrap(), b["v_centre"].as_f64().unwrap(), b["v_high"].as_f64());
+        !close(at, centre)
+            && boundaries.iter().any(|o| o["v_high"].as_f64() < high && o["v_high"].as_f64().unwrap() < at)
+    });
+    assert!(moved, "{gaussians:?} at the centres of {boundaries:?}");
 }
 
 #[test]

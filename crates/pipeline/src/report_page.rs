@@ -240,16 +240,19 @@ fn boundaries_section(h: &mut String, r: &RunReport) {
                  confidence is the share of the voxels above the noise along the arch that it explains. \
                  The default transfer functions give each its colour and surface opacity (what a ray crossing \
                  it accumulates: the smallest inner surface opaque, larger ones fainter, one meeting the \
-                 background at most 0.3).</p>\n<table><tr><th>#</th><th>colour</th>\
+                 background at most 0.3); a TF of one value (gaussian-tf's Gaussians, peak finding's \
+                 isosurfaces) shows it at its isovalue, its centre unless another boundary sharing a material \
+                 passes there.</p>\n<table><tr><th>#</th><th>colour</th>\
                  <th>low material v ({v})</th><th>centre v ({v})</th><th>high material v ({v})</th><th>peak g ({g})</th>\
                  <th>sigma ({l})</th><th>core voxels (within sigma / 2 of its centre)</th><th>confidence</th><th>meets the background</th>\
-                 <th>surface opacity</th></tr>",
+                 <th>surface opacity</th><th>isovalue of one-value TFs ({v})</th></tr>",
                 v = esc(v_unit),
                 g = esc(&g_unit),
                 l = esc(length),
             );
             let n = r.boundaries.len();
-            let opacity = mdtf_pack::boundary_opacities(&crate::pack_inputs::arches_from(&r.boundaries));
+            let arches = crate::pack_inputs::arches_from(&r.boundaries);
+            let opacity = mdtf_pack::boundary_opacities(&arches);
             for ((k, b), a) in r.boundaries.iter().enumerate().zip(opacity) {
                 let [cr, cg, cb] = mdtf_pack::boundary_colour(k, n).map(|c| (c * 255.0).round() as u8);
                 let _ = writeln!(
@@ -257,7 +260,7 @@ fn boundaries_section(h: &mut String, r: &RunReport) {
                     "<tr><td class=\"n\">{}</td><td><span class=\"swatch\" style=\"background:rgb({cr},{cg},{cb})\">\
                      </span></td><td class=\"n\">{} (sd {})</td><td class=\"n\">{}</td><td class=\"n\">{} (sd {})</td>\
                      <td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
-                     <td class=\"n\">{:.2}</td><td>{}</td><td class=\"n\">{a:.3}</td></tr>",
+                     <td class=\"n\">{:.2}</td><td>{}</td><td class=\"n\">{a:.3}</td><td class=\"n\">{}</td></tr>",
                     k + 1,
                     num(b.v_low),
                     num(b.v_low_spread),
@@ -268,7 +271,8 @@ fn boundaries_section(h: &mut String, r: &RunReport) {
                     num(b.sigma),
                     b.core_voxels,
                     b.confidence,
-                    if b.meets_background { "yes" } else { "no" }
+                    if b.meets_background { "yes" } else { "no" },
+                    num(mdtf_pack::isovalue(&arches, k))
                 );
             }
             h.push_str("</table>\n");
