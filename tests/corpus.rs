@@ -45,6 +45,7 @@ fn base() -> &'static Path {
         run(&["synth", "erf-sphere", "-o", "v.nii", "--size", "8", "--sigma", "1", "-q"]);
         run(&["convert", "v.nii", "v.nrrd", "-q"]);
         run(&["convert", "v.nii", "v.nhdr", "-q"]);
+        run(&["convert", "v.nii", "v.ome.zarr", "-q"]);
         run(&["pack", "v.nii", "--profile", "slicer-3dtf", "-o", "pk", "-q"]);
         std::fs::write(dir.join("m.vtk"), tet_vtk("CELLS 1 5\n4 0 1 2 3\n")).unwrap();
         dir
@@ -56,6 +57,26 @@ fn tet_vtk(cells: &str) -> String {
         "# vtk DataFile Version 4.2\nx\nASCII\nDATASET UNSTRUCTURED_GRID\nPOINTS 4 float\n0 0 0 1 0 0 0 1 0 0 0 1\n\
          {cells}CELL_TYPES 1\n10\nPOINT_DATA 4\nSCALARS s float 1\nLOOKUP_TABLE default\n1 2 3 4\n"
     )
+}
+
+/// Sets the shape ([z, y, x]) the base OME-Zarr store copied into `dir` claims.
+fn claim_zarr_shape(dir: &Path, shape: [u64; 3]) {
+    let path = dir.join("v.ome.zarr/0/zarr.json");
+    let mut meta: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    meta["shape"] = serde_json::json!(shape);
+    std::fs::write(&path, serde_json::to_vec_pretty(&meta).unwrap()).unwrap();
+}
+
+/// A DICOM file of `dicom_slice` with RescaleIntercept and RescaleSlope
+/// (DS text) inserted before its pixel data, as the tag order wants.
+fn with_rescale(slice: Vec<u8>, slope: &str, intercept: &str) -> Vec<u8> {
+    let pixels = slice.windows(4).rposition(|w| w == [0xE0, 0x7F, 0x10, 0x00]).unwrap();
+    let pad = |t: &str| if t.len() % 2 == 1 { format!("{t} ") } else { t.to_string() };
+    let mut out = slice[..pixels].to_vec();
+    out.extend(mdtf_e2e::dicom_element(0x0028, 0x1052, "DS", pad(intercept).as_bytes()));
+    out.extend(mdtf_e2e::dicom_element(0x0028, 0x1053, "DS", pad(slope).as_bytes()));
+    out.extend(&slice[pixels..]);
+    out
 }
 
 fn base_bytes(name: &str) -> Vec<u8> {
@@ -333,7 +354,20 @@ fn readers() -> Vec<Case> {
             &["b.dcm", "ImagePositionPatient is missing"],
         ),
         dicom_folder("nodicom", vec![("a.dcm", b"not dicom".to_vec())], &["no DICOM files"]),
+        info_of("slope0.dcm", with_rescale(mdtf_e2e::dicom_slice(mdtf_e2e::EXPLICIT_LE, 4, 4, Some(0.0), 32), "0", "-1024"), &["RescaleSlope 0", "-1024", "non-zero"]),
         info_of("list.txt", b"missing-slice.dcm\n".to_vec(), &["line 1", "missing-slice.dcm", "not a file"]),
+        // OME-Zarr: a store may claim any shape (its missing chunks are the fill value), so the
+        // claim is checked before anything is allocated
+        case("OME-Zarr claiming 10^15 voxels", &["v.ome.zarr", "100000x100000x100000", "PiB"], |d| {
+            copy_base("v.ome.zarr", d);
+            claim_zarr_shape(d, [100_000; 3]);
+            args(&["info", "v.ome.zarr"])
+        }),
+        case("OME-Zarr whose one plane exceeds memory, by slabs", &["v.ome.zarr", "one plane of 200000x200000"], |d| {
+            copy_base("v.ome.zarr", d);
+            claim_zarr_shape(d, [2, 200_000, 200_000]);
+            args(&["derive", "v.ome.zarr", "-o", "d.nii", "--items", "g", "--memory-budget", "1GiB"])
+        }),
         // raw
         case("short raw claiming 800^3", &["a.raw", "truncated"], |d| {
             std::fs::write(d.join("a.raw"), vec![0u8; 4096]).unwrap();

@@ -615,3 +615,28 @@ fn pydicoms_one_bit_segmentations_read_as_0_and_1_as_pydicom_decodes_them() {
         assert_eq!(values(&mf), want, "{name}");
     }
 }
+
+#[test]
+fn a_series_folder_says_how_many_files_it_left_out_and_why() {
+    // pydicom's CT_small beside an empty .dcm, a text note and pydicom's structured report
+    let script = "import json, pydicom, os; d = os.path.join(os.path.dirname(pydicom.__file__), 'data', 'test_files'); \
+                  print(json.dumps([os.path.join(d, 'CT_small.dcm'), os.path.join(d, 'test-SR.dcm')]))";
+    let files: Vec<String> = serde_json::from_str(&run_python(script, &[])).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let series = dir.path().join("series");
+    std::fs::create_dir(&series).unwrap();
+    std::fs::copy(&files[0], series.join("ct.dcm")).unwrap();
+    std::fs::copy(&files[1], series.join("report.dcm")).unwrap();
+    std::fs::write(series.join("empty.dcm"), b"").unwrap();
+    std::fs::write(series.join("notes.txt"), b"scanned on Monday").unwrap();
+    let out = mdtf(&["info", series.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{text}");
+    assert!(text.contains("left out 2 files not DICOM") && text.contains("1 DICOM file without pixel data"), "{text}");
+    // with nothing to leave out, nothing is said
+    std::fs::remove_file(series.join("report.dcm")).unwrap();
+    std::fs::remove_file(series.join("empty.dcm")).unwrap();
+    std::fs::remove_file(series.join("notes.txt")).unwrap();
+    let out = mdtf(&["info", series.to_str().unwrap()]);
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("left out"));
+}

@@ -45,6 +45,15 @@ impl PlaneReader {
             if image.field_count() != 1 {
                 return Ok(None);
             }
+            // one plane at least must fit: a store may claim any shape
+            let [nx, ny, _] = image.geometry().dims;
+            crate::limits::check_dims(path, &[nx as u64, ny as u64, 1], 1).map_err(|e| match e {
+                VolumeError::TooLarge { needed, available, .. } => VolumeError::header(
+                    path,
+                    format!("one plane of {nx}x{ny} would need {needed} as f32 but only {available} is available"),
+                ),
+                other => other,
+            })?;
             return Ok(Some(PlaneReader {
                 path: path.to_path_buf(),
                 geometry: image.geometry().clone(),

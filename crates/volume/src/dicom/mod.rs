@@ -78,14 +78,17 @@ pub fn folder_is_dicom(dir: &Path) -> bool {
 
 /// The series an input holds, for a listing.
 pub fn list_series(input: &Path) -> Result<Vec<SeriesSummary>> {
-    let headers = read_headers(input)?;
+    let (headers, _) = read_headers(input)?;
     Ok(series::group(headers).iter().map(|g| SeriesSummary::of(g)).collect())
 }
 
-fn read_headers(input: &Path) -> Result<Vec<header::ImageHeader>> {
-    let files = scan::dicom_files(input)?;
+/// The image headers of the files at `input`, and a sentence on the files
+/// left out, when some were.
+fn read_headers(input: &Path) -> Result<(Vec<header::ImageHeader>, Option<String>)> {
+    let (files, others) = scan::dicom_files(input)?;
     let headers: Vec<Option<header::ImageHeader>> =
         files.par_iter().map(|f| header::read_header(f)).collect::<Result<_>>()?;
+    let without_pixels = headers.iter().filter(|h| h.is_none()).count();
     let headers: Vec<header::ImageHeader> = headers.into_iter().flatten().collect();
     if headers.is_empty() {
         return Err(VolumeError::header(
@@ -93,14 +96,33 @@ fn read_headers(input: &Path) -> Result<Vec<header::ImageHeader>> {
             "no DICOM image found (the files hold no pixel data: reports or a DICOMDIR alone?)",
         ));
     }
-    Ok(headers)
+    Ok((headers, skipped_note(input, others, without_pixels)))
+}
+
+/// What the reading of `input` left out, in words (None when nothing was).
+fn skipped_note(input: &Path, not_dicom: usize, without_pixels: usize) -> Option<String> {
+    let files = |n: usize, what: &str| if n == 1 { format!("1 {what}file") } else { format!("{n} {what}files") };
+    let mut parts = Vec::new();
+    if not_dicom > 0 {
+        parts.push(format!(
+            "{} not DICOM (no 'DICM' at byte 128: empty files, notes, thumbnails)",
+            files(not_dicom, "")
+        ));
+    }
+    if without_pixels > 0 {
+        parts.push(format!(
+            "{} without pixel data (structured reports, presentation states)",
+            files(without_pixels, "DICOM ")
+        ));
+    }
+    (!parts.is_empty()).then(|| format!("{}: left out {}", input.display(), parts.join(" and ")))
 }
 
 /// Reads a DICOM series (see the module docs) as a one-field volume named
 /// "value". Integer samples scaled by finite factors (checked per slice) are
 /// always finite, so the NaN policy has nothing to act on.
 pub fn read_dicom_with_info(input: &Path, opts: &ReadOptions) -> Result<(MultiField, FileInfo)> {
-    let headers = read_headers(input)?;
+    let (headers, skipped) = read_headers(input)?;
     let files = series::choose(input, series::group(headers), opts.dicom.series.as_deref())?;
     let mut checked: Vec<&str> = Vec::new();
     for h in &files {
@@ -109,7 +131,8 @@ pub fn read_dicom_with_info(input: &Path, opts: &ReadOptions) -> Result<(MultiFi
             checked.push(&h.transfer_syntax);
         }
     }
-    let layout = series::layout(input, &files, opts.dicom.resample)?;
+    let mut layout = series::layout(input, &files, opts.dicom.resample)?;
+    layout.warnings.extend(skipped);
     pixels::check_native_sizes(&files)?;
     let first = &files[0];
     let (cols, rows) = first.slice_dims();

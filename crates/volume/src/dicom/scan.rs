@@ -21,12 +21,13 @@ pub fn is_list_name(path: &Path) -> bool {
     path.extension().is_some_and(|e| e.eq_ignore_ascii_case("txt") || e.eq_ignore_ascii_case("lst"))
 }
 
-/// The DICOM files of `input`.
-pub fn dicom_files(input: &Path) -> Result<Vec<PathBuf>> {
+/// The DICOM files of `input`, and how many files a folder's walk left out
+/// as not DICOM (no 'DICM' at byte 128: empty files, notes, thumbnails).
+pub fn dicom_files(input: &Path) -> Result<(Vec<PathBuf>, usize)> {
     if input.is_dir() {
         let dicomdir = input.join("DICOMDIR");
         if dicomdir.is_file() {
-            return dicomdir_files(&dicomdir);
+            return Ok((dicomdir_files(&dicomdir)?, 0));
         }
         let mut files = Vec::new();
         let mut others = 0usize;
@@ -38,15 +39,15 @@ pub fn dicom_files(input: &Path) -> Result<Vec<PathBuf>> {
             ));
         }
         files.sort();
-        return Ok(files);
+        return Ok((files, others));
     }
     if is_dicomdir_name(input) {
-        return dicomdir_files(input);
+        return Ok((dicomdir_files(input)?, 0));
     }
     if is_list_name(input) {
-        return listed_files(input);
+        return Ok((listed_files(input)?, 0));
     }
-    Ok(vec![input.to_path_buf()])
+    Ok((vec![input.to_path_buf()], 0))
 }
 
 fn walk(dir: &Path, depth: usize, files: &mut Vec<PathBuf>, others: &mut usize) -> Result<()> {

@@ -352,6 +352,16 @@ pub fn layout(input: &Path, files: &[ImageHeader], resample: bool) -> Result<Lay
                 }
             };
             let (slope, intercept) = p.rescale;
+            if slope == 0.0 || !slope.is_finite() || !intercept.is_finite() {
+                // a zero slope maps every stored value to the intercept: a constant volume, never a scan
+                return Err(VolumeError::header(
+                    &h.path,
+                    format!(
+                        "RescaleSlope {slope}{here}: stored values would all map to {intercept}; the header is \
+                         broken (RescaleSlope must be a finite, non-zero number)"
+                    ),
+                ));
+            }
             if slope.abs() * 2f64.powi(32) + intercept.abs() > f64::from(f32::MAX) {
                 return Err(VolumeError::header(
                     &h.path,
