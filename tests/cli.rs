@@ -1723,3 +1723,25 @@ fn boundary_under_a_memory_budget_writes_the_whole_runs_files_and_report() {
     assert!(e.contains("slab by slab as .nii, .nii.gz, .nrrd"), "{e}");
     assert!(!third.exists(), "a refused tracing left {}", third.display());
 }
+
+#[test]
+fn slabs_of_no_planes_and_a_negative_budget_are_refused_as_sizes() {
+    // clap's usage errors (exit 2), each naming the option and why, not clap's "use '-- -5'" tip
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("v.nii");
+    mdtf_ok(&["synth", "erf-sphere", "-o", input.to_str().unwrap(), "--size", "8", "-q"]);
+    let (i, out) = (input.to_str().unwrap(), dir.path().join("out"));
+    let p = shipped_pipeline("slicer-3dtf");
+    let o = out.to_str().unwrap();
+    for (extra, said) in
+        [(["--slab-planes", "0"], "0 is not in 1.."), (["--memory-budget", "-5"], "'-5' is not a size")]
+    {
+        let run = mdtf(&[&["run", p.to_str().unwrap(), "--input", i, "-o", o][..], &extra].concat());
+        let text = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(2), "{text}");
+        assert!(text.contains(extra[0]) && text.contains(said) && !text.contains("'-- "), "{text}");
+    }
+    let derive = mdtf(&["derive", i, "--items", "g", "-o", o, "--memory-budget", "-5"]);
+    assert!(String::from_utf8_lossy(&derive.stderr).contains("'-5' is not a size"));
+    assert!(!out.exists());
+}

@@ -354,8 +354,14 @@ fn readers() -> Vec<Case> {
             &["b.dcm", "ImagePositionPatient is missing"],
         ),
         dicom_folder("nodicom", vec![("a.dcm", b"not dicom".to_vec())], &["no DICOM files"]),
+        info_of("empty.dcm", Vec::new(), &["the file is empty"]),
         info_of("slope0.dcm", with_rescale(mdtf_e2e::dicom_slice(mdtf_e2e::EXPLICIT_LE, 4, 4, Some(0.0), 32), "0", "-1024"), &["RescaleSlope 0", "-1024", "non-zero"]),
         info_of("list.txt", b"missing-slice.dcm\n".to_vec(), &["line 1", "missing-slice.dcm", "not a file"]),
+        // arguments: a file given twice as two fields
+        case("the same file as two fields", &["v.nii", "given twice"], |d| {
+            std::fs::copy(base().join("v.nii"), d.join("v.nii")).unwrap();
+            args(&["derive", "v.nii", "./v.nii", "--items", "gnorm", "-o", "out"])
+        }),
         // OME-Zarr: a store may claim any shape (its missing chunks are the fill value), so the
         // claim is checked before anything is allocated
         case("OME-Zarr claiming 10^15 voxels", &["v.ome.zarr", "100000x100000x100000", "PiB"], |d| {

@@ -328,12 +328,13 @@ pub struct RunArgs {
     /// byte-identical to a whole-volume run. One-field inputs, every profile but projected-tetrahedra.
     /// Without it, a volume whose whole run would not fit in three quarters of the available
     /// memory runs this way within that.
-    #[arg(long, value_name = "SIZE", value_parser = mdtf_volume::parse_size)]
+    #[arg(long, value_name = "SIZE", value_parser = mdtf_volume::parse_size, allow_hyphen_values = true)]
     pub memory_budget: Option<u64>,
     /// Run slab by slab with slabs of this many z-planes (for checks and benchmarks; see
     /// --memory-budget).
-    #[arg(long, value_name = "N", conflicts_with = "memory_budget")]
-    pub slab_planes: Option<usize>,
+    #[arg(long, value_name = "N", conflicts_with = "memory_budget",
+          value_parser = clap::value_parser!(u32).range(1..))]
+    pub slab_planes: Option<u32>,
 }
 
 /// `mdtf validate`.

@@ -75,7 +75,7 @@ pub struct DeriveArgs {
     /// to a whole-volume derive's. One input file with one field; not shade (it divides by
     /// the whole volume's largest g). Without it, a volume whose whole derive would not fit in
     /// three quarters of the available memory goes this way within that.
-    #[arg(long, value_name = "SIZE", value_parser = mdtf_volume::parse_size)]
+    #[arg(long, value_name = "SIZE", value_parser = mdtf_volume::parse_size, allow_hyphen_values = true)]
     pub memory_budget: Option<u64>,
     #[command(flatten)]
     pub read: InputArgs,
@@ -213,7 +213,7 @@ pub struct BoundaryArgs {
     /// written slab by slab (.nii, .nii.gz or .ome.zarr). The outputs and the report are
     /// byte-identical to a whole-volume run's. Without it, a volume whose whole run would not
     /// fit in three quarters of the available memory goes this way within that.
-    #[arg(long, value_name = "SIZE", value_parser = mdtf_volume::parse_size)]
+    #[arg(long, value_name = "SIZE", value_parser = mdtf_volume::parse_size, allow_hyphen_values = true)]
     pub memory_budget: Option<u64>,
     #[command(flatten)]
     pub read: InputArgs,

@@ -132,7 +132,14 @@ fn read_inputs(args: &DeriveArgs, opts: &mdtf_volume::ReadOptions) -> Result<Mul
         return Ok(read_input(&args.inputs[0], &args.read, opts)?.0);
     }
     let mut named = Vec::new();
+    let mut seen = Vec::new();
     for path in &args.inputs {
+        // the same file twice would be two identical fields (a ||G|| of one field, named twice)
+        let real = std::fs::canonicalize(path).unwrap_or_else(|_| path.clone());
+        if seen.contains(&real) {
+            bail!("{} is given twice: each field of a multi-field input is a file of its own", path.display());
+        }
+        seen.push(real);
         let mf = read_input(path, &args.read, opts)?.0;
         let stem = path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         let stem = stem.split('.').next().unwrap_or("field").to_string();

@@ -61,7 +61,7 @@ fn print_plan(args: &RunArgs, pipeline: &Pipeline, opts: &RunOptions) -> Result<
 fn slab_size(args: &RunArgs, pipeline: &Pipeline, opts: &RunOptions, progress: &Progress) -> Option<SlabSize> {
     match (args.memory_budget, args.slab_planes) {
         (Some(b), _) => Some(SlabSize::Budget(b)),
-        (None, Some(h)) => Some(SlabSize::Planes(h.max(1))),
+        (None, Some(h)) => Some(SlabSize::Planes(h as usize)),
         (None, None) => {
             let auto = mdtf_pipeline::blocks::automatic(pipeline, opts);
             crate::input::announce_slabs(progress, "running", auto).map(SlabSize::Budget)

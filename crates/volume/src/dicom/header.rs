@@ -188,6 +188,9 @@ fn array<const N: usize>(v: Option<Vec<f64>>) -> Option<[f64; N]> {
 /// Reads the header of `path`. Returns `Ok(None)` for a DICOM file that holds
 /// no image (a DICOMDIR, a structured report, a presentation state).
 pub fn read_header(path: &Path) -> Result<Option<ImageHeader>> {
+    if std::fs::metadata(path).is_ok_and(|m| m.len() == 0) {
+        return Err(VolumeError::Empty { path: path.to_path_buf() });
+    }
     super::bounds::check_declared_lengths(path)?;
     let obj = open(path, true)?;
     let transfer_syntax = obj.meta().transfer_syntax().trim_end_matches('\0').to_string();
