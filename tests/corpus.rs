@@ -333,9 +333,36 @@ fn readers() -> Vec<Case> {
         info_of("empty.tif", Vec::new(), &["empty"]),
         info_of("notiff.tif", b"hello, not a tiff".to_vec(), &["cannot decode the TIFF"]),
         info_of("cut.tif", b"II*\0\x08\0\0\0\x09\0".to_vec(), &["claims 9 entries", "truncated"]),
-        case("folder without slices", &["empty-folder", "no .tif"], |d| {
+        case("folder without slices", &["empty-folder", "no .tif", "no DICOM files", "no Zarr metadata"], |d| {
             std::fs::create_dir(d.join("empty-folder")).unwrap();
             args(&["info", "empty-folder"])
+        }),
+        case("a .zarr folder without metadata", &["empty.zarr", "not a Zarr store", "zarr.json"], |d| {
+            std::fs::create_dir(d.join("empty.zarr")).unwrap();
+            args(&["info", "empty.zarr"])
+        }),
+        case("a TIFF cut inside its pages", &["cut-pages.tif", "ends inside its pages"], |d| {
+            // a 2-page 8 x 8 u16 stack, its second page's samples cut off
+            let mut f = b"II*\0\x08\0\0\0".to_vec();
+            let entry = |tag: u16, ty: u16, value: u32| {
+                [&tag.to_le_bytes()[..], &ty.to_le_bytes(), &1u32.to_le_bytes(), &value.to_le_bytes()].concat()
+            };
+            let ifd = |data: u32, next: u32| {
+                let tags = [(256, 3, 8), (257, 3, 8), (258, 3, 16), (259, 3, 1), (262, 3, 1), (273, 4, data), (277, 3, 1), (278, 3, 8), (279, 4, 128)];
+                let mut b = (tags.len() as u16).to_le_bytes().to_vec();
+                for (t, ty, v) in tags {
+                    b.extend(entry(t, ty, v));
+                }
+                b.extend(next.to_le_bytes());
+                b
+            };
+            // IFD 1 at 8 (9 entries: 2 + 108 + 4 = 114 bytes), its data at 122; IFD 2 at 250, data at 364
+            f.extend(ifd(122, 250));
+            f.extend(vec![1u8; 128]);
+            f.extend(ifd(364, 0));
+            f.extend(vec![2u8; 40]);
+            std::fs::write(d.join("cut-pages.tif"), f).unwrap();
+            args(&["info", "cut-pages.tif"])
         }),
         // DICOM
         info_of("cut.dcm", mdtf_e2e::dicom_slice(mdtf_e2e::EXPLICIT_LE, 4, 4, Some(0.0), 32)[..300].to_vec(), &["not a readable DICOM file"]),

@@ -26,6 +26,11 @@ save("big.tif", (n * 7).astype("uint16"), bigtiff=True)
 save("deflate.tif", (n * 11).astype("uint16"), compression="zlib")
 save("lzw.tif", (n * 13).astype("uint16"), compression="lzw")
 save("zstd.tif", (n * 17).astype("float32"), compression="zstd")
+save("tiled-float64.tif", (n / 3).astype("float64"), tile=(16, 16))
+# several channels or time points: refused, not read as z-slices with the axes mixed
+h = np.zeros((2, 3, 2, 4, 5), "uint16")
+tifffile.imwrite(os.path.join(d, "tzcyx.tif"), h, imagej=True, metadata={"axes": "TZCYX"})
+tifffile.imwrite(os.path.join(d, "czyx.ome.tif"), h[0].transpose(1, 0, 2, 3), metadata={"axes": "CZYX"})
 os.makedirs(os.path.join(d, "slices"))
 for k in range(z):
     tifffile.imwrite(os.path.join(d, "slices", f"z{k * 5 + 2}.tif"), (n[k] + 1000 * k).astype("uint16"))
@@ -44,6 +49,7 @@ fn tifffile_stacks_read_value_for_value_with_their_spacing() {
         _ => [1.0, 1.0, 1.0],
     };
     for (name, values) in truth.as_object().unwrap() {
+        // (tiles of 16 x 16 over 5 x 4 pages: tifffile pads them, mdtf crops them)
         let mf = read(&dir.path().join(name), &ReadOptions::default()).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(mf.geometry.dims, [5, 4, 3], "{name}");
         let s = mf.geometry.spacing;
@@ -60,6 +66,13 @@ fn tifffile_stacks_read_value_for_value_with_their_spacing() {
     let out = mdtf(&["info", dir.path().join("plain-uint8.tif").to_str().unwrap()]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success() && err.contains("no ImageJ or OME spacing"), "{err}");
+    // a hyperstack names its channels and time points
+    for (name, said) in [("tzcyx.tif", "2 channel(s) and 2 time point(s)"), ("czyx.ome.tif", "2 channel(s) and 1")] {
+        let out = mdtf(&["info", dir.path().join(name).to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{name}: {err}");
+        assert!(err.contains(name) && err.contains(said), "{name}: {err}");
+    }
     // colour is not a volume
     let out = mdtf(&["info", dir.path().join("rgb.tif").to_str().unwrap()]);
     let err = String::from_utf8_lossy(&out.stderr);

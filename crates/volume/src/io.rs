@@ -127,7 +127,15 @@ impl Format {
         if crate::ome_zarr::is_store(path) {
             Some(Format::OmeZarr)
         } else if path.is_dir() {
-            Some(if crate::dicom::folder_is_dicom(path) { Format::Dicom } else { Format::Tiff })
+            let named_zarr = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("zarr"));
+            Some(if crate::dicom::folder_is_dicom(path) {
+                Format::Dicom
+            } else if named_zarr {
+                // read_with_info names what a store lacks
+                Format::OmeZarr
+            } else {
+                Format::Tiff
+            })
         } else if crate::dicom::is_list_name(path) {
             Some(Format::Dicom)
         } else {

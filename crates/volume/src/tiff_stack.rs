@@ -38,7 +38,11 @@ fn folder_slices(dir: &Path) -> Result<Vec<PathBuf>> {
         .take(MAX_SLICES + 1)
         .collect();
     if files.is_empty() {
-        return Err(VolumeError::header(dir, "the folder holds no .tif or .tiff slices"));
+        return Err(VolumeError::header(
+            dir,
+            "the folder holds no .tif or .tiff slices, no DICOM files and no Zarr metadata (zarr.json, or \
+             .zgroup/.zarray for Zarr v2)",
+        ));
     }
     if files.len() > MAX_SLICES {
         return Err(VolumeError::header(dir, format!("more than {MAX_SLICES} slice files")));
@@ -56,6 +60,10 @@ fn folder_slices(dir: &Path) -> Result<Vec<PathBuf>> {
 /// Spacing and the metadata it came from, from the first page's tags.
 struct PageMeta {
     spacing: [Option<f64>; 3],
+    /// Channels and time points the description states (ImageJ
+    /// `channels=`/`frames=`, OME `SizeC`/`SizeT`), 1 when it states none.
+    channels: u64,
+    frames: u64,
 }
 
 fn tag_f64_pair(d: &mut Decoder<BufReader<std::fs::File>>, tag: Tag) -> Option<f64> {
@@ -77,18 +85,39 @@ fn number_after(text: &str, key: &str) -> Option<f64> {
 fn page_meta(d: &mut Decoder<BufReader<std::fs::File>>) -> PageMeta {
     let description = d.get_tag_ascii_string(Tag::ImageDescription).unwrap_or_default();
     let mut spacing = [None; 3];
+    let (mut channels, mut frames) = (1, 1);
+    let count = |key: &str| number_after(&description, key).map_or(1, |n| n as u64);
     if description.contains("<OME") {
+        (channels, frames) = (count("SizeC"), count("SizeT"));
         spacing = [
             number_after(&description, "PhysicalSizeX"),
             number_after(&description, "PhysicalSizeY"),
             number_after(&description, "PhysicalSizeZ"),
         ];
     } else if description.starts_with("ImageJ") {
+        (channels, frames) = (count("channels"), count("frames"));
         // X and Y resolution are pixels per unit
         let per_unit = |t: Tag, d: &mut Decoder<BufReader<std::fs::File>>| tag_f64_pair(d, t).map(|r| 1.0 / r);
         spacing = [per_unit(Tag::XResolution, d), per_unit(Tag::YResolution, d), number_after(&description, "spacing")];
     }
-    PageMeta { spacing }
+    PageMeta { spacing, channels, frames }
+}
+
+/// Refuses a stack of several channels or time points, which would read
+/// as z-slices with the axes mixed.
+fn check_one_channel_and_time(path: &Path, meta: &PageMeta) -> Result<()> {
+    if meta.channels <= 1 && meta.frames <= 1 {
+        return Ok(());
+    }
+    Err(VolumeError::header(
+        path,
+        format!(
+            "a hyperstack of {} channel(s) and {} time point(s): mdtf reads one channel at one time point, as z-slices \
+             (save one, e.g. Fiji's Image > Duplicate with one channel and one frame, or give each channel as its \
+             own file to mdtf derive)",
+            meta.channels, meta.frames
+        ),
+    ))
 }
 
 /// Checks the first directory's value counts against the file length before
@@ -152,7 +181,12 @@ fn check_first_directory(path: &Path, len: u64) -> Result<()> {
 }
 
 fn tiff_error(path: &Path, e: tiff::TiffError) -> VolumeError {
-    VolumeError::header(path, format!("cannot decode the TIFF: {e}"))
+    match e {
+        tiff::TiffError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
+            VolumeError::header(path, "the file ends inside its pages (truncated?)")
+        }
+        e => VolumeError::header(path, format!("cannot decode the TIFF: {e}")),
+    }
 }
 
 /// Appends one decoded page to `out` as f32; returns the stored type
@@ -203,6 +237,7 @@ fn read_pages(
     check_first_directory(path, len as u64)?;
     let mut d = Decoder::new(BufReader::new(file)).map_err(|e| tiff_error(path, e))?.with_limits(limits);
     let meta = page_meta(&mut d);
+    check_one_channel_and_time(path, &meta)?;
     let mut pages = 0usize;
     let mut first = None;
     let mut ty: Option<SampleType> = None;
