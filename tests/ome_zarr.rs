@@ -298,3 +298,32 @@ fn a_run_reads_a_store_by_slabs_with_the_outputs_of_the_nifti_input() {
         assert_eq!((d["model"].as_str(), floats(&d["data"])), (Some("Image"), samples(&b)), "{c}");
     }
 }
+
+#[test]
+fn every_single_bit_flip_in_a_written_shard_is_caught_and_its_chunk_named() {
+    // zstd's frame checksum covers each chunk's content, the shard index has its CRC32C: 40 flips
+    // at positions spread over the shard (a fixed LCG, no rand crate), each read refused
+    let dir = tempfile::tempdir().unwrap();
+    let (input, store) = (dir.path().join("v.nii"), dir.path().join("s.ome.zarr"));
+    let (i, s) = (input.to_str().unwrap(), store.to_str().unwrap());
+    mdtf_ok(&["synth", "erf-sphere", "-o", i, "--size", "24", "--noise", "3", "-q"]);
+    mdtf_ok(&["convert", i, s, "-q"]);
+    let meta = std::fs::read_to_string(store.join("0/zarr.json")).unwrap();
+    assert!(meta.contains("\"checksum\": true") || meta.contains("\"checksum\":true"), "{meta}");
+    let shard = store.join("0/c/0/0/0");
+    let original = std::fs::read(&shard).unwrap();
+    let mut state = 12345u64;
+    for k in 0..40 {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        let (at, bit) = ((state >> 33) as usize % original.len(), (state >> 13) % 8);
+        let mut flipped = original.clone();
+        flipped[at] ^= 1 << bit;
+        std::fs::write(&shard, &flipped).unwrap();
+        let out = mdtf(&["info", s]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "flip {k} at byte {at} bit {bit} read back: {err}");
+        assert!(err.contains("s.ome.zarr") && err.contains("chunk 0/c/0/0/0"), "flip {k}: {err}");
+    }
+    std::fs::write(&shard, &original).unwrap();
+    mdtf_ok(&["info", s]);
+}

@@ -12,8 +12,9 @@
 //!   `world_from_voxel` under `attributes.mdtf`; it is used on read when it
 //!   agrees with the scale and translation (a store edited by another tool
 //!   keeps the OME placement).
-//! * Write: NGFF 0.5 on Zarr v3, one level, sharded, zstd, axes `c z y x`
-//!   (`c` only for several fields). The OME translation is the world origin
+//! * Write: NGFF 0.5 on Zarr v3, one level, sharded, zstd with its frame
+//!   checksum (every chunk's content is checked on read; the shard index
+//!   has its CRC32C), axes `c z y x` (`c` only for several fields). The OME translation is the world origin
 //!   in the grid's own axes (`directions^T origin`), the origin itself for
 //!   an axis-aligned grid. Integer types need exact values, as every writer.
 
@@ -249,10 +250,11 @@ impl ZarrImage {
             })
             .collect();
         let what = || format!("reading planes {z0}..{z1}");
+        let subset = ArraySubset::new_with_ranges(&ranges);
         let bytes: ArrayBytes<'static> = self
             .array
-            .retrieve_array_subset(&ArraySubset::new_with_ranges(&ranges))
-            .map_err(|e| VolumeError::zarr(&self.path, what())(boxed(e)))?;
+            .retrieve_array_subset(&subset)
+            .map_err(|e| VolumeError::zarr(&self.path, self.failing_chunk(&subset).unwrap_or_else(what))(boxed(e)))?;
         let raw = bytes.into_fixed().map_err(|e| VolumeError::zarr(&self.path, what())(boxed(e)))?;
         let mut samples = vec![0.0f32; raw.len() / self.ty.size()];
         decode_samples(&raw, self.ty, Endian::native(), &mut samples);
@@ -270,6 +272,20 @@ impl ZarrImage {
             })
             .collect::<Result<Vec<Field>>>()?;
         MultiField::new(geometry, fields)
+    }
+}
+
+impl ZarrImage {
+    /// "reading chunk KEY" for the first chunk (or shard) of `subset` that
+    /// does not decode (a checksum that does not match, a cut file), to
+    /// name the file a failed read came from.
+    fn failing_chunk(&self, subset: &ArraySubset) -> Option<String> {
+        let chunks = self.array.chunks_in_array_subset(subset).ok().flatten()?;
+        let bad = chunks
+            .indices()
+            .into_iter()
+            .find(|c| self.array.retrieve_chunk_if_exists::<ArrayBytes<'static>>(c).is_err())?;
+        Some(format!("reading chunk {} (its file in the store)", self.array.chunk_key(&bad).as_str()))
     }
 }
 
@@ -461,7 +477,7 @@ impl ZarrWriter {
         let mut builder = ArrayBuilder::new(shape, shard, zarr_data_type(ty), zero);
         builder
             .subchunk_shape(chunk)
-            .bytes_to_bytes_codecs(vec![Arc::new(zarrs::array::codec::ZstdCodec::new(ZSTD_LEVEL, false))])
+            .bytes_to_bytes_codecs(vec![Arc::new(zarrs::array::codec::ZstdCodec::new(ZSTD_LEVEL, true))])
             .dimension_names(Some(names));
         let array = builder.build(store.clone(), "/0").map_err(|e| err("creating array 0")(boxed(e)))?;
         array.store_metadata().map_err(|e| err("writing array 0's metadata")(boxed(e)))?;
