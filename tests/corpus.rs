@@ -224,6 +224,7 @@ fn readers() -> Vec<Case> {
         info_of("sizeof.nii", nii_with(0, &[0, 0, 0, 0]), &["not a NIfTI-1 file", "sizeof_hdr"]),
         info_of("nifti2.nii", nii_with(0, &540i32.to_le_bytes()), &["NIfTI-2"]),
         info_of("pair.nii", nii_with(344, b"ni1\0"), &["magic", "pairs"]),
+        info_of("magic.nii", nii_with(344, b"xyz\0"), &["magic at byte 344", "'xyz\\x00'", "'n+1'"]),
         info_of("rank9.nii", nii_with(40, &9i16.to_le_bytes()), &["dim[0]", "is 9", "1 to 7"]),
         info_of("rank0.nii", nii_with(40, &0i16.to_le_bytes()), &["dim[0]", "1 to 7"]),
         info_of("negdim.nii", nii_with(42, &(-8i16).to_le_bytes()), &["negative dimension"]),
@@ -276,7 +277,7 @@ fn readers() -> Vec<Case> {
         info_of(
             "ascii.nrrd",
             b"NRRD0004\ntype: float\ndimension: 3\nsizes: 2 1 1\nencoding: ascii\n\n1 x\n".to_vec(),
-            &["ascii"],
+            &["ascii", "sample 2 is 'x'"],
         ),
         info_of(
             "asciishort.nrrd",

@@ -80,14 +80,21 @@ pub(crate) fn open_samples(path: &Path) -> Result<(SampleStream, Geometry)> {
             ),
         ));
     }
-    let header =
-        NiftiHeader::from_reader(&head[..]).map_err(|e| VolumeError::Nifti { path: path.to_path_buf(), cause: e })?;
-    if &header.magic != b"n+1\0" {
+    // (checked before the nifti crate, whose word for a bad magic is "Invalid NIfTI-1 file")
+    let magic = &head[344..348];
+    if magic != b"n+1\0" {
+        let shown: String = magic.iter().map(|&b| std::ascii::escape_default(b).to_string()).collect();
+        let pair = if magic == b"ni1\0" { ": 'ni1' is a .hdr/.img pair" } else { "" };
         return Err(VolumeError::header(
             path,
-            "not a single-file NIfTI-1 (magic is not 'n+1'); .hdr/.img pairs and NIfTI-2 are not supported",
+            format!(
+                "not a single-file NIfTI-1: the magic at byte 344 reads '{shown}', not 'n+1'{pair} (.hdr/.img pairs \
+                 and NIfTI-2 are not supported; nibabel or fslchfiletype NIFTI converts them)"
+            ),
         ));
     }
+    let header =
+        NiftiHeader::from_reader(&head[..]).map_err(|e| VolumeError::Nifti { path: path.to_path_buf(), cause: e })?;
     let layout = layout_of(path, &header)?;
     let geometry = geometry_of(path, &header, layout.dims)?;
 

@@ -179,9 +179,14 @@ fn read_ascii(
     let values: Vec<f32> = text
         .split(|c: char| c.is_whitespace() || c == ',')
         .filter(|s| !s.is_empty())
-        .map(|s| s.parse::<f64>().map(|v| v as f32))
-        .collect::<std::result::Result<_, _>>()
-        .map_err(|e| VolumeError::header(path, format!("ascii data: {e}")))?;
+        .enumerate()
+        .map(|(k, s)| {
+            s.parse::<f64>().map(|v| v as f32).map_err(|_| {
+                let shown: String = s.chars().take(40).collect();
+                VolumeError::header(path, format!("ascii data: sample {} is '{shown}', not a number", k + 1))
+            })
+        })
+        .collect::<Result<_>>()?;
     if values.len() != n {
         let expected = layout.byte_len();
         let found = (values.len() * layout.ty.size()) as u64;
