@@ -442,7 +442,8 @@ fn readers() -> Vec<Case> {
             args(&["tetra", "idx.vtk", "-o", "out"])
         }),
         info_of("empty.vtu", Vec::new(), &["empty.vtu"]),
-        info_of("notxml.vtu", b"<VTKFile type=\"UnstructuredGrid\"><Piece NumberOfPoints=\"x\"".to_vec(), &["parse"]),
+        info_of("count.vtu", b"<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\">\n<UnstructuredGrid>\n<Piece NumberOfPoints=\"99999999999999999999\" NumberOfCells=\"1\">\n</Piece></UnstructuredGrid></VTKFile>\n".to_vec(), &["count.vtu", "NumberOfPoints=\"99999999999999999999\" is not a count"]),
+        info_of("notxml.vtu", b"<VTKFile type=\"UnstructuredGrid\"><Piece NumberOfPoints=\"x\"".to_vec(), &["NumberOfPoints=\"x\" is not a count"]),
         info_of("cut.vtu", b"<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\">\n<UnstructuredGrid>\n<Piece NumberOfPoints=\"4\" NumberOfCells=\"1\">\n<Points>\n<DataArray type=\"Float32\" NumberOfComponents=\"3\" format=\"ascii\">0 0 0 1".to_vec(), &["cut.vtu"]),
         // pack manifests, read by preview
         case("no manifest", &["manifest.json"], |d| {

@@ -96,6 +96,22 @@ fn catch_quietly<R>(f: impl FnOnce() -> R + std::panic::UnwindSafe) -> std::thre
     result
 }
 
+/// What is wrong with the point and cell counts of a VTU's `Piece` tags
+/// (each a whole number that fits 64 bits), if anything.
+fn piece_counts_problem(text: &str) -> Option<String> {
+    for key in ["NumberOfPoints", "NumberOfCells"] {
+        for (at, _) in text.match_indices(&format!("{key}=\"")) {
+            let value = &text[at + key.len() + 2..];
+            let value = &value[..value.find('"').unwrap_or(value.len())];
+            if value.trim().parse::<u64>().is_err() {
+                let shown: String = value.chars().take(40).collect();
+                return Some(format!("{key}=\"{shown}\" is not a count (a whole number below 2^64)"));
+            }
+        }
+    }
+    None
+}
+
 /// The single unstructured-grid piece of a `.vtk`/`.vtu` file.
 fn load_piece(path: &Path) -> Result<UnstructuredGridPiece, TetraError> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
@@ -105,24 +121,27 @@ fn load_piece(path: &Path) -> Result<UnstructuredGridPiece, TetraError> {
     if !path.is_file() {
         return Err(read_error(path, "no such file"));
     }
-    // vtkio asserts on some malformed inputs; a panic there is a bad file, not a bug of ours
-    let imported =
-        catch_quietly(|| Vtk::import(path)).map_err(|_| read_error(path, "malformed VTK file (the parser gave up)"))?;
-    let mut vtk = imported.map_err(|e| {
-        let explained = (ext == "vtk")
-            .then(|| std::fs::read(path).ok())
-            .flatten()
-            .and_then(|bytes| crate::legacy_check::explain(&String::from_utf8_lossy(&bytes)));
-        match explained {
-            Some(why) => read_error(path, format!("malformed legacy VTK: {why}")),
-            None => read_error(
-                path,
-                format!(
-                    "cannot parse: {e} (the parser's words; check that the file is complete and that \
-                     its point and cell counts match the data)"
-                ),
-            ),
+    // what is wrong, in the file's own terms, when the parser fails
+    let explained = || {
+        let text = String::from_utf8_lossy(&std::fs::read(path).ok()?).into_owned();
+        match ext.as_str() {
+            "vtk" => crate::legacy_check::explain(&text).map(|why| format!("malformed legacy VTK: {why}")),
+            _ => piece_counts_problem(&text).map(|why| format!("malformed VTU: {why}")),
         }
+    };
+    // vtkio asserts on some malformed inputs; a panic there is a bad file, not a bug of ours
+    let imported = catch_quietly(|| Vtk::import(path)).map_err(|_| {
+        read_error(path, explained().unwrap_or_else(|| "malformed VTK file (the parser gave up)".into()))
+    })?;
+    let mut vtk = imported.map_err(|e| match explained() {
+        Some(why) => read_error(path, why),
+        None => read_error(
+            path,
+            format!(
+                "cannot parse: {e} (the parser's words; check that the file is complete and that \
+                     its point and cell counts match the data)"
+            ),
+        ),
     })?;
     vtk.load_all_pieces().map_err(|e| read_error(path, format!("cannot load pieces: {e}")))?;
     let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
