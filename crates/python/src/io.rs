@@ -24,7 +24,7 @@ pub fn read<'py>(
 ) -> PyResult<(Bound<'py, PyList>, Bound<'py, PyDict>)> {
     let opts = ReadOptions { nan: parse_choice("nan", nan, "refuse, zero, keep")?, level, ..Default::default() };
     let (mf, info) = run_released(py, None, || mdtf_volume::read_with_info(&path, &opts))?
-        .map_err(|e| mdtf_error(format!("{}: {e}", path.display())))?;
+        .map_err(|e| mdtf_error(naming(&path, e)))?;
     let meta = geometry_dict(py, &mf.geometry)?;
     meta.set_item("format", &info.format)?;
     meta.set_item("warnings", &info.warnings)?;
@@ -64,5 +64,11 @@ pub fn write(
         let mf = MultiField::new(geo, fields)?;
         mdtf_volume::write(&path, &mf, &opts, &[])
     })?
-    .map_err(|e| mdtf_error(format!("{}: {e}", path.display())))
+    .map_err(|e| mdtf_error(naming(&path, e)))
+}
+
+/// `e`'s message, led by `path` unless it already names it first.
+fn naming(path: &std::path::Path, e: impl std::fmt::Display) -> String {
+    let (message, shown) = (e.to_string(), path.display().to_string());
+    if message.starts_with(&shown) { message } else { format!("{shown}: {message}") }
 }

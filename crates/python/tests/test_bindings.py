@@ -182,3 +182,28 @@ def test_halo_and_plan_equal_the_command(mdtf_bin: Path, pipelines: Path) -> Non
         assert mdtf.halo(pipeline, input__size=40) == (z, y, x)
         # the command's first line names the pipeline file and input; the plan follows
         assert mdtf.plan(pipeline, input__size=40).strip() == text.split("\n", 1)[1].strip()
+
+
+def test_a_missing_file_is_both_an_mdtf_error_and_a_file_not_found_error(tmp_path: Path, pipelines: Path) -> None:
+    import errno
+
+    missing = tmp_path / "nope.nii"
+    for call in (
+        lambda: mdtf.read(missing),
+        lambda: mdtf.run(pipelines / "slicer-3dtf.toml", tmp_path / "out", input=missing),
+        lambda: mdtf.plan(tmp_path / "nope.toml"),
+    ):
+        with pytest.raises(FileNotFoundError) as caught:
+            call()
+        assert isinstance(caught.value, mdtf.MdtfError)
+        assert caught.value.errno == errno.ENOENT
+        assert caught.value.filename in (str(missing), str(tmp_path / "nope.toml"))
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_read_error_names_the_file_once(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.nii"
+    bad.write_bytes(b"\0" * 400)
+    with pytest.raises(mdtf.MdtfError) as caught:
+        mdtf.read(bad)
+    assert str(caught.value).count(str(bad)) == 1, str(caught.value)

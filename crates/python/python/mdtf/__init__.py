@@ -16,11 +16,14 @@ finish their call first.
 
 Errors of mdtf's stages are raised as :class:`MdtfError` with the message
 the ``mdtf`` command prints; unknown names of items, kernels or modes as
-``ValueError``.
+``ValueError``; a file or folder that does not exist as
+:class:`MdtfFileNotFoundError`, both an ``MdtfError`` and a
+``FileNotFoundError`` (``errno.ENOENT``, its ``filename`` the path).
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 from dataclasses import dataclass, field
@@ -33,6 +36,7 @@ from ._mdtf import MdtfError, set_threads, threads
 
 __all__ = [
     "MdtfError",
+    "MdtfFileNotFoundError",
     "Volume",
     "Histogram",
     "Boundary",
@@ -51,6 +55,21 @@ __all__ = [
 ]
 
 __version__: str = _mdtf.version()
+
+
+
+class MdtfFileNotFoundError(MdtfError, FileNotFoundError):
+    """A file or folder given to mdtf does not exist: caught as ``MdtfError``
+    and as ``FileNotFoundError`` (``OSError``) alike."""
+
+
+def _existing(path: str | os.PathLike[str]) -> str:
+    """``path`` as a string, when it exists; else MdtfFileNotFoundError."""
+    p = os.fspath(path)
+    if not os.path.exists(p):
+        raise MdtfFileNotFoundError(errno.ENOENT, "no such file or folder", p)
+    return p
+
 
 Triple = tuple[float, float, float]
 SpacingLike = float | Sequence[float] | Mapping[str, float]
@@ -116,7 +135,7 @@ def read(path: str | os.PathLike[str], level: int = 0, nan: str = "refuse") -> V
     """Reads a volume file or folder: NIfTI, NRRD, MetaImage, TIFF stack,
     DICOM series, OME-Zarr (``level`` picks the multiscale level; 0 is full
     resolution). ``nan``: "refuse" (the default), "zero" or "keep"."""
-    fields, meta = _mdtf.read(os.fspath(path), level, nan)
+    fields, meta = _mdtf.read(_existing(path), level, nan)
     return Volume(
         fields=dict(fields),
         spacing=tuple(meta["spacing"]),
@@ -348,8 +367,8 @@ def _run(
     submit: Any = None,
 ) -> dict[str, Any]:
     """``run``, and ``mdtf.dask.run`` with its ``submit`` of the tasks: the run report."""
-    path = None if input is None else os.fspath(input)
-    text = _mdtf.run(os.fspath(pipeline), os.fspath(output), path, overrides, memory_budget, slab_planes, submit)
+    path = None if input is None else _existing(input)
+    text = _mdtf.run(_existing(pipeline), os.fspath(output), path, overrides, memory_budget, slab_planes, submit)
     return json.loads(text)
 
 
@@ -360,7 +379,7 @@ def plan(
     **overrides: Any,
 ) -> str:
     """The plan of a pipeline on its input, as ``mdtf run --plan`` prints it."""
-    text, _ = _mdtf.plan(os.fspath(pipeline), None if input is None else os.fspath(input), _overrides(settings, overrides))
+    text, _ = _mdtf.plan(_existing(pipeline), None if input is None else _existing(input), _overrides(settings, overrides))
     return text
 
 
@@ -373,5 +392,5 @@ def halo(
     """The halo (z, y, x voxels) a block of this pipeline needs on its
     input: how far its derivatives, pre-filter and tracing read beyond the
     block (the overlap for ``dask.array.map_overlap``)."""
-    _, h = _mdtf.plan(os.fspath(pipeline), None if input is None else os.fspath(input), _overrides(settings, overrides))
+    _, h = _mdtf.plan(_existing(pipeline), None if input is None else _existing(input), _overrides(settings, overrides))
     return h
