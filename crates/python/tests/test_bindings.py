@@ -207,3 +207,12 @@ def test_a_read_error_names_the_file_once(tmp_path: Path) -> None:
     with pytest.raises(mdtf.MdtfError) as caught:
         mdtf.read(bad)
     assert str(caught.value).count(str(bad)) == 1, str(caught.value)
+
+
+def test_one_item_may_be_named_alone() -> None:
+    # a plain string is one item, not its letters ('f2' is not 'f' and '2')
+    a = np.zeros((6, 6, 6), np.float32)
+    a[3:] = 1.0
+    one = mdtf.derive(a, items="f2")
+    listed = mdtf.derive(a, items=["f2"])
+    assert list(one) == ["f2"] and np.array_equal(one["f2"], listed["f2"])

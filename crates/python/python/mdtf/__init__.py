@@ -169,7 +169,7 @@ def write(
 def derive(
     data: Any,
     spacing: SpacingLike = 1.0,
-    items: Iterable[str] = ("g", "f2"),
+    items: str | Iterable[str] = ("g", "f2"),
     kernel: str | None = None,
     border: str | None = None,
     epsilon: float | None = None,
@@ -178,12 +178,13 @@ def derive(
     mapping name -> array) for the multi-field items (gnorm, jacobian).
 
     ``items``: value, grad, g, normal, hessian, f2, laplacian, inv_g, shade,
-    gnorm, jacobian. ``kernel``: central, central4 (the default), bspline3,
+    gnorm, jacobian (one name, or several). ``kernel``: central, central4 (the default), bspline3,
     catmull-rom or gauss:SIGMA (voxels). ``border``: clamp (the default),
     mirror or wrap. Derivatives are per world unit. Returns one array per
     component, by item name (``g``, ``f2``) or component name (``nx``,
     ``ny``, ``nz`` for the normal; ``gx`` ... for grad)."""
-    return _mdtf.derive(_fields(data), _triple(spacing, "spacing"), list(items), kernel, border, epsilon)
+    names = [items] if isinstance(items, str) else list(items)
+    return _mdtf.derive(_fields(data), _triple(spacing, "spacing"), names, kernel, border, epsilon)
 
 
 def bilateral(
