@@ -535,6 +535,10 @@ fn readers() -> Vec<Case> {
 /// Outputs that would replace, overwrite or mix with the user's files.
 fn outputs() -> Vec<Case> {
     vec![
+        case("convert to a picture", &["out.png", "no format mdtf writes", ".ome.zarr", "mdtf preview"], |d| {
+            copy_base("v.nii", d);
+            args(&["convert", "v.nii", "out.png"])
+        }),
         case("run -o a folder holding the input", &["ct", "ct/v.nii", "input"], |d| {
             std::fs::create_dir(d.join("ct")).unwrap();
             std::fs::copy(base().join("v.nii"), d.join("ct/v.nii")).unwrap();

@@ -216,3 +216,10 @@ def test_one_item_may_be_named_alone() -> None:
     one = mdtf.derive(a, items="f2")
     listed = mdtf.derive(a, items=["f2"])
     assert list(one) == ["f2"] and np.array_equal(one["f2"], listed["f2"])
+
+
+def test_writing_to_an_extension_mdtf_does_not_write_says_what_it_writes(tmp_path: Path) -> None:
+    with pytest.raises(mdtf.MdtfError) as caught:
+        mdtf.write(tmp_path / "x.png", np.zeros((4, 4, 4), np.float32))
+    assert "no format mdtf writes" in str(caught.value) and ".nii.gz" in str(caught.value)
+    assert not (tmp_path / "x.png").exists()

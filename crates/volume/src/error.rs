@@ -128,6 +128,14 @@ pub enum VolumeError {
         /// The file concerned.
         path: PathBuf,
     },
+    /// An output's extension names no format mdtf writes.
+    #[error(
+        "{path}: the extension names no format mdtf writes: .nii, .nii.gz, .nrrd, .nhdr, .mha, .mhd or .ome.zarr (pictures come from mdtf preview and the histogram figures)"
+    )]
+    UnwritableFormat {
+        /// The file concerned.
+        path: PathBuf,
+    },
     /// Writing would overwrite an input of the run.
     #[error("{path}: refusing to overwrite {input}, an input of this run (choose another output name)")]
     WouldOverwriteInput {

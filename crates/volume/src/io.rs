@@ -220,7 +220,7 @@ pub fn write(path: &Path, mf: &MultiField, opts: &WriteOptions, inputs: &[&Path]
             path,
             "mdtf reads DICOM but does not write it: write .nii.gz, .nrrd or .mha (3D Slicer and ITK-SNAP open all three)",
         )),
-        None => Err(VolumeError::UnknownFormat { path: path.to_path_buf() }),
+        None => Err(VolumeError::UnwritableFormat { path: path.to_path_buf() }),
     }
 }
 
