@@ -399,15 +399,31 @@ fn an_oblique_series_matches_dcm2niix_in_world_space() {
     }
 }
 
-/// Writes one CT image per (transfer syntax, bits allocated, pixel representation) with pydicom
-/// (values spanning the stored range, RescaleSlope 0.5 and RescaleIntercept -3) into argv[1], and
-/// prints {file: values pydicom decodes, scaled} as JSON.
-const SAMPLE_LAYOUTS_PY: &str = r#"
+/// Python shared by the pydicom scripts (run as `PYDICOM_CT_PY` + script):
+/// `ct_dataset(syntax, series, study)` gives a CT image's dataset with its
+/// file meta, identifiers and modality; pixels and geometry are the script's.
+const PYDICOM_CT_PY: &str = r#"
 import json, os, sys
 import numpy as np
 import pydicom
 from pydicom.dataset import Dataset, FileMetaDataset
 from pydicom.uid import CTImageStorage, ExplicitVRBigEndian, ExplicitVRLittleEndian, ImplicitVRLittleEndian, generate_uid
+def ct_dataset(syntax, series, study):
+    meta = FileMetaDataset()
+    meta.MediaStorageSOPClassUID = CTImageStorage
+    meta.MediaStorageSOPInstanceUID = generate_uid()
+    meta.TransferSyntaxUID = syntax
+    ds = Dataset()
+    ds.file_meta = meta
+    ds.SOPClassUID, ds.SOPInstanceUID = CTImageStorage, meta.MediaStorageSOPInstanceUID
+    ds.Modality, ds.SeriesInstanceUID, ds.StudyInstanceUID = "CT", series, study
+    return ds
+"#;
+
+/// Writes one CT image per (transfer syntax, bits allocated, pixel representation) with pydicom
+/// (values spanning the stored range, RescaleSlope 0.5 and RescaleIntercept -3) into argv[1], and
+/// prints {file: values pydicom decodes, scaled} as JSON.
+const SAMPLE_LAYOUTS_PY: &str = r#"
 out, result = sys.argv[1], {}
 for syntax, little in [(ExplicitVRLittleEndian, True), (ImplicitVRLittleEndian, True), (ExplicitVRBigEndian, False)]:
     for bits in (8, 16, 32):
@@ -417,14 +433,7 @@ for syntax, little in [(ExplicitVRLittleEndian, True), (ImplicitVRLittleEndian, 
             # values near both ends of the stored range and between, in every byte
             lo, hi = max(info.min, -(2**31) + 1), min(info.max, 2**31 - 1)
             values = np.linspace(lo, hi, 5 * 7).round().astype(kind).reshape(5, 7)
-            meta = FileMetaDataset()
-            meta.MediaStorageSOPClassUID = CTImageStorage
-            meta.MediaStorageSOPInstanceUID = generate_uid()
-            meta.TransferSyntaxUID = syntax
-            ds = Dataset()
-            ds.file_meta = meta
-            ds.SOPClassUID, ds.SOPInstanceUID = CTImageStorage, meta.MediaStorageSOPInstanceUID
-            ds.Modality, ds.SeriesInstanceUID, ds.StudyInstanceUID = "CT", generate_uid(), generate_uid()
+            ds = ct_dataset(syntax, generate_uid(), generate_uid())
             ds.Rows, ds.Columns, ds.SamplesPerPixel, ds.PhotometricInterpretation = 5, 7, 1, "MONOCHROME2"
             ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = bits, bits, bits - 1, signed
             ds.PixelSpacing, ds.RescaleSlope, ds.RescaleIntercept = [1, 1], 0.5, -3
@@ -439,7 +448,11 @@ print(json.dumps(result))
 #[test]
 fn every_sample_width_byte_order_and_sign_reads_as_pydicom_decodes_it() {
     let dir = tempfile::tempdir().unwrap();
-    let written: Value = serde_json::from_str(&run_python(SAMPLE_LAYOUTS_PY, &[dir.path().to_str().unwrap()])).unwrap();
+    let written: Value = serde_json::from_str(&run_python(
+        &format!("{PYDICOM_CT_PY}{SAMPLE_LAYOUTS_PY}"),
+        &[dir.path().to_str().unwrap()],
+    ))
+    .unwrap();
     let files = written.as_object().unwrap();
     assert_eq!(files.len(), 18, "3 transfer syntaxes x 3 widths x 2 signs");
     for (name, want) in files {
@@ -479,12 +492,7 @@ fn pydicoms_big_endian_dose_grids_read_as_pydicom_decodes_them() {
 /// within that many voxels of a padded one along each axis (a box): those whose derivatives read
 /// padding.
 const PADDED_SERIES_PY: &str = r#"
-import os, sys
-import numpy as np
-import pydicom
 from math import erf
-from pydicom.dataset import Dataset, FileMetaDataset
-from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, generate_uid
 out = sys.argv[1]
 nx, ny, nz = 40, 40, 12
 z, y, x = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing='ij')
@@ -495,14 +503,8 @@ padded = np.hypot(x - 19.5, y - 19.5) > 18.0
 hu = np.where(padded, -1500, np.round(hu)).astype(np.int16)
 series, study = generate_uid(), generate_uid()
 for k in range(nz):
-    meta = FileMetaDataset()
-    meta.MediaStorageSOPClassUID = CTImageStorage
-    meta.MediaStorageSOPInstanceUID = generate_uid()
-    meta.TransferSyntaxUID = ExplicitVRLittleEndian
-    ds = Dataset()
-    ds.file_meta = meta
-    ds.SOPClassUID, ds.SOPInstanceUID = CTImageStorage, meta.MediaStorageSOPInstanceUID
-    ds.Modality, ds.SeriesInstanceUID, ds.StudyInstanceUID, ds.SeriesNumber = "CT", series, study, 1
+    ds = ct_dataset(ExplicitVRLittleEndian, series, study)
+    ds.SeriesNumber = 1
     ds.InstanceNumber, ds.ImagePositionPatient, ds.ImageOrientationPatient = k + 1, [0, 0, float(k)], [1, 0, 0, 0, 1, 0]
     ds.Rows, ds.Columns, ds.SamplesPerPixel, ds.PhotometricInterpretation = ny, nx, 1, "MONOCHROME2"
     ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 16, 16, 15, 1
@@ -531,7 +533,7 @@ fn a_ct_series_pixel_padding_is_left_out_of_the_histograms_and_the_tracing() {
     let dir = tempfile::tempdir().unwrap();
     let series = dir.path().join("series");
     std::fs::create_dir(&series).unwrap();
-    let counts = run_python(PADDED_SERIES_PY, &[series.to_str().unwrap()]);
+    let counts = run_python(&format!("{PYDICOM_CT_PY}{PADDED_SERIES_PY}"), &[series.to_str().unwrap()]);
     let counts: Vec<u64> = counts.split_whitespace().map(|n| n.parse().unwrap()).collect();
     let padded = counts[0];
     let info = mdtf_ok(&["info", series.to_str().unwrap()]);

@@ -281,22 +281,31 @@ fn pynrrd_opens_pack_textures_with_values_intact() {
     assert_eq!(mf.fields[1].data.iter().map(|&v| v as f64).collect::<Vec<_>>(), floats(&d["fields"][1]));
 }
 
+/// Python shared by the meshio scripts (run as `TET_GRID_PY` + script):
+/// `tet_grid(n, step, jitter, seed)` gives the points of an n^3 grid of
+/// spacing `step`, each moved by up to `jitter`, and its cubes cut into six
+/// tetrahedra each.
+const TET_GRID_PY: &str = r#"
+import sys, json, meshio, numpy as np
+def tet_grid(n, step, jitter, seed):
+    rng = np.random.default_rng(seed)
+    g = np.stack(np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing='ij'), -1).reshape(-1, 3).astype(float)
+    pts = g * step + rng.uniform(-jitter, jitter, g.shape)
+    idx = lambda i, j, k: (i * n + j) * n + k
+    tets = []
+    for i in range(n - 1):
+        for j in range(n - 1):
+            for k in range(n - 1):
+                c = [idx(i + (m >> 2 & 1), j + (m >> 1 & 1), k + (m & 1)) for m in range(8)]
+                for t in ([0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]):
+                    tets.append([c[v] for v in t])
+    return pts, np.array(tets)
+"#;
+
 /// Writes a mesh with meshio: tetrahedra, one triangle, a linear scalar s, a
 /// second scalar and a vector array, in the format and options given.
 const MESHIO_WRITE: &str = r#"
-import sys, meshio, numpy as np
-rng = np.random.default_rng(7)
-n = 4
-g = np.stack(np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing='ij'), -1).reshape(-1, 3).astype(float)
-pts = g * [1.0, 1.5, 0.75] + rng.uniform(-0.1, 0.1, g.shape)
-idx = lambda i, j, k: (i * n + j) * n + k
-tets = []
-for i in range(n - 1):
-    for j in range(n - 1):
-        for k in range(n - 1):
-            c = [idx(i + (m >> 2 & 1), j + (m >> 1 & 1), k + (m & 1)) for m in range(8)]
-            for t in ([0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]):
-                tets.append([c[v] for v in t])
+pts, tets = tet_grid(4, [1.0, 1.5, 0.75], 0.1, 7)
 s = 2.0 * pts[:, 0] - 3.0 * pts[:, 1] + 0.5 * pts[:, 2] + 10.0
 m = meshio.Mesh(pts, [("tetra", np.array(tets)), ("triangle", np.array([[0, 1, 2]]))],
                 point_data={"s": s, "temperature": s * 0 + 1.0, "velocity": pts * 2.0})
@@ -326,7 +335,7 @@ fn meshio_meshes_round_trip_through_mdtf_tetra() {
         ("m_ascii.vtk", "ascii"),
     ] {
         let input = dir.path().join(name);
-        run_python(MESHIO_WRITE, &[input.to_str().unwrap(), mode]);
+        run_python(&format!("{TET_GRID_PY}{MESHIO_WRITE}"), &[input.to_str().unwrap(), mode]);
         let pack = dir.path().join(format!("pack_{name}"));
         mdtf_ok(&[
             "tetra",
@@ -367,20 +376,7 @@ fn meshio_meshes_round_trip_through_mdtf_tetra() {
 /// id per tetrahedron, as FE and CFD meshes carry), and prints with numpy the
 /// volume-weighted mean of the cells around each point, the reference.
 const MESHIO_CELL_DATA: &str = r#"
-import sys, json, meshio, numpy as np
-rng = np.random.default_rng(3)
-n = 5
-g = np.stack(np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing='ij'), -1).reshape(-1, 3).astype(float)
-pts = g * 2.0 + rng.uniform(-0.2, 0.2, g.shape)
-idx = lambda i, j, k: (i * n + j) * n + k
-tets = []
-for i in range(n - 1):
-    for j in range(n - 1):
-        for k in range(n - 1):
-            c = [idx(i + (m >> 2 & 1), j + (m >> 1 & 1), k + (m & 1)) for m in range(8)]
-            for t in ([0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]):
-                tets.append([c[v] for v in t])
-tets = np.array(tets)
+pts, tets = tet_grid(5, 2.0, 0.2, 3)
 centres = pts[tets].mean(axis=1)
 material = np.where(np.linalg.norm(centres - 4.0, axis=1) < 3.0, 7.0, 1.0)
 m = meshio.Mesh(pts, [("tetra", tets)], cell_data={"material": [material]})
@@ -399,7 +395,10 @@ fn a_mesh_with_only_a_cell_scalar_is_meshed_from_its_volume_weighted_point_means
     let dir = tempfile::tempdir().unwrap();
     for name in ["cells.vtu", "cells.vtk"] {
         let input = dir.path().join(name);
-        let want = floats(&serde_json::from_str(&run_python(MESHIO_CELL_DATA, &[input.to_str().unwrap()])).unwrap());
+        let want = floats(
+            &serde_json::from_str(&run_python(&format!("{TET_GRID_PY}{MESHIO_CELL_DATA}"), &[input.to_str().unwrap()]))
+                .unwrap(),
+        );
         // info lists the cell array; run points to mdtf tetra
         let info = mdtf_ok(&["info", input.to_str().unwrap()]);
         assert!(info.contains("cell arrays: 1") && info.contains("material: 1 component(s)"), "{info}");

@@ -71,7 +71,13 @@ use crate::materials::{Material, find_materials};
 use mdtf_volume::arch_shape;
 use serde::Serialize;
 
+mod background;
+mod columns;
 mod isolated;
+
+pub use background::{FALLBACK_G_QUANTILE, FALLBACK_HIGH_QUANTILE, background_value, fallback_boundary};
+use background::{mode_value, surround_material};
+use columns::Columns;
 
 /// Values along an arch at which its fit is measured.
 pub const ARCH_SAMPLES: usize = 29;
@@ -349,85 +355,6 @@ fn explain_away(counts: &mut [u64], axes: &[Axis; 2], b: &DetectedBoundary) {
     }
 }
 
-/// Per-column cumulative counts over g, for the voxels of a g range of one column.
-struct Columns<'a> {
-    axes: &'a [Axis; 2],
-    /// cum[j * nv + i]: voxels of column i in g bins below j (j = 0..=ng).
-    cum: Vec<u64>,
-    /// still[i]: the g below which column i's voxels are a material's still
-    /// voxels: twice the noise g of the materials within
-    /// [`STILL_SPREADS`] spreads of its value (0 where none is).
-    still: Vec<f64>,
-}
-
-impl<'a> Columns<'a> {
-    fn new(count_vg: &[u64], axes: &'a [Axis; 2], materials: &[Material]) -> Self {
-        let (nv, ng) = (axes[0].bins, axes[1].bins);
-        let mut cum = vec![0u64; (ng + 1) * nv];
-        for j in 0..ng {
-            for i in 0..nv {
-                cum[(j + 1) * nv + i] = cum[j * nv + i] + count_vg.get(j * nv + i).copied().unwrap_or(0);
-            }
-        }
-        let still = (0..nv)
-            .map(|i| {
-                let v = axes[0].centre(i);
-                materials
-                    .iter()
-                    .filter(|m| (v - m.value).abs() <= STILL_SPREADS * m.spread)
-                    .fold(0.0, |a: f64, m| a.max(2.0 * m.noise_g))
-            })
-            .collect();
-        Columns { axes, cum, still }
-    }
-
-    /// The column of value `v` (None outside the v axis).
-    fn column(&self, v: f64) -> Option<usize> {
-        let av = &self.axes[0];
-        let b = ((v - av.min) / av.width()).floor();
-        (b >= 0.0 && b < av.bins as f64).then_some(b as usize)
-    }
-
-    /// The median g (a bin centre) of the voxels of [`Columns::mass`] (None when there are none).
-    fn median_g(&self, i: usize, lo: f64, hi: f64) -> Option<f64> {
-        let ag = &self.axes[1];
-        let half = self.mass(i, lo, hi).div_ceil(2);
-        if half == 0 {
-            return None;
-        }
-        (0..ag.bins).find(|&j| self.mass(i, lo, ag.min + (j + 1) as f64 * ag.width()) >= half).map(|j| ag.centre(j))
-    }
-
-    /// Voxels of column `i` in g bin `j`.
-    fn in_bin(&self, i: usize, j: usize) -> u64 {
-        let nv = self.axes[0].bins;
-        self.cum[(j + 1) * nv + i] - self.cum[j * nv + i]
-    }
-
-    /// Voxels of column `i` alone with g in [lo, hi).
-    fn mass_of_one(&self, i: usize, lo: f64, hi: f64) -> u64 {
-        self.mass_in(i..i + 1, lo, hi)
-    }
-
-    /// Voxels with g in [lo, hi) of column `i` and the [`COLUMN_REACH`]
-    /// columns on each side: a boundary without noise, sampled on a grid,
-    /// leaves some columns empty (its voxels take only certain values).
-    fn mass(&self, i: usize, lo: f64, hi: f64) -> u64 {
-        self.mass_in(i.saturating_sub(COLUMN_REACH)..i + COLUMN_REACH + 1, lo, hi)
-    }
-
-    /// Voxels with g in [lo, hi) of the columns `cols` (clipped to the v axis).
-    fn mass_in(&self, cols: std::ops::Range<usize>, lo: f64, hi: f64) -> u64 {
-        let (nv, ag) = (self.axes[0].bins, &self.axes[1]);
-        let edge = |g: f64| (((g - ag.min) / ag.width()).ceil().max(0.0) as usize).min(ag.bins);
-        let (jl, jh) = (edge(lo), edge(hi));
-        if jh <= jl {
-            return 0;
-        }
-        (cols.start..cols.end.min(nv)).map(|c| self.cum[jh * nv + c] - self.cum[jl * nv + c]).sum()
-    }
-}
-
 /// The arch between two materials at its most confident G, or None when it
 /// is not a boundary by rules 2 and 3 of the module docs (the voxel share is the caller's).
 fn fit_pair(columns: &Columns, low: &Material, high: &Material) -> Option<DetectedBoundary> {
@@ -643,99 +570,4 @@ fn same_voxels(a: &DetectedBoundary, b: &DetectedBoundary) -> bool {
         })
         .count();
     close >= 8
-}
-
-/// Share of the voxels whose value lies below the fallback boundary's high value.
-pub const FALLBACK_HIGH_QUANTILE: f64 = 0.99;
-/// Share of the boundary voxels (g above twice the median) below the fallback's peak g.
-pub const FALLBACK_G_QUANTILE: f64 = 0.75;
-
-/// A boundary to show when [`detect_boundaries`] finds none, placed by
-/// percentiles instead of found: from the background value (see
-/// [`background_value`]) to the value below which [`FALLBACK_HIGH_QUANTILE`]
-/// of the voxels lie, its peak g the [`FALLBACK_G_QUANTILE`] quantile of
-/// the g of the voxels above twice the median g, its confidence 0. None when
-/// the histogram holds no such span (a constant volume).
-pub fn fallback_boundary(hv: &HistogramVolume) -> Option<DetectedBoundary> {
-    let [av, ag] = &hv.vg_axes;
-    let (nv, ng) = (av.bins, ag.bins);
-    let total: u64 = hv.count_v.iter().sum();
-    let per_g: Vec<u64> = (0..ng).map(|j| hv.count_vg[j * nv..(j + 1) * nv].iter().sum()).collect();
-    let quantile_bin = |counts: &[u64], q: f64| {
-        let n: u64 = counts.iter().sum();
-        let target = (q * n as f64).ceil() as u64;
-        let mut seen = 0;
-        counts.iter().position(|&c| {
-            seen += c;
-            seen >= target.max(1)
-        })
-    };
-    let background = background_value(hv);
-    let v_high = av.centre(quantile_bin(&hv.count_v, FALLBACK_HIGH_QUANTILE)?);
-    let median_g = ag.centre(quantile_bin(&per_g, 0.5)?);
-    let floor = 2.0 * median_g.max(ag.width());
-    let above: Vec<u64> = per_g.iter().enumerate().map(|(j, &c)| if ag.centre(j) > floor { c } else { 0 }).collect();
-    let g_peak = ag.centre(quantile_bin(&above, FALLBACK_G_QUANTILE)?);
-    let (v_low, v_high) = if v_high > background { (background, v_high) } else { (av.centre(0), background) };
-    if v_high <= v_low || g_peak <= 0.0 || total == 0 {
-        return None;
-    }
-    Some(DetectedBoundary {
-        v_low,
-        v_low_spread: 0.0,
-        v_high,
-        v_high_spread: 0.0,
-        v_centre: (v_low + v_high) / 2.0,
-        g_peak,
-        sigma: (v_high - v_low) / ((2.0 * std::f64::consts::PI).sqrt() * g_peak),
-        core_voxels: above.iter().sum(),
-        g_floor: floor,
-        confidence: 0.0,
-        meets_background: true,
-    })
-}
-
-/// The background: the centre of the v bin holding the most voxels (air
-/// around a CT, the dark surround of an MRI or a micrograph, the ambient
-/// value of a simulation; inside a cropped scan, its commonest tissue).
-pub fn background_value(hv: &HistogramVolume) -> f64 {
-    mode_value(&hv.count_vg, &hv.vg_axes)
-}
-
-/// The centre of the v bin holding the most voxels of `count_vg` (v fastest).
-fn mode_value(count_vg: &[u64], axes: &[Axis; 2]) -> f64 {
-    let [av, ag] = axes;
-    let nv = av.bins;
-    let column = |i: usize| (0..ag.bins).map(|j| count_vg.get(j * nv + i).copied().unwrap_or(0)).sum::<u64>();
-    let mode = (0..nv).map(|i| (i, column(i))).max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0))).map_or(0, |(i, _)| i);
-    av.centre(mode)
-}
-
-/// The value of the surround's material (rule 7 of the module docs): the
-/// material nearest `background`; while none of the `boundaries` has it as
-/// one side, its neighbour in value holding more still voxels (a scanner's
-/// padding, the commonest value, meets the air inside its field of view
-/// along a hard edge with no arch; the air is what the head meets).
-fn surround_material(materials: &[Material], background: f64, boundaries: &[DetectedBoundary]) -> Option<f64> {
-    let nearest = |a: &&Material, b: &&Material| (a.value - background).abs().total_cmp(&(b.value - background).abs());
-    let mut at = materials.iter().enumerate().min_by(|a, b| nearest(&a.1, &b.1))?.0;
-    let touched = |m: &Material| boundaries.iter().any(|b| b.v_low == m.value || b.v_high == m.value);
-    let mut step: Option<isize> = None;
-    while !touched(&materials[at]) {
-        let side = |d: isize| at.checked_add_signed(d).filter(|&k| k < materials.len());
-        let next = match step {
-            Some(d) => side(d),
-            None => {
-                let pick = [-1, 1]
-                    .into_iter()
-                    .filter_map(|d| side(d).map(|k| (d, k)))
-                    .max_by_key(|&(_, k)| materials[k].still_voxels);
-                step = pick.map(|(d, _)| d);
-                pick.map(|(_, k)| k)
-            }
-        };
-        let Some(next) = next else { break };
-        at = next;
-    }
-    Some(materials[at].value)
 }
