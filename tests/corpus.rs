@@ -221,9 +221,9 @@ fn readers() -> Vec<Case> {
         // NIfTI-1
         info_of("empty.nii", Vec::new(), &["empty"]),
         info_of("short.nii", vec![0; 100], &["348"]),
-        info_of("sizeof.nii", nii_with(0, &[0, 0, 0, 0]), &["not a NIfTI-1 file", "sizeof_hdr"]),
-        info_of("nifti2.nii", nii_with(0, &540i32.to_le_bytes()), &["NIfTI-2"]),
-        info_of("pair.nii", nii_with(344, b"ni1\0"), &["magic", "pairs"]),
+        info_of("sizeof.nii", nii_with(0, &[0, 0, 0, 0]), &["not a NIfTI file", "sizeof_hdr"]),
+        info_of("nifti2.nii", nii_with(0, &540i32.to_le_bytes()), &["540-byte header", "not 'n+2'"]),
+        info_of("pair.nii", nii_with(344, b"ni1\0"), &["magic", "separate .img", "name it .hdr"]),
         info_of("magic.nii", nii_with(344, b"xyz\0"), &["magic at byte 344", "'xyz\\x00'", "'n+1'"]),
         info_of("rank9.nii", nii_with(40, &9i16.to_le_bytes()), &["dim[0]", "is 9", "1 to 7"]),
         info_of("rank0.nii", nii_with(40, &0i16.to_le_bytes()), &["dim[0]", "1 to 7"]),

@@ -219,14 +219,6 @@ pub enum VolumeError {
     /// Fields of a multi-field volume differ in geometry, or an operation needs one field.
     #[error("{0}")]
     Fields(String),
-    /// The NIfTI library refused the header or the data.
-    #[error("{path}: {cause}")]
-    Nifti {
-        /// The file concerned.
-        path: PathBuf,
-        /// The library's error.
-        cause: nifti::NiftiError,
-    },
     /// The Zarr library refused the store, an array's metadata or a chunk.
     #[error("{path}: {what}: {cause}")]
     Zarr {

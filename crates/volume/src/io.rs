@@ -7,7 +7,7 @@ use crate::dicom::read_dicom_with_info;
 use crate::dtype::SampleType;
 use crate::error::{Result, VolumeError};
 use crate::metaimage::{read_metaimage_with_info, write_metaimage};
-use crate::nifti_io::{read_nifti_with_info, write_nifti};
+use crate::nifti::{read_nifti_with_info, write_nifti};
 use crate::nrrd::{Encoding, read_nrrd_with_info, write_nrrd};
 use crate::output::Inputs;
 use crate::samples::{FileInfo, ReadOptions};
@@ -22,6 +22,8 @@ pub enum Format {
     Nifti,
     /// `.nii.gz`
     NiftiGz,
+    /// `.hdr` + `.img` (a NIfTI-1 or NIfTI-2 pair, or Analyze 7.5 on read; `.gz` on both allowed)
+    NiftiPair,
     /// `.nrrd` (attached header, raw encoding)
     Nrrd,
     /// `.nhdr` + `.raw` (detached header)
@@ -46,6 +48,8 @@ impl Format {
             Some(Format::NiftiGz)
         } else if name.ends_with(".nii") {
             Some(Format::Nifti)
+        } else if crate::nifti::is_pair_name(path) {
+            Some(Format::NiftiPair)
         } else if name.ends_with(".nrrd") {
             Some(Format::Nrrd)
         } else if name.ends_with(".nhdr") {
@@ -81,11 +85,9 @@ impl Format {
         if [b"II*\0", b"MM\0*", b"II+\0", b"MM\0+"].iter().any(|m| head.starts_with(*m)) {
             return Some(Format::Tiff);
         }
-        let sizeof_hdr = at(0..4).map(|b| [b[0], b[1], b[2], b[3]]);
-        if sizeof_hdr.is_some_and(|b| i32::from_le_bytes(b) == 348 || i32::from_be_bytes(b) == 348)
-            && matches!(at(344..348), Some(b"n+1\0" | b"ni1\0"))
-        {
-            return Some(Format::Nifti);
+        if crate::nifti::header::has_nifti_magic(&head) {
+            // a pair's header (ni1, ni2) is named .hdr: the extension tells which
+            return Some(if crate::nifti::is_pair_name(path) { Format::NiftiPair } else { Format::Nifti });
         }
         if crate::metaimage::looks_like_metaimage(&head) {
             return Some(Format::Mha);
@@ -98,6 +100,7 @@ impl Format {
         match self {
             Format::Nifti => ".nii",
             Format::NiftiGz => ".nii.gz",
+            Format::NiftiPair => ".hdr",
             Format::Nrrd => ".nrrd",
             Format::Nhdr => ".nhdr",
             Format::Mha => ".mha",
@@ -111,7 +114,7 @@ impl Format {
     /// The format's usual name, e.g. "NIfTI" or "OME-Zarr".
     pub fn name(self) -> &'static str {
         match self {
-            Format::Nifti | Format::NiftiGz => "NIfTI",
+            Format::Nifti | Format::NiftiGz | Format::NiftiPair => "NIfTI",
             Format::Nrrd | Format::Nhdr => "NRRD",
             Format::Mha | Format::Mhd => "MetaImage",
             Format::Tiff => "TIFF",
@@ -160,7 +163,7 @@ pub fn read_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiField, Fi
             let mf = image.read(0..image.geometry().dims[2], opts.nan)?;
             Ok((mf, image.info().clone()))
         }
-        Some(Format::Nifti | Format::NiftiGz) => read_nifti_with_info(path, opts),
+        Some(Format::Nifti | Format::NiftiGz | Format::NiftiPair) => read_nifti_with_info(path, opts),
         Some(Format::Dicom) => read_dicom_with_info(path, opts),
         Some(Format::Nrrd | Format::Nhdr) => read_nrrd_with_info(path, opts),
         Some(Format::Mha | Format::Mhd) => read_metaimage_with_info(path, opts),
@@ -201,6 +204,7 @@ pub fn write(path: &Path, mf: &MultiField, opts: &WriteOptions, inputs: &[&Path]
     inputs.refuse_target(path)?;
     let data_file = match Format::from_path(path) {
         Some(Format::Mhd) => crate::metaimage::metaimage_planned_data_file(path),
+        Some(Format::NiftiPair) => crate::nifti::planned_partner(path),
         _ => crate::nrrd::planned_data_file(path, opts.gzip),
     };
     if let Some(data) = data_file {
@@ -208,7 +212,7 @@ pub fn write(path: &Path, mf: &MultiField, opts: &WriteOptions, inputs: &[&Path]
     }
     let encoding = if opts.gzip { Encoding::Gzip } else { Encoding::Raw };
     match Format::from_path(path) {
-        Some(Format::Nifti | Format::NiftiGz) => write_nifti(path, mf, opts.ty),
+        Some(Format::Nifti | Format::NiftiGz | Format::NiftiPair) => write_nifti(path, mf, opts.ty),
         Some(Format::Nrrd | Format::Nhdr) => write_nrrd(path, mf, opts.ty, encoding),
         Some(Format::Mha | Format::Mhd) => write_metaimage(path, mf, opts.ty),
         Some(Format::OmeZarr) => crate::ome_zarr::write_ome_zarr(path, mf, opts.ty, &inputs),

@@ -67,7 +67,7 @@ impl PlaneReader {
         }
         let format = Format::from_content(path).or_else(|| Format::from_path(path));
         let opened = match format {
-            Some(Format::Nifti | Format::NiftiGz) => Some(crate::nifti_io::open_samples(path)?),
+            Some(Format::Nifti | Format::NiftiGz | Format::NiftiPair) => Some(crate::nifti::open_samples(path)?),
             Some(Format::Nrrd | Format::Nhdr) => crate::nrrd::open_samples(path)?,
             _ => None,
         };

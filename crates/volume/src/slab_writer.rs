@@ -88,7 +88,7 @@ impl SlabWriter {
         let gz = path.to_string_lossy().to_ascii_lowercase().ends_with(".gz");
         let sink = match Format::from_path(path) {
             Some(Format::Nifti | Format::NiftiGz) => {
-                let header = crate::nifti_io::header_of(path, geometry, names.len(), ty)?;
+                let header = crate::nifti::header_of(path, geometry, names.len(), ty)?;
                 let mut out = Stream::create(path, gz)?;
                 out.writer().write_all(&header).map_err(|e| VolumeError::io(path, e))?;
                 let rest = (1..names.len())

@@ -4,7 +4,7 @@ use crate::args::ConvertArgs;
 use crate::input::{read_input, read_options, sample_type};
 use crate::progress::Progress;
 use anyhow::{Context, Result};
-use mdtf_volume::{SampleType, WriteOptions, write};
+use mdtf_volume::{Format, NIFTI1_MAX_AXIS, SampleType, WriteOptions, nifti_version_for, write};
 
 /// Converts one file.
 pub fn run(args: &ConvertArgs, progress: &Progress) -> Result<()> {
@@ -17,6 +17,15 @@ pub fn run(args: &ConvertArgs, progress: &Progress) -> Result<()> {
     let ty = args.out_type.map(sample_type).or(own).unwrap_or(SampleType::F32);
     let opts = WriteOptions { ty, gzip: args.gzip };
     progress.step("writing", || write(&args.output, &mf, &opts, &[&args.input])).context("cannot write the output")?;
+    let nifti = matches!(Format::from_path(&args.output), Some(Format::Nifti | Format::NiftiGz | Format::NiftiPair));
+    if nifti && nifti_version_for(&mf.geometry, mf.fields.len()) == 2 {
+        progress.note(&format!(
+            "warning: {}: written as NIfTI-2, since an axis ({}) exceeds NIfTI-1's {NIFTI1_MAX_AXIS} voxels; \
+             nibabel, ITK, FSL 6 and AFNI read NIfTI-2, older tools may not",
+            args.output.display(),
+            mf.geometry.dims_string()
+        ));
+    }
     progress.note(&format!(
         "wrote {} ({} field(s), {}, {})",
         args.output.display(),

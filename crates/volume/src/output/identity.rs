@@ -63,7 +63,8 @@ impl Inputs {
         set
     }
 
-    /// Adds a file and the data files its header names (a `.nhdr`), or every
+    /// Adds a file and the data files its header names (a `.nhdr`) or its
+    /// pair partner (a `.hdr` or `.img`), or every
     /// file under a folder. A path that does not exist adds nothing: the
     /// reader reports it.
     pub fn add(&mut self, path: &Path) {
@@ -76,6 +77,7 @@ impl Inputs {
         let data_files = match ext.as_str() {
             "nhdr" | "nrrd" => crate::nrrd::detached_data_files(path),
             "mhd" | "mha" => crate::metaimage::metaimage_data_files(path),
+            _ if crate::nifti::is_pair_name(path) => crate::nifti::pair_files(path),
             _ => Vec::new(),
         };
         for data in data_files {
