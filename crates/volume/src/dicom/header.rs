@@ -66,6 +66,8 @@ pub struct ImageHeader {
     pub signed: bool,
     /// SamplesPerPixel (1 for the grayscale images mdtf reads).
     pub samples_per_pixel: u16,
+    /// PhotometricInterpretation, e.g. "MONOCHROME2" ("PALETTE COLOR" is colour in one sample).
+    pub photometric: String,
     /// SliceThickness, mm.
     pub slice_thickness: Option<f64>,
     /// SpacingBetweenSlices, mm.
@@ -211,7 +213,15 @@ pub fn read_header(path: &Path) -> Result<Option<ImageHeader>> {
     if rows == 0 || cols == 0 {
         return Err(bad(format!("the image is {cols} x {rows} pixels")));
     }
-    let frame_count = int(&obj, tags::NUMBER_OF_FRAMES).unwrap_or(1);
+    let frame_count = match (int(&obj, tags::NUMBER_OF_FRAMES), obj.element_opt(tags::NUMBER_OF_FRAMES).ok().flatten())
+    {
+        (Some(n), _) => n,
+        (None, None) => 1,
+        (None, Some(_)) => {
+            let said = text(&obj, tags::NUMBER_OF_FRAMES).unwrap_or_default();
+            return Err(bad(format!("NumberOfFrames (0028,0008) reads '{said}', not a whole number")));
+        }
+    };
     if !(1..=1 << 20).contains(&frame_count) {
         return Err(bad(format!("NumberOfFrames {frame_count} is not a positive count")));
     }
@@ -292,6 +302,7 @@ pub fn read_header(path: &Path) -> Result<Option<ImageHeader>> {
         high_bit,
         signed: uint(&obj, tags::PIXEL_REPRESENTATION) == Some(1),
         samples_per_pixel: uint(&obj, tags::SAMPLES_PER_PIXEL).unwrap_or(1) as u16,
+        photometric: text(&obj, tags::PHOTOMETRIC_INTERPRETATION).unwrap_or_default(),
         slice_thickness: thickness.filter(|t| *t > 0.0),
         spacing_between_slices: float(&obj, tags::SPACING_BETWEEN_SLICES).filter(|t| *t > 0.0),
         frames,
@@ -335,6 +346,13 @@ pub fn check_decodable(h: &ImageHeader) -> Result<()> {
                 ),
             ));
         }
+    }
+    if h.photometric.trim() == "PALETTE COLOR" {
+        return Err(VolumeError::header(
+            &h.path,
+            "the image is PALETTE COLOR: its samples index a colour table, they are not intensities; \
+             mdtf reads grayscale DICOM (CT, MR, PET, microscopy) only",
+        ));
     }
     if h.samples_per_pixel != 1 {
         return Err(VolumeError::header(

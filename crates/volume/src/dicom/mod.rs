@@ -28,6 +28,7 @@ mod header;
 pub mod mosaic;
 mod pixels;
 mod resample;
+mod rle;
 mod scan;
 mod series;
 

@@ -1,12 +1,14 @@
 //! Decoding the pixel data of a series into f32 slices, one file per task.
 //!
 //! Uncompressed pixel data is read in place; encapsulated data (RLE, JPEG,
-//! JPEG 2000) goes through dicom-pixeldata's decoders. Each stored sample is
+//! JPEG 2000) goes through dicom-pixeldata's decoders, but for 32-bit RLE,
+//! which they refuse (see `rle`). Each stored sample is
 //! masked to BitsStored, sign-extended when PixelRepresentation is 1, then
 //! scaled by its own slice's RescaleSlope and RescaleIntercept (they may vary
 //! from slice to slice, as on many CT scanners).
 
 use super::header::{ImageHeader, open};
+use super::rle;
 use super::series::SliceRef;
 use crate::error::{Result, VolumeError};
 use dicom_core::value::Value;
@@ -76,8 +78,13 @@ fn decode_file(h: &ImageHeader, targets: Vec<Target>) -> Result<()> {
         .ok()
         .flatten()
         .ok_or_else(|| VolumeError::header(&h.path, "the file has no PixelData (7FE0,0010)"))?;
+    let plane = h.rows as usize * h.cols as usize;
     let bytes: Cow<[u8]> = match element.value() {
         Value::Primitive(p) => little_endian_samples(h, element.vr(), p.to_bytes()),
+        Value::PixelSequence(seq) if h.transfer_syntax == rle::RLE_LOSSLESS && h.bits_allocated == 32 => Cow::Owned(
+            rle::decode_frames(seq.fragments(), h.frames.len(), plane, 4)
+                .map_err(|m| VolumeError::header(&h.path, format!("the RLE Lossless pixel data: {m}")))?,
+        ),
         _ => Cow::Owned(
             obj.decode_pixel_data()
                 .map_err(|e| {
@@ -92,7 +99,6 @@ fn decode_file(h: &ImageHeader, targets: Vec<Target>) -> Result<()> {
                 .into_data(),
         ),
     };
-    let plane = h.rows as usize * h.cols as usize;
     let frame_bytes = plane * h.sample_bytes();
     let needed = h.pixel_bytes(h.frames.len());
     if (bytes.len() as u64) < needed {
@@ -214,6 +220,7 @@ mod tests {
             high_bit,
             signed,
             samples_per_pixel: 1,
+            photometric: "MONOCHROME2".into(),
             slice_thickness: None,
             spacing_between_slices: None,
             frames: vec![FramePlane { position: None, orientation: None, pixel_spacing: None, rescale: (1.0, 0.0) }],
