@@ -245,12 +245,15 @@ fn stored_bits_enhanced_frames_and_pydicoms_files_read_as_pydicom_decodes_them()
         assert_close(&values(&mf), &numbers(&w.json[name]["values"]), 1e-6, name);
     }
     let mr = read(&data.join("MR_small.dcm"), &ReadOptions::default()).unwrap();
-    for variant in ["MR_small_RLE.dcm", "MR_small_jp2klossless.dcm", "MR_small_bigendian.dcm", "MR_small_implicit.dcm"]
-    {
+    for variant in [
+        "MR_small_RLE.dcm",
+        "MR_small_jp2klossless.dcm",
+        "MR_small_bigendian.dcm",
+        "MR_small_implicit.dcm",
+        "MR_small_jpeg_ls_lossless.dcm",
+    ] {
         assert_eq!(read(&data.join(variant), &ReadOptions::default()).unwrap(), mr, "{variant}");
     }
-    let err = mdtf_err(&["info", data.join("MR_small_jpeg_ls_lossless.dcm").to_str().unwrap()]);
-    assert!(err.contains("JPEG-LS Lossless (1.2.840.10008.1.2.4.80)") && err.contains("gdcmconv --raw"), "{err}");
     let err = mdtf_err(&["info", data.join("MR_truncated.dcm").to_str().unwrap()]);
     assert!(err.contains("MR_truncated.dcm"), "{err}");
 }
@@ -288,16 +291,10 @@ fn the_mr_image_reads_the_same_in_every_decodable_transfer_syntax() {
     // and every voxel lies where dcm2niix puts it, with its value
     let dcm2niix = read(&dir.join("../Ref/1.nii"), &ReadOptions::default()).unwrap();
     assert_same_in_world(&reference, &dcm2niix, "1.dcm vs dcm2niix's Ref/1.nii");
-    for n in [2, 3, 4, 5, 6, 9] {
+    // 7 and 8 are JPEG-LS (CharLS)
+    for n in 2..=9 {
         let mf = read(&dir.join(format!("{n}.dcm")), &ReadOptions::default()).unwrap();
         assert_eq!(mf, reference, "{n}.dcm");
-    }
-    for n in [7, 8] {
-        let err = mdtf_err(&["info", dir.join(format!("{n}.dcm")).to_str().unwrap()]);
-        assert!(
-            err.contains("JPEG-LS") && err.contains("gdcmconv --raw") && err.contains(&format!("{n}.dcm")),
-            "{err}"
-        );
     }
 }
 

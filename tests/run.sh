@@ -34,6 +34,15 @@ command -v python3 >/dev/null || {
   fi
 }
 
+command -v cmake >/dev/null || {
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    say "installing cmake (apt-get; CharLS, the JPEG-LS decoder, is built with it)"
+    apt-get update -qq && apt-get install -y -qq cmake >/dev/null
+  else
+    die "cmake is missing (CharLS, the DICOM JPEG-LS decoder, is built with it): sudo apt-get install cmake"
+  fi
+}
+
 command -v dcm2niix >/dev/null || {
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
     say "installing dcm2niix (apt-get)"

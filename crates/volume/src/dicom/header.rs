@@ -13,10 +13,6 @@ use dicom_object::{DefaultDicomObject, OpenFileOptions};
 use dicom_transfer_syntax_registry::TransferSyntaxIndex;
 use std::path::{Path, PathBuf};
 
-/// Transfer syntaxes mdtf's pure-Rust decoders cannot read, with their names.
-const UNDECODABLE: &[(&str, &str)] =
-    &[("1.2.840.10008.1.2.4.80", "JPEG-LS Lossless"), ("1.2.840.10008.1.2.4.81", "JPEG-LS Near-Lossless")];
-
 /// The placement and scaling of one frame (a single-frame file has one).
 #[derive(Debug, Clone, PartialEq)]
 pub struct FramePlane {
@@ -109,10 +105,7 @@ impl ImageHeader {
 
 /// A transfer syntax UID with its name, e.g. "JPEG 2000 (Lossless Only) (1.2.840.10008.1.2.4.90)".
 pub fn transfer_syntax_name(uid: &str) -> String {
-    let name = dicom_transfer_syntax_registry::TransferSyntaxRegistry
-        .get(uid)
-        .map(|ts| ts.name().to_string())
-        .or_else(|| UNDECODABLE.iter().find(|(u, _)| *u == uid).map(|(_, n)| n.to_string()));
+    let name = dicom_transfer_syntax_registry::TransferSyntaxRegistry.get(uid).map(|ts| ts.name().to_string());
     match name {
         Some(n) => format!("{n} ({uid})"),
         None => format!("unknown transfer syntax {uid}"),
@@ -325,15 +318,6 @@ fn siemens_mosaic(obj: &InMemDicomObject, cols: u32, rows: u32) -> Option<Mosaic
 
 /// Refuses what the decoders cannot read, naming the transfer syntax and a way out.
 pub fn check_decodable(h: &ImageHeader) -> Result<()> {
-    if let Some((uid, name)) = UNDECODABLE.iter().find(|(u, _)| *u == h.transfer_syntax) {
-        return Err(VolumeError::header(
-            &h.path,
-            format!(
-                "the pixel data is compressed as {name} ({uid}), which mdtf cannot decode (no pure-Rust JPEG-LS decoder); \
-                 convert the series to an uncompressed syntax first, e.g. `gdcmconv --raw IN OUT` or `dcmdjpls IN OUT`"
-            ),
-        ));
-    }
     let known = dicom_transfer_syntax_registry::TransferSyntaxRegistry.get(&h.transfer_syntax);
     match known {
         Some(ts) if ts.can_decode_all() => {}

@@ -21,7 +21,7 @@
 //!   converted from DICOM's LPS to mdtf's RAS.
 //!
 //! Siemens MOSAIC frames are untiled into their slices ([`mosaic`]). JPEG-LS
-//! has no pure-Rust decoder: it is refused with the conversion to run.
+//! goes through CharLS (dicom-rs's `charls` feature, built with CMake).
 
 mod bounds;
 mod header;

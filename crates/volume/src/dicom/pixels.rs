@@ -46,9 +46,8 @@ pub fn decode_into(files: &[ImageHeader], slices: &[SliceRef], out: &mut [f32]) 
 pub fn check_native_sizes(files: &[ImageHeader]) -> Result<()> {
     for h in files {
         // a deflated file holds its pixels compressed: its length says nothing of them
-        let native = dicom_transfer_syntax_registry::TransferSyntaxRegistry
-            .get(&h.transfer_syntax)
-            .is_some_and(|ts| !ts.is_encapsulated_pixel_data() && h.transfer_syntax != super::bounds::DEFLATED);
+        let known = dicom_transfer_syntax_registry::TransferSyntaxRegistry.get(&h.transfer_syntax).is_some();
+        let native = known && !encapsulated(h) && h.transfer_syntax != super::bounds::DEFLATED;
         let needed = h.pixel_bytes(h.frames.len());
         let len = std::fs::metadata(&h.path).map_err(|e| VolumeError::io(&h.path, e))?.len();
         if native && len < needed {
@@ -80,6 +79,16 @@ fn decode_file(h: &ImageHeader, targets: Vec<Target>) -> Result<()> {
         .ok_or_else(|| VolumeError::header(&h.path, "the file has no PixelData (7FE0,0010)"))?;
     let plane = h.rows as usize * h.cols as usize;
     let bytes: Cow<[u8]> = match element.value() {
+        Value::Primitive(_) if encapsulated(h) => {
+            return Err(VolumeError::header(
+                &h.path,
+                format!(
+                    "the transfer syntax, {}, says the pixel data is compressed in fragments, but it is stored \
+                     uncompressed: the file is damaged or mislabelled",
+                    h.transfer_syntax_name()
+                ),
+            ));
+        }
         Value::Primitive(p) => little_endian_samples(h, element.vr(), p.to_bytes()),
         Value::PixelSequence(seq) if h.transfer_syntax == rle::RLE_LOSSLESS && h.bits_allocated == 32 => Cow::Owned(
             rle::decode_frames(seq.fragments(), h.frames.len(), plane, 4)
@@ -129,6 +138,13 @@ fn decode_file(h: &ImageHeader, targets: Vec<Target>) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Whether the file's transfer syntax keeps pixel data in fragments (JPEG, RLE, ...).
+fn encapsulated(h: &ImageHeader) -> bool {
+    dicom_transfer_syntax_registry::TransferSyntaxRegistry
+        .get(&h.transfer_syntax)
+        .is_some_and(|ts| ts.is_encapsulated_pixel_data())
 }
 
 /// Explicit VR Big Endian (retired), the one big-endian transfer syntax.
