@@ -463,6 +463,49 @@ fn every_sample_width_byte_order_and_sign_reads_as_pydicom_decodes_it() {
     }
 }
 
+/// Writes multi-frame RLE Lossless images (3 frames of 6 x 5) with pydicom's own RLE encoder into
+/// argv[1], one per bits allocated (8, 16: the encoder refuses 32, which pydicom's 15-frame
+/// rtdose_rle.dcm covers in tests/peer_test_data.rs) and sign, and prints {file: values pydicom decodes}.
+const RLE_FRAMES_PY: &str = r#"
+from pydicom.uid import RLELossless
+out, result = sys.argv[1], {}
+rng = np.random.default_rng(5)
+for bits in (8, 16):
+    for signed in (0, 1):
+        kind = ('i' if signed else 'u') + str(bits // 8)
+        info = np.iinfo(np.dtype(kind))
+        values = rng.integers(info.min, info.max, size=(3, 5, 6), dtype=np.int64, endpoint=True).astype(kind)
+        values[:, :2, :] = values[0, 0, 0]  # runs, as well as literals
+        ds = ct_dataset(ExplicitVRLittleEndian, generate_uid(), generate_uid())
+        ds.Rows, ds.Columns, ds.NumberOfFrames, ds.SamplesPerPixel, ds.PhotometricInterpretation = 5, 6, 3, 1, "MONOCHROME2"
+        ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = bits, bits, bits - 1, signed
+        ds.PixelSpacing = [1, 1]
+        ds.compress(RLELossless, values, encoding_plugin='pydicom')
+        name = f"rle_{bits}_{'signed' if signed else 'unsigned'}.dcm"
+        ds.save_as(os.path.join(out, name), enforce_file_format=True)
+        back = pydicom.dcmread(os.path.join(out, name))
+        assert back.file_meta.TransferSyntaxUID == RLELossless
+        result[name] = back.pixel_array.astype(np.float64).ravel().tolist()
+print(json.dumps(result))
+"#;
+
+#[test]
+fn rle_frames_of_8_and_16_bits_either_sign_read_as_pydicom_decodes_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let written: Value =
+        serde_json::from_str(&run_python(&format!("{PYDICOM_CT_PY}{RLE_FRAMES_PY}"), &[dir.path().to_str().unwrap()]))
+            .unwrap();
+    let files = written.as_object().unwrap();
+    assert_eq!(files.len(), 4, "2 widths x 2 signs");
+    for (name, want) in files {
+        let mf = read(&dir.path().join(name), &ReadOptions::default()).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(mf.geometry.dims, [6, 5, 3], "{name}");
+        let want: Vec<f32> = numbers(want).iter().map(|&w| w as f32).collect();
+        let got: Vec<f32> = mf.fields[0].data.iter().copied().collect();
+        assert_eq!(got, want, "{name}");
+    }
+}
+
 #[test]
 fn pydicoms_big_endian_dose_grids_read_as_pydicom_decodes_them() {
     let script = "import json, sys, pydicom, os; d = os.path.join(os.path.dirname(pydicom.__file__), 'data', 'test_files'); \

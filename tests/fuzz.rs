@@ -1,4 +1,5 @@
-//! Mutation fuzzing of every reader, in process: NIfTI (plain and gzip),
+//! Mutation fuzzing of every reader, in process: NIfTI (plain, gzip,
+//! NIfTI-2, .hdr/.img pair, Analyze 7.5),
 //! NRRD (attached, detached, gzip, ascii), MetaImage (attached, zlib,
 //! detached), TIFF, DICOM, raw, legacy VTK, VTU, pack
 //! manifests (read as the preview reads them), pipeline TOML and TF JSON.
@@ -196,6 +197,7 @@ impl Seeds {
             ("a.mha", &mf, f32o),
             ("b.mha", &u8v, u8o),
             ("m.mhd", &mf, f32o),
+            ("p.hdr", &u8v, u8o),
         ] {
             write(&dir.path().join(name), m, &o, &[]).unwrap();
         }
@@ -238,6 +240,34 @@ impl Seeds {
 
     fn bytes(&self, name: &str) -> Vec<u8> {
         std::fs::read(self.dir.path().join(name)).unwrap()
+    }
+
+    /// `b.nii` (u8, 6 x 5 x 5) with a NIfTI-2 header (nifti2.h offsets) in place of its NIfTI-1 one.
+    fn nifti2(&self) -> Vec<u8> {
+        let one = self.bytes("b.nii");
+        let (i16_at, f32_at) = (
+            |at: usize| i16::from_le_bytes([one[at], one[at + 1]]),
+            |at: usize| f32::from_le_bytes([one[at], one[at + 1], one[at + 2], one[at + 3]]),
+        );
+        let mut h = vec![0u8; 544];
+        let mut put = |at: usize, b: &[u8]| h[at..at + b.len()].copy_from_slice(b);
+        put(0, &540i32.to_le_bytes());
+        put(4, b"n+2\0\r\n\x1a\n");
+        put(12, &i16_at(70).to_le_bytes());
+        put(14, &i16_at(72).to_le_bytes());
+        for k in 0..8 {
+            put(16 + 8 * k, &i64::from(i16_at(40 + 2 * k)).to_le_bytes());
+            put(104 + 8 * k, &f64::from(f32_at(76 + 4 * k)).to_le_bytes());
+        }
+        put(168, &544i64.to_le_bytes());
+        put(176, &1.0f64.to_le_bytes());
+        put(344, &i32::from(i16_at(252)).to_le_bytes());
+        put(348, &i32::from(i16_at(254)).to_le_bytes());
+        for k in 0..18 {
+            put(352 + 8 * k, &f64::from(f32_at(256 + 4 * k)).to_le_bytes());
+        }
+        put(500, &i32::from(one[123]).to_le_bytes());
+        [h, one[352..].to_vec()].concat()
     }
 }
 
@@ -329,6 +359,11 @@ fn readers(seeds: &Seeds, dir: &Path) -> Vec<Reader> {
     // a detached header's data file stays valid; the header is mutated
     std::fs::copy(seeds.dir.path().join("d.raw"), dir.join("d.raw")).unwrap();
     std::fs::copy(seeds.dir.path().join("m.raw"), dir.join("m.raw")).unwrap();
+    std::fs::copy(seeds.dir.path().join("p.img"), dir.join("p.img")).unwrap();
+    std::fs::copy(seeds.dir.path().join("p.img"), dir.join("q.img")).unwrap();
+    // the pair's header without its NIfTI magic is an Analyze 7.5 header
+    let mut analyze = seeds.bytes("p.hdr");
+    analyze[344..348].fill(0);
     let zlib_mha = {
         let raw = std::fs::read(seeds.dir.path().join("m.raw")).unwrap();
         let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
@@ -388,6 +423,10 @@ fn readers(seeds: &Seeds, dir: &Path) -> Vec<Reader> {
             dir,
             read_volume,
         ),
+        file_reader("NIfTI-2", "n2.nii", vec![seeds.nifti2()], false, false, dir, read_volume),
+        // a pair's and an Analyze header's data file stays valid; the header is mutated
+        file_reader("NIfTI pair", "p.hdr", vec![seeds.bytes("p.hdr")], false, false, dir, read_volume),
+        file_reader("Analyze", "q.hdr", vec![analyze], false, false, dir, read_volume),
         file_reader("raw", "r.raw", vec![vec![7u8; 48]], false, false, dir, move |p| {
             let _ = read_raw(p, &raw_spec, &ReadOptions::default());
         }),
