@@ -3,7 +3,7 @@
 //! sizes, BigTIFF, Deflate and LZW pages, every sample type, and folders of
 //! numbered slices, read by mdtf value for value.
 
-use mdtf_e2e::{mdtf, run_python};
+use mdtf_e2e::{mdtf, mdtf_err, run_python};
 use mdtf_volume::{ReadOptions, read};
 use serde_json::Value;
 
@@ -27,6 +27,8 @@ save("deflate.tif", (n * 11).astype("uint16"), compression="zlib")
 save("lzw.tif", (n * 13).astype("uint16"), compression="lzw")
 save("zstd.tif", (n * 17).astype("float32"), compression="zstd")
 save("tiled-float64.tif", (n / 3).astype("float64"), tile=(16, 16))
+# a stack of 4 float slices written without photometric='minisblack': tifffile stores one planar RGBA image
+tifffile.imwrite(os.path.join(d, "four-planes.tif"), np.zeros((4, 6, 7), "float32"))
 # several channels or time points: refused, not read as z-slices with the axes mixed
 h = np.zeros((2, 3, 2, 4, 5), "uint16")
 tifffile.imwrite(os.path.join(d, "tzcyx.tif"), h, imagej=True, metadata={"axes": "TZCYX"})
@@ -78,4 +80,7 @@ fn tifffile_stacks_read_value_for_value_with_their_spacing() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1));
     assert!(err.contains("rgb.tif") && err.contains("not grayscale"), "{err}");
+    // tifffile's 4-slice trap is named, with the way out
+    let err = mdtf_err(&["info", dir.path().join("four-planes.tif").to_str().unwrap()]);
+    assert!(err.contains("RGBA") && err.contains("photometric='minisblack'"), "{err}");
 }

@@ -246,9 +246,21 @@ fn read_pages(
         let bits = match d.colortype().map_err(|e| tiff_error(path, e))? {
             ColorType::Gray(bits) => bits as u64,
             other => {
+                // tifffile.imwrite stores an array of 3 or 4 planes as one colour image unless told otherwise
+                let planes = matches!(other, ColorType::RGB(_) | ColorType::RGBA(_))
+                    && d.find_tag_unsigned::<u16>(Tag::PlanarConfiguration).ok().flatten() == Some(2);
+                let hint = if planes {
+                    "; its colour samples are stored as separate planes, as tifffile.imwrite stores a stack of 3 or \
+                     4 slices unless given photometric='minisblack'"
+                } else {
+                    ""
+                };
                 return Err(VolumeError::header(
                     path,
-                    format!("page {} is {other:?}, not grayscale: a volume needs one sample per pixel", pages + 1),
+                    format!(
+                        "page {} is {other:?}, not grayscale: a volume needs one sample per pixel{hint}",
+                        pages + 1
+                    ),
                 ));
             }
         };
