@@ -327,3 +327,59 @@ fn every_single_bit_flip_in_a_written_shard_is_caught_and_its_chunk_named() {
     std::fs::write(&shard, &original).unwrap();
     mdtf_ok(&["info", s]);
 }
+
+/// Writes with zarr-python into argv[1] an OME-Zarr 0.5 store claiming 800^3 float32 voxels in
+/// chunks of 64^3 of which it holds two (a constant 5 and a ramp from -20), fill value 0; runs `argv[2] info`
+/// on it and prints its peak RSS (KiB), its output, and the statistics numpy computes of the whole
+/// grid from what the store holds.
+const SPARSE_STORE_PYTHON: &str = r#"
+import sys, os, json, resource, subprocess, numpy as np, zarr
+path = os.path.join(sys.argv[1], 'sparse.ome.zarr')
+g = zarr.open_group(path, mode='w', zarr_format=3)
+a = g.create_array('0', shape=(800, 800, 800), dtype='float32', chunks=(64, 64, 64), fill_value=0.0,
+                   dimension_names=['z', 'y', 'x'])
+a[0:64, 0:64, 0:64] = 5.0
+ramp = np.arange(64 ** 3, dtype=np.float32).reshape(64, 64, 64) / 1000.0 - 20.0
+a[64:128, 0:64, 64:128] = ramp
+g.attrs['ome'] = {'version': '0.5', 'multiscales': [{'axes': [{'name': n, 'type': 'space', 'unit': 'micrometer'} for n in 'zyx'],
+    'datasets': [{'path': '0', 'coordinateTransformations': [{'type': 'scale', 'scale': [1.0, 1.0, 1.0]}]}]}]}
+size = sum(os.path.getsize(os.path.join(d, f)) for d, _, fs in os.walk(path) for f in fs)
+run = subprocess.run([sys.argv[2], 'info', path, '--bins', '4'], capture_output=True, text=True)
+rss = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+total = 800 ** 3
+s = 5.0 * 64 ** 3 + float(ramp.astype(np.float64).sum())
+lo, hi = float(ramp.min()), float(ramp.max())
+print(json.dumps({'bytes': size, 'rss_kib': rss, 'code': run.returncode, 'out': run.stdout, 'err': run.stderr,
+                  'mean': s / total, 'min': lo, 'max': hi}))
+"#;
+
+#[test]
+fn a_small_store_claiming_800_cubed_is_described_from_the_chunks_it_holds() {
+    let dir = tempfile::tempdir().unwrap();
+    let mdtf_bin = mdtf_e2e::mdtf_path();
+    let r: Value = serde_json::from_str(&run_python(
+        SPARSE_STORE_PYTHON,
+        &[dir.path().to_str().unwrap(), mdtf_bin.to_str().unwrap()],
+    ))
+    .unwrap();
+    let out = r["out"].as_str().unwrap();
+    assert_eq!(r["code"], 0, "{}", r["err"]);
+    assert!(r["bytes"].as_u64().unwrap() < 2 << 20, "a small store: {} bytes", r["bytes"]);
+    assert!(out.contains("800x800x800 (512000000 voxels)"), "{out}");
+    assert!(out.contains("chunks held: 0.1 % of the grid; the rest is the fill value 0"), "{out}");
+    // the statistics of the whole claimed grid: fill value included
+    let line = |key: &str| out.lines().find(|l| l.trim_start().starts_with(key)).unwrap().to_string();
+    let (lo, hi) = (r["min"].as_f64().unwrap() as f32, r["max"].as_f64().unwrap() as f32);
+    assert_eq!(line("range:"), format!("  range:     {lo} .. {hi}"));
+    let mean: f64 = line("mean:").split_whitespace().nth(1).unwrap().parse().unwrap();
+    assert!((mean - r["mean"].as_f64().unwrap()).abs() < 1e-6, "{mean} vs {}", r["mean"]);
+    let counted: u64 = out
+        .lines()
+        .filter(|l| l.contains(" | "))
+        .map(|l| l.split('|').nth(1).unwrap().split_whitespace().next().unwrap().parse::<u64>().unwrap())
+        .sum();
+    assert_eq!(counted, 512_000_000, "every voxel of the grid in the histogram");
+    // and at the cost of what it holds, not of the grid it claims (2 GB as f32)
+    let rss_mib = r["rss_kib"].as_u64().unwrap() / 1024;
+    assert!(rss_mib < 64, "peak RSS {rss_mib} MiB");
+}

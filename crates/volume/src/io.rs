@@ -158,8 +158,7 @@ pub fn read_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiField, Fi
     match Format::of_input(path) {
         Some(Format::OmeZarr) if is_store => {
             let image = crate::ome_zarr::ZarrImage::open(path, opts.level)?;
-            // a store may claim any shape (its missing chunks are the fill value): checked before any allocation
-            crate::limits::check_dims(path, &image.geometry().dims.map(|d| d as u64), image.field_count() as u64)?;
+            image.check_size()?;
             let mf = image.read(0..image.geometry().dims[2], opts.nan)?;
             Ok((mf, image.info().clone()))
         }

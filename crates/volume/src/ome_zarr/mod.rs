@@ -19,8 +19,10 @@
 //!   an axis-aligned grid. Integer types need exact values, as every writer.
 
 mod metadata;
+mod stored;
 
 pub use metadata::{Axis, Dataset, MdtfAttributes, Multiscale, Transform, multiscales_of};
+pub use stored::Unstored;
 
 use crate::dtype::{Endian, SampleType, decode_samples, encode_samples, first_unrepresentable};
 use crate::error::{Result, VolumeError};
@@ -226,6 +228,19 @@ impl ZarrImage {
     /// How many fields (channels) the image has.
     pub fn field_count(&self) -> usize {
         self.fields.len()
+    }
+
+    /// Refuses an image whose claimed grid (every field's f32 samples) would
+    /// not fit in memory, before anything is allocated for it: a store may
+    /// claim any shape, its missing chunks being the fill value.
+    pub fn check_size(&self) -> Result<()> {
+        let dims = self.geometry.dims.map(|d| d as u64);
+        crate::limits::check_dims(&self.path, &dims, self.fields.len() as u64).map(|_| ())
+    }
+
+    /// The names of the fields (channels), in order.
+    pub fn field_names(&self) -> &[String] {
+        &self.fields
     }
 
     /// What the store says about its samples, for `mdtf info`.
