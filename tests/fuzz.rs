@@ -1,7 +1,8 @@
 //! Mutation fuzzing of every reader, in process: NIfTI (plain, gzip,
 //! NIfTI-2, .hdr/.img pair, Analyze 7.5),
 //! NRRD (attached, detached, gzip, ascii), MetaImage (attached, zlib,
-//! detached), TIFF, DICOM, raw, legacy VTK, VTU, pack
+//! detached), TIFF, DICOM, OME-Zarr (group and array metadata, a shard;
+//! read as `mdtf info` reads a store), raw, legacy VTK, VTU, pack
 //! manifests (read as the preview reads them), pipeline TOML and TF JSON.
 //!
 //! Each case mutates a valid seed file (bit flips, interesting integers and
@@ -198,6 +199,7 @@ impl Seeds {
             ("b.mha", &u8v, u8o),
             ("m.mhd", &mf, f32o),
             ("p.hdr", &u8v, u8o),
+            ("s.ome.zarr", &mf, f32o),
         ] {
             write(&dir.path().join(name), m, &o, &[]).unwrap();
         }
@@ -328,6 +330,19 @@ fn tiff_seed() -> Vec<u8> {
     b
 }
 
+/// Copies the files of folder `from` (recursively) into `to`.
+fn copy_folder(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap().flatten() {
+        let target = to.join(e.file_name());
+        if e.file_type().unwrap().is_dir() {
+            copy_folder(&e.path(), &target);
+        } else {
+            std::fs::copy(e.path(), target).unwrap();
+        }
+    }
+}
+
 /// A reader of files: writes each case to `dir/name` and reads it with `f`.
 fn file_reader(
     name: &'static str,
@@ -361,6 +376,22 @@ fn readers(seeds: &Seeds, dir: &Path) -> Vec<Reader> {
     std::fs::copy(seeds.dir.path().join("m.raw"), dir.join("m.raw")).unwrap();
     std::fs::copy(seeds.dir.path().join("p.img"), dir.join("p.img")).unwrap();
     std::fs::copy(seeds.dir.path().join("p.img"), dir.join("q.img")).unwrap();
+    // three copies of a store, in each of which one file is mutated: the group's and the array's
+    // metadata and the one shard
+    for copy in ["z1", "z2", "z3"] {
+        copy_folder(&seeds.dir.path().join("s.ome.zarr"), &dir.join(copy));
+    }
+    let store_of = |levels: usize| {
+        move |p: &Path| {
+            let store = p.ancestors().nth(levels).unwrap();
+            // what `mdtf info` does: bounded by the chunks the store holds, whatever grid it claims
+            if let Ok(image) = mdtf_volume::ome_zarr::ZarrImage::open(store, 0)
+                && image.check_size().is_ok()
+            {
+                let _ = image.visit_stored(|_, _| {});
+            }
+        }
+    };
     // the pair's header without its NIfTI magic is an Analyze 7.5 header
     let mut analyze = seeds.bytes("p.hdr");
     analyze[344..348].fill(0);
@@ -427,6 +458,33 @@ fn readers(seeds: &Seeds, dir: &Path) -> Vec<Reader> {
         // a pair's and an Analyze header's data file stays valid; the header is mutated
         file_reader("NIfTI pair", "p.hdr", vec![seeds.bytes("p.hdr")], false, false, dir, read_volume),
         file_reader("Analyze", "q.hdr", vec![analyze], false, false, dir, read_volume),
+        file_reader(
+            "OME-Zarr group metadata",
+            "z1/zarr.json",
+            vec![seeds.bytes("s.ome.zarr/zarr.json")],
+            true,
+            false,
+            dir,
+            store_of(1),
+        ),
+        file_reader(
+            "OME-Zarr array metadata",
+            "z2/0/zarr.json",
+            vec![seeds.bytes("s.ome.zarr/0/zarr.json")],
+            true,
+            false,
+            dir,
+            store_of(2),
+        ),
+        file_reader(
+            "OME-Zarr shard",
+            "z3/0/c/0/0/0",
+            vec![seeds.bytes("s.ome.zarr/0/c/0/0/0")],
+            false,
+            false,
+            dir,
+            store_of(5),
+        ),
         file_reader("raw", "r.raw", vec![vec![7u8; 48]], false, false, dir, move |p| {
             let _ = read_raw(p, &raw_spec, &ReadOptions::default());
         }),

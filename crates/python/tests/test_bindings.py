@@ -201,6 +201,30 @@ def test_a_missing_file_is_both_an_mdtf_error_and_a_file_not_found_error(tmp_pat
     assert not (tmp_path / "out").exists()
 
 
+def test_arrays_mdtf_cannot_take_as_they_are_are_value_errors_that_say_why(tmp_path: Path) -> None:
+    real = np.zeros((4, 5, 6))
+    # complex: the imaginary part is not dropped without a word
+    with pytest.raises(ValueError, match=r"complex values \(complex128\).*\.real") as caught:
+        mdtf.derive(real + 1j)
+    assert isinstance(caught.value, mdtf.MdtfError)
+    # float64 beyond float32's range: refused with how many and how large, not turned into inf
+    big = real.copy()
+    big[1, 2, 3], big[0, 0, 0] = 1e39, -5e40
+    with pytest.raises(mdtf.MdtfValueError, match=r"2 value\(s\) up to 5e\+40 exceed float32's range"):
+        mdtf.write(tmp_path / "big.nii", big)
+    assert not (tmp_path / "big.nii").exists()
+    # an infinity that was one already is not an overflow: written as it is
+    inf = real.copy()
+    inf[0, 0, 0] = np.inf
+    mdtf.write(tmp_path / "inf.nii", inf)
+    assert np.isinf(np.asarray(nibabel.load(tmp_path / "inf.nii").dataobj)[0, 0, 0])
+    # fields, channels and a mask of different shapes
+    with pytest.raises(ValueError, match=r"share one \(z, y, x\) shape: a \(4, 5, 6\), b \(4, 5, 7\)"):
+        mdtf.write(tmp_path / "two.nii", {"a": real, "b": np.zeros((4, 5, 7))})
+    with pytest.raises(mdtf.MdtfValueError, match="mask"):
+        mdtf.histogram({"v": real}, mask=np.ones((4, 5, 5), bool))
+
+
 def test_a_read_error_names_the_file_once(tmp_path: Path) -> None:
     bad = tmp_path / "bad.nii"
     bad.write_bytes(b"\0" * 400)

@@ -18,7 +18,10 @@ Errors of mdtf's stages are raised as :class:`MdtfError` with the message
 the ``mdtf`` command prints; unknown names of items, kernels or modes as
 ``ValueError``; a file or folder that does not exist as
 :class:`MdtfFileNotFoundError`, both an ``MdtfError`` and a
-``FileNotFoundError`` (``errno.ENOENT``, its ``filename`` the path).
+``FileNotFoundError`` (``errno.ENOENT``, its ``filename`` the path); arrays
+mdtf cannot take as they are (complex values, values beyond float32's range,
+fields or a mask of another shape) as :class:`MdtfValueError`, both an
+``MdtfError`` and a ``ValueError``.
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from ._mdtf import MdtfError, set_threads, threads
 __all__ = [
     "MdtfError",
     "MdtfFileNotFoundError",
+    "MdtfValueError",
     "Volume",
     "Histogram",
     "Boundary",
@@ -61,6 +65,12 @@ __version__: str = _mdtf.version()
 class MdtfFileNotFoundError(MdtfError, FileNotFoundError):
     """A file or folder given to mdtf does not exist: caught as ``MdtfError``
     and as ``FileNotFoundError`` (``OSError``) alike."""
+
+
+class MdtfValueError(MdtfError, ValueError):
+    """An array mdtf cannot take as it is (complex, beyond float32's range,
+    another shape than its companions): caught as ``MdtfError`` and as
+    ``ValueError`` alike."""
 
 
 def _existing(path: str | os.PathLike[str]) -> str:
@@ -92,11 +102,34 @@ def _triple(value: SpacingLike, name: str) -> Triple:
 
 
 def _f32(a: Any, name: str) -> np.ndarray:
-    """A C-contiguous float32 (z, y, x) array (no copy when it already is one)."""
-    arr = np.ascontiguousarray(a, dtype=np.float32)
+    """A C-contiguous float32 (z, y, x) array (no copy when it already is one).
+    Complex values, and finite values beyond float32's range (which the cast
+    would turn into infinities), are refused rather than changed."""
+    src = np.asarray(a)
+    if np.iscomplexobj(src):
+        raise MdtfValueError(
+            f"{name}: complex values ({src.dtype}); mdtf takes real volumes: pass .real, .imag or abs() of the array"
+        )
+    arr = np.ascontiguousarray(src, dtype=np.float32)
     if arr.ndim != 3:
-        raise ValueError(f"{name}: expected a 3-D (z, y, x) array, got shape {arr.shape}")
+        raise MdtfValueError(f"{name}: expected a 3-D (z, y, x) array, got shape {arr.shape}")
+    if src.dtype.kind == "f" and src.dtype.itemsize > 4 and np.isinf(arr).any():
+        overflow = np.isinf(arr) & np.isfinite(src)
+        if overflow.any():
+            big = float(np.abs(src[overflow]).max())
+            raise MdtfValueError(
+                f"{name}: {int(overflow.sum())} value(s) up to {big:.6g} exceed float32's range "
+                f"(±{float(np.finfo(np.float32).max):.6g}), in which mdtf computes: scale the array first"
+            )
     return arr
+
+
+def _same_shape(arrays: Sequence[tuple[str, np.ndarray]], what: str) -> None:
+    """Refuses arrays of different shapes, naming them."""
+    shapes = {n: a.shape for n, a in arrays}
+    if len(set(shapes.values())) > 1:
+        listed = ", ".join(f"{n} {s}" for n, s in shapes.items())
+        raise MdtfValueError(f"{what} must share one (z, y, x) shape: {listed}")
 
 
 def _fields(data: Any, name: str = "data") -> list[tuple[str, np.ndarray]]:
@@ -104,7 +137,9 @@ def _fields(data: Any, name: str = "data") -> list[tuple[str, np.ndarray]]:
     if isinstance(data, Volume):
         data = data.fields
     if isinstance(data, Mapping):
-        return [(str(k), _f32(v, f"{name}[{k!r}]")) for k, v in data.items()]
+        fields = [(str(k), _f32(v, f"{name}[{k!r}]")) for k, v in data.items()]
+        _same_shape(fields, f"the fields of {name}")
+        return fields
     return [("v", _f32(data, name))]
 
 
@@ -299,6 +334,7 @@ def histogram(
         axes.append((n, None if r is None else (float(r[0]), float(r[1])), None if b is None else int(b)))
     arrays = [_f32(channels[n], n) for n in names]
     m = None if mask is None else np.ascontiguousarray(mask, dtype=bool)
+    _same_shape(list(zip(names, arrays)) + ([] if m is None else [("mask", m)]), "the channels and the mask")
     counts, out_axes = _mdtf.histogram(arrays, axes, m)
     return Histogram(counts=counts, axes=out_axes)
 
