@@ -32,7 +32,7 @@ use crate::volume::{Field, MultiField};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use zarrs::array::{Array, ArrayBuilder, ArrayBytes, ArraySubset, data_type};
+use zarrs::array::{Array, ArrayBuilder, ArrayBytes, ArrayShardedExt, ArraySubset, data_type};
 use zarrs::filesystem::FilesystemStore;
 
 /// Planes of a written chunk along z, and its edge in y and x.
@@ -144,6 +144,7 @@ impl ZarrImage {
         }
         let roles = roles_of(path, &axes, &shape)?;
         let ty = sample_type_of(path, array.data_type())?;
+        check_chunk_shapes(path, &array, ty)?;
         let at = |role: Role| roles.iter().position(|&r| r == role);
         let mut dims = [1usize; 3];
         let (mut spacing, mut origin) = ([1.0f64; 3], [0.0f64; 3]);
@@ -302,6 +303,35 @@ impl ZarrImage {
             .find(|c| self.array.retrieve_chunk_if_exists::<ArrayBytes<'static>>(c).is_err())?;
         Some(format!("reading chunk {} (its file in the store)", self.array.chunk_key(&bad).as_str()))
     }
+}
+
+/// The most bytes one chunk (or subchunk) may decode to: far above any
+/// store's chunks (OME-Zarr writers use megabytes), far below a product that
+/// overflows the codecs' arithmetic.
+const MAX_CHUNK_BYTES: u64 = 1 << 36;
+
+/// Refuses chunk (and subchunk) shapes whose decoded size is absurd, before a
+/// codec multiplies them out (a shape of 2^64 - 1 overflowed inside zarrs).
+fn check_chunk_shapes(path: &Path, array: &Array<FilesystemStore>, ty: SampleType) -> Result<()> {
+    let origin = vec![0u64; array.dimensionality()];
+    let chunk: Option<Vec<u64>> =
+        array.chunk_grid().chunk_shape(&origin).ok().flatten().map(|c| c.iter().map(|n| n.get()).collect());
+    let sub: Option<Vec<u64>> = array.subchunk_shape().map(|c| c.iter().map(|n| n.get()).collect());
+    for (what, shape) in [("chunk", chunk), ("subchunk", sub)] {
+        let Some(shape) = shape else { continue };
+        let bytes = shape.iter().try_fold(ty.size() as u64, |acc, &n| acc.checked_mul(n));
+        if bytes.is_none_or(|b| b > MAX_CHUNK_BYTES) {
+            return Err(VolumeError::header(
+                path,
+                format!(
+                    "a {what} shape of {shape:?} ({} bytes of {}): not a shape a store holds (at most {MAX_CHUNK_BYTES} bytes a {what})",
+                    bytes.map_or("over 2^64".to_string(), |b| b.to_string()),
+                    ty.name()
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Whether the oriented geometry `o` (from mdtf's attributes) places the
