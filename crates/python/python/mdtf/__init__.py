@@ -110,7 +110,8 @@ def _f32(a: Any, name: str) -> np.ndarray:
         raise MdtfValueError(
             f"{name}: complex values ({src.dtype}); mdtf takes real volumes: pass .real, .imag or abs() of the array"
         )
-    arr = np.ascontiguousarray(src, dtype=np.float32)
+    with np.errstate(over="ignore"):  # an overflow is reported below, with its count
+        arr = np.ascontiguousarray(src, dtype=np.float32)
     if arr.ndim != 3:
         raise MdtfValueError(f"{name}: expected a 3-D (z, y, x) array, got shape {arr.shape}")
     if src.dtype.kind == "f" and src.dtype.itemsize > 4 and np.isinf(arr).any():
