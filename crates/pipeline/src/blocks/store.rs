@@ -84,8 +84,7 @@ impl ChannelStore {
     fn write_at(&mut self, name: &str, offset: u64, samples: &[f32]) -> std::io::Result<()> {
         self.create_channel(name)?;
         let Some(file) = self.files.get_mut(name) else { return Err(missing(name)) };
-        file.seek(SeekFrom::Start(offset))?;
-        file.write_all(bytemuck::cast_slice(samples))
+        write_sparse(file, offset, bytemuck::cast_slice(samples))
     }
 
     /// Writes a volume of planes `first..` of channel `name`.
@@ -230,14 +229,64 @@ fn write_rows(
 ) -> std::io::Result<()> {
     let [nx, ny, _] = geometry.dims;
     if rows.start == 0 && rows.end == ny {
-        file.seek(SeekFrom::Start((first * nx * ny * 4) as u64))?;
-        return file.write_all(bytemuck::cast_slice(v.samples()));
+        return write_sparse(file, (first * nx * ny * 4) as u64, bytemuck::cast_slice(v.samples()));
     }
     for (k, plane) in v.samples().chunks((nx * rows.len()).max(1)).enumerate() {
-        file.seek(SeekFrom::Start((((first + k) * ny + rows.start) * nx * 4) as u64))?;
-        file.write_all(bytemuck::cast_slice(plane))?;
+        write_sparse(file, (((first + k) * ny + rows.start) * nx * 4) as u64, bytemuck::cast_slice(plane))?;
     }
     Ok(())
+}
+
+/// Bytes of a block [`write_sparse`] leaves as a hole when it is all zero.
+const HOLE_BLOCK: usize = 64 << 10;
+
+/// Writes `bytes` at `offset` of `file`, leaving blocks of zero bytes as holes
+/// (punched where the file already has data there), so that a channel of a
+/// sparse input, mostly its fill value 0, costs the disk of what it holds
+/// rather than of its grid. Holes read back as zeros. Where the file system
+/// cannot punch holes, the zeros are written.
+fn write_sparse(file: &mut File, offset: u64, bytes: &[u8]) -> std::io::Result<()> {
+    let mut at = 0;
+    let mut punched_last = false;
+    while at < bytes.len() {
+        let zero = |b: &[u8]| b.iter().all(|&x| x == 0);
+        let block = |k: usize| &bytes[k..(k + HOLE_BLOCK).min(bytes.len())];
+        let is_zero = zero(block(at));
+        let mut run_end = (at + HOLE_BLOCK).min(bytes.len());
+        while run_end < bytes.len() && zero(block(run_end)) == is_zero {
+            run_end = (run_end + HOLE_BLOCK).min(bytes.len());
+        }
+        let run = &bytes[at..run_end];
+        punched_last = is_zero && punch_hole(file, offset + at as u64, run.len() as u64);
+        if !punched_last {
+            file.seek(SeekFrom::Start(offset + at as u64))?;
+            file.write_all(run)?;
+        }
+        at = run_end;
+    }
+    // a hole punched past the end does not lengthen the file: its last byte
+    // written does (never set_len, which could cut what another task of the
+    // run wrote further on meanwhile)
+    if punched_last && let Some(last) = bytes.len().checked_sub(1) {
+        file.seek(SeekFrom::Start(offset + last as u64))?;
+        file.write_all(&bytes[last..])?;
+    }
+    Ok(())
+}
+
+/// Makes `len` bytes at `offset` of `file` a hole (zeros on read); false
+/// where the file system or the platform cannot.
+fn punch_hole(file: &File, offset: u64, len: u64) -> bool {
+    #[cfg(target_os = "linux")]
+    {
+        use rustix::fs::{FallocateFlags, fallocate};
+        fallocate(file, FallocateFlags::PUNCH_HOLE | FallocateFlags::KEEP_SIZE, offset, len).is_ok()
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = (file, offset, len);
+        false
+    }
 }
 
 fn missing(name: &str) -> std::io::Error {
@@ -247,6 +296,44 @@ fn missing(name: &str) -> std::io::Error {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn zero_blocks_are_holes_that_read_back_as_zeros_even_over_old_data() {
+        use std::os::unix::fs::MetadataExt;
+        let dir = tempfile::tempdir().unwrap();
+        let g = Geometry::new([256, 256, 8], [1.0; 3]);
+        let mut store = ChannelStore::create(dir.path().join("s"), g.clone()).unwrap();
+        let plane = 256 * 256;
+        // planes 0..8 of a sparse channel: a few non-zero samples in plane 2, -0.0 (not zero bits) in plane 5
+        let mut samples = vec![0.0f32; 8 * plane];
+        samples[2 * plane + 7] = 3.5;
+        samples[5 * plane + 100] = -0.0;
+        store.put("v", 0, &samples).unwrap();
+        let back = store.samples("v", 0..8).unwrap();
+        assert_eq!(
+            back.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            samples.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        );
+        let file = dir.path().join("s/v.f32");
+        let meta = std::fs::metadata(&file).unwrap();
+        assert_eq!(meta.len(), (8 * plane * 4) as u64, "full length");
+        // 2 MiB of samples, of which two 64 KiB blocks hold data (where the file system punches holes)
+        let on_disk = meta.blocks() * 512;
+        if on_disk < meta.len() {
+            assert!(on_disk <= 4 * (64 << 10), "{on_disk} bytes on disk");
+        }
+        // rewriting data with zeros punches it out: it reads back as zeros
+        store.put("v", 2, &vec![0.0f32; plane]).unwrap();
+        assert!(store.samples("v", 2..3).unwrap().iter().all(|v| v.to_bits() == 0));
+        // a zero block at the end of a later write still lengthens the file
+        let mut tail = vec![0.0f32; 2 * plane];
+        tail[10] = 1.0;
+        let mut longer = ChannelStore::create(dir.path().join("t"), Geometry::new([256, 256, 10], [1.0; 3])).unwrap();
+        longer.put("w", 8, &tail).unwrap();
+        assert_eq!(std::fs::metadata(dir.path().join("t/w.f32")).unwrap().len(), (10 * plane * 4) as u64);
+        assert_eq!(longer.samples("w", 8..10).unwrap(), tail);
+        assert!(longer.samples("w", 0..8).unwrap().iter().all(|&v| v == 0.0));
+    }
 
     #[test]
     fn planes_come_back_as_written_in_any_order_of_writes() {
