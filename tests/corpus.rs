@@ -441,6 +441,7 @@ fn readers() -> Vec<Case> {
             std::fs::write(d.join("idx.vtk"), tet_vtk("CELLS 1 5\n4 0 1 2 7\n")).unwrap();
             args(&["tetra", "idx.vtk", "-o", "out"])
         }),
+        info_of("cutbin.vtk", [&b"# vtk DataFile Version 4.2\nt\nBINARY\nDATASET UNSTRUCTURED_GRID\nPOINTS 4 float\n"[..], &[0u8; 10]].concat(), &["cutbin.vtk", "binary", "POINTS 4 needs 48 bytes", "only 10 follow"]),
         info_of("empty.vtu", Vec::new(), &["empty.vtu"]),
         info_of("count.vtu", b"<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\">\n<UnstructuredGrid>\n<Piece NumberOfPoints=\"99999999999999999999\" NumberOfCells=\"1\">\n</Piece></UnstructuredGrid></VTKFile>\n".to_vec(), &["count.vtu", "NumberOfPoints=\"99999999999999999999\" is not a count"]),
         info_of("notxml.vtu", b"<VTKFile type=\"UnstructuredGrid\"><Piece NumberOfPoints=\"x\"".to_vec(), &["NumberOfPoints=\"x\" is not a count"]),

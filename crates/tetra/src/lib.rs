@@ -16,6 +16,7 @@ mod budget;
 mod cells;
 mod from_volume;
 mod gradient;
+mod legacy_binary_check;
 mod legacy_check;
 mod mesh;
 mod pack_mesh;

@@ -123,8 +123,13 @@ fn load_piece(path: &Path) -> Result<UnstructuredGridPiece, TetraError> {
     }
     // what is wrong, in the file's own terms, when the parser fails
     let explained = || {
-        let text = String::from_utf8_lossy(&std::fs::read(path).ok()?).into_owned();
+        let bytes = std::fs::read(path).ok()?;
+        let text = String::from_utf8_lossy(&bytes).into_owned();
+        let binary = text.lines().nth(2).is_some_and(|l| l.trim().eq_ignore_ascii_case("BINARY"));
         match ext.as_str() {
+            "vtk" if binary => {
+                crate::legacy_binary_check::explain(&bytes).map(|why| format!("malformed legacy VTK (binary): {why}"))
+            }
             "vtk" => crate::legacy_check::explain(&text).map(|why| format!("malformed legacy VTK: {why}")),
             _ => piece_counts_problem(&text).map(|why| format!("malformed VTU: {why}")),
         }
