@@ -683,10 +683,12 @@ fn run_cases(cases: Vec<Case>) -> usize {
 #[test]
 fn every_malformed_input_is_refused_by_name_and_changes_nothing() {
     let n = run_cases(readers());
+    println!("{n} reader cases, each refused by name with nothing changed");
     assert!(n >= 60, "the reader corpus has {n} cases");
 }
 
 #[test]
 fn no_output_replaces_mixes_with_or_overwrites_a_users_file() {
-    run_cases(outputs());
+    let n = run_cases(outputs());
+    println!("{n} output cases, no user's file replaced, mixed with or overwritten");
 }
