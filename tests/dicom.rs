@@ -479,7 +479,9 @@ for bits in (8, 16):
         ds = ct_dataset(ExplicitVRLittleEndian, generate_uid(), generate_uid())
         ds.Rows, ds.Columns, ds.NumberOfFrames, ds.SamplesPerPixel, ds.PhotometricInterpretation = 5, 6, 3, 1, "MONOCHROME2"
         ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = bits, bits, bits - 1, signed
-        ds.PixelSpacing = [1, 1]
+        # frames placed along the normal by offsets, as RT dose grids place theirs
+        ds.PixelSpacing, ds.ImageOrientationPatient, ds.ImagePositionPatient = [1, 1], [1, 0, 0, 0, 1, 0], [0, 0, 0]
+        ds.GridFrameOffsetVector = [0, 1, 2]
         ds.compress(RLELossless, values, encoding_plugin='pydicom')
         name = f"rle_{bits}_{'signed' if signed else 'unsigned'}.dcm"
         ds.save_as(os.path.join(out, name), enforce_file_format=True)
