@@ -102,6 +102,43 @@ impl GaussianPrimitive {
         })
     }
 
+    /// A lower bound of the density's exponent, ||K (v - c)||^2 (over g^2 for
+    /// a triangular primitive), anywhere in the box of coordinates
+    /// `lo[i]..=hi[i]` (the m fields, then g for a triangular one), by
+    /// interval arithmetic on each row of K. The density is at most
+    /// exp(-bound) in the box, and so is the segment integral between two
+    /// points of it (the box is convex). +inf where a triangular primitive's
+    /// g is not positive in the whole box (its density is 0 there).
+    pub fn exponent_lower_bound(&self, lo: &[f64], hi: &[f64]) -> f64 {
+        let mut bound = 0.0;
+        for row in &self.k {
+            // the interval of K_i . (v - c) over the box
+            let (mut a, mut b) = (0.0, 0.0);
+            for ((k, c), (l, h)) in row.iter().zip(&self.centre).zip(lo.iter().zip(hi)) {
+                let (x, y) = (k * (l - c), k * (h - c));
+                a += x.min(y);
+                b += x.max(y);
+            }
+            let nearest = if a > 0.0 {
+                a
+            } else if b < 0.0 {
+                -b
+            } else {
+                0.0
+            };
+            bound += nearest * nearest;
+        }
+        if self.triangular {
+            let m = self.centre.len();
+            let g_high = hi.get(m).copied().unwrap_or(0.0);
+            if g_high <= 0.0 {
+                return f64::INFINITY;
+            }
+            bound /= g_high * g_high;
+        }
+        if bound.is_nan() { 0.0 } else { bound }
+    }
+
     /// The mean density over the segment from v1 to v2 with linearly varying
     /// data, integral of rho(v1 + t (v2 - v1)) over t in [0, 1] (eq. 11; eq. 14 in the limit).
     /// For a triangular primitive g is held at the endpoints' mean (section
@@ -286,6 +323,46 @@ pub fn erf_difference_table() -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_exponent_bound_holds_at_every_point_of_a_box_and_is_reached_at_its_nearest() {
+        let full = GaussianPrimitive {
+            centre: vec![100.0, 40.0],
+            k: vec![vec![0.05, 0.02], vec![-0.01, 0.08]],
+            alpha_max: 2.0,
+            colour: [1.0, 0.5, 0.0],
+            triangular: false,
+        };
+        let tri = GaussianPrimitive { k: vec![vec![0.5]], centre: vec![100.0], triangular: true, ..full.clone() };
+        let mut state = 9u64;
+        let mut uniform = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..200 {
+            let (lo, hi): (Vec<f64>, Vec<f64>) = (0..3)
+                .map(|_| {
+                    let (a, b) = (uniform() * 300.0 - 50.0, uniform() * 300.0 - 50.0);
+                    (a.min(b), a.max(b))
+                })
+                .unzip();
+            for gp in [&full, &tri] {
+                let bound = gp.exponent_lower_bound(&lo, &hi);
+                // brute force: the density at points of the box never exceeds exp(-bound)
+                for _ in 0..50 {
+                    let v: Vec<f64> = (0..3).map(|k| lo[k] + uniform() * (hi[k] - lo[k])).collect();
+                    let most = (-bound).exp();
+                    assert!(gp.density(&v) <= most * (1.0 + 1e-12) + 1e-300, "{lo:?} {hi:?} {v:?}");
+                }
+            }
+        }
+        // a box around the centre bounds nothing; a point box is exact
+        assert_eq!(full.exponent_lower_bound(&[90.0, 30.0], &[110.0, 50.0]), 0.0);
+        let at = [130.0, 10.0];
+        let exact = -full.density(&at).ln();
+        assert!((full.exponent_lower_bound(&at, &at) - exact).abs() < 1e-9 * exact);
+        assert_eq!(tri.exponent_lower_bound(&[0.0, -5.0], &[200.0, 0.0]), f64::INFINITY);
+    }
 
     fn simpson(f: impl Fn(f64) -> f64, n: usize) -> f64 {
         let h = 1.0 / n as f64;

@@ -346,6 +346,50 @@ fn visible_distance_blocks(alpha_d: &Table, distance: &[f32], dims: [usize; 3]) 
     })
 }
 
+/// The most a skipped block may change a pixel, in 8-bit levels (a pixel
+/// changes only where its exact value lies this close to a rounding edge).
+const GAUSSIAN_SKIP_TOLERANCE: f64 = 1e-3;
+
+/// The exponent beyond which the Gaussian primitives add less than
+/// [`GAUSSIAN_SKIP_TOLERANCE`] of a level to any pixel, for rays of at most
+/// `path` voxels: each sample adds at most 1 - exp(-l sum_k tau_k e^-E) <=
+/// l sum_k tau_k e^-E of opacity (and as much colour), and the samples of a
+/// ray sum to `path` voxels.
+fn gaussian_far_exponent(primitives: &[mdtf_pack::GaussianPrimitive], path: f64) -> f64 {
+    let tau: f64 = primitives.iter().map(|gp| gp.alpha_max.abs()).sum();
+    (tau * path.max(1.0) * 255.0 / GAUSSIAN_SKIP_TOLERANCE).ln().max(0.0)
+}
+
+/// For the Gaussian classifier: per block (as [`visible_blocks`]), whether
+/// any primitive can add anything there: a block whose box of TF coordinates
+/// (each channel's min..max, the square root of the last where the
+/// classifier takes it) keeps every primitive's exponent at least `far`
+/// ([`gaussian_far_exponent`]) is skipped. A block holding NaN shows.
+fn visible_gaussian_blocks(
+    primitives: &[mdtf_pack::GaussianPrimitive],
+    chans: &[Option<&[f32]>],
+    sqrt_last: bool,
+    far: f64,
+    dims: [usize; 3],
+) -> (Vec<bool>, [usize; 3]) {
+    per_block(dims, |lo, hi| {
+        let mut low = Vec::with_capacity(chans.len());
+        let mut high = Vec::with_capacity(chans.len());
+        for (k, c) in chans.iter().enumerate() {
+            let (mut a, mut b) = c.map_or((0.0, 0.0), |d| block_range(d, dims, lo, hi));
+            if a > b || a.is_nan() || b.is_nan() {
+                return true;
+            }
+            if sqrt_last && k + 1 == chans.len() {
+                (a, b) = (a.max(0.0).sqrt(), b.max(0.0).sqrt());
+            }
+            low.push(a as f64);
+            high.push(b as f64);
+        }
+        primitives.iter().any(|gp| gp.exponent_lower_bound(&low, &high) < far)
+    })
+}
+
 /// `visible(lo, hi)` for every block of BLOCK^3 cells (voxel ranges lo..hi
 /// per axis, the next voxel included), in parallel; and the block counts.
 fn per_block(dims: [usize; 3], visible: impl Fn([usize; 3], [usize; 3]) -> bool + Sync) -> (Vec<bool>, [usize; 3]) {
@@ -535,6 +579,10 @@ fn render_impl(
         Classifier::Distance { alpha_d, .. } if skip_empty => {
             distance.map(|d| visible_distance_blocks(alpha_d, d, dims))
         }
+        Classifier::Gaussian { primitives, sqrt_last, .. } if skip_empty => {
+            let far = gaussian_far_exponent(primitives, steps as f64 * step_vox);
+            Some(visible_gaussian_blocks(primitives, &table_chans, *sqrt_last, far, dims))
+        }
         // a product is 0 wherever one factor is: a block shows only if every factor can there
         Classifier::Product { factors, .. } if skip_empty && !factors.is_empty() => {
             let mut at = 0;
@@ -582,6 +630,8 @@ fn render_impl(
             // and its TF coordinates once the chord classifier computed them
             let mut prev: Option<(Cell, usize, [f64; 3])> = None;
             let mut prev_coords: Option<[f32; 4]> = None;
+            // the sample before this one was skipped: an analytic Gaussian segment starts there
+            let mut skipped_before = false;
             let mut entered = false;
             for s in first_step(origin, dir, &ext, step_world)..steps {
                 let pw = [0, 1, 2].map(|a| origin[a] + (s as f64 + 0.5) * step_world * dir[a]);
@@ -605,8 +655,10 @@ fn render_impl(
                 {
                     // (only the chord search reads the previous sample across a skip)
                     prev = None;
+                    skipped_before = true;
                     continue;
                 }
+                let resumed = std::mem::take(&mut skipped_before);
                 let cell = Cell::at(dims, p);
                 let prev_here = prev.replace((cell, block, p));
                 let prev_coords_here = prev_coords.take();
@@ -688,11 +740,21 @@ fn render_impl(
                         }
                     }
                     Classifier::Gaussian { primitives, channels: _, analytic, sqrt_last } => {
-                        here.clear();
-                        here.extend(table_chans.iter().map(|&c| sample(c) as f64));
-                        if *sqrt_last && let Some(last) = here.last_mut() {
-                            *last = last.max(0.0).sqrt();
+                        let coords_at = |cell: &Cell, out: &mut Vec<f64>| {
+                            out.clear();
+                            out.extend(table_chans.iter().map(|&c| c.map_or(0.0, |d| cell.sample(d)) as f64));
+                            if *sqrt_last && let Some(last) = out.last_mut() {
+                                *last = last.max(0.0).sqrt();
+                            }
+                        };
+                        if *analytic && resumed {
+                            // the segment starts at the skipped sample before: its coordinates, as
+                            // the renderer without skipping had them
+                            let pw0 = [0, 1, 2].map(|a| origin[a] + (s as f64 - 0.5) * step_world * dir[a]);
+                            coords_at(&Cell::at(dims, [0, 1, 2].map(|a| pw0[a] / g.spacing[a])), &mut previous);
+                            has_previous = true;
                         }
+                        coords_at(&cell, &mut here);
                         let from_previous = *analytic && has_previous;
                         let (mut depth, mut c) = (0.0, [0.0f64; 3]);
                         for gp in primitives {
