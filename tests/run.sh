@@ -25,32 +25,21 @@ say() { printf '== %s\n' "$*" >&2; }
 die() { printf 'error: %s\n' "$*" >&2; exit 1; }
 
 command -v cargo >/dev/null || die "cargo is missing: install the Rust toolchain (https://rustup.rs), then run this again"
-command -v python3 >/dev/null || {
+# need COMMAND WHY PACKAGE...: the Debian packages installed with apt-get as root, else the command to run
+need() {
+  local cmd=$1 why=$2
+  shift 2
+  command -v "$cmd" >/dev/null && return 0
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
-    say "installing python3 (apt-get)"
-    apt-get update -qq && apt-get install -y -qq python3 python3-venv >/dev/null
+    say "installing $* (apt-get; $why)"
+    apt-get update -qq && apt-get install -y -qq "$@" >/dev/null
   else
-    die "python3 is missing: install it (Debian/Ubuntu: sudo apt-get install python3 python3-venv)"
+    die "$cmd is missing ($why): sudo apt-get install $*"
   fi
 }
-
-command -v cmake >/dev/null || {
-  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
-    say "installing cmake (apt-get; CharLS, the JPEG-LS decoder, is built with it)"
-    apt-get update -qq && apt-get install -y -qq cmake >/dev/null
-  else
-    die "cmake is missing (CharLS, the DICOM JPEG-LS decoder, is built with it): sudo apt-get install cmake"
-  fi
-}
-
-command -v dcm2niix >/dev/null || {
-  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
-    say "installing dcm2niix (apt-get)"
-    apt-get update -qq && apt-get install -y -qq dcm2niix >/dev/null
-  else
-    die "dcm2niix is missing (the DICOM tests compare with it): sudo apt-get install dcm2niix"
-  fi
-}
+need python3 "the tests' reference packages run in it" python3 python3-venv
+need cmake "CharLS, the DICOM JPEG-LS decoder, is built with it" cmake
+need dcm2niix "the DICOM tests compare with it" dcm2niix
 
 # what the export tests run: pvbatch (Debian's ParaView) under xvfb-run, and the vtk wheel offscreen through Mesa's EGL
 missing=()
