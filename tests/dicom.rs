@@ -508,6 +508,42 @@ fn rle_frames_of_8_and_16_bits_either_sign_read_as_pydicom_decodes_them() {
     }
 }
 
+/// Writes into argv[1] a multi-frame image with no geometry at all (no position, orientation or
+/// pixel spacing, as a cine or a secondary capture has): 4 frames of 6 x 5, SliceThickness 2.5 in
+/// `thick.dcm` and none in `bare.dcm`; prints the values pydicom decodes, frame after frame.
+const BARE_FRAMES_PY: &str = r#"
+out = sys.argv[1]
+values = (np.arange(4 * 5 * 6).reshape(4, 5, 6) * 7 % 1000).astype(np.uint16)
+for name, thickness in [("thick.dcm", 2.5), ("bare.dcm", None)]:
+    ds = ct_dataset(ExplicitVRLittleEndian, generate_uid(), generate_uid())
+    ds.Rows, ds.Columns, ds.NumberOfFrames, ds.SamplesPerPixel, ds.PhotometricInterpretation = 5, 6, 4, 1, "MONOCHROME2"
+    ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 16, 16, 15, 0
+    if thickness is not None:
+        ds.SliceThickness = thickness
+    ds.PixelData = values.tobytes()
+    ds.save_as(os.path.join(out, name), enforce_file_format=True)
+print(json.dumps(pydicom.dcmread(os.path.join(out, "bare.dcm")).pixel_array.astype(float).ravel().tolist()))
+"#;
+
+#[test]
+fn a_multi_frame_image_without_geometry_stacks_its_frames_in_file_order_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let want: Value =
+        serde_json::from_str(&run_python(&format!("{PYDICOM_CT_PY}{BARE_FRAMES_PY}"), &[dir.path().to_str().unwrap()]))
+            .unwrap();
+    for (name, gap, said) in
+        [("thick.dcm", 2.5, "2.5 mm apart (SliceThickness)"), ("bare.dcm", 1.0, "1 mm apart (assumed)")]
+    {
+        let path = dir.path().join(name);
+        let (mf, info) = read_with_info(&path, &ReadOptions::default()).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(mf.geometry.dims, [6, 5, 4], "{name}");
+        assert_eq!(mf.geometry.spacing, [1.0, 1.0, gap], "{name}");
+        assert_eq!(values(&mf), numbers(&want), "{name}: frames in file order");
+        let warned = info.warnings.join("\n");
+        assert!(warned.contains("the 4 frames are stacked in file order") && warned.contains(said), "{name}: {warned}");
+    }
+}
+
 #[test]
 fn pydicoms_big_endian_dose_grids_read_as_pydicom_decodes_them() {
     let script = "import json, sys, pydicom, os; d = os.path.join(os.path.dirname(pydicom.__file__), 'data', 'test_files'); \

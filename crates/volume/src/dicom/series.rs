@@ -280,9 +280,27 @@ pub fn layout(input: &Path, files: &[ImageHeader], resample: bool) -> Result<Lay
     let frame0 = &first.frames[0];
     let mut slices: Vec<SliceRef> = Vec::new();
     let total: usize = files.iter().map(|f| f.frames.len()).sum();
+    // one multi-frame file with no geometry at all (a cine, a secondary capture): its frames are
+    // stacked in file order, as ITK stacks them
+    let bare_stack = files.len() == 1
+        && total > 1
+        && first.mosaic.is_none()
+        && first.frames.iter().all(|f| f.orientation.is_none() && f.position.is_none());
+    let stack_gap = first.spacing_between_slices.or(first.slice_thickness).unwrap_or(1.0);
+    if bare_stack {
+        let said = match (first.spacing_between_slices, first.slice_thickness) {
+            (Some(_), _) => "SpacingBetweenSlices",
+            (None, Some(_)) => "SliceThickness",
+            _ => "assumed",
+        };
+        warnings.push(format!(
+            "no ImagePositionPatient or ImageOrientationPatient: the {total} frames are stacked in file order along the \
+             world z axis, {stack_gap} mm apart ({said})"
+        ));
+    }
     let orientation = match frame0.orientation {
         Some(o) => o,
-        None if total == 1 => {
+        None if total == 1 || bare_stack => {
             warnings.push("no ImageOrientationPatient: the image axes are taken as the world axes".into());
             [1.0, 0.0, 0.0, 0.0, 1.0, 0.0]
         }
@@ -344,6 +362,7 @@ pub fn layout(input: &Path, files: &[ImageHeader], resample: bool) -> Result<Lay
                     warnings.push("no ImagePositionPatient: the origin is taken as 0".into());
                     [0.0; 3]
                 }
+                None if bare_stack => [0.0, 0.0, frame as f64 * stack_gap],
                 None => {
                     return Err(VolumeError::header(
                         &h.path,
