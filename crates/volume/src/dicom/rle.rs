@@ -23,7 +23,15 @@ pub(crate) fn decode_frames(
             fragments.len()
         ));
     }
-    let mut out = vec![0u8; frames * plane * width];
+    // a PackBits run of 2 bytes gives at most 128: the fragments bound what the frames can hold
+    let held: usize = fragments.iter().map(Vec::len).sum();
+    let needed = frames.saturating_mul(plane).saturating_mul(width);
+    if needed > held.saturating_mul(64) {
+        return Err(format!(
+            "{held} bytes of fragments cannot decode to the {needed} bytes the header declares (RLE expands at most 64 times)"
+        ));
+    }
+    let mut out = vec![0u8; needed];
     let mut segment = Vec::with_capacity(plane);
     for (f, (fragment, dst)) in fragments.iter().zip(out.chunks_exact_mut(plane * width)).enumerate() {
         let offsets = segment_offsets(fragment).map_err(|m| format!("frame {f}: {m}"))?;
@@ -153,5 +161,7 @@ mod tests {
         cut[1].truncate(short);
         assert!(decode_frames(&cut, 2, plane, 4).unwrap_err().starts_with("frame 1, segment 3"));
         assert!(decode_frames(&fragments[..1], 2, plane, 4).unwrap_err().contains("1 fragments for 2 frames"));
+        // a header claiming far more than the fragments can hold is refused before anything is allocated
+        assert!(decode_frames(&fragments, 2, 1 << 40, 4).unwrap_err().contains("cannot decode to"));
     }
 }
