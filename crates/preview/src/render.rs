@@ -360,6 +360,27 @@ fn gaussian_far_exponent(primitives: &[mdtf_pack::GaussianPrimitive], path: f64)
     (tau * path.max(1.0) * 255.0 / GAUSSIAN_SKIP_TOLERANCE).ln().max(0.0)
 }
 
+/// For the peak classifier: per block (as [`visible_blocks`]), whether a
+/// sample there can show: some cell of the pre-integration table over the
+/// block's (v, v) box is opaque, or some cell of the peak table there holds
+/// a peak. The ray skips a sample of an invisible block only when the sample
+/// before was in the same block (a segment from another block may cross a
+/// peak), so the segment's values stay in the box.
+fn visible_peak_blocks(peaks: &Table, preintegration: &Table, v: &[f32], dims: [usize; 3]) -> (Vec<bool>, [usize; 3]) {
+    let opaque = OpaqueCells::new(preintegration);
+    let peaked = OpaqueCells::marking(peaks, |cell| peaks.values[cell * peaks.components] >= 0.0);
+    per_block(dims, |lo, hi| {
+        let (vmin, vmax) = block_range(v, dims, lo, hi);
+        if vmin > vmax {
+            return true;
+        }
+        let box_of = |t: &Table| -> Vec<(usize, usize)> {
+            t.axes.iter().map(|axis| (table_cell(axis, vmin), table_cell(axis, vmax))).collect()
+        };
+        opaque.any(&box_of(preintegration)) || peaked.any(&box_of(peaks))
+    })
+}
+
 /// For the Gaussian classifier: per block (as [`visible_blocks`]), whether
 /// any primitive can add anything there: a block whose box of TF coordinates
 /// (each channel's min..max, the square root of the last where the
@@ -437,7 +458,16 @@ struct OpaqueCells {
 }
 
 impl OpaqueCells {
+    /// The cells of `t` with a non-zero opacity.
     fn new(t: &Table) -> OpaqueCells {
+        OpaqueCells::marking(t, |cell| {
+            let alpha = if t.components == 4 { t.values[cell * 4 + 3] } else { t.values[cell] };
+            alpha > 0.0
+        })
+    }
+
+    /// The cells of `t` (by flat index) for which `marked` holds.
+    fn marking(t: &Table, marked: impl Fn(usize) -> bool) -> OpaqueCells {
         if t.axes.len() > 3 {
             return OpaqueCells { n: None, below: Vec::new() };
         }
@@ -449,9 +479,8 @@ impl OpaqueCells {
             for y in 0..n[1] {
                 for x in 0..n[0] {
                     let cell = (z * n[1] + y) * n[0] + x;
-                    let alpha = if t.components == 4 { t.values[cell * 4 + 3] } else { t.values[cell] };
                     // inclusion-exclusion over the seven lower neighbours
-                    let sum = u32::from(alpha > 0.0) as i64
+                    let sum = u32::from(marked(cell)) as i64
                         + below[at(x, y + 1, z + 1)] as i64
                         + below[at(x + 1, y, z + 1)] as i64
                         + below[at(x + 1, y + 1, z)] as i64
@@ -579,6 +608,9 @@ fn render_impl(
         Classifier::Distance { alpha_d, .. } if skip_empty => {
             distance.map(|d| visible_distance_blocks(alpha_d, d, dims))
         }
+        Classifier::Peak { peak_table, preintegration, .. } if skip_empty => {
+            v_data.map(|v| visible_peak_blocks(peak_table, preintegration, v, dims))
+        }
         Classifier::Gaussian { primitives, sqrt_last, .. } if skip_empty => {
             let far = gaussian_far_exponent(primitives, steps as f64 * step_vox);
             Some(visible_gaussian_blocks(primitives, &table_chans, *sqrt_last, far, dims))
@@ -600,9 +632,13 @@ fn render_impl(
         }
         _ => None,
     };
-    // the chord from the previous sample leaves a block's value box unless both samples are in it
-    let chord_search =
-        matches!(classifier, Classifier::Chord { find_peaks: true, .. } | Classifier::Product { find_peaks: true, .. });
+    // the chord (or the peak segment) from the previous sample leaves a block's value box unless both samples are in it
+    let chord_search = matches!(
+        classifier,
+        Classifier::Chord { find_peaks: true, .. }
+            | Classifier::Product { find_peaks: true, .. }
+            | Classifier::Peak { find_peaks: true, .. }
+    );
     // the chord classifiers' domain and TF: one table, or a product of tables
     let chord_axes: Vec<(String, usize, f64, f64)> = match classifier {
         Classifier::Chord { tf, .. } => tf.axes.clone(),

@@ -58,6 +58,17 @@ fn peak_finding_finds_the_feature_that_coarse_sampling_misses() {
     // the shell projects to a disc of about pi (14 / (48 sqrt 3 / 2 / 32))^2 ~ 400 pixels
     assert!(lk > 300, "{lk}");
     assert!(lp * 5 < lk, "post-classification should miss most of the shell: {lp} vs {lk}");
+    // empty-space skipping (blocks whose v box holds no peak and no opacity; a sample after
+    // another block's never skipped) changes no pixel, peak finding on or off, at several steps
+    for find_peaks in [true, false] {
+        for step in [0.5, 2.0, 3.0] {
+            assert_eq!(
+                render(&channels, &classify(find_peaks), &cam(step)),
+                mdtf_preview::render_without_skipping(&channels, &classify(find_peaks), &cam(step)),
+                "find_peaks {find_peaks}, step {step}"
+            );
+        }
+    }
 }
 
 #[test]
