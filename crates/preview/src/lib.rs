@@ -8,6 +8,7 @@
 //! that the pack is complete, and a picture to look at before loading it
 //! into the real renderer.
 
+mod empty_space;
 mod load;
 mod mesh;
 mod render;
