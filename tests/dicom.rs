@@ -415,6 +415,10 @@ def ct_dataset(syntax, series, study):
     ds.SOPClassUID, ds.SOPInstanceUID = CTImageStorage, meta.MediaStorageSOPInstanceUID
     ds.Modality, ds.SeriesInstanceUID, ds.StudyInstanceUID = "CT", series, study
     return ds
+def grey_frames(ds, rows, cols, frames, bits, signed):
+    """Sets the pixel module of a grayscale image of `frames` frames (stored as all `bits`)."""
+    ds.Rows, ds.Columns, ds.NumberOfFrames, ds.SamplesPerPixel, ds.PhotometricInterpretation = rows, cols, frames, 1, "MONOCHROME2"
+    ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = bits, bits, bits - 1, signed
 "#;
 
 /// Writes one CT image per (transfer syntax, bits allocated, pixel representation) with pydicom
@@ -477,8 +481,7 @@ for bits in (8, 16):
         values = rng.integers(info.min, info.max, size=(3, 5, 6), dtype=np.int64, endpoint=True).astype(kind)
         values[:, :2, :] = values[0, 0, 0]  # runs, as well as literals
         ds = ct_dataset(ExplicitVRLittleEndian, generate_uid(), generate_uid())
-        ds.Rows, ds.Columns, ds.NumberOfFrames, ds.SamplesPerPixel, ds.PhotometricInterpretation = 5, 6, 3, 1, "MONOCHROME2"
-        ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = bits, bits, bits - 1, signed
+        grey_frames(ds, 5, 6, 3, bits, signed)
         # frames placed along the normal by offsets, as RT dose grids place theirs
         ds.PixelSpacing, ds.ImageOrientationPatient, ds.ImagePositionPatient = [1, 1], [1, 0, 0, 0, 1, 0], [0, 0, 0]
         ds.GridFrameOffsetVector = [0, 1, 2]
@@ -516,8 +519,7 @@ out = sys.argv[1]
 values = (np.arange(4 * 5 * 6).reshape(4, 5, 6) * 7 % 1000).astype(np.uint16)
 for name, thickness in [("thick.dcm", 2.5), ("bare.dcm", None)]:
     ds = ct_dataset(ExplicitVRLittleEndian, generate_uid(), generate_uid())
-    ds.Rows, ds.Columns, ds.NumberOfFrames, ds.SamplesPerPixel, ds.PhotometricInterpretation = 5, 6, 4, 1, "MONOCHROME2"
-    ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 16, 16, 15, 0
+    grey_frames(ds, 5, 6, 4, 16, 0)
     if thickness is not None:
         ds.SliceThickness = thickness
     ds.PixelData = values.tobytes()

@@ -291,6 +291,12 @@ pub(crate) fn datatype_code(ty: SampleType) -> Option<(i16, i16)> {
     })
 }
 
+/// The header mdtf writes for `dims`: NIfTI-1 when every axis fits its
+/// 16-bit dims, else NIfTI-2.
+pub(crate) fn kind_for(dims: &[usize]) -> Kind {
+    if dims.iter().all(|&d| d <= NIFTI1_MAX_AXIS) { Kind::Nifti1 } else { Kind::Nifti2 }
+}
+
 /// Puts numbers at byte offsets, little-endian.
 struct Out(Vec<u8>);
 
@@ -308,7 +314,7 @@ impl Out {
 /// None when `ty` is not one mdtf writes.
 pub(crate) fn encode(geometry: &Geometry, dims: &[usize], ty: SampleType, pair: bool) -> Option<(Kind, Vec<u8>)> {
     let (code, bitpix) = datatype_code(ty)?;
-    let kind = if dims.iter().all(|&d| d <= NIFTI1_MAX_AXIS) { Kind::Nifti1 } else { Kind::Nifti2 };
+    let kind = kind_for(dims);
     let m = geometry.world_from_voxel();
     let ([b, c, d], qfac) = super::quaternion::from_rotation(&geometry.directions);
     let mut pixdim = [qfac, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0];

@@ -52,9 +52,8 @@ pub fn read_nifti(path: &Path, opts: &ReadOptions) -> Result<MultiField> {
 
 /// [`read_nifti`], also returning how the file stores its samples.
 pub fn read_nifti_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiField, FileInfo)> {
-    let (mut stream, geometry, header) = open(path)?;
+    let Opened { mut stream, geometry, header, data_path } = open(path)?;
     let (layout, compressed, units) = (stream.layout, stream.compressed, stream.units.clone());
-    let data_path = stream_path(path, &header);
     let arrays = read_decoded(&data_path, &mut stream.src, &layout, compressed, opts)?;
     // Trailing bytes are allowed in NIfTI; draining still checks a gzip CRC.
     drain_rest(&data_path, &mut stream.src, compressed)?;
@@ -74,17 +73,21 @@ pub fn read_nifti_with_info(path: &Path, opts: &ReadOptions) -> Result<(MultiFie
     Ok((MultiField::new(geometry, fields)?, info))
 }
 
-/// The file the samples of the file at `path` are in.
-fn stream_path(path: &Path, h: &Header) -> std::path::PathBuf {
-    if h.pair { pair::data_file(path).unwrap_or_else(|| path.to_path_buf()) } else { path.to_path_buf() }
-}
-
 /// The samples of a NIfTI file as a stream at its first sample, with their layout and grid.
 pub(crate) fn open_samples(path: &Path) -> Result<(SampleStream, Geometry)> {
-    open(path).map(|(s, g, _)| (s, g))
+    open(path).map(|o| (o.stream, o.geometry))
 }
 
-fn open(path: &Path) -> Result<(SampleStream, Geometry, Header)> {
+/// A NIfTI or Analyze file opened at its first sample.
+struct Opened {
+    stream: SampleStream,
+    geometry: Geometry,
+    header: Header,
+    /// The file the samples are read from (the `.img` of a pair).
+    data_path: std::path::PathBuf,
+}
+
+fn open(path: &Path) -> Result<Opened> {
     let header_path = pair::header_file(path)?;
     let (mut src, compressed) = open_maybe_gz(&header_path)?;
     let mut head = vec![0u8; NIFTI2_BYTES];
@@ -128,7 +131,7 @@ fn open(path: &Path) -> Result<(SampleStream, Geometry, Header)> {
                 format!(
                     "the samples of this {} are in {}, which is missing",
                     h.kind.name(true),
-                    pair::expected_data_name(&header_path)
+                    pair::expected_partner_name(&header_path)
                 ),
             )
         })?;
@@ -143,7 +146,7 @@ fn open(path: &Path) -> Result<(SampleStream, Geometry, Header)> {
         return Err(VolumeError::Truncated { path: data_path, expected: layout.byte_len(), found: 0 });
     }
     let units = crate::Units { value: None, length: crate::units::nifti_length_unit(h.xyzt_units) };
-    Ok((SampleStream { src, layout, compressed, units }, geometry, h))
+    Ok(Opened { stream: SampleStream { src, layout, compressed, units }, geometry, header: h, data_path })
 }
 
 fn read_up_to(src: &mut dyn Read, buf: &mut [u8]) -> std::io::Result<usize> {
@@ -236,7 +239,10 @@ pub(crate) fn header_of(path: &Path, geometry: &Geometry, fields: usize, ty: Sam
 /// The NIfTI version mdtf writes for `geometry` with `fields` fields: 1, or
 /// 2 when an axis exceeds NIfTI-1's 16-bit dims.
 pub fn nifti_version_for(geometry: &Geometry, fields: usize) -> u8 {
-    if geometry.dims.iter().chain(std::iter::once(&fields)).all(|&d| d <= NIFTI1_MAX_AXIS) { 1 } else { 2 }
+    match header::kind_for(&[geometry.dims[0], geometry.dims[1], geometry.dims[2], fields]) {
+        Kind::Nifti2 => 2,
+        _ => 1,
+    }
 }
 
 /// Writes `mf` as `.nii` or `.nii.gz` (by the path's extension), or as a

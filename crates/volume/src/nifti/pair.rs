@@ -90,12 +90,8 @@ pub(crate) fn data_file(header: &Path) -> Option<PathBuf> {
     partners(header).into_iter().find(|p| p.is_file())
 }
 
-/// The name the data file beside the pair header `header` would have.
-pub(crate) fn expected_data_name(header: &Path) -> String {
-    expected_partner_name(header)
-}
-
-fn expected_partner_name(path: &Path) -> String {
+/// The name the partner file of `path` would have (the `.img` of a `.hdr`).
+pub(crate) fn expected_partner_name(path: &Path) -> String {
     partners(path).first().and_then(|p| p.file_name()).map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()
 }
 
