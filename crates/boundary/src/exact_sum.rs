@@ -10,7 +10,8 @@ const SLOTS: usize = 256;
 /// round; the slots are combined at the end in exponent order. A slot holds
 /// at least 2^39 values (2^63 / 2^24) before it could overflow: over 500
 /// billion voxels.
-#[derive(Clone)]
+#[derive(Clone, serde::Serialize, serde::Deserialize)]
+#[serde(into = "SlotsAndRest", from = "SlotsAndRest")]
 pub(crate) struct ExactSum {
     slots: Box<[i64; SLOTS]>,
     /// The sum of the infinite and NaN values added (0 without any):
@@ -39,6 +40,12 @@ impl ExactSum {
         self.slots[exponent] += if bits >> 31 == 1 { -significand } else { significand };
     }
 
+    /// Adds every value `other` holds (as if each had been added here).
+    pub(crate) fn merge(&mut self, other: &ExactSum) {
+        self.slots.iter_mut().zip(other.slots.iter()).for_each(|(a, b)| *a += b);
+        self.non_finite += other.non_finite;
+    }
+
     /// The sum, rounded once per slot in a fixed order.
     pub(crate) fn value(&self) -> f64 {
         let mut sum = 0.0f64;
@@ -49,6 +56,30 @@ impl ExactSum {
             }
         }
         sum + self.non_finite as f64
+    }
+}
+
+/// How an [`ExactSum`] is stored: its non-zero slots (most are zero) and
+/// the sum of its non-finite values.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct SlotsAndRest {
+    /// (exponent, slot) for each non-zero slot.
+    slots: Vec<(u8, i64)>,
+    non_finite: f32,
+}
+
+impl From<ExactSum> for SlotsAndRest {
+    fn from(s: ExactSum) -> SlotsAndRest {
+        let slots = (0..SLOTS).filter(|&e| s.slots[e] != 0).map(|e| (e as u8, s.slots[e])).collect();
+        SlotsAndRest { slots, non_finite: s.non_finite }
+    }
+}
+
+impl From<SlotsAndRest> for ExactSum {
+    fn from(parts: SlotsAndRest) -> ExactSum {
+        let mut s = ExactSum { non_finite: parts.non_finite, ..ExactSum::default() };
+        parts.slots.into_iter().for_each(|(e, v)| s.slots[e as usize] = v);
+        s
     }
 }
 

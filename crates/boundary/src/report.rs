@@ -44,7 +44,7 @@ pub struct ReportBin {
 }
 
 /// The Fig. 2 thresholds: outliers the report leaves out (the outputs keep them).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ReportThresholds {
     /// Least g at the voxel (the paper's 5 on 8-bit data), value units per world unit.
     pub g_min: f64,
@@ -70,7 +70,7 @@ pub struct Report {
 }
 
 /// Per-bin sums while counting (exact, so any order of voxels gives the same bits).
-#[derive(Clone, Default)]
+#[derive(Clone, Default, serde::Serialize, serde::Deserialize)]
 struct Sums {
     voxels: u64,
     distance: ExactSum,
@@ -99,8 +99,10 @@ fn log_bin(dot: f64) -> usize {
 
 /// The report's sums over the voxels seen so far: feed it the blocks of a
 /// slab-by-slab run in any order and it finishes into the report of the
-/// whole volume, bit for bit (its sums are exact, see [`ExactSum`]).
-#[derive(Clone)]
+/// whole volume, bit for bit (its sums are exact, see [`ExactSum`]). The
+/// sums of blocks counted elsewhere (a cluster's tasks) are serialisable and
+/// merge exactly ([`ReportAccumulator::merge`]).
+#[derive(Clone, serde::Serialize, serde::Deserialize)]
 pub struct ReportAccumulator {
     log: Vec<Sums>,
     paper: Vec<Sums>,
@@ -145,6 +147,21 @@ impl ReportAccumulator {
             self.sum_dot.add(dot);
             self.hits += 1;
         }
+    }
+
+    /// Adds the voxels `other` counted (with the same thresholds), as if
+    /// they had been added here.
+    pub fn merge(&mut self, other: &ReportAccumulator) {
+        for (mine, theirs) in [(&mut self.log, &other.log), (&mut self.paper, &other.paper)] {
+            for (a, b) in mine.iter_mut().zip(theirs) {
+                a.voxels += b.voxels;
+                a.distance.merge(&b.distance);
+                a.g.merge(&b.g);
+            }
+        }
+        self.sum_dot.merge(&other.sum_dot);
+        self.hits += other.hits;
+        self.outliers += other.outliers;
     }
 
     /// The report of every voxel added.
@@ -384,5 +401,49 @@ mod tests {
         // the five bins span log10(1 - dot) -7 .. -0.25 of the axis -7 .. 0.5: the points reach 90 % across
         let (lo, hi) = (red.iter().map(|p| p.0).min().unwrap(), red.iter().map(|p| p.0).max().unwrap());
         assert!((hi - lo) as f64 > 0.75 * w as f64, "{lo}..{hi}");
+    }
+
+    #[test]
+    fn sums_counted_apart_and_merged_give_the_whole_report_bit_for_bit() {
+        // 3000 voxels of widely spread sizes, whose f64 running sums depend on the order
+        let n = 3000;
+        let hit: Vec<f32> = (0..n).map(|i| if i % 7 == 3 { 0.0 } else { 1.0 }).collect();
+        let dot: Vec<f32> = (0..n).map(|i| 1.0 - ((i * 7919) % 1000) as f32 * 1e-3).collect();
+        let distance: Vec<f32> = (0..n).map(|i| ((i * 31) % 97) as f32 * if i % 2 == 0 { 1e-4 } else { 1e3 }).collect();
+        let g: Vec<f32> = (0..n).map(|i| ((i * 13) % 101) as f32 * if i % 3 == 0 { 1e5 } else { 0.37 }).collect();
+        let g_hit = vec![50.0; n];
+        let thresholds = ReportThresholds { g_min: 1.0, g_hit_min: 20.0 };
+        let part = |r: std::ops::Range<usize>| ReportInput {
+            hit: &hit[r.clone()],
+            dot: &dot[r.clone()],
+            distance: &distance[r.clone()],
+            g: &g[r.clone()],
+            g_hit: &g_hit[r],
+        };
+        let whole = Report::new(part(0..n), thresholds);
+        // three pieces counted apart, merged in another order than the voxels'
+        let mut pieces: Vec<ReportAccumulator> = [0..1100, 1100..1101, 1101..n]
+            .into_iter()
+            .map(|r| {
+                let mut acc = ReportAccumulator::new(thresholds);
+                acc.add(part(r));
+                acc
+            })
+            .collect();
+        let mut merged = pieces.pop().unwrap();
+        pieces.iter().for_each(|p| merged.merge(p));
+        let merged = merged.finish();
+        assert_eq!(merged, whole);
+        assert!(whole.hits > 2000 && whole.outliers > 0, "{} {}", whole.hits, whole.outliers);
+        // the largest paper bin's mean distance, brute force in f64
+        let big = whole.paper_bins.iter().max_by_key(|b| b.voxels).unwrap();
+        let kept = (0..n).filter(|&i| hit[i] == 1.0 && g[i] >= 1.0 && (dot[i] as f64 * 100.0).round() == big.lo);
+        let (count, sum) = kept.fold((0u64, 0.0f64), |(c, s), i| (c + 1, s + distance[i] as f64));
+        assert_eq!(count, big.voxels);
+        assert!(
+            (sum / count as f64 - big.mean_distance).abs() <= 1e-12 * big.mean_distance.abs(),
+            "{}",
+            big.mean_distance
+        );
     }
 }

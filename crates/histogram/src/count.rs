@@ -4,10 +4,10 @@
 use crate::HistogramError;
 use crate::axis::{Axis, Binner};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Counts over 1, 2 or 3 axes; the first axis varies fastest in `counts`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Histogram {
     /// The axes, in order.
     pub axes: Vec<Axis>,

@@ -106,7 +106,7 @@ pub const SIGMA_MIN_SHARE: f64 = 1e-4;
 pub const HVOL_PARTS: usize = 16;
 
 /// The (v, g, f'') axes of a histogram volume.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct HvolAxes {
     /// Value axis.
     pub v: Axis,
@@ -150,7 +150,11 @@ impl HvolAxes {
 
 /// Counts and sums of a histogram volume over the voxels one task has seen:
 /// feed it with [`HvolAccumulator::add`], then hand every task's
-/// accumulator to [`HvolAccumulator::finish`].
+/// accumulator to [`HvolAccumulator::finish`]. Serialisable (its non-zero
+/// counts and sums only), for tasks in other processes; keep every f64 bit
+/// (a binary format).
+#[derive(Deserialize)]
+#[serde(try_from = "StoredAccumulator")]
 pub struct HvolAccumulator {
     axes: HvolAxes,
     binners: [Binner; 3],
@@ -207,6 +211,69 @@ impl HvolAccumulator {
         let sums = PartSums::merged(parts, &axes);
         let hist = Histogram { axes: axes.list(), counts: counts.counts };
         derive_tables(hist, axes, sums, params)
+    }
+}
+
+/// How an [`HvolAccumulator`] is stored: its axes, its non-zero counts
+/// (bin, count) and each part's non-zero (v, g) sums (index, count, g sum, f'' sum).
+#[derive(Serialize, Deserialize)]
+struct StoredAccumulator {
+    axes: HvolAxes,
+    counts: Vec<(u32, u32)>,
+    parts: Vec<(usize, Vec<StoredSums>)>,
+}
+
+/// One non-zero (v, g) bin of a part's sums: its index, voxel count, g sum and f'' sum.
+type StoredSums = (u32, u64, f64, f64);
+
+impl Serialize for HvolAccumulator {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        StoredAccumulator::from(self).serialize(serializer)
+    }
+}
+
+impl From<&HvolAccumulator> for StoredAccumulator {
+    fn from(acc: &HvolAccumulator) -> StoredAccumulator {
+        let nonzero = |c: &[u32]| c.iter().enumerate().filter(|(_, n)| **n > 0).map(|(i, &n)| (i as u32, n)).collect();
+        let parts = acc
+            .sums
+            .0
+            .iter()
+            .map(|(p, s)| {
+                let kept = (0..s.c_vg.len()).filter(|&i| s.c_vg[i] > 0);
+                (*p, kept.map(|i| (i as u32, s.c_vg[i], s.g_vg[i], s.h_vg[i])).collect())
+            })
+            .collect();
+        StoredAccumulator { counts: nonzero(&acc.counts.counts), parts, axes: acc.axes.clone() }
+    }
+}
+
+impl TryFrom<StoredAccumulator> for HvolAccumulator {
+    type Error = String;
+
+    fn try_from(stored: StoredAccumulator) -> Result<HvolAccumulator, String> {
+        let mut acc = HvolAccumulator::new(&stored.axes, 0).map_err(|e| e.to_string())?;
+        let bins = acc.counts.counts.len();
+        for (bin, n) in stored.counts {
+            if bin as usize >= bins {
+                return Err(format!("bin {bin} of a histogram volume of {bins} bins"));
+            }
+            acc.counts.add(bin as usize, n);
+        }
+        for (part, sums) in stored.parts {
+            if part >= HVOL_PARTS {
+                return Err(format!("part {part} of {HVOL_PARTS}"));
+            }
+            let s = acc.sums.of(part, &stored.axes);
+            for (i, c, g, h) in sums {
+                let i = i as usize;
+                if i >= s.c_vg.len() {
+                    return Err(format!("(v, g) bin {i} of {}", s.c_vg.len()));
+                }
+                (s.c_vg[i], s.g_vg[i], s.h_vg[i]) = (c, g, h);
+            }
+        }
+        Ok(acc)
     }
 }
 

@@ -21,7 +21,7 @@ const BLOCK: usize = 64;
 
 /// One end's candidates: every sample seen strictly beyond `threshold`, and
 /// enough of them that the `keep` most extreme samples are among them.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 struct Tail {
     keep: usize,
     candidates: Vec<f32>,
@@ -87,8 +87,10 @@ impl Tail {
     }
 }
 
-/// Range, integer-ness and percentile tails of one channel (see the module docs).
-#[derive(Debug, Clone)]
+/// Range, integer-ness and percentile tails of one channel (see the module
+/// docs). Serialisable, so that statistics taken elsewhere (a cluster's
+/// tasks) merge here; keep every f32 bit (a binary format: JSON has no infinity).
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct ChannelStats {
     clip: (f64, f64),
     low: Tail,

@@ -5,7 +5,8 @@ use mdtf_boundary::{BoundaryInput, BoundaryParams};
 use mdtf_datagen::{RadialPhantom, erf_sphere};
 use mdtf_derive::{DeriveParams, Item};
 use mdtf_histogram::{
-    Axis, AxisSpec, HvolAxes, HvolBySlabs, HvolParams, Scale, count, grey_level, histogram_volume, hit_mask, write_png,
+    Axis, AxisSpec, HvolAccumulator, HvolAxes, HvolBySlabs, HvolParams, Scale, count, fixed_parts, grey_level,
+    histogram_volume, hit_mask, write_png,
 };
 use mdtf_volume::{Geometry, MultiField, Volume};
 use std::f64::consts::PI;
@@ -305,6 +306,37 @@ fn a_histogram_volume_fed_by_slabs_equals_the_whole_one_for_any_slabs_and_lanes(
     }
     let mut by_slabs = HvolBySlabs::new(&axes, plane, 48, 2).unwrap();
     assert!(by_slabs.add_slab(0, &v[..plane + 1], &g[..plane + 1], &f2[..plane + 1]).is_err(), "a partial slice");
+}
+
+#[test]
+fn histogram_volume_parts_counted_by_tasks_elsewhere_give_the_whole_one() {
+    // each task counts whole fixed parts, slice by slice, and goes through its stored bytes
+    let c = channels(erf_sphere(Geometry::new([40, 36, 48], [1.0, 1.2, 0.8]), 13.0, 2.0, 3.0, 255.0, None).volume());
+    let (v, g, f2, plane) = (c.v.samples(), c.g.samples(), c.f2.samples(), c.v.plane_len());
+    let params = HvolParams::default();
+    let whole = histogram_volume(v, g, f2, plane, &params).unwrap();
+    let axes = HvolAxes::of(v, g, f2, &params).unwrap();
+    let parts = fixed_parts(48);
+    // tasks of 1, 5 and 10 parts, handed back in reverse order
+    let mut tasks = Vec::new();
+    for group in [0..1, 1..6, 6..16] {
+        let mut acc = HvolAccumulator::new(&axes, v.len()).unwrap();
+        for k in parts[group.start].start..parts[group.end - 1].end {
+            let at = k * plane..(k + 1) * plane;
+            acc.add_slice(k, 48, &v[at.clone()], &g[at.clone()], &f2[at]);
+        }
+        let mut bytes = Vec::new();
+        ciborium::into_writer(&acc, &mut bytes).unwrap();
+        assert!(bytes.len() < 4_000_000, "{} bytes", bytes.len());
+        tasks.push(ciborium::from_reader::<HvolAccumulator, _>(bytes.as_slice()).unwrap());
+    }
+    tasks.reverse();
+    let hv = HvolAccumulator::finish(tasks, &params).unwrap();
+    assert_eq!(hv.hist, whole.hist);
+    assert_eq!(
+        (hv.mean_g_v, hv.mean_h_v, hv.position, hv.sigma),
+        (whole.mean_g_v.clone(), whole.mean_h_v.clone(), whole.position.clone(), whole.sigma)
+    );
 }
 
 /// A (v, g) histogram of 8 x 6 bins with 1000 voxels in bin (2, 5) and 10 in bin (6, 1), and its samples.

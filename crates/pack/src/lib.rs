@@ -8,6 +8,7 @@
 //! exactly representable.
 
 mod boundary_tf;
+mod by_tasks;
 mod gaussian;
 mod lut;
 mod manifest;
@@ -26,6 +27,7 @@ pub use boundary_tf::{
     MIN_BOUNDARY_OPACITY, OUTER_BOUNDARY_OPACITY, Tent, boundary_alpha_u, boundary_colour, boundary_isosurface_tf,
     boundary_opacities, boundary_tf, isovalue, multi_field_isosurface_tf, per_voxel_opacities,
 };
+pub use by_tasks::TextureTarget;
 pub use gaussian::{
     ERF_DOMAIN, ERF_SIZE, FitError, GaussianPrimitive, IGAUSS_DOMAIN, IGAUSS_SIZE, erf_difference,
     erf_difference_table, igauss, igauss_table,

@@ -28,7 +28,7 @@ pub enum Profile {
 pub const PROFILE_NAMES: &str = "slicer-3dtf, distance-tf, gaussian-tf, peak-finding, projected-tetrahedra";
 
 /// One texture of a profile: its name, channels per component (None: unused) and type.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TextureLayout {
     /// Texture name (also its file stem).
     pub name: String,

@@ -4,6 +4,7 @@
 //! channels just before it is written and free them right after, so a pack
 //! never needs every channel and every texture in memory together.
 
+use crate::by_tasks::TextureTarget;
 use crate::manifest::{ChannelEntry, ChannelSource, Manifest, ManifestGeometry, Provenance, SCHEMA_ID, TextureEntry};
 use crate::profile::{Profile, TextureLayout, describe};
 use crate::quantise::{Decode, Dtype, decode_for};
@@ -174,18 +175,18 @@ const SLAB_PLANES: usize = 16;
 
 /// A texture ready to quantise: each component's samples and decode (None: unused, code 0).
 pub(crate) struct Prepared<'v> {
-    dtype: Dtype,
-    dims: [usize; 3],
-    decodes: Vec<Option<(&'v [f32], Decode)>>,
+    pub(crate) dtype: Dtype,
+    pub(crate) dims: [usize; 3],
+    pub(crate) decodes: Vec<Option<(&'v [f32], Decode)>>,
 }
 
 impl Prepared<'_> {
-    fn plane_bytes(&self) -> usize {
+    pub(crate) fn plane_bytes(&self) -> usize {
         self.dims[0] * self.dims[1] * self.decodes.len() * self.dtype.size()
     }
 
     /// Quantises z-slices `first..` into `out` (whole slices), in parallel over slices.
-    fn encode_planes(&self, first: usize, out: &mut [u8]) {
+    pub(crate) fn encode_planes(&self, first: usize, out: &mut [u8]) {
         let (size, comps) = (self.dtype.size(), self.decodes.len());
         let [nx, ny, _] = self.dims;
         let plane = nx * ny;
@@ -340,6 +341,47 @@ impl<'a> PackWriter<'a> {
         for (layout, file) in layouts.iter().zip(files) {
             file.publish()?;
             self.textures.push(write_header(self.dir, &self.encoder.geometry, layout, None)?);
+        }
+        Ok(())
+    }
+
+    /// The textures `layouts`, for tasks (in any process, in any order) to
+    /// write plane range by plane range ([`TextureTarget::write_planes`]):
+    /// their manifest entries recorded from the code ranges in the pack's
+    /// parameters, their data files created empty in the pack's folder
+    /// (itself inside a staging folder: a failed run publishes none of
+    /// them). [`PackWriter::adopt_task_textures`] takes them in once every
+    /// plane is written.
+    pub fn task_textures(&mut self, layouts: &[TextureLayout]) -> Result<Vec<TextureTarget>, PackError> {
+        let geometry = &self.encoder.geometry;
+        let plane = [geometry.dims[0], geometry.dims[1]];
+        let mut targets = Vec::with_capacity(layouts.len());
+        for layout in layouts {
+            let decodes = self.encoder.prepare_ranged(layout)?;
+            let file = self.dir.join(format!("{}.raw", layout.name));
+            std::fs::File::create(&file)
+                .map_err(|cause| PackError::Io(VolumeError::Io { path: file.clone(), cause }))?;
+            targets.push(TextureTarget { file, layout: layout.clone(), decodes, plane });
+        }
+        Ok(targets)
+    }
+
+    /// Takes in the textures of [`PackWriter::task_textures`], every plane
+    /// written: checks each data file's length and writes its header.
+    pub fn adopt_task_textures(&mut self, targets: &[TextureTarget]) -> Result<(), PackError> {
+        let nz = self.encoder.geometry.dims[2];
+        for t in targets {
+            let want = (t.plane_bytes() * nz) as u64;
+            let got = std::fs::metadata(&t.file)
+                .map_err(|cause| PackError::Io(VolumeError::Io { path: t.file.clone(), cause }))?
+                .len();
+            if got != want {
+                return Err(PackError::Geometry(format!(
+                    "texture {} holds {got} bytes after its tasks, not {want}: a task did not write its planes",
+                    t.layout.name
+                )));
+            }
+            self.textures.push(write_header(self.dir, &self.encoder.geometry, &t.layout, None)?);
         }
         Ok(())
     }

@@ -354,8 +354,11 @@ fn runs_whose_passes_go_to_tasks_give_the_same_files() {
         let ran = tasks.ran.lock().unwrap().clone();
         let passes: Vec<&str> = ran.iter().map(|(p, _)| p.as_str()).collect();
         let traced = name == "distance-tf";
-        assert_eq!(passes, if traced { vec!["Derive", "Prefilter", "Trace"] } else { vec!["Derive"] }, "{name}");
-        assert!(ran.iter().all(|(_, n)| *n == 48usize.div_ceil(7) + 1), "{name}: {ran:?}");
+        assert_eq!(passes, if traced { vec!["Derive", "Prefilter", "Trace", "Pack"] } else { vec!["Derive", "Pack"] });
+        // one task per slab, the first twice; the pack's one per fixed part of the histogram volume when it counts it
+        let slabs = 48usize.div_ceil(7) + 1;
+        let parts = mdtf_histogram::HVOL_PARTS + 1;
+        assert!(ran.iter().all(|(p, n)| *n == slabs || (p == "Pack" && *n == parts)), "{name}: {ran:?}");
     }
     // the pre-filter's pass too, on an anisotropic noisy file read by planes
     let geo = Geometry::new([30, 28, 33], [1.0, 0.8, 1.3]);
@@ -370,7 +373,33 @@ fn runs_whose_passes_go_to_tasks_give_the_same_files() {
     let tasks = Arc::new(ThreadTasks::default());
     assert_runs_equal_the_whole("distance-tf", &p, Some(input), &[SlabSize::Planes(5)], Some(tasks.clone()));
     let passes: Vec<String> = tasks.ran.lock().unwrap().iter().map(|(p, _)| p.clone()).collect();
-    assert_eq!(passes, ["Derive", "Prefilter", "Trace"]);
+    assert_eq!(passes, ["Derive", "Prefilter", "Trace", "Pack"]);
+}
+
+#[test]
+fn a_zarr_input_is_read_by_the_tasks_with_the_same_files() {
+    // an OME-Zarr store reads any planes: each task reads its own slab of the input (chunks of 8
+    // planes, slabs of 5: a task reads parts of two chunks), counting the scanner padding too
+    let geo = Geometry::new([30, 28, 33], [1.0, 0.8, 1.3]);
+    let mut v = mdtf_datagen::RadialPhantom::tooth(geo, 1.5).volume();
+    mdtf_datagen::add_gaussian_noise(&mut v, 3.0, 9);
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("tooth.ome.zarr");
+    write_volume(&input, &v, &WriteOptions { ty: SampleType::F32, gzip: false }, &[]).unwrap();
+    let text = "keep = [\"distance\", \"g\"]\n[input]\npadding = [14.0, 16.0]\n[prefilter]\nsigma_d = 1.0\n\
+                sigma_r = 0.1\n[histogram]\njoint = true\nstretched = true\n[pack]\nprofile = \"distance-tf\"\n";
+    let p = parse(text, &[]).unwrap();
+    let tasks = Arc::new(ThreadTasks::default());
+    assert_runs_equal_the_whole("distance-tf", &p, Some(input), &[SlabSize::Planes(5)], Some(tasks.clone()));
+    let passes: Vec<String> = tasks.ran.lock().unwrap().iter().map(|(p, _)| p.clone()).collect();
+    assert_eq!(passes, ["Input", "Derive", "Prefilter", "Trace", "Pack"]);
+    // the padding the tasks counted is in the report the runs agree on
+    let out = dir.path().join("whole");
+    let opts = RunOptions { input: Some(dir.path().join("tooth.ome.zarr")), output: out.clone(), ..Default::default() };
+    let warnings = run_whole(&p, &opts, &|_| {}).unwrap().warnings;
+    let want = v.samples().iter().filter(|&&x| (14.0..=16.0).contains(&x)).count();
+    assert!(want > 100, "{want}");
+    assert!(warnings.iter().any(|w| w.contains(&format!("{want} "))), "{want}: {warnings:?}");
 }
 
 /// Tasks that fail as a lost store would make them.
@@ -403,7 +432,7 @@ fn a_failed_task_fails_the_run_with_its_message_and_no_output() {
     let job = SlabJob {
         store: dir.path().to_path_buf(),
         geometry: Geometry::new([4, 4, 4], [1.0; 3]),
-        pass: mdtf_pipeline::blocks::SlabPass::Derive { groups: vec![], kernel_reach: 1 },
+        pass: mdtf_pipeline::blocks::SlabPass::Derive { groups: vec![], kernel_reach: 1, summarise: vec![] },
     };
     let e = run_task(&job, 2..9).unwrap_err().to_string();
     assert!(e.contains("not a slab of the volume's 4"), "{e}");

@@ -100,6 +100,17 @@ impl PlaneReader {
         }
     }
 
+    /// The file or store read.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Whether any planes can be read in any order, by any number of
+    /// readers at once (an OME-Zarr store), rather than front to back.
+    pub fn reads_any_planes(&self) -> bool {
+        matches!(self.source, Source::Zarr(_))
+    }
+
     /// Planes `z` (clamped to the grid) as a volume placed where they lie.
     /// From a stream, planes before those of the previous call's start are
     /// gone: a call asking for them fails, since it reads forward only (an

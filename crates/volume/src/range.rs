@@ -71,8 +71,20 @@ fn key(v: f32) -> u32 {
 /// samples seen so far by the upper half of their keys. A caller that sees
 /// the samples anyway (a pass computing them) keeps these, and the select
 /// ([`order_statistic_from_buckets`]) then takes one pass instead of two.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "Vec<u64>")]
 pub struct KeyBuckets(Vec<u64>);
+
+impl TryFrom<Vec<u64>> for KeyBuckets {
+    type Error = String;
+
+    fn try_from(counts: Vec<u64>) -> Result<KeyBuckets, String> {
+        match counts.len() {
+            BUCKETS => Ok(KeyBuckets(counts)),
+            n => Err(format!("{n} bucket counts where {BUCKETS} were expected")),
+        }
+    }
+}
 
 impl Default for KeyBuckets {
     fn default() -> Self {
@@ -89,6 +101,11 @@ impl KeyBuckets {
     /// Counts the finite samples of `data`.
     pub fn add(&mut self, data: &[f32]) {
         count_piece(data, &|key| Some((key >> 16) as usize), &mut self.0);
+    }
+
+    /// Adds the counts of `other` (samples counted elsewhere: a cluster's tasks).
+    pub fn merge(&mut self, other: &KeyBuckets) {
+        self.0.iter_mut().zip(&other.0).for_each(|(a, b)| *a += b);
     }
 
     /// How many finite samples were counted.

@@ -56,11 +56,13 @@
 mod budget;
 mod item_files;
 mod medians;
+mod partials;
 mod passes;
 mod pool;
 mod reductions;
 mod remote;
 mod slab_channels;
+mod slab_histograms;
 mod store;
 mod trace;
 mod trace_files;
@@ -68,9 +70,11 @@ mod trace_files;
 use crate::inputs::InputMeta;
 pub use budget::{TraceBlocks, automatic_budget, automatic_file_budget, fit_slabs, fit_trace, slab_height, slabs};
 pub use item_files::{ItemFiles, automatic_item_budget, derive_item_files, items_unsupported};
+pub use partials::{SlabPartial, TracePartial};
 pub use pool::SamplePool;
-pub use remote::{Prefilter, SlabJob, SlabPass, SlabTasks, TracePartial, run_task};
+pub use remote::{Prefilter, SlabJob, SlabPass, SlabTasks, run_task};
 pub use slab_channels::SlabChannels;
+pub use slab_histograms::{HistogramAxes, HistogramCounts};
 pub use store::{ChannelStore, StoreWriter};
 pub use trace_files::{TRACED_CHANNELS, TracedFiles, automatic_trace_budget, trace_files};
 

@@ -4,9 +4,11 @@
 //! Each pass visits the slabs in z order, so the reductions it feeds merge
 //! in the same order whatever the slab height.
 
+use super::partials::{SlabPartial, TracePartial};
 use super::remote::{self, Prefilter, SlabPass, SlabTasks};
+use super::slab_histograms::SlabHistograms;
 use super::trace::{self, SlabTrace, TraceSetup};
-use super::{ChannelStore, SlabChannels, SlabSize, medians, open_source};
+use super::{ChannelStore, SlabChannels, SlabSize, Source, medians, open_source};
 use super::{TraceBlocks, fit_slabs, fit_trace, reductions, slabs};
 use crate::file::Pipeline;
 use crate::hist_files::Written;
@@ -19,7 +21,7 @@ use mdtf_derive::{DeriveParams, Item};
 use mdtf_histogram::{ChannelStats, Histogram};
 use mdtf_pack::{PackParams, PackWriter, Profile, TfFile};
 use mdtf_volume::{Geometry, KeyBuckets, Volume, overlapped};
-use reductions::{SlabHistograms, Stats, detected_before_tracing, g_stats};
+use reductions::{Stats, detected_before_tracing, g_stats};
 use std::collections::BTreeMap;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -85,6 +87,16 @@ impl Derived {
             _ => {}
         }
     }
+
+    /// Takes in a task's part of the same (its slab's g counts, its smallest positive 1/g).
+    fn merge(&mut self, part: &SlabPartial) {
+        if let (Some(mine), Some(theirs)) = (&mut self.g_buckets, &part.g_buckets) {
+            mine.merge(theirs);
+        }
+        if let Some(x) = part.smallest_inv_g {
+            self.smallest_inv_g = self.smallest_inv_g.min(x);
+        }
+    }
 }
 
 impl<'a> SlabPasses<'a> {
@@ -139,22 +151,21 @@ impl<'a> SlabPasses<'a> {
         progress.stage(&format!("input: {} slabs of {height} planes", slabs.len()))?;
         let mut store = ChannelStore::create(dir.join(".slabs"), geo.clone()).map_err(at("input"))?;
         let mut stats = Stats::new(&["v", "g", "f2", "g_hit", "g_prefiltered", "inv_g"], geo.voxel_count());
-        let mut writer = store.writer(&["v"]).map_err(io("input"))?;
-        let mut padded = 0u64;
-        // a slab is read while the one before is summarised and stored
-        overlapped(
-            slabs.len(),
-            &mut |k| progress.slab(k + 1, slabs.len()),
-            &mut |k, _| Ok((slabs[k].start, source.read(slabs[k].clone())?)),
-            &mut |(first, v)| {
-                stats.add("v", v.samples());
-                if let Some(range) = meta.padding {
-                    padded += crate::inputs::count_padding(v.samples(), range);
+        let padded = match (opts.tasks.as_deref(), &source) {
+            (Some(tasks), Source::Planes(reader)) if reader.reads_any_planes() => {
+                progress.stage("input (tasks)")?;
+                let input = std::path::absolute(reader.path()).map_err(io("input"))?;
+                let (level, nan, padding) = (p.input.level, p.input.nan, meta.padding);
+                let pass = SlabPass::Input { input, level, nan, padding };
+                let mut padded = 0;
+                for mut part in remote::run_pass(tasks, pass, &mut store, &slabs)? {
+                    part.merge_stats_into(&mut stats);
+                    padded += part.padded;
                 }
-                writer.put_volume("v", first, &v).map_err(io("input"))?;
-                Ok(None)
-            },
-        )?;
+                padded
+            }
+            _ => copy_input(&mut source, &mut store, &slabs, &mut stats, meta.padding, &progress)?,
+        };
         let mut stages = Stages::default();
         stages.done("input", t, geo.voxel_count(), vec![]);
         let mut warnings = meta.warnings.clone();
@@ -199,21 +210,28 @@ impl<'a> SlabPasses<'a> {
     /// normals on their own when it defers them); this pass takes their
     /// statistics. With tasks, the tasks store every derived channel and the
     /// later passes read them instead.
-    pub(super) fn derive(&mut self, mut store: ChannelStore) -> Result<(SlabChannels, Derived), RunError> {
+    pub(super) fn derive(&mut self, store: ChannelStore) -> Result<(SlabChannels, Derived), RunError> {
         let groups = self.derive_groups();
         let derive_start = Instant::now();
-        if let Some(tasks) = self.tasks {
-            self.progress.stage("derive (tasks)")?;
-            let pass = SlabPass::Derive { groups: groups.clone(), kernel_reach: self.plan.reach.kernel[2] };
-            remote::run_pass(tasks, pass, &mut store, &self.slabs)?;
-        }
         let nz = self.geo.dims[2];
+        let kernel_reach = self.plan.reach.kernel[2];
         let mut chans =
-            SlabChannels::new(store, groups, self.plan.reach.kernel[2], nz).cancelled_by(self.opts.cancel.clone());
+            SlabChannels::new(store, groups.clone(), kernel_reach, nz).cancelled_by(self.opts.cancel.clone());
         let summarised: Vec<&str> = ["g", "f2", "inv_g"].into_iter().filter(|c| chans.has(c)).collect();
         let g_buckets = summarised.contains(&"g").then(KeyBuckets::new);
         let derive = DeriveParams { items: Vec::new(), ..self.derive_params() };
         let mut derived = Derived { derive, g_buckets, smallest_inv_g: f32::INFINITY };
+        if let Some(tasks) = self.tasks {
+            self.progress.stage("derive (tasks)")?;
+            let summarise = summarised.iter().map(|c| c.to_string()).collect();
+            let pass = SlabPass::Derive { groups, kernel_reach, summarise };
+            for mut part in remote::run_pass(tasks, pass, &mut chans.store, &self.slabs)? {
+                part.merge_stats_into(&mut self.stats);
+                derived.merge(&part);
+            }
+            self.stages.done("derive", derive_start, self.geo.voxel_count(), vec![]);
+            return Ok((chans, derived));
+        }
         // g waits on disk for the second radix pass of its median before the tracing: reading
         // it back costs less than deriving every slab again (it goes once the median is known)
         let keep_g = self.median_reads_stored_g() && derived.g_buckets.is_some();
@@ -241,7 +259,6 @@ impl<'a> SlabPasses<'a> {
                 },
             )?;
             chans.release();
-            // its time includes its tasks'
             self.stages.done("derive", derive_start, self.geo.voxel_count(), vec![]);
         }
         Ok((chans, derived))
@@ -316,67 +333,33 @@ impl<'a> SlabPasses<'a> {
         }
         // the median's reads are done: their memory is not the tracing's size
         chans.release();
-        let setup = TraceSetup {
-            g,
-            f2,
-            stored: self.tasks.is_some(),
-            prefiltered,
-            params: &self.p.boundary,
-            stats: &stats,
-            halo: self.plan.reach.trace[2],
-            halo_rows: self.plan.reach.trace[1],
-            value_range,
-        };
-        if let Some(tasks) = self.tasks {
-            let pass = SlabPass::Trace {
-                g: g.into(),
-                f2: f2.into(),
-                params: self.p.boundary.clone(),
-                stats,
-                halo: setup.halo,
-                value_range,
-            };
-            remote::run_pass(tasks, pass, &mut chans.store, &self.slabs)?;
-        }
         let mut sums = TraceSums::default();
-        let (strips, tslabs) = self.trace_strips_and_slabs();
-        if strips.len() > 1 {
-            let TraceBlocks { planes, rows } = self.trace_blocks;
-            let what = format!("boundary: {} blocks of {planes} planes x {rows} rows", strips.len() * tslabs.len());
-            self.progress.stage(&what)?;
-        }
-        let blocks: Vec<(Range<usize>, Range<usize>)> =
-            strips.iter().flat_map(|rows| tslabs.iter().map(move |z| (rows.clone(), z.clone()))).collect();
-        // dot only when the run keeps it
-        let outputs = &["g_hit", "hit", "distance", "dot"][..if self.plan.wants("dot") { 4 } else { 3 }];
-        let mut writer = match self.tasks {
-            Some(_) => None,
-            None => Some(chans.store.writer(outputs).map_err(io("boundary"))?),
-        };
-        let (progress, tasks, stats) = (&self.progress, self.tasks.is_some(), &mut self.stats);
-        // a block is traced (in the memory of one written and summed) while the one before is written and summed
-        let mut make = |k: usize, spent: Option<(usize, SlabTrace)>| {
-            let (rows, z) = &blocks[k];
-            let slab = match tasks {
-                true => remote::stored_trace(chans, g, z),
-                false => trace::trace_slab(chans, &setup, z, rows, spent.map(|(_, s)| s)),
-            };
-            Ok((k, slab?))
-        };
-        let mut take = |(k, slab): (usize, SlabTrace)| {
-            let (rows, z) = &blocks[k];
-            if let Some(w) = &mut writer {
-                let made = [&slab.trace.g_hit, &slab.trace.hit, &slab.trace.distance, &slab.trace.dot];
-                for (c, v) in outputs.iter().zip(made) {
-                    w.put_rows(c, z.start, rows.clone(), v).map_err(io("boundary"))?;
+        match self.tasks {
+            Some(tasks) => {
+                let (params, halo) = (self.p.boundary.clone(), self.plan.reach.trace[2]);
+                let pass = SlabPass::Trace { g: g.into(), f2: f2.into(), params, stats, halo, value_range };
+                for mut part in remote::run_pass(tasks, pass, &mut chans.store, &self.slabs)? {
+                    part.merge_stats_into(&mut self.stats);
+                    let no_trace = || fail("boundary")("a tracing task left no tracing partial".into());
+                    sums.merge(part.trace.ok_or_else(no_trace)?);
                 }
             }
-            stats.add("g_hit", slab.trace.g_hit.samples());
-            sums.add(&slab);
-            Ok(Some((k, slab)))
-        };
-        let n = blocks.len();
-        overlapped(n, &mut |k| progress.slab(k + 1, n), &mut make, &mut take)?;
+            None => {
+                let p = self.p;
+                let setup = TraceSetup {
+                    g,
+                    f2,
+                    stored: false,
+                    prefiltered,
+                    params: &p.boundary,
+                    stats: &stats,
+                    halo: self.plan.reach.trace[2],
+                    halo_rows: self.plan.reach.trace[1],
+                    value_range,
+                };
+                self.trace_here(chans, &setup, &mut sums)?;
+            }
+        }
         let traced = self.finish_trace(sums)?;
         for c in ["g_prefiltered", "f2_prefiltered", "dot"] {
             if !self.plan.wants(c) {
@@ -387,6 +370,45 @@ impl<'a> SlabPasses<'a> {
         let outputs = vec!["boundary/boundary_report.csv".into(), "boundary/boundary_report.png".into()];
         self.stages.done("boundary", t, self.geo.voxel_count(), outputs);
         Ok(traced)
+    }
+
+    /// The tracing in this process, block by block (strips of rows, z-slabs
+    /// within each), each block's outputs stored and summed into `sums`.
+    fn trace_here(
+        &mut self,
+        chans: &mut SlabChannels,
+        setup: &TraceSetup,
+        sums: &mut TraceSums,
+    ) -> Result<(), RunError> {
+        let (strips, tslabs) = self.trace_strips_and_slabs();
+        if strips.len() > 1 {
+            let TraceBlocks { planes, rows } = self.trace_blocks;
+            let what = format!("boundary: {} blocks of {planes} planes x {rows} rows", strips.len() * tslabs.len());
+            self.progress.stage(&what)?;
+        }
+        let blocks: Vec<(Range<usize>, Range<usize>)> =
+            strips.iter().flat_map(|rows| tslabs.iter().map(move |z| (rows.clone(), z.clone()))).collect();
+        // dot only when the run keeps it
+        let outputs = &["g_hit", "hit", "distance", "dot"][..if self.plan.wants("dot") { 4 } else { 3 }];
+        let mut writer = chans.store.writer(outputs).map_err(io("boundary"))?;
+        let (progress, stats) = (&self.progress, &mut self.stats);
+        // a block is traced (in the memory of one written and summed) while the one before is written and summed
+        let mut make = |k: usize, spent: Option<(usize, SlabTrace)>| {
+            let (rows, z) = &blocks[k];
+            Ok((k, trace::trace_slab(chans, setup, z, rows, spent.map(|(_, s)| s))?))
+        };
+        let mut take = |(k, slab): (usize, SlabTrace)| {
+            let (rows, z) = &blocks[k];
+            let made = [&slab.trace.g_hit, &slab.trace.hit, &slab.trace.distance, &slab.trace.dot];
+            for (c, v) in outputs.iter().zip(made) {
+                writer.put_rows(c, z.start, rows.clone(), v).map_err(io("boundary"))?;
+            }
+            stats.add("g_hit", slab.trace.g_hit.samples());
+            sums.add(&slab);
+            Ok(Some((k, slab)))
+        };
+        let n = blocks.len();
+        overlapped(n, &mut |k| progress.slab(k + 1, n), &mut make, &mut take)
     }
 
     /// The tracing's strips of rows (one of every row without strips) and
@@ -410,22 +432,22 @@ impl<'a> SlabPasses<'a> {
                 Prefilter { input: c.into(), output: out.into(), params }
             })
             .into();
-        if let Some(tasks) = self.tasks {
-            let pass = SlabPass::Prefilter { filters: filters.clone(), halo };
-            remote::run_pass(tasks, pass, &mut chans.store, &self.slabs)?;
-        }
-        for f in &filters {
-            for (k, z) in self.slabs.iter().enumerate() {
-                self.progress.slab(k + 1, self.slabs.len())?;
-                let own = match self.tasks {
-                    Some(_) => chans.store.volume(&f.output, z.clone()).map_err(io("prefilter"))?,
-                    None => {
+        match self.tasks {
+            Some(tasks) => {
+                let pass = SlabPass::Prefilter { filters, halo };
+                for mut part in remote::run_pass(tasks, pass, &mut chans.store, &self.slabs)? {
+                    part.merge_stats_into(&mut self.stats);
+                }
+            }
+            None => {
+                for f in &filters {
+                    for (k, z) in self.slabs.iter().enumerate() {
+                        self.progress.slab(k + 1, self.slabs.len())?;
                         let own = trace::prefilter_slab(chans, &f.input, &f.params, z, halo)?;
                         chans.store.put_volume(&f.output, z.start, &own).map_err(io("prefilter"))?;
-                        own
+                        self.stats.add(&f.output, own.samples());
                     }
-                };
-                self.stats.add(&f.output, own.samples());
+                }
             }
         }
         chans.release();
@@ -523,7 +545,8 @@ impl<'a> SlabPasses<'a> {
         writer: &mut PackWriter,
     ) -> Result<Written, RunError> {
         let counting = self.p.histogram.is_some() || self.hvol_needed;
-        self.progress.stage(if counting { "histogram and pack" } else { "pack" })?;
+        let what = if counting { "histogram and pack" } else { "pack" };
+        self.progress.stage(&format!("{what}{}", if self.tasks.is_some() { " (tasks)" } else { "" }))?;
         let n = self.geo.voxel_count();
         let mut histograms = match counting {
             true => {
@@ -533,11 +556,32 @@ impl<'a> SlabPasses<'a> {
             false => None,
         };
         let layouts = mdtf_pack::texture_layouts(params);
-        let mut read: Vec<&str> = histograms.as_ref().map(SlabHistograms::channels).unwrap_or_default();
+        let mut read: Vec<&str> = histograms.as_ref().map(|h| h.axes().channels()).unwrap_or_default();
         for c in layouts.iter().flat_map(|l| l.components.iter().flatten()) {
             if !read.contains(&c.as_str()) {
                 read.push(c);
             }
+        }
+        if let Some(tasks) = self.tasks {
+            let targets = writer.task_textures(&layouts).map_err(at("pack"))?;
+            let axes = histograms.as_ref().map(|h| h.axes().clone());
+            // a task counting the histogram volume holds whole fixed parts of its slices
+            let task_slabs = match axes.as_ref().is_some_and(|a| a.counts_hvol()) {
+                true => mdtf_histogram::fixed_parts(self.geo.dims[2]).into_iter().filter(|p| !p.is_empty()).collect(),
+                false => self.slabs.clone(),
+            };
+            let read = read.iter().map(|c| c.to_string()).collect();
+            let pass = SlabPass::Pack { textures: targets.clone(), histograms: axes, read, height: self.height };
+            for part in remote::run_pass(tasks, pass, &mut chans.store, &task_slabs)? {
+                if let (Some(h), Some(counts)) = (&mut histograms, part.histograms) {
+                    h.merge(counts);
+                }
+            }
+            writer.adopt_task_textures(&targets).map_err(at("pack"))?;
+            return match histograms {
+                Some(h) => self.write_histograms(h),
+                None => Ok(Written::default()),
+            };
         }
         let mut counting_failed = None;
         let (progress, height, count) = (&self.progress, self.height, self.slabs.len());
@@ -660,6 +704,35 @@ impl<'a> SlabPasses<'a> {
     }
 }
 
+/// Copies the input's value slab by slab into `store`, taking its
+/// statistics; the samples in the `padding` range, counted.
+fn copy_input(
+    source: &mut Source,
+    store: &mut ChannelStore,
+    slabs: &[Range<usize>],
+    stats: &mut Stats,
+    padding: Option<[f64; 2]>,
+    progress: &Progress,
+) -> Result<u64, RunError> {
+    let mut writer = store.writer(&["v"]).map_err(io("input"))?;
+    let mut padded = 0u64;
+    // a slab is read while the one before is summarised and stored
+    overlapped(
+        slabs.len(),
+        &mut |k| progress.slab(k + 1, slabs.len()),
+        &mut |k, _| Ok((slabs[k].start, source.read(slabs[k].clone())?)),
+        &mut |(first, v)| {
+            stats.add("v", v.samples());
+            if let Some(range) = padding {
+                padded += crate::inputs::count_padding(v.samples(), range);
+            }
+            writer.put_volume("v", first, &v).map_err(io("input"))?;
+            Ok(None)
+        },
+    )?;
+    Ok(padded)
+}
+
 /// The tracing's whole-volume sums, fed slab by slab in z order.
 #[derive(Default)]
 struct TraceSums {
@@ -690,5 +763,19 @@ impl TraceSums {
         }
         self.counts += b.counts;
         self.resolved = Some(b.resolved);
+    }
+
+    /// Adds the next slab's tracing, made by a task.
+    fn merge(&mut self, part: TracePartial) {
+        match &mut self.report {
+            Some(r) => r.merge(&part.report),
+            None => self.report = Some(part.report),
+        }
+        match &mut self.crossings {
+            Some(c) => c.merge(&part.crossings),
+            None => self.crossings = Some(part.crossings),
+        }
+        self.counts += part.counts;
+        self.resolved = Some(part.resolved);
     }
 }

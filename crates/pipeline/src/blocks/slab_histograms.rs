@@ -1,0 +1,245 @@
+//! The histograms of a slab-by-slab run (and the histogram volume when it
+//! is needed), counted slab by slab over axes the whole volume's
+//! statistics give: here, in z order, or by tasks elsewhere that each count
+//! whole fixed parts of the histogram volume's slices and hand back their
+//! counts ([`HistogramCounts`]), merged exactly.
+
+use super::reductions::Stats;
+use super::{SlabChannels, medians};
+use crate::file::Pipeline;
+use crate::hist_files::Counted;
+use crate::run::{RunError, at, fail};
+use mdtf_histogram::{
+    Axis, AxisSpec, Histogram, HistogramError, HvolAccumulator, HvolAxes, HvolBySlabs, HvolParams, count, hit_mask,
+};
+use mdtf_volume::{KeyBuckets, Volume};
+use serde::{Deserialize, Serialize};
+use std::ops::Range;
+
+/// What each slab's histograms are counted over (serialisable: a pack
+/// pass's tasks get it).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HistogramAxes {
+    /// The (v, g) histogram is counted.
+    joint: bool,
+    /// The stretched pair is counted.
+    stretched: bool,
+    /// The (v, g) axes; the stretched pair's second is g_hit.
+    axes: Vec<Axis>,
+    stretched_axes: Vec<Axis>,
+    /// The histogram volume's axes, when it is counted.
+    hvol: Option<HvolAxes>,
+    /// Peak finding's TF domain (v, 1/g), over the whole g's axis.
+    inv_g: Option<Vec<Axis>>,
+}
+
+impl HistogramAxes {
+    /// The channels each slab's counting reads.
+    pub fn channels(&self) -> Vec<&'static str> {
+        let mut names = vec!["v", "g"];
+        if self.hvol.is_some() {
+            names.push("f2");
+        }
+        if self.stretched {
+            names.extend(["g_hit", "hit"]);
+        }
+        if self.inv_g.is_some() {
+            names.push("inv_g");
+        }
+        names
+    }
+
+    /// Whether the histogram volume is counted.
+    pub fn counts_hvol(&self) -> bool {
+        self.hvol.is_some()
+    }
+}
+
+/// The counts of the (v, g), (v, 1/g) and stretched histograms over some
+/// slabs, and the histogram volume's counts and sums over whole fixed
+/// parts of its slices (a task's): they merge exactly in any order.
+#[derive(Default, Serialize, Deserialize)]
+pub struct HistogramCounts {
+    joint: Option<Histogram>,
+    inv_g: Option<Histogram>,
+    stretched: (Option<Histogram>, Option<Histogram>),
+    hvol: Option<HvolAccumulator>,
+}
+
+impl HistogramCounts {
+    /// Counts a slab's channels (at least [`HistogramAxes::channels`]) into
+    /// every histogram but the histogram volume.
+    fn add(&mut self, axes: &HistogramAxes, slab: &[(String, Volume)]) -> Result<(), RunError> {
+        let err = at::<HistogramError>("histogram");
+        let (v, g) = (channel(slab, "v")?, channel(slab, "g")?);
+        if axes.joint {
+            add(&mut self.joint, count(&[v, g], axes.axes.clone(), None).map_err(err)?);
+        }
+        if let Some(ia) = &axes.inv_g {
+            add(&mut self.inv_g, count(&[v, channel(slab, "inv_g")?], ia.clone(), None).map_err(err)?);
+        }
+        if axes.stretched {
+            let traced = hit_mask(channel(slab, "hit")?);
+            let pair = &mut self.stretched;
+            add(&mut pair.0, count(&[v, g], axes.axes.clone(), Some(&traced)).map_err(err)?);
+            let g_hit = channel(slab, "g_hit")?;
+            add(&mut pair.1, count(&[v, g_hit], axes.stretched_axes.clone(), Some(&traced)).map_err(err)?);
+        }
+        Ok(())
+    }
+
+    /// A task's counts of the slab of planes `z` of a volume of `nz`
+    /// planes and `voxels` voxels: every histogram, the histogram volume's
+    /// slices each into its fixed part (the task must hold whole parts).
+    pub fn of_task_slab(
+        &mut self,
+        axes: &HistogramAxes,
+        z: &Range<usize>,
+        nz: usize,
+        voxels: usize,
+        slab: &[(String, Volume)],
+    ) -> Result<(), RunError> {
+        self.add(axes, slab)?;
+        if let Some(hv_axes) = &axes.hvol {
+            let acc = match &mut self.hvol {
+                Some(acc) => acc,
+                None => self.hvol.insert(HvolAccumulator::new(hv_axes, voxels).map_err(at("histogram"))?),
+            };
+            let (v, g, f2) = (channel(slab, "v")?, channel(slab, "g")?, channel(slab, "f2")?);
+            let plane = v.len() / z.len().max(1);
+            for (i, k) in z.clone().enumerate() {
+                let at = i * plane..(i + 1) * plane;
+                acc.add_slice(k, nz, &v[at.clone()], &g[at.clone()], &f2[at]);
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Channel `c`'s samples in `slab`.
+fn channel<'s>(slab: &'s [(String, Volume)], c: &str) -> Result<&'s [f32], RunError> {
+    slab.iter().find(|(n, _)| n == c).map(|(_, v)| v.samples()).ok_or_else(|| fail("histogram")(format!("{c} missing")))
+}
+
+/// The histograms of the pipeline counted slab by slab (see the module docs).
+pub(super) struct SlabHistograms {
+    axes: HistogramAxes,
+    /// The histogram volume fed here, slab by slab in z order.
+    hvol: Option<HvolBySlabs>,
+    /// The histogram volume's parts counted by tasks.
+    hvol_tasks: Vec<HvolAccumulator>,
+    counts: HistogramCounts,
+    voxels: usize,
+}
+
+impl SlabHistograms {
+    /// Empty histograms of `p` (with the histogram volume when `hvol`,
+    /// counted on a lane per thread) over the axes of `stats`, for
+    /// the `slabs` of a volume of `n` voxels. Peak finding's (v, 1/g) axis
+    /// takes its own passes over `chans` (one fewer with `g_buckets`, the
+    /// first radix pass over g).
+    pub(super) fn new(
+        p: &Pipeline,
+        chans: &mut SlabChannels,
+        stats: &Stats,
+        slabs: &[Range<usize>],
+        n: usize,
+        hvol: bool,
+        g_buckets: Option<&KeyBuckets>,
+    ) -> Result<SlabHistograms, RunError> {
+        let joint = p.histogram.as_ref().is_some_and(|h| h.joint);
+        let stretched = p.histogram.as_ref().is_some_and(|h| h.stretched) && chans.has("g_hit") && chans.has("hit");
+        let axes = vec![stats.axis(&AxisSpec::qbert("v"), "v")?, stats.axis(&AxisSpec::qbert("g"), "g")?];
+        let mut stretched_axes = axes.clone();
+        stretched_axes[1].name = "g_hit".into();
+        let bins = HvolParams::default().bins;
+        let nz = slabs.last().map_or(0, |z| z.end);
+        let hvol_axes = match hvol {
+            true => Some(HvolAxes {
+                v: stats.axis(&HvolAxes::spec("v", bins[0]), "v")?,
+                g: stats.axis(&HvolAxes::spec("g", bins[1]), "g")?,
+                h: stats.axis(&HvolAxes::spec("f2", bins[2]), "f2")?,
+            }),
+            false => None,
+        };
+        let by_slabs = match &hvol_axes {
+            Some(a) => {
+                let (plane, lanes) = (n / nz.max(1), rayon::current_num_threads());
+                Some(HvolBySlabs::new(a, plane, nz, lanes).map_err(at("histogram"))?)
+            }
+            None => None,
+        };
+        let inv_g = match joint && chans.has("inv_g") {
+            true => medians::inverse_gradient_axis(chans, slabs, g_buckets)
+                .map_err(fail("histogram"))?
+                .map(|ia| vec![axes[0].clone(), ia]),
+            false => None,
+        };
+        let axes = HistogramAxes { joint, stretched, axes, stretched_axes, hvol: hvol_axes, inv_g };
+        Ok(SlabHistograms {
+            axes,
+            hvol: by_slabs,
+            hvol_tasks: Vec::new(),
+            counts: HistogramCounts::default(),
+            voxels: n,
+        })
+    }
+
+    /// What each slab is counted over.
+    pub(super) fn axes(&self) -> &HistogramAxes {
+        &self.axes
+    }
+
+    /// Counts the slab of planes from `first` on, whose channels are `slab`
+    /// (at least [`HistogramAxes::channels`]); slabs come in order.
+    pub(super) fn add(&mut self, first: usize, slab: &[(String, Volume)]) -> Result<(), RunError> {
+        if let Some(acc) = &mut self.hvol {
+            let (v, g, f2) = (channel(slab, "v")?, channel(slab, "g")?, channel(slab, "f2")?);
+            acc.add_slab(first, v, g, f2).map_err(at("histogram"))?;
+        }
+        self.counts.add(&self.axes, slab)
+    }
+
+    /// Takes in a task's counts.
+    pub(super) fn merge(&mut self, task: HistogramCounts) {
+        let HistogramCounts { joint, inv_g, stretched, hvol } = task;
+        for (mine, theirs) in [
+            (&mut self.counts.joint, joint),
+            (&mut self.counts.inv_g, inv_g),
+            (&mut self.counts.stretched.0, stretched.0),
+            (&mut self.counts.stretched.1, stretched.1),
+        ] {
+            if let Some(h) = theirs {
+                add(mine, h);
+            }
+        }
+        self.hvol_tasks.extend(hvol);
+    }
+
+    /// The histograms of every slab added or merged, of a grid of voxel `spacing`.
+    pub(super) fn finish(self, spacing: [f64; 3]) -> Result<Counted, RunError> {
+        let params = HvolParams::on_grid(spacing);
+        let hvol = match (self.hvol, self.hvol_tasks.is_empty()) {
+            (Some(_), false) => Some(HvolAccumulator::finish(self.hvol_tasks, &params)),
+            (Some(acc), true) => Some(acc.finish(&params)),
+            (None, _) => None,
+        };
+        let HistogramCounts { joint, inv_g, stretched, .. } = self.counts;
+        Ok(Counted {
+            voxels: self.voxels,
+            hvol: hvol.transpose().map_err(at("histogram"))?,
+            joint,
+            inv_g,
+            stretched: stretched.0.zip(stretched.1),
+            ..Default::default()
+        })
+    }
+}
+
+/// Adds the counts of `h` into `into` (h itself when it is the first).
+fn add(into: &mut Option<Histogram>, h: Histogram) {
+    match into {
+        Some(a) => a.counts.iter_mut().zip(&h.counts).for_each(|(x, y)| *x += y),
+        None => *into = Some(h),
+    }
+}
