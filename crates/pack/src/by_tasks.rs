@@ -36,8 +36,15 @@ impl TextureTarget {
 
     /// Quantises planes `z` of the texture from `chans` (each channel's
     /// samples on those planes) and writes them at their place in the data
-    /// file; a rerun of the same planes writes the same bytes.
-    pub fn write_planes(&self, z: Range<usize>, chans: &[(String, Volume)]) -> Result<(), PackError> {
+    /// file, through `bytes` (reused from call to call: fresh memory of a
+    /// slab's size page-faults at a cost like the quantising's); a rerun of
+    /// the same planes writes the same bytes.
+    pub fn write_planes(
+        &self,
+        z: Range<usize>,
+        chans: &[(String, Volume)],
+        bytes: &mut Vec<u8>,
+    ) -> Result<(), PackError> {
         let [nx, ny] = self.plane;
         let mut decodes = Vec::with_capacity(self.decodes.len());
         for (c, d) in self.layout.components.iter().zip(&self.decodes) {
@@ -58,11 +65,12 @@ impl TextureTarget {
             decodes.push(Some((v.samples(), *d)));
         }
         let prepared = Prepared { dtype: self.layout.dtype, dims: [nx, ny, z.len()], decodes };
-        let mut bytes = vec![0u8; prepared.plane_bytes() * z.len()];
-        prepared.encode_planes(0, &mut bytes);
+        // every byte is encoded over
+        bytes.resize(prepared.plane_bytes() * z.len(), 0);
+        prepared.encode_planes(0, bytes);
         let io = |cause| PackError::Io(VolumeError::Io { path: self.file.clone(), cause });
         let mut file = std::fs::OpenOptions::new().write(true).open(&self.file).map_err(io)?;
         file.seek(SeekFrom::Start((self.plane_bytes() * z.start) as u64)).map_err(io)?;
-        file.write_all(&bytes).map_err(io)
+        file.write_all(bytes).map_err(io)
     }
 }

@@ -386,7 +386,7 @@ fn a_zarr_input_is_read_by_the_tasks_with_the_same_files() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("tooth.ome.zarr");
     write_volume(&input, &v, &WriteOptions { ty: SampleType::F32, gzip: false }, &[]).unwrap();
-    let text = "keep = [\"distance\", \"g\"]\n[input]\npadding = [14.0, 16.0]\n[prefilter]\nsigma_d = 1.0\n\
+    let text = "keep = [\"distance\", \"g\", \"nx\", \"f2\"]\n[input]\npadding = [14.0, 16.0]\n[prefilter]\nsigma_d = 1.0\n\
                 sigma_r = 0.1\n[histogram]\njoint = true\nstretched = true\n[pack]\nprofile = \"distance-tf\"\n";
     let p = parse(text, &[]).unwrap();
     let tasks = Arc::new(ThreadTasks::default());
@@ -400,6 +400,18 @@ fn a_zarr_input_is_read_by_the_tasks_with_the_same_files() {
     let want = v.samples().iter().filter(|&&x| (14.0..=16.0).contains(&x)).count();
     assert!(want > 100, "{want}");
     assert!(warnings.iter().any(|w| w.contains(&format!("{want} "))), "{want}: {warnings:?}");
+}
+
+#[test]
+fn tracing_tasks_cut_their_slabs_in_strips_of_rows_with_the_same_files() {
+    // the budget of a task decides its strips as the run's own: slabs of 6 planes, strips of 9 rows of 28
+    let p = shipped("distance-tf", &["input.size=28", "input.phantom=\"shells\"", "keep=[\"distance\", \"dot\"]"]);
+    let tasks = Arc::new(ThreadTasks::default());
+    let strips = SlabSize::Strips { planes: 6, rows: 9 };
+    assert_runs_equal_the_whole("distance-tf", &p, None, &[strips], Some(tasks.clone()));
+    let ran = tasks.ran.lock().unwrap().clone();
+    let trace = ran.iter().find(|(p, _)| p == "Trace").map(|(_, n)| *n);
+    assert_eq!(trace, Some(28usize.div_ceil(6) + 1), "{ran:?}");
 }
 
 /// Tasks that fail as a lost store would make them.
@@ -432,7 +444,10 @@ fn a_failed_task_fails_the_run_with_its_message_and_no_output() {
     let job = SlabJob {
         store: dir.path().to_path_buf(),
         geometry: Geometry::new([4, 4, 4], [1.0; 3]),
-        pass: mdtf_pipeline::blocks::SlabPass::Derive { groups: vec![], kernel_reach: 1, summarise: vec![] },
+        stored: vec!["v".into()],
+        groups: vec![],
+        kernel_reach: 1,
+        pass: mdtf_pipeline::blocks::SlabPass::Derive { summarise: vec![], store: vec![] },
     };
     let e = run_task(&job, 2..9).unwrap_err().to_string();
     assert!(e.contains("not a slab of the volume's 4"), "{e}");

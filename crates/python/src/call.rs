@@ -17,6 +17,29 @@ const SIGNAL_POLL: Duration = Duration::from_millis(20);
 /// The pool set by [`set_threads`]; None: rayon's global pool (one thread per core).
 static POOL: Mutex<Option<Arc<rayon::ThreadPool>>> = Mutex::new(None);
 
+/// The pool of the last thread count a cluster task asked for ([`task_pool`]).
+static TASK_POOL: Mutex<Option<(usize, Arc<rayon::ThreadPool>)>> = Mutex::new(None);
+
+/// A pool of `threads` worker threads for a cluster task (kept for the
+/// next task asking for as many): a task sets its own threads, so a
+/// restarted worker runs its tasks as the run asked.
+pub fn task_pool(threads: usize) -> PyResult<Arc<rayon::ThreadPool>> {
+    let mut kept = TASK_POOL.lock().unwrap_or_else(PoisonError::into_inner);
+    if let Some((n, pool)) = kept.as_ref()
+        && *n == threads
+    {
+        return Ok(pool.clone());
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(|k| format!("mdtf-task-{k}"))
+        .build()
+        .map_err(|e| PyRuntimeError::new_err(format!("cannot start {threads} threads: {e}")))?;
+    let pool = Arc::new(pool);
+    *kept = Some((threads, pool.clone()));
+    Ok(pool)
+}
+
 /// Uses `threads` worker threads for every later call (0: one per core).
 pub fn set_threads(threads: usize) -> PyResult<()> {
     let pool = if threads == 0 {

@@ -26,9 +26,10 @@ fn load(path: &Path, overrides: &[String]) -> PyResult<Pipeline> {
 /// place of the pipeline's. `memory_budget` (bytes) or `slab_planes` run it
 /// slab by slab; with neither, a volume too large for memory goes by slabs
 /// on its own, as `mdtf run` does. With `submit`, the run goes slab by slab
-/// (64 planes unless told) and its derive, pre-filter and tracing passes are
-/// handed to `submit(job, slabs, cancelled)` as tasks (see `mdtf.dask.run`
-/// and [`PythonTasks`]); the outputs are the same, byte for byte. Returns
+/// (64 planes unless told) and its passes (reading an OME-Zarr input,
+/// derive, pre-filter, tracing, histograms and textures) are handed to
+/// `submit(job, slabs, cancelled)` as tasks (see `mdtf.dask.run` and
+/// [`PythonTasks`]); the outputs are the same, byte for byte. Returns
 /// run_report.json's text.
 #[pyfunction]
 #[pyo3(signature = (pipeline, output, input=None, overrides=vec![], memory_budget=None, slab_planes=None, submit=None))]
@@ -116,9 +117,17 @@ impl SlabTasks for PythonTasks {
 }
 
 /// Runs one task of a [`run`] with `submit`: `job` (the pass, as JSON) on the
-/// planes `start..end`, writing them into the run's channel store.
+/// planes `start..end`, writing them into the run's channel store, on
+/// `threads` threads (0: the pool [`set_threads`](crate::call::set_threads) set, else one per core).
 #[pyfunction]
-pub fn slab_task(py: Python<'_>, job: &str, start: usize, end: usize) -> PyResult<()> {
+#[pyo3(signature = (job, start, end, threads=0))]
+pub fn slab_task(py: Python<'_>, job: &str, start: usize, end: usize, threads: usize) -> PyResult<()> {
     let job: SlabJob = serde_json::from_str(job).map_err(|e| value_error(format!("not a slab job: {e}")))?;
-    run_released(py, None, || mdtf_pipeline::blocks::run_task(&job, start..end))?.map_err(mdtf_error)
+    let pool = if threads > 0 { Some(crate::call::task_pool(threads)?) } else { None };
+    let task = || mdtf_pipeline::blocks::run_task(&job, start..end);
+    run_released(py, None, || match &pool {
+        Some(pool) => pool.install(task),
+        None => task(),
+    })?
+    .map_err(mdtf_error)
 }

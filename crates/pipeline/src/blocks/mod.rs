@@ -64,6 +64,7 @@ mod remote;
 mod slab_channels;
 mod slab_histograms;
 mod store;
+mod tasks;
 mod trace;
 mod trace_files;
 
@@ -72,10 +73,11 @@ pub use budget::{TraceBlocks, automatic_budget, automatic_file_budget, fit_slabs
 pub use item_files::{ItemFiles, automatic_item_budget, derive_item_files, items_unsupported};
 pub use partials::{SlabPartial, TracePartial};
 pub use pool::SamplePool;
-pub use remote::{Prefilter, SlabJob, SlabPass, SlabTasks, run_task};
+pub use remote::{Prefilter, SlabJob, SlabPass, SlabTasks};
 pub use slab_channels::SlabChannels;
 pub use slab_histograms::{HistogramAxes, HistogramCounts};
 pub use store::{ChannelStore, StoreWriter};
+pub use tasks::run_task;
 pub use trace_files::{TRACED_CHANNELS, TracedFiles, automatic_trace_budget, trace_files};
 
 use crate::file::Pipeline;

@@ -10,8 +10,9 @@
 
 use super::reductions::Stats;
 use super::slab_histograms::HistogramCounts;
+use super::trace::SlabTrace;
 use crate::run::{RunError, fail};
-use mdtf_boundary::{Crossings, ReportAccumulator, ResolvedParams, TraceCounts};
+use mdtf_boundary::{Crossings, ReportAccumulator, ReportInput, ResolvedParams, TraceCounts};
 use mdtf_histogram::{AxisSpec, ChannelStats};
 use mdtf_volume::KeyBuckets;
 use serde::{Deserialize, Serialize};
@@ -76,6 +77,25 @@ impl SlabPartial {
         for (name, part) in self.stats.drain(..) {
             stats.merge(&name, part);
         }
+    }
+}
+
+impl TracePartial {
+    /// The sums of one block's tracing.
+    pub(super) fn of(slab: &SlabTrace) -> TracePartial {
+        let b = &slab.trace;
+        let mut report = ReportAccumulator::new(b.resolved.report_thresholds());
+        let (hit, dot, distance, g_hit) = (b.hit.samples(), b.dot.samples(), b.distance.samples(), b.g_hit.samples());
+        report.add(ReportInput { hit, dot, distance, g: slab.g.samples(), g_hit });
+        TracePartial { counts: b.counts, crossings: b.crossings.clone(), resolved: b.resolved, report }
+    }
+
+    /// Adds the tracing of the next strip or slab.
+    pub fn merge(&mut self, other: TracePartial) {
+        self.counts += other.counts;
+        self.crossings.merge(&other.crossings);
+        self.report.merge(&other.report);
+        self.resolved = other.resolved;
     }
 }
 

@@ -5,7 +5,8 @@
 //! in the same order whatever the slab height.
 
 use super::partials::{SlabPartial, TracePartial};
-use super::remote::{self, Prefilter, SlabPass, SlabTasks};
+use super::remote::{self, Derivation, Prefilter, SlabPass, SlabTasks};
+use super::slab_channels::made_by;
 use super::slab_histograms::SlabHistograms;
 use super::trace::{self, SlabTrace, TraceSetup};
 use super::{ChannelStore, SlabChannels, SlabSize, Source, medians, open_source};
@@ -16,7 +17,7 @@ use crate::plan::Plan;
 use crate::progress::Progress;
 use crate::report::{BoundarySummary, Stages, Traced};
 use crate::run::{RunError, RunOptions, at, fail};
-use mdtf_boundary::{Crossings, ReportAccumulator, ResolvedParams, TraceCounts, VolumeStats};
+use mdtf_boundary::VolumeStats;
 use mdtf_derive::{DeriveParams, Item};
 use mdtf_histogram::{ChannelStats, Histogram};
 use mdtf_pack::{PackParams, PackWriter, Profile, TfFile};
@@ -129,13 +130,11 @@ impl<'a> SlabPasses<'a> {
         let hvol_asked = p.histogram.as_ref().is_some_and(|h| h.hvol);
         let hvol_needed = packs && (hvol_asked || tf.is_none());
         let threads = rayon::current_num_threads();
-        // the tracing cuts strips of rows unless its tasks stored every channel by whole planes
-        let strips = opts.tasks.is_none();
         let ny = geo.dims[1];
         let (height, trace_blocks) = match size {
             SlabSize::Budget(b) => {
-                let h = fit_slabs(b, &geo, &plan, hvol_needed, strips).map_err(fail("plan"))?;
-                (h, fit_trace(b, &geo, &plan, h, threads, strips).map_err(fail("plan"))?)
+                let h = fit_slabs(b, &geo, &plan, hvol_needed, true).map_err(fail("plan"))?;
+                (h, fit_trace(b, &geo, &plan, h, threads, true).map_err(fail("plan"))?)
             }
             SlabSize::Planes(h) => {
                 let h = h.clamp(1, nz.max(1));
@@ -143,8 +142,7 @@ impl<'a> SlabPasses<'a> {
             }
             SlabSize::Strips { planes, rows } => {
                 let h = planes.clamp(1, nz.max(1));
-                let rows = if strips { rows.clamp(1, ny.max(1)) } else { ny };
-                (h, TraceBlocks { planes: h, rows })
+                (h, TraceBlocks { planes: h, rows: rows.clamp(1, ny.max(1)) })
             }
         };
         let slabs = slabs(nz, height);
@@ -158,7 +156,8 @@ impl<'a> SlabPasses<'a> {
                 let (level, nan, padding) = (p.input.level, p.input.nan, meta.padding);
                 let pass = SlabPass::Input { input, level, nan, padding };
                 let mut padded = 0;
-                for mut part in remote::run_pass(tasks, pass, &mut store, &slabs)? {
+                let nothing_derived = Derivation { groups: &[], kernel_reach: 0 };
+                for mut part in remote::run_pass(tasks, pass, &mut store, nothing_derived, &slabs)? {
                     part.merge_stats_into(&mut stats);
                     padded += part.padded;
                 }
@@ -224,8 +223,9 @@ impl<'a> SlabPasses<'a> {
         if let Some(tasks) = self.tasks {
             self.progress.stage("derive (tasks)")?;
             let summarise = summarised.iter().map(|c| c.to_string()).collect();
-            let pass = SlabPass::Derive { groups, kernel_reach, summarise };
-            for mut part in remote::run_pass(tasks, pass, &mut chans.store, &self.slabs)? {
+            let pass = SlabPass::Derive { summarise, store: self.read_later(&groups) };
+            let derivation = Derivation { groups: &groups, kernel_reach };
+            for mut part in remote::run_pass(tasks, pass, &mut chans.store, derivation, &self.slabs)? {
                 part.merge_stats_into(&mut self.stats);
                 derived.merge(&part);
             }
@@ -284,6 +284,24 @@ impl<'a> SlabPasses<'a> {
         self.plan.trace && !self.plan.prefilter && self.tasks.is_none()
     }
 
+    /// The derived channels a run on tasks reads itself after its derive
+    /// pass, which its derive tasks store (the tasks remake every other
+    /// channel): the kept ones, and g where the run takes a median of it
+    /// (the tracing's noise floor and the detection before it, the (v, 1/g)
+    /// axis, gaussian-tf's default without a TF file).
+    fn read_later(&self, groups: &[DeriveParams]) -> Vec<String> {
+        let derived: Vec<String> = groups.iter().flat_map(|d| d.items.iter()).flat_map(|&i| made_by(i)).collect();
+        let mut store: Vec<String> = self.p.keep.iter().filter(|c| derived.contains(c)).cloned().collect();
+        let joint = self.p.histogram.as_ref().is_some_and(|h| h.joint);
+        let medians_of_g = self.plan.trace
+            || (joint && derived.iter().any(|c| c == "inv_g"))
+            || (self.p.pack.profile == Profile::GaussianTf && self.tf.is_none());
+        if medians_of_g && derived.iter().any(|c| c == "g") && !store.iter().any(|c| c == "g") {
+            store.push("g".into());
+        }
+        store
+    }
+
     /// The derive groups of the whole run: the plan's items (with g and f''
     /// for the default TF's histogram volume, which the whole run derives
     /// on its own from the value), then the deferred normals.
@@ -336,9 +354,13 @@ impl<'a> SlabPasses<'a> {
         let mut sums = TraceSums::default();
         match self.tasks {
             Some(tasks) => {
-                let (params, halo) = (self.p.boundary.clone(), self.plan.reach.trace[2]);
-                let pass = SlabPass::Trace { g: g.into(), f2: f2.into(), params, stats, halo, value_range };
-                for mut part in remote::run_pass(tasks, pass, &mut chans.store, &self.slabs)? {
+                let (params, [_, halo_rows, halo]) = (self.p.boundary.clone(), self.plan.reach.trace);
+                let (g, f2, rows) = (g.into(), f2.into(), self.trace_blocks.rows);
+                let pass = SlabPass::Trace { g, f2, prefiltered, params, stats, halo, halo_rows, rows, value_range };
+                let groups = self.derive_groups();
+                let derivation = Derivation { groups: &groups, kernel_reach: self.plan.reach.kernel[2] };
+                let (_, tslabs) = self.trace_strips_and_slabs();
+                for mut part in remote::run_pass(tasks, pass, &mut chans.store, derivation, &tslabs)? {
                     part.merge_stats_into(&mut self.stats);
                     let no_trace = || fail("boundary")("a tracing task left no tracing partial".into());
                     sums.merge(part.trace.ok_or_else(no_trace)?);
@@ -349,7 +371,6 @@ impl<'a> SlabPasses<'a> {
                 let setup = TraceSetup {
                     g,
                     f2,
-                    stored: false,
                     prefiltered,
                     params: &p.boundary,
                     stats: &stats,
@@ -435,7 +456,9 @@ impl<'a> SlabPasses<'a> {
         match self.tasks {
             Some(tasks) => {
                 let pass = SlabPass::Prefilter { filters, halo };
-                for mut part in remote::run_pass(tasks, pass, &mut chans.store, &self.slabs)? {
+                let groups = self.derive_groups();
+                let derivation = Derivation { groups: &groups, kernel_reach: self.plan.reach.kernel[2] };
+                for mut part in remote::run_pass(tasks, pass, &mut chans.store, derivation, &self.slabs)? {
                     part.merge_stats_into(&mut self.stats);
                 }
             }
@@ -457,7 +480,7 @@ impl<'a> SlabPasses<'a> {
 
     /// The tracing's summary and its Fig. 2 report (written), from the slabs' sums.
     fn finish_trace(&mut self, sums: TraceSums) -> Result<Traced, RunError> {
-        let TraceSums { report: Some(report), crossings: Some(crossings), counts, resolved: Some(r) } = sums else {
+        let Some(TracePartial { report, crossings, counts, resolved: r }) = sums.0 else {
             return Err(fail("boundary")("the volume has no planes".into()));
         };
         let (lost, lost_warnings) = crossings.lost(&r);
@@ -572,7 +595,9 @@ impl<'a> SlabPasses<'a> {
             };
             let read = read.iter().map(|c| c.to_string()).collect();
             let pass = SlabPass::Pack { textures: targets.clone(), histograms: axes, read, height: self.height };
-            for part in remote::run_pass(tasks, pass, &mut chans.store, &task_slabs)? {
+            let groups = self.derive_groups();
+            let derivation = Derivation { groups: &groups, kernel_reach: self.plan.reach.kernel[2] };
+            for part in remote::run_pass(tasks, pass, &mut chans.store, derivation, &task_slabs)? {
                 if let (Some(h), Some(counts)) = (&mut histograms, part.histograms) {
                     h.merge(counts);
                 }
@@ -733,49 +758,21 @@ fn copy_input(
     Ok(padded)
 }
 
-/// The tracing's whole-volume sums, fed slab by slab in z order.
+/// The tracing's whole-volume sums, fed block by block (or task by task).
 #[derive(Default)]
-struct TraceSums {
-    /// The Fig. 2 report's sums, fed in voxel order.
-    report: Option<ReportAccumulator>,
-    crossings: Option<Crossings>,
-    counts: TraceCounts,
-    /// The thresholds the tracing resolved (the same for every slab).
-    resolved: Option<ResolvedParams>,
-}
+struct TraceSums(Option<TracePartial>);
 
 impl TraceSums {
-    /// Adds the next slab's tracing.
+    /// Adds the next block's tracing.
     fn add(&mut self, slab: &SlabTrace) {
-        let SlabTrace { trace: b, g } = slab;
-        self.report.get_or_insert_with(|| ReportAccumulator::new(b.resolved.report_thresholds())).add(
-            mdtf_boundary::ReportInput {
-                hit: b.hit.samples(),
-                dot: b.dot.samples(),
-                distance: b.distance.samples(),
-                g: g.samples(),
-                g_hit: b.g_hit.samples(),
-            },
-        );
-        match &mut self.crossings {
-            Some(c) => c.merge(&b.crossings),
-            None => self.crossings = Some(b.crossings.clone()),
-        }
-        self.counts += b.counts;
-        self.resolved = Some(b.resolved);
+        self.merge(TracePartial::of(slab));
     }
 
     /// Adds the next slab's tracing, made by a task.
     fn merge(&mut self, part: TracePartial) {
-        match &mut self.report {
-            Some(r) => r.merge(&part.report),
-            None => self.report = Some(part.report),
+        match &mut self.0 {
+            Some(sums) => sums.merge(part),
+            None => self.0 = Some(part),
         }
-        match &mut self.crossings {
-            Some(c) => c.merge(&part.crossings),
-            None => self.crossings = Some(part.crossings),
-        }
-        self.counts += part.counts;
-        self.resolved = Some(part.resolved);
     }
 }

@@ -10,17 +10,15 @@
 //! the single-process run's bit for bit. The run itself still makes the
 //! histograms, the pack and the kept volumes from the stored channels.
 
-use super::partials::{SlabPartial, TracePartial};
-use super::slab_channels::made_by;
-use super::slab_histograms::{HistogramAxes, HistogramCounts};
-use super::trace::{TraceSetup, prefilter_slab, trace_slab};
-use super::{ChannelStore, SlabChannels};
+use super::ChannelStore;
+use super::partials::SlabPartial;
+use super::slab_histograms::HistogramAxes;
 use crate::run::{RunError, at, fail};
 use mdtf_bilateral::BilateralParams;
-use mdtf_boundary::{BoundaryParams, ReportAccumulator, ReportInput, VolumeStats};
+use mdtf_boundary::{BoundaryParams, VolumeStats};
 use mdtf_derive::DeriveParams;
 use mdtf_pack::TextureTarget;
-use mdtf_volume::{Geometry, NanPolicy, PlaneReader, ReadOptions};
+use mdtf_volume::{Geometry, NanPolicy};
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::path::PathBuf;
@@ -40,8 +38,26 @@ pub struct SlabJob {
     pub store: PathBuf,
     /// The whole volume's grid.
     pub geometry: Geometry,
+    /// The channels the store holds when the pass starts (a task reads
+    /// these; what it derives it remakes from the stored value, as the
+    /// run's own passes do).
+    pub stored: Vec<String>,
+    /// The run's derive groups (each its items, kernel and epsilon).
+    pub groups: Vec<DeriveParams>,
+    /// Planes the derive kernel reads on each side of a slab.
+    pub kernel_reach: usize,
     /// What each task does to its slab.
     pub pass: SlabPass,
+}
+
+/// How the channels a pass reads and does not find stored are derived:
+/// the run's derive groups and the kernel's reach in planes.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Derivation<'d> {
+    /// The derive groups.
+    pub groups: &'d [DeriveParams],
+    /// Planes the kernel reads on each side.
+    pub kernel_reach: usize,
 }
 
 /// The work of a pass on one slab.
@@ -60,16 +76,15 @@ pub enum SlabPass {
         /// The scanner padding's values (inclusive, value units), if any.
         padding: Option<[f64; 2]>,
     },
-    /// Derives every channel of the derive groups from the stored value and
-    /// stores them, with the statistics of the channels `summarise`.
+    /// Derives the channels `summarise` and `store` from the stored value:
+    /// the statistics of the first, the second stored (what the run reads
+    /// itself later).
     Derive {
-        /// The derive passes (each its items, kernel and epsilon), as the run derives them.
-        groups: Vec<DeriveParams>,
-        /// Planes the kernel reads on each side of the slab.
-        kernel_reach: usize,
         /// The channels whose statistics the run takes (g also its median's
         /// first radix pass, 1/g its smallest positive value).
         summarise: Vec<String>,
+        /// The channels stored.
+        store: Vec<String>,
     },
     /// Pre-filters stored channels into new ones, with their statistics.
     Prefilter {
@@ -92,19 +107,27 @@ pub enum SlabPass {
         /// Planes read at a time (the run's slab height).
         height: usize,
     },
-    /// Traces the stored g and f'' (and normal) and stores the distance,
-    /// g_hit, hit and dot, with g_hit's statistics and the slab's [`TracePartial`].
+    /// Traces g and f'' (derived, or stored pre-filtered ones) with the
+    /// derived normal and stores the distance, g_hit, hit and dot, with
+    /// g_hit's statistics and the slab's [`TracePartial`].
     Trace {
-        /// The stored g traced.
+        /// The g traced.
         g: String,
-        /// The stored f'' traced.
+        /// The f'' traced.
         f2: String,
+        /// g and f'' are stored pre-filtered ones.
+        prefiltered: bool,
         /// The tracing's parameters.
         params: BoundaryParams,
         /// The whole volume's statistics the tracing takes its defaults from.
         stats: VolumeStats,
         /// Planes a ray may reach beyond its slab (d_max plus the interpolation's support).
         halo: usize,
+        /// Rows a ray may reach beyond its strip, likewise.
+        halo_rows: usize,
+        /// Rows per strip: a task traces its slab strip by strip (all of
+        /// them: one strip) under the run's memory budget.
+        rows: usize,
         /// Value range (max - min) of the input, value units.
         value_range: f64,
     },
@@ -122,7 +145,7 @@ pub struct Prefilter {
 }
 
 /// The channels the tracing stores for each slab.
-const TRACED: [&str; 4] = ["g_hit", "hit", "distance", "dot"];
+pub(super) const TRACED: [&str; 4] = ["g_hit", "hit", "distance", "dot"];
 
 impl SlabPass {
     /// The run's stage this pass belongs to (its errors and partials name it).
@@ -140,9 +163,7 @@ impl SlabPass {
     fn outputs(&self) -> Vec<String> {
         match self {
             SlabPass::Input { .. } => vec!["v".into()],
-            SlabPass::Derive { groups, .. } => {
-                groups.iter().flat_map(|d| d.items.iter()).flat_map(|&i| made_by(i)).collect()
-            }
+            SlabPass::Derive { store, .. } => store.clone(),
             SlabPass::Prefilter { filters, .. } => filters.iter().map(|f| f.output.clone()).collect(),
             SlabPass::Trace { .. } => TRACED.map(String::from).to_vec(),
             SlabPass::Pack { .. } => Vec::new(),
@@ -156,121 +177,21 @@ pub(super) fn run_pass(
     tasks: &dyn SlabTasks,
     pass: SlabPass,
     store: &mut ChannelStore,
+    derivation: Derivation,
     slabs: &[Range<usize>],
 ) -> Result<Vec<SlabPartial>, RunError> {
     let (stage, outputs) = (pass.stage(), pass.outputs());
-    let job = SlabJob { store: store.dir().to_path_buf(), geometry: store.geometry().clone(), pass };
+    let job = SlabJob {
+        store: store.dir().to_path_buf(),
+        geometry: store.geometry().clone(),
+        stored: store.names(),
+        groups: derivation.groups.to_vec(),
+        kernel_reach: derivation.kernel_reach,
+        pass,
+    };
     tasks.run(&job, slabs).map_err(fail(stage))?;
     for c in &outputs {
         store.adopt(c).map_err(at(stage))?;
     }
     slabs.iter().map(|z| SlabPartial::read(store.dir(), stage, z.start)).collect()
-}
-
-/// Runs `job` on the planes `z` of the volume: the body of one task.
-pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<(), RunError> {
-    let nz = job.geometry.dims[2];
-    if z.start >= z.end || z.end > nz {
-        return Err(fail("plan")(format!("planes {z:?} are not a slab of the volume's {nz}")));
-    }
-    let voxels = job.geometry.voxel_count();
-    let stage = job.pass.stage();
-    let open = |reads: &[&str]| ChannelStore::open(job.store.clone(), job.geometry.clone(), reads).map_err(at("input"));
-    let mut partial = SlabPartial::default();
-    match &job.pass {
-        SlabPass::Input { input, level, nan, padding } => {
-            let read = ReadOptions { nan: *nan, level: *level, ..ReadOptions::default() };
-            let not_by_planes = || fail("input")(format!("{}: not readable by planes", input.display()));
-            let mut reader = PlaneReader::open(input, &read).map_err(at("input"))?.ok_or_else(not_by_planes)?;
-            if reader.geometry().dims != job.geometry.dims {
-                let dims = reader.geometry().dims;
-                return Err(fail("input")(format!(
-                    "{}: {dims:?} voxels, the run planned {:?}",
-                    input.display(),
-                    job.geometry.dims
-                )));
-            }
-            let v = reader.read(z.clone()).map_err(at("input"))?;
-            open(&[])?.put_volume("v", z.start, &v).map_err(at("input"))?;
-            partial.summarise("v", v.samples(), voxels);
-            if let Some(range) = padding {
-                partial.padded = crate::inputs::count_padding(v.samples(), *range);
-            }
-        }
-        SlabPass::Derive { groups, kernel_reach, summarise } => {
-            let mut chans = SlabChannels::new(open(&["v"])?, groups.clone(), *kernel_reach, nz);
-            let names = job.pass.outputs();
-            let names: Vec<&str> = names.iter().map(String::as_str).collect();
-            for (name, v) in chans.volumes(z.clone(), &names).map_err(fail("derive"))? {
-                chans.store.put_volume(&name, z.start, &v).map_err(at("derive"))?;
-                if !summarise.contains(&name) {
-                    continue;
-                }
-                partial.summarise(&name, v.samples(), voxels);
-                match name.as_str() {
-                    "g" => partial.g_buckets.get_or_insert_with(mdtf_volume::KeyBuckets::new).add(v.samples()),
-                    "inv_g" => partial.smallest_inv_g = Some(crate::pack_inputs::smallest_positive(v.samples())),
-                    _ => {}
-                }
-            }
-        }
-        SlabPass::Prefilter { filters, halo } => {
-            let reads: Vec<&str> = filters.iter().map(|f| f.input.as_str()).collect();
-            let mut chans = SlabChannels::new(open(&reads)?, vec![], 0, nz);
-            for f in filters {
-                let own = prefilter_slab(&mut chans, &f.input, &f.params, &z, *halo)?;
-                chans.store.put_volume(&f.output, z.start, &own).map_err(at("prefilter"))?;
-                partial.summarise(&f.output, own.samples(), voxels);
-            }
-        }
-        SlabPass::Trace { g, f2, params, stats, halo, value_range } => {
-            let mut chans = SlabChannels::new(open(&[g, f2, "nx", "ny", "nz"])?, vec![], 0, nz);
-            let setup = TraceSetup {
-                g,
-                f2,
-                stored: true,
-                prefiltered: false,
-                params,
-                stats,
-                halo: *halo,
-                halo_rows: 0,
-                value_range: *value_range,
-            };
-            let rows = 0..chans.ny();
-            let slab = trace_slab(&mut chans, &setup, &z, &rows, None)?;
-            let b = &slab.trace;
-            for (c, v) in TRACED.iter().zip([&b.g_hit, &b.hit, &b.distance, &b.dot]) {
-                chans.store.put_volume(c, z.start, v).map_err(at("boundary"))?;
-            }
-            partial.summarise("g_hit", b.g_hit.samples(), voxels);
-            let mut report = ReportAccumulator::new(b.resolved.report_thresholds());
-            report.add(ReportInput {
-                hit: b.hit.samples(),
-                dot: b.dot.samples(),
-                distance: b.distance.samples(),
-                g: slab.g.samples(),
-                g_hit: b.g_hit.samples(),
-            });
-            let (counts, crossings, resolved) = (b.counts, b.crossings.clone(), b.resolved);
-            partial.trace = Some(TracePartial { counts, crossings, resolved, report });
-        }
-        SlabPass::Pack { textures, histograms, read, height } => {
-            let reads: Vec<&str> = read.iter().map(String::as_str).collect();
-            let mut chans = SlabChannels::new(open(&reads)?, vec![], 0, nz);
-            let mut counts = HistogramCounts::default();
-            for first in z.clone().step_by((*height).max(1)) {
-                let planes = first..(first + height.max(&1)).min(z.end);
-                let slab = chans.volumes(planes.clone(), &reads).map_err(fail("pack"))?;
-                if let Some(axes) = histograms {
-                    counts.of_task_slab(axes, &planes, nz, voxels, &slab)?;
-                }
-                for t in textures {
-                    t.write_planes(planes.clone(), &slab).map_err(at("pack"))?;
-                }
-                chans.give_back(slab);
-            }
-            partial.histograms = histograms.is_some().then_some(counts);
-        }
-    }
-    partial.write(&job.store, stage, z.start)
 }

@@ -68,6 +68,11 @@ impl ChannelStore {
         self.geometry.dims[0] * self.geometry.dims[1]
     }
 
+    /// The channels the store holds, by name.
+    pub fn names(&self) -> Vec<String> {
+        self.files.keys().cloned().collect()
+    }
+
     /// Whether the store holds channel `name`.
     pub fn has(&self, name: &str) -> bool {
         self.files.contains_key(name)

@@ -32,10 +32,6 @@ pub(super) struct TraceSetup<'a> {
     pub g: &'a str,
     /// The f'' traced (likewise).
     pub f2: &'a str,
-    /// Read g, f'' and the normal from the store by whole planes (a task's
-    /// tracing: its run stored every channel); else derive them over the
-    /// block (the first derive group).
-    pub stored: bool,
     /// g and f'' are the pre-filtered ones: a derived block reads them from the store over it.
     pub prefiltered: bool,
     /// The tracing's parameters.
@@ -69,25 +65,13 @@ pub(super) fn trace_slab(
     spent: Option<SlabTrace>,
 ) -> Result<SlabTrace, RunError> {
     let read = grown(z, setup.halo, 1, chans.nz());
-    let all_rows = rows.len() == chans.ny();
-    let block = if setup.stored {
-        if !all_rows {
-            return Err(fail("boundary")("a tracing of stored channels reads whole planes".into()));
-        }
-        let mut c = chans.volumes(read.clone(), &[setup.g, setup.f2, "nx", "ny", "nz"]).map_err(fail("boundary"))?;
-        let normal = MultiField::from_volumes(c.split_off(2)).map_err(at("boundary"))?;
-        let (f2, g) = (c.remove(1).1, c.remove(0).1);
-        let at = BlockRange { planes: read.clone(), rows: rows.clone() };
-        TraceBlock { at, g, f2, normal, order: None }
-    } else {
-        // the derivatives over the block as derived (its planes and rows beyond the halo are never reached)
-        let read_rows = grown(rows, setup.halo_rows, 1, chans.ny());
-        let (place, out) = chans.derive_block(read.clone(), read_rows).map_err(fail("boundary"))?;
-        let block = TraceBlock::of(place, out).map_err(fail("boundary"))?;
-        match setup.prefiltered {
-            false => block,
-            true => block.with_stored(&mut chans.store, setup.g, setup.f2).map_err(at("boundary"))?,
-        }
+    // the derivatives over the block as derived (its planes and rows beyond the halo are never reached)
+    let read_rows = grown(rows, setup.halo_rows, 1, chans.ny());
+    let (place, out) = chans.derive_block(read.clone(), read_rows).map_err(fail("boundary"))?;
+    let block = TraceBlock::of(place, out).map_err(fail("boundary"))?;
+    let block = match setup.prefiltered {
+        false => block,
+        true => block.with_stored(&mut chans.store, setup.g, setup.f2).map_err(at("boundary"))?,
     };
     let own_planes = z.start - block.at.planes.start..z.end - block.at.planes.start;
     let own_rows = rows.start - block.at.rows.start..rows.end - block.at.rows.start;

@@ -13,8 +13,8 @@ Read an OME-Zarr store with ``mdtf.dask.from_ome_zarr`` and write results
 with ``mdtf.dask.to_ome_zarr`` (each block writes only its own chunks).
 
 ``mdtf.dask.run`` runs a whole pipeline file as ``mdtf run`` does, its
-derive, pre-filter and tracing passes spread over the cluster as one task
-per z-slab; the outputs are ``mdtf run``'s, byte for byte.
+passes spread over the cluster as one task per z-slab; the outputs are
+``mdtf run``'s, byte for byte.
 
 Needs ``dask[array]`` (and ``zarr`` for stores, ``distributed`` for a cluster).
 """
@@ -313,10 +313,11 @@ def to_ome_zarr(
         raise
 
 
-def _slab_task(job: str, start: int, end: int) -> None:
-    """One task of ``run``: ``job``'s pass on the z-planes ``start:end``
-    (a module function, so that workers import it rather than unpickle it)."""
-    _mdtf.slab_task(job, start, end)
+def _slab_task(job: str, start: int, end: int, threads: int) -> None:
+    """One task of ``run``: ``job``'s pass on the z-planes ``start:end`` on
+    ``threads`` threads (a module function, so that workers import it
+    rather than unpickle it)."""
+    _mdtf.slab_task(job, start, end, threads)
 
 
 def _executing(dask_worker: Any) -> int:
@@ -346,36 +347,45 @@ def run(
     slab_planes: int | None = None,
     memory_budget: int | None = None,
     retries: int = 3,
+    task_threads: int = 1,
     **overrides: Any,
 ) -> dict[str, Any]:
     """Runs a pipeline file like ``mdtf.run`` (``mdtf run``), slab by slab,
-    its derive, pre-filter and tracing passes as one task per z-slab on a
-    dask cluster. The outputs in ``output`` are ``mdtf run``'s, byte for
-    byte: every whole-volume reduction (ranges, percentile tails, medians,
-    histograms, the histogram volume's sums) is made by this process from
-    what the tasks stored, in z order.
+    its passes as tasks on a dask cluster: reading an OME-Zarr input,
+    derive, pre-filter, tracing, and the histograms with the pack's
+    textures. The outputs in ``output`` are ``mdtf run``'s, byte for byte:
+    each task hands back its part of every whole-volume reduction (ranges,
+    percentile tails, medians, histogram counts, the histogram volume's
+    sums), which this process merges exactly.
 
-    The tasks read and write the run's channel store inside the output's
-    staging folder, so ``output`` must be on a file system every worker
-    sees (the cluster's shared disk). A task writes only its own slab's
-    planes: a task lost with its worker is rerun (up to ``retries`` times)
-    with the same result. This process reads the input (any format
-    ``mdtf.read`` takes, OME-Zarr stores included; a dask array: write it
-    with ``to_ome_zarr`` first) and writes the pack.
+    The tasks read the input and read and write the run's channel store
+    and pack inside the output's staging folder, so ``input`` and
+    ``output`` must be on a file system every worker sees (the cluster's
+    shared disk). A task writes only its own slab's planes: a task lost
+    with its worker is rerun (up to ``retries`` times) with the same
+    result. An input that is not an OME-Zarr store (any format
+    ``mdtf.read`` takes; a dask array: write it with ``to_ome_zarr``
+    first) is read by this process. This process also writes the kept
+    volumes, the histogram files, the tables and the report.
 
     ``client``: a ``dask.distributed`` client (default: the current one, if
     any, else dask's default scheduler in this process). ``slab_planes``
     z-planes per task (default 64), or ``memory_budget`` bytes per task.
+    ``task_threads``: threads each task computes on (default 1: a worker
+    runs as many tasks at once as it has threads, so give workers one
+    thread per core; 0: one per core of the worker's machine, for workers
+    of one thread).
     ``settings`` and keyword overrides as for ``mdtf.run``. Returns the run
     report (run_report.json)."""
     client = client if client is not None else _current_client()
 
     def submit(job: str, slabs: list[tuple[int, int]], cancelled: Any) -> None:
         if client is None:
-            dask.compute(*[dask.delayed(_slab_task, pure=False)(job, a, b) for a, b in slabs])
+            dask.compute(*[dask.delayed(_slab_task, pure=False)(job, a, b, task_threads) for a, b in slabs])
             return
         starts, ends = [a for a, _ in slabs], [b for _, b in slabs]
-        futures = client.map(_slab_task, [job] * len(slabs), starts, ends, pure=False, retries=retries)
+        threads = [task_threads] * len(slabs)
+        futures = client.map(_slab_task, [job] * len(slabs), starts, ends, threads, pure=False, retries=retries)
         # Ctrl-C in the caller sets cancelled(): the tasks are dropped and the run ends as cancelled
         while not all(f.done() for f in futures):
             if cancelled():

@@ -1,0 +1,185 @@
+//! The body of one task of a run on a cluster ([`super::remote`]): each
+//! pass's work on one slab, its outputs stored by planes (or rows of
+//! planes) and its part of the pass's reductions left beside the store
+//! ([`SlabPartial`]). What a pass reads and finds unstored it derives from
+//! the stored value, as the run's own passes do.
+
+use super::budget::slabs;
+use super::partials::{SlabPartial, TracePartial};
+use super::remote::{Prefilter, SlabJob, SlabPass, TRACED};
+use super::slab_histograms::{HistogramAxes, HistogramCounts};
+use super::trace::{TraceSetup, prefilter_slab, trace_slab};
+use super::{ChannelStore, SlabChannels};
+use crate::run::{RunError, at, fail};
+use mdtf_pack::TextureTarget;
+use mdtf_volume::{NanPolicy, PlaneReader, ReadOptions};
+use std::ops::Range;
+use std::path::Path;
+
+/// Runs `job` on the planes `z` of the volume: the body of one task.
+pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<(), RunError> {
+    let nz = job.geometry.dims[2];
+    if z.start >= z.end || z.end > nz {
+        return Err(fail("plan")(format!("planes {z:?} are not a slab of the volume's {nz}")));
+    }
+    let task = Task { job, z, voxels: job.geometry.voxel_count() };
+    let partial = match &job.pass {
+        SlabPass::Input { input, level, nan, padding } => task.input(input, *level, *nan, *padding)?,
+        SlabPass::Derive { summarise, store } => task.derive(summarise, store)?,
+        SlabPass::Prefilter { filters, halo } => task.prefilter(filters, *halo)?,
+        SlabPass::Trace { .. } => task.trace()?,
+        SlabPass::Pack { textures, histograms, read, height } => {
+            task.pack(textures, histograms.as_ref(), read, *height)?
+        }
+    };
+    partial.write(&job.store, job.pass.stage(), task.z.start)
+}
+
+/// One task: its job and its slab.
+struct Task<'j> {
+    job: &'j SlabJob,
+    /// The slab's planes.
+    z: Range<usize>,
+    /// Voxels of the whole volume.
+    voxels: usize,
+}
+
+impl Task<'_> {
+    /// The run's channel store, with the channels `reads` adopted.
+    fn open(&self, reads: &[&str]) -> Result<ChannelStore, RunError> {
+        ChannelStore::open(self.job.store.clone(), self.job.geometry.clone(), reads).map_err(at("input"))
+    }
+
+    /// The channels the store holds, and the derivation of the others.
+    fn channels(&self) -> Result<SlabChannels, RunError> {
+        let stored: Vec<&str> = self.job.stored.iter().map(String::as_str).collect();
+        let nz = self.job.geometry.dims[2];
+        Ok(SlabChannels::new(self.open(&stored)?, self.job.groups.clone(), self.job.kernel_reach, nz))
+    }
+
+    /// Reads the slab of the input store and stores it as the value.
+    fn input(
+        &self,
+        input: &Path,
+        level: usize,
+        nan: NanPolicy,
+        padding: Option<[f64; 2]>,
+    ) -> Result<SlabPartial, RunError> {
+        let read = ReadOptions { nan, level, ..ReadOptions::default() };
+        let not_by_planes = || fail("input")(format!("{}: not readable by planes", input.display()));
+        let mut reader = PlaneReader::open(input, &read).map_err(at("input"))?.ok_or_else(not_by_planes)?;
+        let (dims, planned) = (reader.geometry().dims, self.job.geometry.dims);
+        if dims != planned {
+            return Err(fail("input")(format!("{}: {dims:?} voxels, the run planned {planned:?}", input.display())));
+        }
+        let v = reader.read(self.z.clone()).map_err(at("input"))?;
+        self.open(&[])?.put_volume("v", self.z.start, &v).map_err(at("input"))?;
+        let mut partial = SlabPartial::default();
+        partial.summarise("v", v.samples(), self.voxels);
+        if let Some(range) = padding {
+            partial.padded = crate::inputs::count_padding(v.samples(), range);
+        }
+        Ok(partial)
+    }
+
+    /// Derives the channels `summarise` (taking their statistics) and `store` (storing them).
+    fn derive(&self, summarise: &[String], store: &[String]) -> Result<SlabPartial, RunError> {
+        let mut chans = self.channels()?;
+        let mut names: Vec<&str> = summarise.iter().map(String::as_str).collect();
+        names.extend(store.iter().map(String::as_str).filter(|c| !summarise.iter().any(|s| s == c)));
+        let mut partial = SlabPartial::default();
+        for (name, v) in chans.volumes(self.z.clone(), &names).map_err(fail("derive"))? {
+            if store.contains(&name) {
+                chans.store.put_volume(&name, self.z.start, &v).map_err(at("derive"))?;
+            }
+            if !summarise.contains(&name) {
+                continue;
+            }
+            partial.summarise(&name, v.samples(), self.voxels);
+            match name.as_str() {
+                "g" => partial.g_buckets.get_or_insert_with(mdtf_volume::KeyBuckets::new).add(v.samples()),
+                "inv_g" => partial.smallest_inv_g = Some(crate::pack_inputs::smallest_positive(v.samples())),
+                _ => {}
+            }
+        }
+        Ok(partial)
+    }
+
+    /// Pre-filters the slab of each of `filters`' channels (read over its `halo`) and stores it.
+    fn prefilter(&self, filters: &[Prefilter], halo: usize) -> Result<SlabPartial, RunError> {
+        let mut chans = self.channels()?;
+        let mut partial = SlabPartial::default();
+        for f in filters {
+            let own = prefilter_slab(&mut chans, &f.input, &f.params, &self.z, halo)?;
+            chans.store.put_volume(&f.output, self.z.start, &own).map_err(at("prefilter"))?;
+            partial.summarise(&f.output, own.samples(), self.voxels);
+        }
+        Ok(partial)
+    }
+
+    /// Traces the slab strip by strip and stores its outputs.
+    fn trace(&self) -> Result<SlabPartial, RunError> {
+        let SlabPass::Trace { g, f2, prefiltered, params, stats, halo, halo_rows, rows, value_range } = &self.job.pass
+        else {
+            return Err(fail("boundary")("not a tracing pass".into()));
+        };
+        let mut chans = self.channels()?;
+        let setup = TraceSetup {
+            g,
+            f2,
+            prefiltered: *prefiltered,
+            params,
+            stats,
+            halo: *halo,
+            halo_rows: *halo_rows,
+            value_range: *value_range,
+        };
+        let (mut partial, mut sums, mut spent) = (SlabPartial::default(), None::<TracePartial>, None);
+        for strip in slabs(chans.ny(), (*rows).max(1)) {
+            let slab = trace_slab(&mut chans, &setup, &self.z, &strip, spent.take())?;
+            let b = &slab.trace;
+            for (c, v) in TRACED.iter().zip([&b.g_hit, &b.hit, &b.distance, &b.dot]) {
+                chans.store.put_rows(c, self.z.start, strip.clone(), v).map_err(at("boundary"))?;
+            }
+            partial.summarise("g_hit", b.g_hit.samples(), self.voxels);
+            let strip_sums = TracePartial::of(&slab);
+            match &mut sums {
+                Some(s) => s.merge(strip_sums),
+                None => sums = Some(strip_sums),
+            }
+            spent = Some(slab);
+        }
+        partial.trace = sums;
+        Ok(partial)
+    }
+
+    /// Counts the slab's histograms and writes its planes of every texture,
+    /// `height` planes at a time.
+    fn pack(
+        &self,
+        textures: &[TextureTarget],
+        histograms: Option<&HistogramAxes>,
+        read: &[String],
+        height: usize,
+    ) -> Result<SlabPartial, RunError> {
+        let reads: Vec<&str> = read.iter().map(String::as_str).collect();
+        let mut chans = self.channels()?;
+        let mut counts = HistogramCounts::default();
+        let mut bytes = vec![Vec::new(); textures.len()];
+        let nz = self.job.geometry.dims[2];
+        for planes in slabs(self.z.len(), height.max(1)) {
+            let planes = self.z.start + planes.start..self.z.start + planes.end;
+            let slab = chans.volumes(planes.clone(), &reads).map_err(fail("pack"))?;
+            if let Some(axes) = histograms {
+                counts.of_task_slab(axes, &planes, nz, self.voxels, &slab)?;
+            }
+            for (t, bytes) in textures.iter().zip(&mut bytes) {
+                t.write_planes(planes.clone(), &slab, bytes).map_err(at("pack"))?;
+            }
+            chans.give_back(slab);
+        }
+        let mut partial = SlabPartial::default();
+        partial.histograms = histograms.is_some().then_some(counts);
+        Ok(partial)
+    }
+}
