@@ -78,6 +78,21 @@ pub struct SlabRun {
     pub count: usize,
     /// The memory budget they were sized for, bytes (None: the height was given).
     pub budget: Option<u64>,
+    /// The passes that ran as tasks elsewhere (a cluster run), in order.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub tasks: Vec<TaskPass>,
+}
+
+/// One pass of a run whose work went to tasks.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TaskPass {
+    /// The pass's stage.
+    pub pass: String,
+    /// Its tasks (one per slab, or per fixed part of the histogram volume).
+    pub tasks: usize,
+    /// Task runs beyond one per task: reruns after a lost worker, or the
+    /// scheduler's duplicates; each wrote the same bytes.
+    pub retries: u64,
 }
 
 impl RunReport {

@@ -412,6 +412,24 @@ fn tracing_tasks_cut_their_slabs_in_strips_of_rows_with_the_same_files() {
     let ran = tasks.ran.lock().unwrap().clone();
     let trace = ran.iter().find(|(p, _)| p == "Trace").map(|(_, n)| *n);
     assert_eq!(trace, Some(28usize.div_ceil(6) + 1), "{ran:?}");
+    // the report counts each pass's tasks and the rerun of its first
+    let dir = tempfile::tempdir().unwrap();
+    let opts = RunOptions {
+        pipeline_path: pipelines_dir().join("distance-tf.toml"),
+        output: dir.path().join("out"),
+        tasks: Some(Arc::new(ThreadTasks::default())),
+        ..Default::default()
+    };
+    let report = run_blocks(&p, &opts, strips, &|_| {}, &|_, _| {}).unwrap();
+    let passes: Vec<(String, usize, u64)> =
+        report.slabs.unwrap().tasks.into_iter().map(|t| (t.pass, t.tasks, t.retries)).collect();
+    let slabs = 28usize.div_ceil(6);
+    let want: Vec<(String, usize, u64)> =
+        [("derive", slabs), ("prefilter", slabs), ("boundary", slabs), ("pack", mdtf_histogram::HVOL_PARTS)]
+            .into_iter()
+            .map(|(p, n)| (p.to_string(), n, 1))
+            .collect();
+    assert_eq!(passes, want);
 }
 
 /// Tasks that fail as a lost store would make them.

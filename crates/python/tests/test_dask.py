@@ -168,7 +168,13 @@ def test_a_pipeline_run_on_the_cluster_writes_mdtf_runs_files(
     pipeline = pipelines / f"{name}.toml"
     cli(mdtf_bin, "run", pipeline, "--input", chunked_store, "-o", tmp_path / "cli", "--set", "preview=false")
     report = mdask.run(pipeline, tmp_path / "dask", input=chunked_store, client=client, slab_planes=13, preview=False)
-    assert report["slabs"] == {"planes": 13, "count": 4, "budget": None}
+    slabs = report["slabs"]
+    assert {k: slabs[k] for k in ("planes", "count", "budget")} == {"planes": 13, "count": 4, "budget": None}
+    # every pass ran on the cluster, the store read by the tasks, none rerun
+    passes = [t["pass"] for t in slabs["tasks"]]
+    traced = ["prefilter", "boundary"] if name == "distance-tf" else []
+    assert passes == ["input", "derive", *traced, "pack"], slabs["tasks"]
+    assert all(t["retries"] == 0 for t in slabs["tasks"]), slabs["tasks"]
     want, got = _outputs(tmp_path / "cli"), _outputs(tmp_path / "dask")
     assert any(f.startswith("pack/") and f.endswith(".raw") for f in want), sorted(want)
     assert sorted(got) == sorted(want)

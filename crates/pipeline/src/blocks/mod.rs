@@ -262,6 +262,7 @@ fn run_slabs(
                 SlabSize::Budget(b) => Some(b),
                 SlabSize::Planes(_) | SlabSize::Strips { .. } => None,
             },
+            tasks: std::mem::take(&mut run.task_passes),
         }),
         units: run.units.clone(),
         ..RunReport::of(opts, run.input_name.clone(), &run.geo)

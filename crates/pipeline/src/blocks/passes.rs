@@ -64,6 +64,8 @@ pub(super) struct SlabPasses<'a> {
     stats: Stats,
     pub(super) warnings: Vec<String>,
     tasks: Option<&'a dyn SlabTasks>,
+    /// The passes that ran as tasks, for the report.
+    pub(super) task_passes: Vec<crate::report::TaskPass>,
 }
 
 /// What the derive pass found.
@@ -149,6 +151,7 @@ impl<'a> SlabPasses<'a> {
         progress.stage(&format!("input: {} slabs of {height} planes", slabs.len()))?;
         let mut store = ChannelStore::create(dir.join(".slabs"), geo.clone()).map_err(at("input"))?;
         let mut stats = Stats::new(&["v", "g", "f2", "g_hit", "g_prefiltered", "inv_g"], geo.voxel_count());
+        let mut task_passes = Vec::new();
         let padded = match (opts.tasks.as_deref(), &source) {
             (Some(tasks), Source::Planes(reader)) if reader.reads_any_planes() => {
                 progress.stage("input (tasks)")?;
@@ -157,7 +160,9 @@ impl<'a> SlabPasses<'a> {
                 let pass = SlabPass::Input { input, level, nan, padding };
                 let mut padded = 0;
                 let nothing_derived = Derivation { groups: &[], kernel_reach: 0 };
-                for mut part in remote::run_pass(tasks, pass, &mut store, nothing_derived, &slabs)? {
+                let (parts, ran) = remote::run_pass(tasks, pass, &mut store, nothing_derived, &slabs)?;
+                task_passes.push(ran);
+                for mut part in parts {
                     part.merge_stats_into(&mut stats);
                     padded += part.padded;
                 }
@@ -190,8 +195,23 @@ impl<'a> SlabPasses<'a> {
             stats,
             warnings,
             tasks: opts.tasks.as_deref(),
+            task_passes,
         };
         Ok((run, store))
+    }
+
+    /// [`remote::run_pass`], its tasks counted for the report.
+    fn on_tasks(
+        &mut self,
+        tasks: &dyn SlabTasks,
+        pass: SlabPass,
+        store: &mut ChannelStore,
+        derivation: Derivation,
+        slabs: &[Range<usize>],
+    ) -> Result<Vec<SlabPartial>, RunError> {
+        let (parts, ran) = remote::run_pass(tasks, pass, store, derivation, slabs)?;
+        self.task_passes.push(ran);
+        Ok(parts)
     }
 
     /// The input's finite value range, value units.
@@ -225,7 +245,7 @@ impl<'a> SlabPasses<'a> {
             let summarise = summarised.iter().map(|c| c.to_string()).collect();
             let pass = SlabPass::Derive { summarise, store: self.read_later(&groups) };
             let derivation = Derivation { groups: &groups, kernel_reach };
-            for mut part in remote::run_pass(tasks, pass, &mut chans.store, derivation, &self.slabs)? {
+            for mut part in self.on_tasks(tasks, pass, &mut chans.store, derivation, &self.slabs.clone())? {
                 part.merge_stats_into(&mut self.stats);
                 derived.merge(&part);
             }
@@ -360,7 +380,7 @@ impl<'a> SlabPasses<'a> {
                 let groups = self.derive_groups();
                 let derivation = Derivation { groups: &groups, kernel_reach: self.plan.reach.kernel[2] };
                 let (_, tslabs) = self.trace_strips_and_slabs();
-                for mut part in remote::run_pass(tasks, pass, &mut chans.store, derivation, &tslabs)? {
+                for mut part in self.on_tasks(tasks, pass, &mut chans.store, derivation, &tslabs)? {
                     part.merge_stats_into(&mut self.stats);
                     let no_trace = || fail("boundary")("a tracing task left no tracing partial".into());
                     sums.merge(part.trace.ok_or_else(no_trace)?);
@@ -458,7 +478,7 @@ impl<'a> SlabPasses<'a> {
                 let pass = SlabPass::Prefilter { filters, halo };
                 let groups = self.derive_groups();
                 let derivation = Derivation { groups: &groups, kernel_reach: self.plan.reach.kernel[2] };
-                for mut part in remote::run_pass(tasks, pass, &mut chans.store, derivation, &self.slabs)? {
+                for mut part in self.on_tasks(tasks, pass, &mut chans.store, derivation, &self.slabs.clone())? {
                     part.merge_stats_into(&mut self.stats);
                 }
             }
@@ -597,7 +617,7 @@ impl<'a> SlabPasses<'a> {
             let pass = SlabPass::Pack { textures: targets.clone(), histograms: axes, read, height: self.height };
             let groups = self.derive_groups();
             let derivation = Derivation { groups: &groups, kernel_reach: self.plan.reach.kernel[2] };
-            for part in remote::run_pass(tasks, pass, &mut chans.store, derivation, &task_slabs)? {
+            for part in self.on_tasks(tasks, pass, &mut chans.store, derivation, &task_slabs)? {
                 if let (Some(h), Some(counts)) = (&mut histograms, part.histograms) {
                     h.merge(counts);
                 }

@@ -13,6 +13,7 @@
 use super::ChannelStore;
 use super::partials::SlabPartial;
 use super::slab_histograms::HistogramAxes;
+use crate::report::TaskPass;
 use crate::run::{RunError, at, fail};
 use mdtf_bilateral::BilateralParams;
 use mdtf_boundary::{BoundaryParams, VolumeStats};
@@ -21,7 +22,7 @@ use mdtf_pack::TextureTarget;
 use mdtf_volume::{Geometry, NanPolicy};
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Runs the tasks of a pass: [`run_task`] of `job` on every slab of `slabs`,
 /// wherever it likes, returning once each has finished (an error if any
@@ -172,14 +173,15 @@ impl SlabPass {
 }
 
 /// Runs `pass` as `tasks` over `slabs` of the volume of `store`, then takes
-/// the channels they stored into `store`; the tasks' partials, in z order.
+/// the channels they stored into `store`; the tasks' partials, in z order,
+/// and how many tasks ran and were rerun.
 pub(super) fn run_pass(
     tasks: &dyn SlabTasks,
     pass: SlabPass,
     store: &mut ChannelStore,
     derivation: Derivation,
     slabs: &[Range<usize>],
-) -> Result<Vec<SlabPartial>, RunError> {
+) -> Result<(Vec<SlabPartial>, TaskPass), RunError> {
     let (stage, outputs) = (pass.stage(), pass.outputs());
     let job = SlabJob {
         store: store.dir().to_path_buf(),
@@ -193,5 +195,17 @@ pub(super) fn run_pass(
     for c in &outputs {
         store.adopt(c).map_err(at(stage))?;
     }
-    slabs.iter().map(|z| SlabPartial::read(store.dir(), stage, z.start)).collect()
+    let mut retries = 0;
+    for z in slabs {
+        let runs = std::fs::metadata(attempts_path(store.dir(), stage, z.start)).map_or(0, |m| m.len());
+        retries += runs.saturating_sub(1);
+    }
+    let partials = slabs.iter().map(|z| SlabPartial::read(store.dir(), stage, z.start)).collect::<Result<_, _>>()?;
+    Ok((partials, TaskPass { pass: stage.into(), tasks: slabs.len(), retries }))
+}
+
+/// The file a task of `stage` for the slab from plane `first` adds a byte
+/// to each time it starts (its length: how often the task ran).
+pub(super) fn attempts_path(store: &Path, stage: &str, first: usize) -> PathBuf {
+    store.join(format!("{stage}-{first}.attempts"))
 }

@@ -22,6 +22,10 @@ pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<(), RunError> {
     if z.start >= z.end || z.end > nz {
         return Err(fail("plan")(format!("planes {z:?} are not a slab of the volume's {nz}")));
     }
+    let attempts = super::remote::attempts_path(&job.store, job.pass.stage(), z.start);
+    let stage = job.pass.stage();
+    let mut count = std::fs::OpenOptions::new().create(true).append(true).open(&attempts).map_err(at(stage))?;
+    std::io::Write::write_all(&mut count, b".").map_err(at(stage))?;
     let task = Task { job, z, voxels: job.geometry.voxel_count() };
     let partial = match &job.pass {
         SlabPass::Input { input, level, nan, padding } => task.input(input, *level, *nan, *padding)?,
@@ -178,8 +182,6 @@ impl Task<'_> {
             }
             chans.give_back(slab);
         }
-        let mut partial = SlabPartial::default();
-        partial.histograms = histograms.is_some().then_some(counts);
-        Ok(partial)
+        Ok(SlabPartial { histograms: histograms.is_some().then_some(counts), ..SlabPartial::default() })
     }
 }
