@@ -149,6 +149,15 @@ impl SparseCounts {
         self.touched[idx / MERGE_BLOCK] = true;
     }
 
+    /// The non-zero counts (bin, count), read block by touched block (an
+    /// untouched block's pages were never faulted in).
+    pub fn nonzero(&self) -> Vec<(u32, u32)> {
+        let n = self.counts.len();
+        let touched = self.touched.iter().enumerate().filter(|(_, t)| **t);
+        let blocks = touched.map(|(b, _)| b * MERGE_BLOCK..((b + 1) * MERGE_BLOCK).min(n));
+        blocks.flat_map(|r| r.filter(|&i| self.counts[i] > 0).map(|i| (i as u32, self.counts[i]))).collect()
+    }
+
     /// Adds `other`'s counts, block by touched block.
     pub fn merge(&mut self, other: &SparseCounts) {
         let n = self.counts.len();

@@ -234,7 +234,6 @@ impl Serialize for HvolAccumulator {
 
 impl From<&HvolAccumulator> for StoredAccumulator {
     fn from(acc: &HvolAccumulator) -> StoredAccumulator {
-        let nonzero = |c: &[u32]| c.iter().enumerate().filter(|(_, n)| **n > 0).map(|(i, &n)| (i as u32, n)).collect();
         let parts = acc
             .sums
             .0
@@ -244,7 +243,7 @@ impl From<&HvolAccumulator> for StoredAccumulator {
                 (*p, kept.map(|i| (i as u32, s.c_vg[i], s.g_vg[i], s.h_vg[i])).collect())
             })
             .collect();
-        StoredAccumulator { counts: nonzero(&acc.counts.counts), parts, axes: acc.axes.clone() }
+        StoredAccumulator { counts: acc.counts.nonzero(), parts, axes: acc.axes.clone() }
     }
 }
 

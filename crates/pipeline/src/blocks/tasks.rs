@@ -15,6 +15,7 @@ use mdtf_pack::TextureTarget;
 use mdtf_volume::{NanPolicy, PlaneReader, ReadOptions};
 use std::ops::Range;
 use std::path::Path;
+use std::sync::{Mutex, PoisonError};
 
 /// Runs `job` on the planes `z` of the volume: the body of one task.
 pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<(), RunError> {
@@ -24,8 +25,12 @@ pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<(), RunError> {
     }
     let attempts = super::remote::attempts_path(&job.store, job.pass.stage(), z.start);
     let stage = job.pass.stage();
-    let mut count = std::fs::OpenOptions::new().create(true).append(true).open(&attempts).map_err(at(stage))?;
-    std::io::Write::write_all(&mut count, b".").map_err(at(stage))?;
+    let counted = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&attempts)
+        .and_then(|mut f| std::io::Write::write_all(&mut f, b"."));
+    counted.map_err(|e| fail(stage)(format!("{}: {e}", attempts.display())))?;
     let task = Task { job, z, voxels: job.geometry.voxel_count() };
     let partial = match &job.pass {
         SlabPass::Input { input, level, nan, padding } => task.input(input, *level, *nan, *padding)?,
@@ -38,6 +43,18 @@ pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<(), RunError> {
     };
     partial.write(&job.store, job.pass.stage(), task.z.start)
 }
+
+/// The channels (and the memory they hold: the slabs' samples, the
+/// derivation's outputs, the value's planes) of the last task of a pass
+/// this process ran, with the pass's key, kept for its next task of the
+/// same pass: a task's arrays are beyond what the allocator keeps for
+/// reuse, and mapping them fresh for every task page-faults on every
+/// 4 KiB, at a cost like the work's. The store does not change during a
+/// pass, so what they hold of it stays right.
+static KEPT_CHANNELS: Mutex<Option<(String, SlabChannels)>> = Mutex::new(None);
+
+/// The texture bytes of the last pack task, likewise.
+static KEPT_BYTES: Mutex<Vec<Vec<u8>>> = Mutex::new(Vec::new());
 
 /// One task: its job and its slab.
 struct Task<'j> {
@@ -54,11 +71,32 @@ impl Task<'_> {
         ChannelStore::open(self.job.store.clone(), self.job.geometry.clone(), reads).map_err(at("input"))
     }
 
-    /// The channels the store holds, and the derivation of the others.
+    /// The channels the store holds, and the derivation of the others:
+    /// those the last task of this pass in this process left, if any (and
+    /// still of the same stored channels).
     fn channels(&self) -> Result<SlabChannels, RunError> {
+        let kept = KEPT_CHANNELS.lock().unwrap_or_else(PoisonError::into_inner).take();
+        if let Some((key, chans)) = kept
+            && key == self.key()
+            && chans.store.names() == self.job.stored
+        {
+            return Ok(chans);
+        }
         let stored: Vec<&str> = self.job.stored.iter().map(String::as_str).collect();
         let nz = self.job.geometry.dims[2];
         Ok(SlabChannels::new(self.open(&stored)?, self.job.groups.clone(), self.job.kernel_reach, nz))
+    }
+
+    /// Leaves `chans` for the next task of this pass in this process.
+    fn keep(&self, chans: SlabChannels) {
+        *KEPT_CHANNELS.lock().unwrap_or_else(PoisonError::into_inner) = Some((self.key(), chans));
+    }
+
+    /// What tasks whose channels are the same share: the store, the pass
+    /// (its kind and settings), the channels stored and their derivation.
+    fn key(&self) -> String {
+        let SlabJob { store, stored, groups, kernel_reach, pass, .. } = self.job;
+        format!("{}|{pass:?}|{stored:?}|{groups:?}|{kernel_reach}", store.display())
     }
 
     /// Reads the slab of the input store and stores it as the value.
@@ -89,12 +127,14 @@ impl Task<'_> {
     /// Derives the channels `summarise` (taking their statistics) and `store` (storing them).
     fn derive(&self, summarise: &[String], store: &[String]) -> Result<SlabPartial, RunError> {
         let mut chans = self.channels()?;
+        // the outputs through their own handles: the channels kept for the next task hold only the stored ones
+        let mut out = self.open(&[])?;
         let mut names: Vec<&str> = summarise.iter().map(String::as_str).collect();
         names.extend(store.iter().map(String::as_str).filter(|c| !summarise.iter().any(|s| s == c)));
         let mut partial = SlabPartial::default();
         for (name, v) in chans.volumes(self.z.clone(), &names).map_err(fail("derive"))? {
             if store.contains(&name) {
-                chans.store.put_volume(&name, self.z.start, &v).map_err(at("derive"))?;
+                out.put_volume(&name, self.z.start, &v).map_err(at("derive"))?;
             }
             if !summarise.contains(&name) {
                 continue;
@@ -106,18 +146,22 @@ impl Task<'_> {
                 _ => {}
             }
         }
+        self.keep(chans);
         Ok(partial)
     }
 
     /// Pre-filters the slab of each of `filters`' channels (read over its `halo`) and stores it.
     fn prefilter(&self, filters: &[Prefilter], halo: usize) -> Result<SlabPartial, RunError> {
         let mut chans = self.channels()?;
+        // the outputs through their own handles: the channels kept for the next task hold only the stored ones
+        let mut out = self.open(&[])?;
         let mut partial = SlabPartial::default();
         for f in filters {
             let own = prefilter_slab(&mut chans, &f.input, &f.params, &self.z, halo)?;
-            chans.store.put_volume(&f.output, self.z.start, &own).map_err(at("prefilter"))?;
+            out.put_volume(&f.output, self.z.start, &own).map_err(at("prefilter"))?;
             partial.summarise(&f.output, own.samples(), self.voxels);
         }
+        self.keep(chans);
         Ok(partial)
     }
 
@@ -128,6 +172,8 @@ impl Task<'_> {
             return Err(fail("boundary")("not a tracing pass".into()));
         };
         let mut chans = self.channels()?;
+        // the outputs through their own handles: the channels kept for the next task hold only the stored ones
+        let mut out = self.open(&[])?;
         let setup = TraceSetup {
             g,
             f2,
@@ -143,7 +189,7 @@ impl Task<'_> {
             let slab = trace_slab(&mut chans, &setup, &self.z, &strip, spent.take())?;
             let b = &slab.trace;
             for (c, v) in TRACED.iter().zip([&b.g_hit, &b.hit, &b.distance, &b.dot]) {
-                chans.store.put_rows(c, self.z.start, strip.clone(), v).map_err(at("boundary"))?;
+                out.put_rows(c, self.z.start, strip.clone(), v).map_err(at("boundary"))?;
             }
             partial.summarise("g_hit", b.g_hit.samples(), self.voxels);
             let strip_sums = TracePartial::of(&slab);
@@ -154,6 +200,7 @@ impl Task<'_> {
             spent = Some(slab);
         }
         partial.trace = sums;
+        self.keep(chans);
         Ok(partial)
     }
 
@@ -169,7 +216,8 @@ impl Task<'_> {
         let reads: Vec<&str> = read.iter().map(String::as_str).collect();
         let mut chans = self.channels()?;
         let mut counts = HistogramCounts::default();
-        let mut bytes = vec![Vec::new(); textures.len()];
+        let mut bytes = std::mem::take(&mut *KEPT_BYTES.lock().unwrap_or_else(PoisonError::into_inner));
+        bytes.resize(textures.len(), Vec::new());
         let nz = self.job.geometry.dims[2];
         for planes in slabs(self.z.len(), height.max(1)) {
             let planes = self.z.start + planes.start..self.z.start + planes.end;
@@ -182,6 +230,8 @@ impl Task<'_> {
             }
             chans.give_back(slab);
         }
+        self.keep(chans);
+        *KEPT_BYTES.lock().unwrap_or_else(PoisonError::into_inner) = bytes;
         Ok(SlabPartial { histograms: histograms.is_some().then_some(counts), ..SlabPartial::default() })
     }
 }
