@@ -372,3 +372,60 @@ fn projected_tetrahedra_meshes_a_volume_over_its_budget_from_block_averages_and_
         }
     }
 }
+
+/// The number before `unit` on the line of `text` that starts with `label` (after spaces), in that unit's bytes.
+fn bytes_on(text: &str, label: &str, column: usize) -> f64 {
+    let line = text.lines().find(|l| l.trim_start().starts_with(label)).unwrap_or_else(|| panic!("{label}: {text}"));
+    let words: Vec<&str> = line.split_whitespace().collect();
+    let (n, unit) = (words[column].parse::<f64>().unwrap(), words[column + 1]);
+    let scale = match unit {
+        "B" => 1.0,
+        "KiB" => 1024.0,
+        "MiB" => 1024f64.powi(2),
+        "GiB" => 1024f64.powi(3),
+        "TiB" => 1024f64.powi(4),
+        other => panic!("unit {other} in {line}"),
+    };
+    n * scale
+}
+
+#[test]
+fn a_run_at_4096_cubed_is_sized_on_paper_before_it_runs() {
+    let p = shipped_pipeline("distance-tf");
+    let plan = mdtf_ok(&["run", p.to_str().unwrap(), "--plan", "--dims", "4096", "--memory-budget", "8GiB"]);
+    // every task within its budget; the derive slabs cover the 4096 planes
+    let line = |pass: &str| -> Vec<String> {
+        let l = plan.lines().find(|l| l.trim_start().starts_with(pass)).unwrap_or_else(|| panic!("{pass}: {plan}"));
+        l.split_whitespace().map(String::from).collect()
+    };
+    let slab_planes: usize = plan
+        .lines()
+        .find_map(|l| l.trim_start().strip_prefix("slabs of "))
+        .and_then(|l| l.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{plan}"));
+    let tasks: usize = line("derive ")[1].parse().unwrap();
+    assert_eq!(tasks, 4096usize.div_ceil(slab_planes), "{plan}");
+    for pass in ["input ", "derive ", "prefilter ", "boundary ", "pack "] {
+        assert!(bytes_on(&plan, pass, 2) <= 8.0 * 1024f64.powi(3), "{pass}: {plan}");
+    }
+    // the store holds v, g, the pre-filtered g and f'' and the tracing's four outputs, 4 bytes a voxel each
+    let voxels = 4096f64.powi(3);
+    assert_eq!(bytes_on(&plan, "channel store", 5), 8.0 * 4.0 * voxels, "{plan}");
+    // kept: distance and g_hit as f32 before compression
+    assert_eq!(bytes_on(&plan, "kept volumes", 4), 2.0 * 4.0 * voxels, "{plan}");
+    // the textures' bytes a voxel are those of a real pack of this pipeline
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("small");
+    let sets = ["--set", "input.size=24", "--set", "preview=false"];
+    mdtf_ok(&[&["run", p.to_str().unwrap(), "-q", "-o", out.to_str().unwrap()][..], &sets[..]].concat());
+    let raw: u64 = std::fs::read_dir(out.join("pack"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|f| f.extension().is_some_and(|e| e == "raw"))
+        .map(|f| std::fs::metadata(f).unwrap().len())
+        .sum();
+    let per_voxel = raw as f64 / (24.0 * 24.0 * 24.0);
+    assert_eq!(bytes_on(&plan, "pack textures", 2), per_voxel * voxels, "{plan}");
+    assert!(plan.contains("us of one core per voxel") && plan.contains("core-hours"), "{plan}");
+}

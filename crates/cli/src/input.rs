@@ -36,6 +36,24 @@ pub fn parse_spacing(text: &str, what: &str) -> Result<[f64; 3]> {
 
 /// Parses "N" (a cube) or "NX,NY,NZ" grid sizes, each at least 1.
 pub fn parse_size(text: &str, what: &str) -> Result<[usize; 3]> {
+    let dims = parse_dims(text, what)?;
+    let bytes = dims.iter().map(|&d| d as u128).product::<u128>() * 4;
+    let available = mdtf_volume::available_memory() as u128;
+    if bytes > available {
+        bail!(
+            "{what}: a {}x{}x{} volume needs {} as f32, more than the {} available",
+            dims[0],
+            dims[1],
+            dims[2],
+            mdtf_volume::human_bytes(bytes),
+            mdtf_volume::human_bytes(available)
+        );
+    }
+    Ok(dims)
+}
+
+/// A grid size, N for N^3 or NX,NY,NZ, each at least 1 (of any size: nothing is allocated).
+pub fn parse_dims(text: &str, what: &str) -> Result<[usize; 3]> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
     let nums: Vec<usize> = parts
         .iter()
@@ -48,18 +66,6 @@ pub fn parse_size(text: &str, what: &str) -> Result<[usize; 3]> {
     };
     if dims.contains(&0) {
         bail!("{what}: every size must be at least 1, got '{text}'");
-    }
-    let bytes = dims.iter().map(|&d| d as u128).product::<u128>() * 4;
-    let available = mdtf_volume::available_memory() as u128;
-    if bytes > available {
-        bail!(
-            "{what}: a {}x{}x{} volume needs {} as f32, more than the {} available",
-            dims[0],
-            dims[1],
-            dims[2],
-            mdtf_volume::human_bytes(bytes),
-            mdtf_volume::human_bytes(available)
-        );
     }
     Ok(dims)
 }

@@ -317,6 +317,13 @@ pub struct RunArgs {
     /// (to learn its fields and grid) and writes nothing.
     #[arg(long)]
     pub plan: bool,
+    /// With --plan: plan for a grid of this size (N or NX,NY,NZ voxels, spacing 1) instead of the
+    /// input's, without reading it, and size a run of it by slabs or on a cluster (with
+    /// --memory-budget, a task's memory, or --slab-planes; default: three quarters of this
+    /// machine's memory): each pass's tasks, memory, bytes read and written, the shared disk it
+    /// needs, and the time it takes per voxel (timed on a small phantom run of the pipeline here).
+    #[arg(long, value_name = "N|NX,NY,NZ", requires = "plan")]
+    pub dims: Option<String>,
     /// Print the settings the run would use, as a pipeline file with every default filled in
     /// (after --set and --input), and stop. Reads neither the input nor writes anything; the
     /// output is itself a valid pipeline file.

@@ -10,6 +10,7 @@ mod info;
 mod pack;
 mod preview;
 mod run;
+mod run_timing;
 mod synth;
 mod tetra;
 mod validate;

@@ -26,7 +26,7 @@ pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
         return Ok(());
     }
     if args.plan {
-        return print_plan(args, &pipeline, &opts);
+        return print_plan(args, &pipeline, &opts, progress);
     }
     let lines = StageLines { progress, current: Mutex::new(None) };
     let on_stage = |stage: &str| lines.next(Some(stage));
@@ -48,10 +48,33 @@ pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
     Ok(())
 }
 
-/// Prints the plan of the run (`--plan`): what it would do, writing nothing.
-fn print_plan(args: &RunArgs, pipeline: &Pipeline, opts: &RunOptions) -> Result<()> {
-    let (plan, input, geo) = plan_pipeline(pipeline, opts)?;
-    crate::input::print_plan(&args.pipeline.display().to_string(), &input, &geo, &plan);
+/// Prints the plan of the run (`--plan`): what it would do, writing
+/// nothing; with `--dims` on that grid, sized for a run by slabs or tasks.
+fn print_plan(args: &RunArgs, pipeline: &Pipeline, opts: &RunOptions, progress: &Progress) -> Result<()> {
+    let Some(dims) = &args.dims else {
+        let (plan, input, geo) = plan_pipeline(pipeline, opts)?;
+        crate::input::print_plan(&args.pipeline.display().to_string(), &input, &geo, &plan);
+        // a run by slabs asked for: sized too
+        if let Some(size) = slab_size(args, pipeline, opts, progress)
+            && plan.fields.is_empty()
+        {
+            println!("{}", mdtf_pipeline::blocks::sizing(pipeline, &geo, size).map_err(anyhow::Error::msg)?);
+        }
+        return Ok(());
+    };
+    let geo = mdtf_volume::Geometry::new(crate::input::parse_dims(dims, "--dims")?, [1.0; 3]);
+    let plan = mdtf_pipeline::plan::Plan::resolve(pipeline, &[], &geo)?;
+    crate::input::print_plan(&args.pipeline.display().to_string(), "a grid of --dims", &geo, &plan);
+    let size = match (args.memory_budget, args.slab_planes) {
+        (Some(b), _) => SlabSize::Budget(b),
+        (None, Some(h)) => SlabSize::Planes(h as usize),
+        (None, None) => SlabSize::Budget(mdtf_volume::available_memory() / 4 * 3),
+    };
+    let sizing = mdtf_pipeline::blocks::sizing(pipeline, &geo, size).map_err(anyhow::Error::msg)?;
+    println!("{sizing}");
+    progress.note("timing the pipeline by slabs on two small phantoms for the time per voxel ...");
+    let timed = crate::commands::run_timing::time_per_voxel(pipeline, opts)?;
+    println!("{}", timed.describe(geo.voxel_count() as u64));
     Ok(())
 }
 

@@ -31,6 +31,21 @@ const TRACE_OUTPUTS: u64 = 10;
 /// the tracing's only when it reads whole planes (`trace_whole_planes`; else
 /// [`fit_trace`] sizes its blocks on their own).
 fn pass_planes(h: u64, plan: &Plan, trace_whole_planes: bool) -> u64 {
+    let p = planes_by_pass(h, plan, trace_whole_planes);
+    p.derive.max(p.prefilter).max(p.trace).max(p.pack)
+}
+
+/// f32 planes of a slab of `h` planes each pass holds (see [`pass_planes`]).
+pub(super) struct PassPlanes {
+    pub derive: u64,
+    pub prefilter: u64,
+    /// 0 when the tracing goes in strips (sized by [`fit_trace`]).
+    pub trace: u64,
+    pub pack: u64,
+}
+
+/// [`pass_planes`], pass by pass.
+pub(super) fn planes_by_pass(h: u64, plan: &Plan, trace_whole_planes: bool) -> PassPlanes {
     let k = plan.reach.kernel[2] as u64;
     // derive reads at least a kernel's width of planes
     let read = (h + 2 * k).max(2 * k + 1);
@@ -52,7 +67,17 @@ fn pass_planes(h: u64, plan: &Plan, trace_whole_planes: bool) -> u64 {
     // and the textures' bytes of two slabs, one quantised while the other is written (at most
     // 8 bytes a voxel: two f32 planes a plane)
     let pack = (outputs + 3) * read + 12 * h;
-    derive.max(prefilter).max(trace).max(pack)
+    PassPlanes { derive, prefilter, trace, pack }
+}
+
+/// Bytes a process holds whatever its slab, and the histogram volume's when `hvol`.
+pub(super) fn fixed_bytes(hvol: bool) -> u64 {
+    BASE_BYTES + if hvol { HVOL_BYTES } else { 0 }
+}
+
+/// Bytes the tracing holds for a block of `h` planes and `r` rows, with the fixed costs.
+pub(super) fn trace_block_bytes(h: usize, r: usize, geometry: &Geometry, plan: &Plan) -> u64 {
+    BASE_BYTES + trace_bytes(h, r, geometry, plan)
 }
 
 /// f32 components one derivation of a slab makes: the components of every

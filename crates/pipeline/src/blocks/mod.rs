@@ -61,6 +61,7 @@ mod passes;
 mod pool;
 mod reductions;
 mod remote;
+mod sizing;
 mod slab_channels;
 mod slab_histograms;
 mod store;
@@ -74,6 +75,7 @@ pub use item_files::{ItemFiles, automatic_item_budget, derive_item_files, items_
 pub use partials::{SlabPartial, TracePartial};
 pub use pool::SamplePool;
 pub use remote::{Prefilter, SlabJob, SlabPass, SlabTasks};
+pub use sizing::{PassSize, Sizing, sizing};
 pub use slab_channels::SlabChannels;
 pub use slab_histograms::{HistogramAxes, HistogramCounts};
 pub use store::{ChannelStore, StoreWriter};
@@ -212,6 +214,32 @@ pub enum SlabSize {
         /// Rows per strip of the tracing.
         rows: usize,
     },
+}
+
+/// How a run of `plan` on `geometry` cuts the volume with slabs of
+/// `size`: the slab height (planes) and the tracing's blocks; with `hvol`
+/// the histogram volume's counts are in the budget.
+pub(crate) fn cut(
+    size: SlabSize,
+    geometry: &Geometry,
+    plan: &crate::plan::Plan,
+    hvol: bool,
+) -> Result<(usize, TraceBlocks), String> {
+    let [_, ny, nz] = geometry.dims;
+    Ok(match size {
+        SlabSize::Budget(b) => {
+            let h = fit_slabs(b, geometry, plan, hvol, true)?;
+            (h, fit_trace(b, geometry, plan, h, rayon::current_num_threads(), true)?)
+        }
+        SlabSize::Planes(h) => {
+            let h = h.clamp(1, nz.max(1));
+            (h, TraceBlocks { planes: h, rows: ny })
+        }
+        SlabSize::Strips { planes, rows } => {
+            let h = planes.clamp(1, nz.max(1));
+            (h, TraceBlocks { planes: h, rows: rows.clamp(1, ny.max(1)) })
+        }
+    })
 }
 
 /// Runs `p` slab by slab, slabs of `size`; `on_stage(name)` is called as

@@ -10,7 +10,7 @@ use super::slab_channels::made_by;
 use super::slab_histograms::SlabHistograms;
 use super::trace::{self, SlabTrace, TraceSetup};
 use super::{ChannelStore, SlabChannels, SlabSize, Source, medians, open_source};
-use super::{TraceBlocks, fit_slabs, fit_trace, reductions, slabs};
+use super::{TraceBlocks, reductions, slabs};
 use crate::file::Pipeline;
 use crate::hist_files::Written;
 use crate::plan::Plan;
@@ -131,22 +131,7 @@ impl<'a> SlabPasses<'a> {
         let tf = crate::inputs::read_tf(p, &base)?;
         let hvol_asked = p.histogram.as_ref().is_some_and(|h| h.hvol);
         let hvol_needed = packs && (hvol_asked || tf.is_none());
-        let threads = rayon::current_num_threads();
-        let ny = geo.dims[1];
-        let (height, trace_blocks) = match size {
-            SlabSize::Budget(b) => {
-                let h = fit_slabs(b, &geo, &plan, hvol_needed, true).map_err(fail("plan"))?;
-                (h, fit_trace(b, &geo, &plan, h, threads, true).map_err(fail("plan"))?)
-            }
-            SlabSize::Planes(h) => {
-                let h = h.clamp(1, nz.max(1));
-                (h, TraceBlocks { planes: h, rows: ny })
-            }
-            SlabSize::Strips { planes, rows } => {
-                let h = planes.clamp(1, nz.max(1));
-                (h, TraceBlocks { planes: h, rows: rows.clamp(1, ny.max(1)) })
-            }
-        };
+        let (height, trace_blocks) = super::cut(size, &geo, &plan, hvol_needed).map_err(fail("plan"))?;
         let slabs = slabs(nz, height);
         progress.stage(&format!("input: {} slabs of {height} planes", slabs.len()))?;
         let mut store = ChannelStore::create(dir.join(".slabs"), geo.clone()).map_err(at("input"))?;
@@ -305,21 +290,10 @@ impl<'a> SlabPasses<'a> {
     }
 
     /// The derived channels a run on tasks reads itself after its derive
-    /// pass, which its derive tasks store (the tasks remake every other
-    /// channel): the kept ones, and g where the run takes a median of it
-    /// (the tracing's noise floor and the detection before it, the (v, 1/g)
-    /// axis, gaussian-tf's default without a TF file).
+    /// pass, which its derive tasks store ([`stored_for_the_run`]).
     fn read_later(&self, groups: &[DeriveParams]) -> Vec<String> {
         let derived: Vec<String> = groups.iter().flat_map(|d| d.items.iter()).flat_map(|&i| made_by(i)).collect();
-        let mut store: Vec<String> = self.p.keep.iter().filter(|c| derived.contains(c)).cloned().collect();
-        let joint = self.p.histogram.as_ref().is_some_and(|h| h.joint);
-        let medians_of_g = self.plan.trace
-            || (joint && derived.iter().any(|c| c == "inv_g"))
-            || (self.p.pack.profile == Profile::GaussianTf && self.tf.is_none());
-        if medians_of_g && derived.iter().any(|c| c == "g") && !store.iter().any(|c| c == "g") {
-            store.push("g".into());
-        }
-        store
+        stored_for_the_run(self.p, &self.plan, self.tf.is_some(), &derived)
     }
 
     /// The derive groups of the whole run: the plan's items (with g and f''
@@ -747,6 +721,23 @@ impl<'a> SlabPasses<'a> {
         crate::gaussians::write(&self.dir.join("pack"), &gaussians).map_err(at("pack"))?;
         Ok(gaussians)
     }
+}
+
+/// The derived channels (of `derived`) a run of `p` on tasks reads itself
+/// after its derive pass, which its derive tasks store (the tasks remake
+/// every other channel): the kept ones, and g where the run takes a median
+/// of it (the tracing's noise floor and the detection before it, the
+/// (v, 1/g) axis, gaussian-tf's default without a TF file, `tf_given`).
+pub(super) fn stored_for_the_run(p: &Pipeline, plan: &Plan, tf_given: bool, derived: &[String]) -> Vec<String> {
+    let mut store: Vec<String> = p.keep.iter().filter(|c| derived.contains(c)).cloned().collect();
+    let joint = p.histogram.as_ref().is_some_and(|h| h.joint);
+    let medians_of_g = plan.trace
+        || (joint && derived.iter().any(|c| c == "inv_g"))
+        || (p.pack.profile == Profile::GaussianTf && !tf_given);
+    if medians_of_g && derived.iter().any(|c| c == "g") && !store.iter().any(|c| c == "g") {
+        store.push("g".into());
+    }
+    store
 }
 
 /// Copies the input's value slab by slab into `store`, taking its

@@ -1,0 +1,171 @@
+//! A slab-by-slab or cluster run sized before it runs ("the plan on
+//! paper"): for a grid of any size, each pass's tasks, the memory each
+//! holds, the bytes each reads and writes, and what the shared disk must
+//! hold, so that a Slurm or Kubernetes job can be sized from
+//! `mdtf run PIPE --plan --dims 4096 --memory-budget 8GiB`.
+
+use super::budget::{fixed_bytes, planes_by_pass, trace_block_bytes};
+use super::passes::stored_for_the_run;
+use super::slab_channels::made_by;
+use super::{SlabSize, TraceBlocks, cut};
+use crate::file::Pipeline;
+use crate::plan::Plan;
+use mdtf_pack::{PackParams, texture_layouts};
+use mdtf_volume::{Geometry, human_bytes};
+use std::fmt;
+
+/// One pass of a sized run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PassSize {
+    /// The pass's stage.
+    pub pass: &'static str,
+    /// Its tasks (one per slab; the pack's one per fixed part of the
+    /// histogram volume's slices when it counts it).
+    pub tasks: usize,
+    /// Memory one task holds at most, bytes.
+    pub memory: u64,
+    /// Bytes one task reads (its slab with the pass's halo), at most.
+    pub read: u64,
+    /// Bytes one task writes, at most.
+    pub written: u64,
+}
+
+/// A slab-by-slab or cluster run of a pipeline on a grid, sized (see the module docs).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sizing {
+    /// The grid.
+    pub geometry: Geometry,
+    /// The memory budget of a task (None: the slab height was given).
+    pub budget: Option<u64>,
+    /// Planes per slab.
+    pub height: usize,
+    /// The tracing's blocks.
+    pub trace: TraceBlocks,
+    /// The passes, in order.
+    pub passes: Vec<PassSize>,
+    /// The channels in the run's store on the shared disk at its fullest.
+    pub stored: Vec<String>,
+    /// The pack's textures, bytes.
+    pub pack_bytes: u64,
+    /// The kept volumes before compression, bytes.
+    pub kept_bytes: u64,
+}
+
+/// `p`'s run on `geometry` (one field) with slabs of `size`, sized.
+pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizing, String> {
+    if let Some(why) = super::unsupported(p, 1) {
+        return Err(why);
+    }
+    let plan = Plan::resolve(p, &[], geometry).map_err(|e| e.to_string())?;
+    let hvol = p.histogram.as_ref().is_some_and(|h| h.hvol) || p.pack.tf.is_none();
+    let (height, trace) = cut(size, geometry, &plan, hvol)?;
+    let [nx, ny, nz] = geometry.dims;
+    let plane = (nx * ny * 4) as u64;
+    let slabs = nz.div_ceil(height.max(1));
+    let h = height as u64;
+    let k = plan.reach.kernel[2] as u64;
+    let by_pass = planes_by_pass(h, &plan, false);
+    let memory = |planes: u64| fixed_bytes(hvol) + planes * plane;
+    let mut derived: Vec<String> = plan.derive.iter().flat_map(|&i| made_by(i)).collect();
+    if hvol {
+        derived.extend(["g".to_string(), "f2".to_string()]);
+    }
+    let stored_derived = stored_for_the_run(p, &plan, p.pack.tf.is_some(), &derived);
+    let mut passes = vec![
+        PassSize { pass: "input", tasks: slabs, memory: memory(2 * h), read: h * plane, written: h * plane },
+        PassSize {
+            pass: "derive",
+            tasks: slabs,
+            memory: memory(by_pass.derive),
+            read: (h + 2 * k) * plane,
+            written: stored_derived.len() as u64 * h * plane,
+        },
+    ];
+    let mut stored: Vec<String> = std::iter::once("v".to_string()).chain(stored_derived).collect();
+    if plan.trace {
+        let pf = if plan.prefilter { plan.reach.prefilter[2] as u64 } else { 0 };
+        if plan.prefilter {
+            let read = (h + 2 * (k + pf)) * plane;
+            let pass = PassSize {
+                pass: "prefilter",
+                tasks: slabs,
+                memory: memory(by_pass.prefilter),
+                read,
+                written: 2 * h * plane,
+            };
+            passes.push(pass);
+            stored.extend(["g_prefiltered".to_string(), "f2_prefiltered".to_string()]);
+        }
+        let (tp, tr) = (trace.planes as u64, trace.rows as u64);
+        let [_, t_rows, t_planes] = plan.reach.trace.map(|t| t as u64);
+        let grown = (tp + 2 * (t_planes + k)).min(nz as u64) * (tr + 2 * t_rows).min(ny as u64) * nx as u64 * 4;
+        let read = grown * if plan.prefilter { 3 } else { 1 };
+        let tasks = nz.div_ceil(trace.planes.max(1));
+        let memory = trace_block_bytes(trace.planes, trace.rows, geometry, &plan);
+        passes.push(PassSize { pass: "boundary", tasks, memory, read, written: 4 * tp * plane });
+        stored.extend(["g_hit", "hit", "distance", "dot"].map(String::from));
+    }
+    let params =
+        PackParams { profile: p.pack.profile, ranges: Default::default(), fields: vec![], dtype: None, nifti: false };
+    let texel: u64 = texture_layouts(&params).iter().map(|l| (l.components.len() * l.dtype.size()) as u64).sum();
+    let pack_planes = if hvol { nz.div_ceil(mdtf_histogram::HVOL_PARTS) as u64 } else { h };
+    let pack_tasks = if hvol { mdtf_histogram::HVOL_PARTS.min(nz) } else { slabs };
+    // the value over each of its slabs with the kernel's halo, and the stored channels it packs over its planes
+    let value_planes = pack_planes + 2 * k * pack_planes.div_ceil(h.max(1));
+    let packed_stored = stored.iter().filter(|c| ["g_hit", "hit", "distance"].contains(&c.as_str())).count() as u64;
+    let read = (value_planes + packed_stored * pack_planes) * plane;
+    let written = pack_planes * (nx * ny) as u64 * texel;
+    passes.push(PassSize { pass: "pack", tasks: pack_tasks, memory: memory(by_pass.pack), read, written });
+    let voxels = geometry.voxel_count() as u64;
+    let budget = match size {
+        SlabSize::Budget(b) => Some(b),
+        _ => None,
+    };
+    let kept_bytes = p.keep.len() as u64 * voxels * 4;
+    Ok(Sizing {
+        geometry: geometry.clone(),
+        budget,
+        height,
+        trace,
+        passes,
+        stored,
+        pack_bytes: voxels * texel,
+        kept_bytes,
+    })
+}
+
+impl Sizing {
+    /// Bytes of the run's channel store at its fullest.
+    pub fn store_bytes(&self) -> u64 {
+        self.stored.len() as u64 * self.geometry.voxel_count() as u64 * 4
+    }
+}
+
+impl fmt::Display for Sizing {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let b = |x: u64| human_bytes(x as u128);
+        let [nx, ny, nz] = self.geometry.dims;
+        let within = self.budget.map_or(String::new(), |x| format!(" within {} a task", b(x)));
+        writeln!(f, "by slabs or on a cluster, {nx} x {ny} x {nz} voxels{within}:")?;
+        let TraceBlocks { planes, rows } = self.trace;
+        writeln!(f, "  slabs of {} planes; the tracing in blocks of {planes} planes x {rows} rows", self.height)?;
+        writeln!(
+            f,
+            "  {:<10} {:>6} {:>12} {:>12} {:>12}",
+            "pass", "tasks", "memory/task", "read/task", "written/task"
+        )?;
+        for p in &self.passes {
+            writeln!(f, "  {:<10} {:>6} {:>12} {:>12} {:>12}", p.pass, p.tasks, b(p.memory), b(p.read), b(p.written))?;
+        }
+        writeln!(f, "  shared disk (the output's staging folder):")?;
+        writeln!(f, "    channel store at its fullest: {} ({})", b(self.store_bytes()), self.stored.join(", "))?;
+        writeln!(f, "    pack textures: {}", b(self.pack_bytes))?;
+        if self.kept_bytes > 0 {
+            writeln!(f, "    kept volumes: up to {} before compression", b(self.kept_bytes))?;
+        }
+        write!(
+            f,
+            "  the calling process merges the tasks' partial sums, reads g for its median where the tracing needs it, and writes the kept volumes, histograms and tables"
+        )
+    }
+}
