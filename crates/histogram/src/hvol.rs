@@ -150,11 +150,8 @@ impl HvolAxes {
 
 /// Counts and sums of a histogram volume over the voxels one task has seen:
 /// feed it with [`HvolAccumulator::add`], then hand every task's
-/// accumulator to [`HvolAccumulator::finish`]. Serialisable (its non-zero
-/// counts and sums only), for tasks in other processes; keep every f64 bit
-/// (a binary format).
-#[derive(Deserialize)]
-#[serde(try_from = "StoredAccumulator")]
+/// accumulator to [`HvolAccumulator::finish`]. A task in another process
+/// hands its counts over as an [`HvolPart`].
 pub struct HvolAccumulator {
     axes: HvolAxes,
     binners: [Binner; 3],
@@ -226,11 +223,13 @@ struct StoredAccumulator {
 /// One non-zero (v, g) bin of a part's sums: its index, voxel count, g sum and f'' sum.
 type StoredSums = (u32, u64, f64, f64);
 
-impl Serialize for HvolAccumulator {
-    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        StoredAccumulator::from(self).serialize(serializer)
-    }
-}
+/// What an [`HvolAccumulator`] counted, to hand to another process
+/// ([`HvolAccumulator::part`], [`HvolAccumulator::absorb`]): its non-zero
+/// counts and each of its parts' non-zero sums. Serialisable; keep every
+/// f64 bit (a binary format).
+#[derive(Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct HvolPart(StoredAccumulator);
 
 impl From<&HvolAccumulator> for StoredAccumulator {
     fn from(acc: &HvolAccumulator) -> StoredAccumulator {
@@ -247,32 +246,45 @@ impl From<&HvolAccumulator> for StoredAccumulator {
     }
 }
 
-impl TryFrom<StoredAccumulator> for HvolAccumulator {
-    type Error = String;
+impl HvolAccumulator {
+    /// What this accumulator counted, for another process to absorb.
+    pub fn part(&self) -> HvolPart {
+        HvolPart(StoredAccumulator::from(self))
+    }
 
-    fn try_from(stored: StoredAccumulator) -> Result<HvolAccumulator, String> {
-        let mut acc = HvolAccumulator::new(&stored.axes, 0).map_err(|e| e.to_string())?;
-        let bins = acc.counts.counts.len();
-        for (bin, n) in stored.counts {
-            if bin as usize >= bins {
-                return Err(format!("bin {bin} of a histogram volume of {bins} bins"));
-            }
-            acc.counts.add(bin as usize, n);
+    /// Takes in what another accumulator over the same axes counted (`part`),
+    /// as if its voxels had been added here; its fixed parts must be others
+    /// than this one's (each part's sums are kept whole, and merged in part
+    /// order at the end).
+    pub fn absorb(&mut self, part: HvolPart) -> Result<(), HistogramError> {
+        let stored = part.0;
+        if stored.axes != self.axes {
+            return Err(HistogramError::Geometry("a histogram volume part over other axes".into()));
         }
-        for (part, sums) in stored.parts {
-            if part >= HVOL_PARTS {
-                return Err(format!("part {part} of {HVOL_PARTS}"));
+        // checked whole first: a part refused leaves this accumulator as it was
+        let (bins, vg_bins) = (self.counts.counts.len(), self.axes.v.bins * self.axes.g.bins);
+        if let Some((bin, _)) = stored.counts.iter().find(|(b, _)| *b as usize >= bins) {
+            return Err(HistogramError::Geometry(format!("bin {bin} of a histogram volume of {bins} bins")));
+        }
+        for (p, sums) in &stored.parts {
+            if *p >= HVOL_PARTS || self.sums.0.iter().any(|(q, _)| q == p) {
+                return Err(HistogramError::Geometry(format!("part {p} twice, or not one of {HVOL_PARTS}")));
             }
-            let s = acc.sums.of(part, &stored.axes);
+            if let Some((i, ..)) = sums.iter().find(|(i, ..)| *i as usize >= vg_bins) {
+                return Err(HistogramError::Geometry(format!("(v, g) bin {i} of {vg_bins}")));
+            }
+        }
+        for (bin, n) in stored.counts {
+            self.counts.add(bin as usize, n);
+        }
+        for (p, sums) in stored.parts {
+            let s = self.sums.of(p, &stored.axes);
             for (i, c, g, h) in sums {
                 let i = i as usize;
-                if i >= s.c_vg.len() {
-                    return Err(format!("(v, g) bin {i} of {}", s.c_vg.len()));
-                }
                 (s.c_vg[i], s.g_vg[i], s.h_vg[i]) = (c, g, h);
             }
         }
-        Ok(acc)
+        Ok(())
     }
 }
 

@@ -36,8 +36,8 @@ pub use figure::{
 };
 pub use files::{write_histogram, write_histogram_marked, write_hvol, write_overlay_figure, write_stretched};
 pub use hvol::{
-    HVOL_PARTS, HistogramVolume, HvolAccumulator, HvolAxes, HvolBySlabs, HvolParams, fixed_parts, histogram_volume,
-    part_groups,
+    HVOL_PARTS, HistogramVolume, HvolAccumulator, HvolAxes, HvolBySlabs, HvolParams, HvolPart, fixed_parts,
+    histogram_volume, part_groups,
 };
 pub use image::{Grey, Scale, grey_level, side_by_side, write_exr, write_png};
 pub use materials::{

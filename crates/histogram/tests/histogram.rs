@@ -5,8 +5,8 @@ use mdtf_boundary::{BoundaryInput, BoundaryParams};
 use mdtf_datagen::{RadialPhantom, erf_sphere};
 use mdtf_derive::{DeriveParams, Item};
 use mdtf_histogram::{
-    Axis, AxisSpec, HvolAccumulator, HvolAxes, HvolBySlabs, HvolParams, Scale, count, fixed_parts, grey_level,
-    histogram_volume, hit_mask, write_png,
+    Axis, AxisSpec, HvolAccumulator, HvolAxes, HvolBySlabs, HvolParams, HvolPart, Scale, count, fixed_parts,
+    grey_level, histogram_volume, hit_mask, write_png,
 };
 use mdtf_volume::{Geometry, MultiField, Volume};
 use std::f64::consts::PI;
@@ -317,8 +317,9 @@ fn histogram_volume_parts_counted_by_tasks_elsewhere_give_the_whole_one() {
     let whole = histogram_volume(v, g, f2, plane, &params).unwrap();
     let axes = HvolAxes::of(v, g, f2, &params).unwrap();
     let parts = fixed_parts(48);
-    // tasks of 1, 5 and 10 parts, handed back in reverse order
-    let mut tasks = Vec::new();
+    // tasks of 1, 5 and 10 parts, absorbed in reverse order by one accumulator
+    let mut merged = HvolAccumulator::new(&axes, v.len()).unwrap();
+    let mut stored = Vec::new();
     for group in [0..1, 1..6, 6..16] {
         let mut acc = HvolAccumulator::new(&axes, v.len()).unwrap();
         for k in parts[group.start].start..parts[group.end - 1].end {
@@ -326,12 +327,16 @@ fn histogram_volume_parts_counted_by_tasks_elsewhere_give_the_whole_one() {
             acc.add_slice(k, 48, &v[at.clone()], &g[at.clone()], &f2[at]);
         }
         let mut bytes = Vec::new();
-        ciborium::into_writer(&acc, &mut bytes).unwrap();
+        ciborium::into_writer(&acc.part(), &mut bytes).unwrap();
         assert!(bytes.len() < 4_000_000, "{} bytes", bytes.len());
-        tasks.push(ciborium::from_reader::<HvolAccumulator, _>(bytes.as_slice()).unwrap());
+        stored.push(bytes);
     }
-    tasks.reverse();
-    let hv = HvolAccumulator::finish(tasks, &params).unwrap();
+    for bytes in stored.iter().rev() {
+        merged.absorb(ciborium::from_reader::<HvolPart, _>(bytes.as_slice()).unwrap()).unwrap();
+    }
+    // a part absorbed twice is refused
+    assert!(merged.absorb(ciborium::from_reader::<HvolPart, _>(stored[0].as_slice()).unwrap()).is_err());
+    let hv = HvolAccumulator::finish(vec![merged], &params).unwrap();
     assert_eq!(hv.hist, whole.hist);
     assert_eq!(
         (hv.mean_g_v, hv.mean_h_v, hv.position, hv.sigma),

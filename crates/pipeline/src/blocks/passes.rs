@@ -593,7 +593,7 @@ impl<'a> SlabPasses<'a> {
             let derivation = Derivation { groups: &groups, kernel_reach: self.plan.reach.kernel[2] };
             for part in self.on_tasks(tasks, pass, &mut chans.store, derivation, &task_slabs)? {
                 if let (Some(h), Some(counts)) = (&mut histograms, part.histograms) {
-                    h.merge(counts);
+                    h.merge(counts)?;
                 }
             }
             writer.adopt_task_textures(&targets).map_err(at("pack"))?;

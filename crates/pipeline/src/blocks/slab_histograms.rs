@@ -10,7 +10,8 @@ use crate::file::Pipeline;
 use crate::hist_files::Counted;
 use crate::run::{RunError, at, fail};
 use mdtf_histogram::{
-    Axis, AxisSpec, Histogram, HistogramError, HvolAccumulator, HvolAxes, HvolBySlabs, HvolParams, count, hit_mask,
+    Axis, AxisSpec, Histogram, HistogramError, HvolAccumulator, HvolAxes, HvolBySlabs, HvolParams, HvolPart, count,
+    hit_mask,
 };
 use mdtf_volume::{KeyBuckets, Volume};
 use serde::{Deserialize, Serialize};
@@ -63,7 +64,11 @@ pub struct HistogramCounts {
     joint: Option<Histogram>,
     inv_g: Option<Histogram>,
     stretched: (Option<Histogram>, Option<Histogram>),
-    hvol: Option<HvolAccumulator>,
+    /// The histogram volume's counts, handed over ([`HistogramCounts::finish_task`]).
+    hvol: Option<HvolPart>,
+    /// The histogram volume being counted by a task.
+    #[serde(skip)]
+    counting: Option<HvolAccumulator>,
 }
 
 impl HistogramCounts {
@@ -101,9 +106,9 @@ impl HistogramCounts {
     ) -> Result<(), RunError> {
         self.add(axes, slab)?;
         if let Some(hv_axes) = &axes.hvol {
-            let acc = match &mut self.hvol {
+            let acc = match &mut self.counting {
                 Some(acc) => acc,
-                None => self.hvol.insert(HvolAccumulator::new(hv_axes, voxels).map_err(at("histogram"))?),
+                None => self.counting.insert(HvolAccumulator::new(hv_axes, voxels).map_err(at("histogram"))?),
             };
             let (v, g, f2) = (channel(slab, "v")?, channel(slab, "g")?, channel(slab, "f2")?);
             let plane = v.len() / z.len().max(1);
@@ -113,6 +118,14 @@ impl HistogramCounts {
             }
         }
         Ok(())
+    }
+}
+
+impl HistogramCounts {
+    /// The counts of a task's last slab added, ready to hand over.
+    pub fn finish_task(mut self) -> HistogramCounts {
+        self.hvol = self.counting.take().map(|acc| acc.part());
+        self
     }
 }
 
@@ -126,8 +139,8 @@ pub(super) struct SlabHistograms {
     axes: HistogramAxes,
     /// The histogram volume fed here, slab by slab in z order.
     hvol: Option<HvolBySlabs>,
-    /// The histogram volume's parts counted by tasks.
-    hvol_tasks: Vec<HvolAccumulator>,
+    /// The histogram volume's parts counted by tasks, absorbed.
+    hvol_tasks: Option<HvolAccumulator>,
     counts: HistogramCounts,
     voxels: usize,
 }
@@ -176,13 +189,7 @@ impl SlabHistograms {
             false => None,
         };
         let axes = HistogramAxes { joint, stretched, axes, stretched_axes, hvol: hvol_axes, inv_g };
-        Ok(SlabHistograms {
-            axes,
-            hvol: by_slabs,
-            hvol_tasks: Vec::new(),
-            counts: HistogramCounts::default(),
-            voxels: n,
-        })
+        Ok(SlabHistograms { axes, hvol: by_slabs, hvol_tasks: None, counts: HistogramCounts::default(), voxels: n })
     }
 
     /// What each slab is counted over.
@@ -201,8 +208,8 @@ impl SlabHistograms {
     }
 
     /// Takes in a task's counts.
-    pub(super) fn merge(&mut self, task: HistogramCounts) {
-        let HistogramCounts { joint, inv_g, stretched, hvol } = task;
+    pub(super) fn merge(&mut self, task: HistogramCounts) -> Result<(), RunError> {
+        let HistogramCounts { joint, inv_g, stretched, hvol, .. } = task;
         for (mine, theirs) in [
             (&mut self.counts.joint, joint),
             (&mut self.counts.inv_g, inv_g),
@@ -213,15 +220,22 @@ impl SlabHistograms {
                 add(mine, h);
             }
         }
-        self.hvol_tasks.extend(hvol);
+        if let (Some(part), Some(axes)) = (hvol, &self.axes.hvol) {
+            let acc = match &mut self.hvol_tasks {
+                Some(acc) => acc,
+                None => self.hvol_tasks.insert(HvolAccumulator::new(axes, self.voxels).map_err(at("histogram"))?),
+            };
+            acc.absorb(part).map_err(at("histogram"))?;
+        }
+        Ok(())
     }
 
     /// The histograms of every slab added or merged, of a grid of voxel `spacing`.
     pub(super) fn finish(self, spacing: [f64; 3]) -> Result<Counted, RunError> {
         let params = HvolParams::on_grid(spacing);
-        let hvol = match (self.hvol, self.hvol_tasks.is_empty()) {
-            (Some(_), false) => Some(HvolAccumulator::finish(self.hvol_tasks, &params)),
-            (Some(acc), true) => Some(acc.finish(&params)),
+        let hvol = match (self.hvol, self.hvol_tasks) {
+            (Some(_), Some(absorbed)) => Some(HvolAccumulator::finish(vec![absorbed], &params)),
+            (Some(acc), None) => Some(acc.finish(&params)),
             (None, _) => None,
         };
         let HistogramCounts { joint, inv_g, stretched, .. } = self.counts;

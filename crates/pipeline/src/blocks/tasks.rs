@@ -232,6 +232,6 @@ impl Task<'_> {
         }
         self.keep(chans);
         *KEPT_BYTES.lock().unwrap_or_else(PoisonError::into_inner) = bytes;
-        Ok(SlabPartial { histograms: histograms.is_some().then_some(counts), ..SlabPartial::default() })
+        Ok(SlabPartial { histograms: histograms.is_some().then(|| counts.finish_task()), ..SlabPartial::default() })
     }
 }
