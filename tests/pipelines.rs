@@ -428,4 +428,8 @@ fn a_run_at_4096_cubed_is_sized_on_paper_before_it_runs() {
     let per_voxel = raw as f64 / (24.0 * 24.0 * 24.0);
     assert_eq!(bytes_on(&plan, "pack textures", 2), per_voxel * voxels, "{plan}");
     assert!(plan.contains("us of one core per voxel") && plan.contains("core-hours"), "{plan}");
+    // 4096^3 voxels are more than the histograms' 32-bit counts hold: the plan says the run would be refused
+    assert!(plan.contains("REFUSED before it starts") && plan.contains("68719476736 voxels"), "{plan}");
+    let small = mdtf_ok(&["run", p.to_str().unwrap(), "--plan", "--dims", "1024", "--memory-budget", "8GiB"]);
+    assert!(!small.contains("REFUSED"), "{small}");
 }

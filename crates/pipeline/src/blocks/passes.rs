@@ -131,6 +131,9 @@ impl<'a> SlabPasses<'a> {
         let tf = crate::inputs::read_tf(p, &base)?;
         let hvol_asked = p.histogram.as_ref().is_some_and(|h| h.hvol);
         let hvol_needed = packs && (hvol_asked || tf.is_none());
+        if let Some(why) = super::sizing::too_many_to_count(p, &geo, hvol_needed) {
+            return Err(fail("plan")(why));
+        }
         let (height, trace_blocks) = super::cut(size, &geo, &plan, hvol_needed).map_err(fail("plan"))?;
         let slabs = slabs(nz, height);
         progress.stage(&format!("input: {} slabs of {height} planes", slabs.len()))?;

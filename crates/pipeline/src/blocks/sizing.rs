@@ -49,6 +49,22 @@ pub struct Sizing {
     pub pack_bytes: u64,
     /// The kept volumes before compression, bytes.
     pub kept_bytes: u64,
+    /// Why the run would be refused before it starts, if it would.
+    pub refused: Option<String>,
+}
+
+/// Why a run of `p` on `geometry` cannot count its histograms (with the
+/// histogram volume when `hvol`), if it cannot: their counts are 32-bit.
+pub(crate) fn too_many_to_count(p: &Pipeline, geometry: &Geometry, hvol: bool) -> Option<String> {
+    let voxels = geometry.voxel_count() as u64;
+    let counts = p.histogram.is_some() || hvol;
+    (counts && voxels >= u32::MAX as u64).then(|| {
+        format!(
+            "{voxels} voxels: the histograms (and the histogram volume behind the default TF) count at most \
+             2^32 - 1 voxels; give the pack a TF file (pack.tf) and leave out [histogram], or run on a grid of \
+             fewer voxels"
+        )
+    })
 }
 
 /// `p`'s run on `geometry` (one field) with slabs of `size`, sized.
@@ -58,6 +74,7 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
     }
     let plan = Plan::resolve(p, &[], geometry).map_err(|e| e.to_string())?;
     let hvol = p.histogram.as_ref().is_some_and(|h| h.hvol) || p.pack.tf.is_none();
+    let refused = too_many_to_count(p, geometry, hvol);
     let (height, trace) = cut(size, geometry, &plan, hvol)?;
     let [nx, ny, nz] = geometry.dims;
     let plane = (nx * ny * 4) as u64;
@@ -131,6 +148,7 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
         stored,
         pack_bytes: voxels * texel,
         kept_bytes,
+        refused,
     })
 }
 
@@ -147,6 +165,9 @@ impl fmt::Display for Sizing {
         let [nx, ny, nz] = self.geometry.dims;
         let within = self.budget.map_or(String::new(), |x| format!(" within {} a task", b(x)));
         writeln!(f, "by slabs or on a cluster, {nx} x {ny} x {nz} voxels{within}:")?;
+        if let Some(why) = &self.refused {
+            writeln!(f, "  REFUSED before it starts, as things are: {why}")?;
+        }
         let TraceBlocks { planes, rows } = self.trace;
         writeln!(f, "  slabs of {} planes; the tracing in blocks of {planes} planes x {rows} rows", self.height)?;
         writeln!(
@@ -167,5 +188,26 @@ impl fmt::Display for Sizing {
             f,
             "  the calling process merges the tasks' partial sums, reads g for its median where the tracing needs it, and writes the kept volumes, histograms and tables"
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn histograms_of_2_to_the_32_voxels_or_more_are_refused_up_front() {
+        let p = crate::file::parse("[histogram]\njoint = true\n[pack]\nprofile = \"slicer-3dtf\"\n", &[]).unwrap();
+        // 4294901760 voxels count; 2^32 - 1 (the histogram crate's limit) and more do not
+        let under = Geometry::new([65535, 65536, 1], [1.0; 3]);
+        assert!(too_many_to_count(&p, &under, true).is_none());
+        assert!(too_many_to_count(&p, &Geometry::new([65535, 65537, 1], [1.0; 3]), true).is_some());
+        let at = Geometry::new([2048, 2048, 1024], [1.0; 3]);
+        let why = too_many_to_count(&p, &at, true).unwrap();
+        assert!(why.contains("4294967296 voxels") && why.contains("2^32 - 1"), "{why}");
+        // no histograms and no histogram volume (a TF file): nothing is counted
+        let mut quiet = p.clone();
+        quiet.histogram = None;
+        assert!(too_many_to_count(&quiet, &at, false).is_none());
     }
 }
