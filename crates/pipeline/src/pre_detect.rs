@@ -16,7 +16,9 @@ use mdtf_histogram::{Axis, HistogramError, HvolAxes, MIN_SIGMA_SPACINGS, count, 
 /// Bins of each axis (the histogram volume's).
 pub const HVOL_BINS: usize = 256;
 
-/// The (v, g) counts of the voxels seen so far, v fastest.
+/// The (v, g) counts of the voxels seen so far, v fastest (serialisable:
+/// a cluster's tasks count their slabs and the run merges them).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct VgCounts {
     axes: [Axis; 2],
     counts: Vec<u64>,
@@ -41,6 +43,15 @@ impl VgCounts {
         for (total, n) in self.counts.iter_mut().zip(piece.counts) {
             *total += n as u64;
         }
+        Ok(())
+    }
+
+    /// Adds the counts of `other`, over the same axes (voxels counted elsewhere).
+    pub fn merge(&mut self, other: &VgCounts) -> Result<(), HistogramError> {
+        if other.axes != self.axes || other.counts.len() != self.counts.len() {
+            return Err(HistogramError::Geometry("(v, g) counts over other axes".into()));
+        }
+        self.counts.iter_mut().zip(&other.counts).for_each(|(a, b)| *a += b);
         Ok(())
     }
 

@@ -354,7 +354,8 @@ fn runs_whose_passes_go_to_tasks_give_the_same_files() {
         let ran = tasks.ran.lock().unwrap().clone();
         let passes: Vec<&str> = ran.iter().map(|(p, _)| p.as_str()).collect();
         let traced = name == "distance-tf";
-        assert_eq!(passes, if traced { vec!["Derive", "Prefilter", "Trace", "Pack"] } else { vec!["Derive", "Pack"] });
+        let want = if traced { vec!["Derive", "Prefilter", "Select", "Trace", "Pack"] } else { vec!["Derive", "Pack"] };
+        assert_eq!(passes, want);
         // one task per slab, the first twice; the pack's one per fixed part of the histogram volume when it counts it
         let slabs = 48usize.div_ceil(7) + 1;
         let parts = mdtf_histogram::HVOL_PARTS + 1;
@@ -373,7 +374,7 @@ fn runs_whose_passes_go_to_tasks_give_the_same_files() {
     let tasks = Arc::new(ThreadTasks::default());
     assert_runs_equal_the_whole("distance-tf", &p, Some(input), &[SlabSize::Planes(5)], Some(tasks.clone()));
     let passes: Vec<String> = tasks.ran.lock().unwrap().iter().map(|(p, _)| p.clone()).collect();
-    assert_eq!(passes, ["Derive", "Prefilter", "Trace", "Pack"]);
+    assert_eq!(passes, ["Derive", "Prefilter", "Select", "Trace", "Pack"]);
 }
 
 #[test]
@@ -392,7 +393,7 @@ fn a_zarr_input_is_read_by_the_tasks_with_the_same_files() {
     let tasks = Arc::new(ThreadTasks::default());
     assert_runs_equal_the_whole("distance-tf", &p, Some(input), &[SlabSize::Planes(5)], Some(tasks.clone()));
     let passes: Vec<String> = tasks.ran.lock().unwrap().iter().map(|(p, _)| p.clone()).collect();
-    assert_eq!(passes, ["Input", "Derive", "Prefilter", "Trace", "Pack"]);
+    assert_eq!(passes, ["Input", "Derive", "Prefilter", "Select", "Trace", "Pack"]);
     // the padding the tasks counted is in the report the runs agree on
     let out = dir.path().join("whole");
     let opts = RunOptions { input: Some(dir.path().join("tooth.ome.zarr")), output: out.clone(), ..Default::default() };
@@ -412,6 +413,10 @@ fn tracing_tasks_cut_their_slabs_in_strips_of_rows_with_the_same_files() {
     let ran = tasks.ran.lock().unwrap().clone();
     let trace = ran.iter().find(|(p, _)| p == "Trace").map(|(_, n)| *n);
     assert_eq!(trace, Some(28usize.div_ceil(6) + 1), "{ran:?}");
+    // without the pre-filter the median's first pass is the derive tasks' count of g
+    let mut unfiltered = p.clone();
+    unfiltered.prefilter = None;
+    assert_runs_equal_the_whole("distance-tf", &unfiltered, None, &[strips], Some(Arc::new(ThreadTasks::default())));
     // the report counts each pass's tasks and the rerun of its first
     let dir = tempfile::tempdir().unwrap();
     let opts = RunOptions {
@@ -424,11 +429,16 @@ fn tracing_tasks_cut_their_slabs_in_strips_of_rows_with_the_same_files() {
     let passes: Vec<(String, usize, u64)> =
         report.slabs.unwrap().tasks.into_iter().map(|t| (t.pass, t.tasks, t.retries)).collect();
     let slabs = 28usize.div_ceil(6);
-    let want: Vec<(String, usize, u64)> =
-        [("derive", slabs), ("prefilter", slabs), ("boundary", slabs), ("pack", mdtf_histogram::HVOL_PARTS)]
-            .into_iter()
-            .map(|(p, n)| (p.to_string(), n, 1))
-            .collect();
+    let want: Vec<(String, usize, u64)> = [
+        ("derive", slabs),
+        ("prefilter", slabs),
+        ("select", slabs),
+        ("boundary", slabs),
+        ("pack", mdtf_histogram::HVOL_PARTS),
+    ]
+    .into_iter()
+    .map(|(p, n)| (p.to_string(), n, 1))
+    .collect();
     assert_eq!(passes, want);
 }
 

@@ -172,7 +172,7 @@ def test_a_pipeline_run_on_the_cluster_writes_mdtf_runs_files(
     assert {k: slabs[k] for k in ("planes", "count", "budget")} == {"planes": 13, "count": 4, "budget": None}
     # every pass ran on the cluster, the store read by the tasks, none rerun
     passes = [t["pass"] for t in slabs["tasks"]]
-    traced = ["prefilter", "boundary"] if name == "distance-tf" else []
+    traced = ["prefilter", "select", "boundary"] if name == "distance-tf" else []
     assert passes == ["input", "derive", *traced, "pack"], slabs["tasks"]
     assert all(t["retries"] == 0 for t in slabs["tasks"]), slabs["tasks"]
     want, got = _outputs(tmp_path / "cli"), _outputs(tmp_path / "dask")

@@ -53,7 +53,7 @@ pub use planes::PlaneReader;
 pub use png_out::{PngColour, register_figure_font, write_png};
 pub use range::{
     KeyBuckets, finite_range, finite_sample_range, median, median_from_buckets, median_of_pieces, order_statistic,
-    order_statistic_from_buckets, order_statistic_of_pieces,
+    order_statistic_from_buckets, order_statistic_from_counts, order_statistic_of_pieces, upper_bucket_of,
 };
 pub use raw::{RawSpec, read_raw};
 pub use samples::{FileInfo, NanPolicy, ReadOptions};

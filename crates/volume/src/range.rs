@@ -103,6 +103,12 @@ impl KeyBuckets {
         count_piece(data, &|key| Some((key >> 16) as usize), &mut self.0);
     }
 
+    /// Counts the finite samples of `data` whose key lies in upper bucket
+    /// `within`, by the lower half of their key (the select's second pass).
+    pub fn add_within(&mut self, within: usize, data: &[f32]) {
+        count_piece(data, &|key| ((key >> 16) as usize == within).then_some((key & 0xffff) as usize), &mut self.0);
+    }
+
     /// Adds the counts of `other` (samples counted elsewhere: a cluster's tasks).
     pub fn merge(&mut self, other: &KeyBuckets) {
         self.0.iter_mut().zip(&other.0).for_each(|(a, b)| *a += b);
@@ -166,13 +172,29 @@ pub fn order_statistic_from_buckets<E>(
     upper: &KeyBuckets,
     mut pass: impl FnMut(&mut dyn FnMut(&[f32])) -> Result<(), E>,
 ) -> Result<Option<f32>, E> {
-    let Some((hi, below)) = find(&upper.0, k) else { return Ok(None) };
-    let mut low = vec![0u64; BUCKETS];
-    pass(&mut |d| count_piece(d, &|key| ((key >> 16) as usize == hi).then_some((key & 0xffff) as usize), &mut low))?;
-    let Some((lo, _)) = find(&low, k - below) else { return Ok(None) };
+    let Some(within) = upper_bucket_of(k, upper) else { return Ok(None) };
+    let mut lower = KeyBuckets::new();
+    pass(&mut |d| lower.add_within(within, d))?;
+    Ok(order_statistic_from_counts(k, upper, &lower))
+}
+
+/// The upper bucket of [`KeyBuckets`] `upper` that holds the k-th smallest
+/// sample counted (0-based), if there are that many: the second pass of the
+/// select counts the samples of that bucket ([`KeyBuckets::add_within`]).
+pub fn upper_bucket_of(k: u64, upper: &KeyBuckets) -> Option<usize> {
+    find(&upper.0, k).map(|(hi, _)| hi)
+}
+
+/// The k-th smallest sample (0-based) from the two passes' counts: `upper`
+/// of every sample, `lower` of those in the upper bucket holding it
+/// ([`upper_bucket_of`]), which may be counted piece by piece anywhere and
+/// merged. None if there are not that many samples.
+pub fn order_statistic_from_counts(k: u64, upper: &KeyBuckets, lower: &KeyBuckets) -> Option<f32> {
+    let (hi, below) = find(&upper.0, k)?;
+    let (lo, _) = find(&lower.0, k - below)?;
     let key = ((hi as u32) << 16) | lo as u32;
     let bits = if key >> 31 == 1 { key & 0x7fff_ffff } else { !key };
-    Ok(Some(f32::from_bits(bits)))
+    Some(f32::from_bits(bits))
 }
 
 /// The median of the finite samples of `data` (the lower one of an even

@@ -11,6 +11,7 @@
 use super::reductions::Stats;
 use super::slab_histograms::HistogramCounts;
 use super::trace::SlabTrace;
+use crate::pre_detect::VgCounts;
 use crate::run::{RunError, fail};
 use mdtf_boundary::{Crossings, ReportAccumulator, ReportInput, ResolvedParams, TraceCounts};
 use mdtf_histogram::{AxisSpec, ChannelStats};
@@ -23,7 +24,9 @@ use std::path::{Path, PathBuf};
 pub struct SlabPartial {
     /// The statistics of each channel the task summarised, of its slab alone.
     pub stats: Vec<(String, ChannelStats)>,
-    /// The first radix pass of g's median over the slab (derive, when g is summarised).
+    /// The first radix pass of the traced g's median over the slab (derive,
+    /// when g is summarised; pre-filter, of the pre-filtered g), or the
+    /// second (select: the slab's samples in one upper bucket).
     pub g_buckets: Option<KeyBuckets>,
     /// The smallest positive 1/g of the slab (derive; infinite without one).
     pub smallest_inv_g: Option<f32>,
@@ -33,6 +36,8 @@ pub struct SlabPartial {
     pub trace: Option<TracePartial>,
     /// The histograms' counts (pack, when it counts histograms).
     pub histograms: Option<HistogramCounts>,
+    /// The (v, g) counts of the detection before the tracing (select).
+    pub vg: Option<VgCounts>,
 }
 
 /// What a tracing task hands back besides its planes.

@@ -14,12 +14,13 @@ use super::{TraceBlocks, reductions, slabs};
 use crate::file::Pipeline;
 use crate::hist_files::Written;
 use crate::plan::Plan;
+use crate::pre_detect::HVOL_BINS;
 use crate::progress::Progress;
 use crate::report::{BoundarySummary, Stages, Traced};
 use crate::run::{RunError, RunOptions, at, fail};
 use mdtf_boundary::VolumeStats;
 use mdtf_derive::{DeriveParams, Item};
-use mdtf_histogram::{ChannelStats, Histogram};
+use mdtf_histogram::{ChannelStats, Histogram, HvolAxes};
 use mdtf_pack::{PackParams, PackWriter, Profile, TfFile};
 use mdtf_volume::{Geometry, KeyBuckets, Volume, overlapped};
 use reductions::{Stats, detected_before_tracing, g_stats};
@@ -66,6 +67,8 @@ pub(super) struct SlabPasses<'a> {
     tasks: Option<&'a dyn SlabTasks>,
     /// The passes that ran as tasks, for the report.
     pub(super) task_passes: Vec<crate::report::TaskPass>,
+    /// The first radix pass of the pre-filtered g's median, when tasks pre-filtered it.
+    prefiltered_buckets: Option<KeyBuckets>,
 }
 
 /// What the derive pass found.
@@ -184,6 +187,7 @@ impl<'a> SlabPasses<'a> {
             warnings,
             tasks: opts.tasks.as_deref(),
             task_passes,
+            prefiltered_buckets: None,
         };
         Ok((run, store))
     }
@@ -332,16 +336,25 @@ impl<'a> SlabPasses<'a> {
         };
         self.progress.stage("boundary")?;
         let t = Instant::now();
-        let traced_buckets = derived.g_buckets.as_ref().filter(|_| !prefiltered);
+        let traced_buckets = match prefiltered {
+            true => self.prefiltered_buckets.take(),
+            false => derived.g_buckets.clone(),
+        };
         let l_min = self.geo.min_spacing();
         let value_range = self.value_range();
-        let detected = match self.plan.detects_before_tracing() {
-            true => detected_before_tracing(chans, &self.slabs, &self.stats, l_min)?,
-            false => Default::default(),
-        };
-        let stats = VolumeStats {
-            detected,
-            ..g_stats(chans, g, traced_buckets, &self.slabs, value_range, l_min, &self.stats)?
+        let stats = match (self.tasks, &traced_buckets) {
+            (Some(tasks), Some(buckets)) => self.tracing_stats_by_tasks(tasks, chans, g, buckets)?,
+            _ => {
+                let detected = match self.plan.detects_before_tracing() {
+                    true => detected_before_tracing(chans, &self.slabs, &self.stats, l_min)?,
+                    false => Default::default(),
+                };
+                let traced_buckets = traced_buckets.as_ref();
+                VolumeStats {
+                    detected,
+                    ..g_stats(chans, g, traced_buckets, &self.slabs, value_range, l_min, &self.stats)?
+                }
+            }
         };
         if self.median_reads_stored_g() {
             chans.store.remove("g");
@@ -388,6 +401,50 @@ impl<'a> SlabPasses<'a> {
         let outputs = vec!["boundary/boundary_report.csv".into(), "boundary/boundary_report.png".into()];
         self.stages.done("boundary", t, self.geo.voxel_count(), outputs);
         Ok(traced)
+    }
+
+    /// The tracing's whole-volume statistics (see [`g_stats`] and
+    /// [`detected_before_tracing`]) from one round of tasks: the second pass
+    /// of the select for the median of the traced g (`g`, whose first pass
+    /// is `buckets`) and the (v, g) counts of the detection, each slab's
+    /// counted where it is and merged here.
+    fn tracing_stats_by_tasks(
+        &mut self,
+        tasks: &dyn SlabTasks,
+        chans: &mut SlabChannels,
+        g: &str,
+        buckets: &KeyBuckets,
+    ) -> Result<VolumeStats, RunError> {
+        let (l_min, value_range) = (self.geo.min_spacing(), self.value_range());
+        let s = self.stats.0.get(g).ok_or_else(|| fail("boundary")(format!("no statistics of {g}")))?;
+        let g_max = s.finite_range().map_or(0.0, |r| r.1);
+        let k = s.finite_count().checked_sub(1).map(|last| last / 2);
+        let median = k.and_then(|k| mdtf_volume::upper_bucket_of(k, buckets)).map(|hi| (g.to_string(), hi));
+        let axis = |name: &str| self.stats.axis(&HvolAxes::spec(name, HVOL_BINS), name).ok();
+        let detect = match self.plan.detects_before_tracing() && chans.has("v") && chans.has("g") {
+            true => axis("v").zip(axis("g")),
+            false => None,
+        };
+        let (mut lower, mut vg) = (KeyBuckets::new(), None::<crate::pre_detect::VgCounts>);
+        if median.is_some() || detect.is_some() {
+            let pass = SlabPass::Select { median: median.clone(), detect };
+            let groups = self.derive_groups();
+            let derivation = Derivation { groups: &groups, kernel_reach: self.plan.reach.kernel[2] };
+            for part in self.on_tasks(tasks, pass, &mut chans.store, derivation, &self.slabs.clone())? {
+                if let Some(b) = &part.g_buckets {
+                    lower.merge(b);
+                }
+                match (&mut vg, part.vg) {
+                    (Some(all), Some(slab)) => all.merge(&slab).map_err(at("boundary"))?,
+                    (all, slab) => *all = all.take().or(slab),
+                }
+            }
+        }
+        let median =
+            k.filter(|_| median.is_some()).and_then(|k| mdtf_volume::order_statistic_from_counts(k, buckets, &lower));
+        let noise_floor = mdtf_boundary::noise_floor_of_median(median, value_range, l_min);
+        let detected = vg.map(|c| c.detected(l_min)).unwrap_or_default();
+        Ok(VolumeStats { value_range, noise_floor, g_max, detected })
     }
 
     /// The tracing in this process, block by block (strips of rows, z-slabs
@@ -455,9 +512,14 @@ impl<'a> SlabPasses<'a> {
                 let pass = SlabPass::Prefilter { filters, halo };
                 let groups = self.derive_groups();
                 let derivation = Derivation { groups: &groups, kernel_reach: self.plan.reach.kernel[2] };
+                let mut buckets = KeyBuckets::new();
                 for mut part in self.on_tasks(tasks, pass, &mut chans.store, derivation, &self.slabs.clone())? {
                     part.merge_stats_into(&mut self.stats);
+                    if let Some(b) = &part.g_buckets {
+                        buckets.merge(b);
+                    }
                 }
+                self.prefiltered_buckets = Some(buckets);
             }
             None => {
                 for f in &filters {

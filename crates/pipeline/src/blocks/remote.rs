@@ -18,6 +18,7 @@ use crate::run::{RunError, at, fail};
 use mdtf_bilateral::BilateralParams;
 use mdtf_boundary::{BoundaryParams, VolumeStats};
 use mdtf_derive::DeriveParams;
+use mdtf_histogram::Axis;
 use mdtf_pack::TextureTarget;
 use mdtf_volume::{Geometry, NanPolicy};
 use serde::{Deserialize, Serialize};
@@ -94,6 +95,16 @@ pub enum SlabPass {
         /// Planes the filter reads on each side of the slab.
         halo: usize,
     },
+    /// Counts what the tracing's whole-volume statistics need from the
+    /// slab: the second pass of the select for the median of the traced g
+    /// (its samples in one upper bucket of the first pass), and the (v, g)
+    /// counts of the detection before the tracing.
+    Select {
+        /// The channel whose median is taken and the upper bucket counted (None: no median).
+        median: Option<(String, usize)>,
+        /// The (v, g) axes of the detection, when it runs.
+        detect: Option<(Axis, Axis)>,
+    },
     /// Counts the slab's histograms and writes its planes of every pack
     /// texture, from the stored channels, a sub-slab at a time; a pack
     /// pass counting the histogram volume gives each task whole fixed
@@ -155,8 +166,16 @@ impl SlabPass {
             SlabPass::Input { .. } => "input",
             SlabPass::Derive { .. } => "derive",
             SlabPass::Prefilter { .. } => "prefilter",
-            SlabPass::Trace { .. } => "boundary",
+            SlabPass::Select { .. } | SlabPass::Trace { .. } => "boundary",
             SlabPass::Pack { .. } => "pack",
+        }
+    }
+
+    /// The pass's name (in the report, and in the names of its tasks' files).
+    pub(super) fn name(&self) -> &'static str {
+        match self {
+            SlabPass::Select { .. } => "select",
+            other => other.stage(),
         }
     }
 
@@ -167,7 +186,7 @@ impl SlabPass {
             SlabPass::Derive { store, .. } => store.clone(),
             SlabPass::Prefilter { filters, .. } => filters.iter().map(|f| f.output.clone()).collect(),
             SlabPass::Trace { .. } => TRACED.map(String::from).to_vec(),
-            SlabPass::Pack { .. } => Vec::new(),
+            SlabPass::Select { .. } | SlabPass::Pack { .. } => Vec::new(),
         }
     }
 }
@@ -182,7 +201,7 @@ pub(super) fn run_pass(
     derivation: Derivation,
     slabs: &[Range<usize>],
 ) -> Result<(Vec<SlabPartial>, TaskPass), RunError> {
-    let (stage, outputs) = (pass.stage(), pass.outputs());
+    let (stage, name, outputs) = (pass.stage(), pass.name(), pass.outputs());
     let job = SlabJob {
         store: store.dir().to_path_buf(),
         geometry: store.geometry().clone(),
@@ -197,15 +216,15 @@ pub(super) fn run_pass(
     }
     let mut retries = 0;
     for z in slabs {
-        let runs = std::fs::metadata(attempts_path(store.dir(), stage, z.start)).map_or(0, |m| m.len());
+        let runs = std::fs::metadata(attempts_path(store.dir(), name, z.start)).map_or(0, |m| m.len());
         retries += runs.saturating_sub(1);
     }
-    let partials = slabs.iter().map(|z| SlabPartial::read(store.dir(), stage, z.start)).collect::<Result<_, _>>()?;
-    Ok((partials, TaskPass { pass: stage.into(), tasks: slabs.len(), retries }))
+    let partials = slabs.iter().map(|z| SlabPartial::read(store.dir(), name, z.start)).collect::<Result<_, _>>()?;
+    Ok((partials, TaskPass { pass: name.into(), tasks: slabs.len(), retries }))
 }
 
-/// The file a task of `stage` for the slab from plane `first` adds a byte
-/// to each time it starts (its length: how often the task ran).
-pub(super) fn attempts_path(store: &Path, stage: &str, first: usize) -> PathBuf {
-    store.join(format!("{stage}-{first}.attempts"))
+/// The file a task of pass `name` for the slab from plane `first` adds a
+/// byte to each time it starts (its length: how often the task ran).
+pub(super) fn attempts_path(store: &Path, name: &str, first: usize) -> PathBuf {
+    store.join(format!("{name}-{first}.attempts"))
 }

@@ -10,7 +10,9 @@ use super::remote::{Prefilter, SlabJob, SlabPass, TRACED};
 use super::slab_histograms::{HistogramAxes, HistogramCounts};
 use super::trace::{TraceSetup, prefilter_slab, trace_slab};
 use super::{ChannelStore, SlabChannels};
+use crate::pre_detect::VgCounts;
 use crate::run::{RunError, at, fail};
+use mdtf_histogram::Axis;
 use mdtf_pack::TextureTarget;
 use mdtf_volume::{NanPolicy, PlaneReader, ReadOptions};
 use std::ops::Range;
@@ -23,7 +25,7 @@ pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<(), RunError> {
     if z.start >= z.end || z.end > nz {
         return Err(fail("plan")(format!("planes {z:?} are not a slab of the volume's {nz}")));
     }
-    let attempts = super::remote::attempts_path(&job.store, job.pass.stage(), z.start);
+    let attempts = super::remote::attempts_path(&job.store, job.pass.name(), z.start);
     let stage = job.pass.stage();
     let counted = std::fs::OpenOptions::new()
         .create(true)
@@ -36,12 +38,13 @@ pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<(), RunError> {
         SlabPass::Input { input, level, nan, padding } => task.input(input, *level, *nan, *padding)?,
         SlabPass::Derive { summarise, store } => task.derive(summarise, store)?,
         SlabPass::Prefilter { filters, halo } => task.prefilter(filters, *halo)?,
+        SlabPass::Select { median, detect } => task.select(median.as_ref(), detect.as_ref())?,
         SlabPass::Trace { .. } => task.trace()?,
         SlabPass::Pack { textures, histograms, read, height } => {
             task.pack(textures, histograms.as_ref(), read, *height)?
         }
     };
-    partial.write(&job.store, job.pass.stage(), task.z.start)
+    partial.write(&job.store, job.pass.name(), task.z.start)
 }
 
 /// The channels (and the memory they hold: the slabs' samples, the
@@ -160,6 +163,32 @@ impl Task<'_> {
             let own = prefilter_slab(&mut chans, &f.input, &f.params, &self.z, halo)?;
             out.put_volume(&f.output, self.z.start, &own).map_err(at("prefilter"))?;
             partial.summarise(&f.output, own.samples(), self.voxels);
+            // the first pass of its median's select, when it is the g traced
+            if f.output == "g_prefiltered" {
+                partial.g_buckets.get_or_insert_with(mdtf_volume::KeyBuckets::new).add(own.samples());
+            }
+        }
+        self.keep(chans);
+        Ok(partial)
+    }
+
+    /// The slab's part of the tracing's statistics: its samples of the
+    /// median's channel in the upper bucket `median` names, and its (v, g)
+    /// counts over the axes `detect`.
+    fn select(&self, median: Option<&(String, usize)>, detect: Option<&(Axis, Axis)>) -> Result<SlabPartial, RunError> {
+        let mut chans = self.channels()?;
+        let mut partial = SlabPartial::default();
+        if let Some((channel, within)) = median {
+            let mut lower = mdtf_volume::KeyBuckets::new();
+            lower.add_within(*within, chans.samples(channel, self.z.clone()).map_err(fail("boundary"))?);
+            partial.g_buckets = Some(lower);
+        }
+        if let Some((v_axis, g_axis)) = detect {
+            let slab = chans.volumes(self.z.clone(), &["v", "g"]).map_err(fail("boundary"))?;
+            let mut counts = VgCounts::new(v_axis.clone(), g_axis.clone());
+            counts.add(slab[0].1.samples(), slab[1].1.samples()).map_err(at("boundary"))?;
+            partial.vg = Some(counts);
+            chans.give_back(slab);
         }
         self.keep(chans);
         Ok(partial)
