@@ -186,7 +186,8 @@ impl fmt::Display for Sizing {
         }
         write!(
             f,
-            "  the calling process merges the tasks' partial sums, reads g for its median where the tracing needs it, and writes the kept volumes, histograms and tables"
+            "  the calling process merges the tasks' partial sums and writes the kept volumes, histograms and \
+             tables (peak-finding's (v, 1/g) axis and gaussian-tf's default TGTF read g there too)"
         )
     }
 }
