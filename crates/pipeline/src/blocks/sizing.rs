@@ -113,6 +113,9 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
             passes.push(pass);
             stored.extend(["g_prefiltered".to_string(), "f2_prefiltered".to_string()]);
         }
+        // the select round reads the traced g (and v and g for the detection) over each slab
+        let select = 3 * h * plane;
+        passes.push(PassSize { pass: "select", tasks: slabs, memory: memory(3 * h), read: select, written: 0 });
         let (tp, tr) = (trace.planes as u64, trace.rows as u64);
         let [_, t_rows, t_planes] = plan.reach.trace.map(|t| t as u64);
         let grown = (tp + 2 * (t_planes + k)).min(nz as u64) * (tr + 2 * t_rows).min(ny as u64) * nx as u64 * 4;
@@ -122,16 +125,10 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
         passes.push(PassSize { pass: "boundary", tasks, memory, read, written: 4 * tp * plane });
         stored.extend(["g_hit", "hit", "distance", "dot"].map(String::from));
     }
-    let params =
-        PackParams { profile: p.pack.profile, ranges: Default::default(), fields: vec![], dtype: None, nifti: false };
-    let texel: u64 = texture_layouts(&params).iter().map(|l| (l.components.len() * l.dtype.size()) as u64).sum();
+    let texel = texel_bytes(p);
     let pack_planes = if hvol { nz.div_ceil(mdtf_histogram::HVOL_PARTS) as u64 } else { h };
     let pack_tasks = if hvol { mdtf_histogram::HVOL_PARTS.min(nz) } else { slabs };
-    // the value over each of its slabs with the kernel's halo, and the stored channels it packs over its planes
-    let value_planes = pack_planes + 2 * k * pack_planes.div_ceil(h.max(1));
-    let packed_stored = stored.iter().filter(|c| ["g_hit", "hit", "distance"].contains(&c.as_str())).count() as u64;
-    let read = (value_planes + packed_stored * pack_planes) * plane;
-    let written = pack_planes * (nx * ny) as u64 * texel;
+    let (read, written) = pack_bytes(pack_planes, h, k, plane, &stored, (nx * ny) as u64 * texel);
     passes.push(PassSize { pass: "pack", tasks: pack_tasks, memory: memory(by_pass.pack), read, written });
     let voxels = geometry.voxel_count() as u64;
     let budget = match size {
@@ -150,6 +147,22 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
         kept_bytes,
         refused,
     })
+}
+
+/// Bytes a voxel of `p`'s pack textures takes.
+fn texel_bytes(p: &Pipeline) -> u64 {
+    let params =
+        PackParams { profile: p.pack.profile, ranges: Default::default(), fields: vec![], dtype: None, nifti: false };
+    texture_layouts(&params).iter().map(|l| (l.components.len() * l.dtype.size()) as u64).sum()
+}
+
+/// Bytes a pack task of `planes` planes reads and writes: the value over
+/// each of its slabs of `h` planes with the kernel's halo `k`, the stored
+/// channels it packs over its planes; its textures (`texel_plane` bytes a plane).
+fn pack_bytes(planes: u64, h: u64, k: u64, plane: u64, stored: &[String], texel_plane: u64) -> (u64, u64) {
+    let value_planes = planes + 2 * k * planes.div_ceil(h.max(1));
+    let packed_stored = stored.iter().filter(|c| ["g_hit", "hit", "distance"].contains(&c.as_str())).count() as u64;
+    ((value_planes + packed_stored * planes) * plane, planes * texel_plane)
 }
 
 impl Sizing {

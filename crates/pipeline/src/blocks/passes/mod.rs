@@ -1,0 +1,388 @@
+//! The passes of a slab-by-slab run, in the order they run, over the state
+//! they hand on ([`SlabPasses`]): input, derive, pre-filter, tracing, kept
+//! volumes, then histograms and pack together, then the pack's tables.
+//! Each pass visits the slabs in z order, so the reductions it feeds merge
+//! in the same order whatever the slab height. The tracing's passes
+//! ([`tracing`]) and the pack's ([`packing`]) have their own files.
+
+mod packing;
+mod tracing;
+
+use super::partials::SlabPartial;
+use super::remote::{self, Derivation, SlabPass, SlabTasks};
+use super::slab_channels::made_by;
+use super::{ChannelStore, SlabChannels, SlabSize, Source, open_source};
+use super::{TraceBlocks, reductions, slabs};
+use crate::file::Pipeline;
+use crate::plan::Plan;
+use crate::progress::Progress;
+use crate::report::Stages;
+use crate::run::{RunError, RunOptions, at, fail};
+use mdtf_derive::{DeriveParams, Item};
+use mdtf_pack::{Profile, TfFile};
+use mdtf_volume::{Geometry, KeyBuckets, overlapped};
+use reductions::Stats;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// An I/O error of the pass `stage`.
+fn io(stage: &'static str) -> impl Fn(std::io::Error) -> RunError {
+    at::<std::io::Error>(stage)
+}
+
+/// What a slab-by-slab run hands from pass to pass.
+pub(super) struct SlabPasses<'a> {
+    p: &'a Pipeline,
+    opts: &'a RunOptions,
+    /// The pipeline file's folder (relative paths in it start there).
+    base: PathBuf,
+    /// The staging output folder.
+    pub(super) dir: PathBuf,
+    pub(super) geo: Geometry,
+    plan: Plan,
+    pub(super) slabs: Vec<Range<usize>>,
+    /// Planes per slab (the last may hold fewer).
+    pub(super) height: usize,
+    /// How the tracing pass cuts the volume.
+    pub(super) trace_blocks: TraceBlocks,
+    /// The histograms ask for the histogram volume.
+    hvol_asked: bool,
+    /// The histogram volume is counted: asked for, or the default TF's source.
+    hvol_needed: bool,
+    tf: Option<TfFile>,
+    /// The input's name in the figures, the manifest and the report.
+    pub(super) input_name: String,
+    /// The units the input states.
+    pub(super) units: mdtf_volume::Units,
+    /// Values that are scanner padding (inclusive range, input units).
+    pub(super) padding: Option<[f64; 2]>,
+    pub(super) progress: Progress<'a>,
+    pub(super) stages: Stages,
+    stats: Stats,
+    pub(super) warnings: Vec<String>,
+    tasks: Option<&'a dyn SlabTasks>,
+    /// The passes that ran as tasks, for the report.
+    pub(super) task_passes: Vec<crate::report::TaskPass>,
+    /// The first radix pass of the pre-filtered g's median, when tasks pre-filtered it.
+    prefiltered_buckets: Option<KeyBuckets>,
+}
+
+/// What the derive pass found.
+pub(super) struct Derived {
+    /// How the value was derived (kernel, scanner padding), for what derives it again.
+    derive: DeriveParams,
+    /// The first radix pass of g's median, when g was derived.
+    g_buckets: Option<KeyBuckets>,
+    /// The smallest positive 1/g (infinite without one).
+    smallest_inv_g: f32,
+}
+
+impl Derived {
+    /// Takes in a slab of channel `name` (g: the first radix pass of its
+    /// median, behind the tracing's noise floor, the (v, 1/g) axis and
+    /// gaussian-tf's default; 1/g: its smallest positive value, whose
+    /// multiple is the top of its code range).
+    fn add(&mut self, name: &str, samples: &[f32]) {
+        match name {
+            "g" => self.g_buckets.iter_mut().for_each(|b| b.add(samples)),
+            "inv_g" => self.smallest_inv_g = crate::pack_inputs::smallest_positive(samples).min(self.smallest_inv_g),
+            _ => {}
+        }
+    }
+
+    /// Takes in a task's part of the same (its slab's g counts, its smallest positive 1/g).
+    fn merge(&mut self, part: &SlabPartial) {
+        if let (Some(mine), Some(theirs)) = (&mut self.g_buckets, &part.g_buckets) {
+            mine.merge(theirs);
+        }
+        if let Some(x) = part.smallest_inv_g {
+            self.smallest_inv_g = self.smallest_inv_g.min(x);
+        }
+    }
+}
+
+impl<'a> SlabPasses<'a> {
+    /// Whether the histogram step looks for boundaries: it runs, and the
+    /// histogram volume is counted (asked for, or for the default TF).
+    pub(super) fn detected(&self) -> bool {
+        self.hvol_needed && self.p.histogram.is_some()
+    }
+
+    /// The input pass: opens the input, plans the run and sizes its slabs
+    /// (`size`), and copies the value slab by slab into a channel store in
+    /// `dir`, taking its statistics. Without `packs` the run stops after its
+    /// tracing and kept volumes (no histogram volume is counted or budgeted).
+    pub(super) fn read_input(
+        p: &'a Pipeline,
+        opts: &'a RunOptions,
+        size: SlabSize,
+        dir: &Path,
+        progress: Progress<'a>,
+        packs: bool,
+    ) -> Result<(SlabPasses<'a>, ChannelStore), RunError> {
+        let base = opts.base();
+        progress.stage("input")?;
+        let t = Instant::now();
+        let (mut source, meta) = open_source(p, opts, &base)?;
+        let geo = source.geometry().clone();
+        let nz = geo.dims[2];
+        let plan = Plan::resolve(p, &[], &geo).map_err(at("plan"))?;
+        let tf = crate::inputs::read_tf(p, &base)?;
+        let hvol_asked = p.histogram.as_ref().is_some_and(|h| h.hvol);
+        let hvol_needed = packs && (hvol_asked || tf.is_none());
+        if let Some(why) = super::sizing::too_many_to_count(p, &geo, hvol_needed) {
+            return Err(fail("plan")(why));
+        }
+        let (height, trace_blocks) = super::cut(size, &geo, &plan, hvol_needed).map_err(fail("plan"))?;
+        let slabs = slabs(nz, height);
+        progress.stage(&format!("input: {} slabs of {height} planes", slabs.len()))?;
+        let mut store = ChannelStore::create(dir.join(".slabs"), geo.clone()).map_err(at("input"))?;
+        let mut stats = Stats::new(&["v", "g", "f2", "g_hit", "g_prefiltered", "inv_g"], geo.voxel_count());
+        let mut task_passes = Vec::new();
+        let padded = match (opts.tasks.as_deref(), &source) {
+            (Some(tasks), Source::Planes(reader)) if reader.reads_any_planes() => {
+                progress.stage("input (tasks)")?;
+                let input = std::path::absolute(reader.path()).map_err(io("input"))?;
+                let (level, nan, padding) = (p.input.level, p.input.nan, meta.padding);
+                let pass = SlabPass::Input { input, level, nan, padding };
+                let mut padded = 0;
+                let nothing_derived = Derivation { groups: &[], kernel_reach: 0 };
+                let (parts, ran) = remote::run_pass(tasks, pass, &mut store, nothing_derived, &slabs)?;
+                task_passes.push(ran);
+                for mut part in parts {
+                    part.merge_stats_into(&mut stats);
+                    padded += part.padded;
+                }
+                padded
+            }
+            _ => copy_input(&mut source, &mut store, &slabs, &mut stats, meta.padding, &progress)?,
+        };
+        let mut stages = Stages::default();
+        stages.done("input", t, geo.voxel_count(), vec![]);
+        let mut warnings = meta.warnings.clone();
+        warnings.extend(meta.padding_note(padded, geo.voxel_count()));
+        let run = SlabPasses {
+            p,
+            opts,
+            base,
+            dir: dir.to_path_buf(),
+            geo,
+            plan,
+            slabs,
+            height,
+            trace_blocks,
+            hvol_asked,
+            hvol_needed,
+            tf,
+            input_name: meta.name,
+            units: meta.units,
+            padding: meta.padding,
+            progress,
+            stages,
+            stats,
+            warnings,
+            tasks: opts.tasks.as_deref(),
+            task_passes,
+            prefiltered_buckets: None,
+        };
+        Ok((run, store))
+    }
+
+    /// [`remote::run_pass`], its tasks counted for the report.
+    fn on_tasks(
+        &mut self,
+        tasks: &dyn SlabTasks,
+        pass: SlabPass,
+        store: &mut ChannelStore,
+        derivation: Derivation,
+        slabs: &[Range<usize>],
+    ) -> Result<Vec<SlabPartial>, RunError> {
+        let (parts, ran) = remote::run_pass(tasks, pass, store, derivation, slabs)?;
+        self.task_passes.push(ran);
+        Ok(parts)
+    }
+
+    /// The input's finite value range, value units.
+    pub(super) fn finite_range(&self) -> Option<[f64; 2]> {
+        self.stats.range("v").map(|(lo, hi)| [lo as f64, hi as f64])
+    }
+
+    /// max - min of the input's finite values (0 without any).
+    fn value_range(&self) -> f64 {
+        self.finite_range().map_or(0.0, |[lo, hi]| hi - lo)
+    }
+
+    /// The derive pass. The derivatives are remade from the stored value by
+    /// every later pass that reads them, in the whole run's groups (the
+    /// normals on their own when it defers them); this pass takes their
+    /// statistics. With tasks, the tasks store every derived channel and the
+    /// later passes read them instead.
+    pub(super) fn derive(&mut self, store: ChannelStore) -> Result<(SlabChannels, Derived), RunError> {
+        let groups = self.derive_groups();
+        let derive_start = Instant::now();
+        let nz = self.geo.dims[2];
+        let kernel_reach = self.plan.reach.kernel[2];
+        let mut chans =
+            SlabChannels::new(store, groups.clone(), kernel_reach, nz).cancelled_by(self.opts.cancel.clone());
+        let summarised: Vec<&str> = ["g", "f2", "inv_g"].into_iter().filter(|c| chans.has(c)).collect();
+        let g_buckets = summarised.contains(&"g").then(KeyBuckets::new);
+        let derive = DeriveParams { items: Vec::new(), ..self.derive_params() };
+        let mut derived = Derived { derive, g_buckets, smallest_inv_g: f32::INFINITY };
+        if let Some(tasks) = self.tasks {
+            self.progress.stage("derive (tasks)")?;
+            let summarise = summarised.iter().map(|c| c.to_string()).collect();
+            let pass = SlabPass::Derive { summarise, store: self.read_later(&groups) };
+            let derivation = Derivation { groups: &groups, kernel_reach };
+            for mut part in self.on_tasks(tasks, pass, &mut chans.store, derivation, &self.slabs.clone())? {
+                part.merge_stats_into(&mut self.stats);
+                derived.merge(&part);
+            }
+            self.stages.done("derive", derive_start, self.geo.voxel_count(), vec![]);
+            return Ok((chans, derived));
+        }
+        // g waits on disk for the second radix pass of its median before the tracing: reading
+        // it back costs less than deriving every slab again (it goes once the median is known)
+        let keep_g = self.median_reads_stored_g() && derived.g_buckets.is_some();
+        if !summarised.is_empty() {
+            self.progress.stage("derive")?;
+            let mut writer = chans.store.writer(if keep_g { &["g"] } else { &[] }).map_err(io("derive"))?;
+            let (slabs, stats, progress) = (&self.slabs, &mut self.stats, &self.progress);
+            // a slab is derived while the one before is summarised (and its g stored)
+            overlapped(
+                slabs.len(),
+                &mut |k| progress.slab(k + 1, slabs.len()),
+                &mut |k, spent| {
+                    chans.give_back(spent.map(|(_, volumes)| volumes).unwrap_or_default());
+                    Ok((slabs[k].start, chans.volumes(slabs[k].clone(), &summarised).map_err(fail("derive"))?))
+                },
+                &mut |(first, volumes)| {
+                    for (name, v) in &volumes {
+                        stats.add(name, v.samples());
+                        derived.add(name, v.samples());
+                        if name == "g" && keep_g {
+                            writer.put_volume("g", first, v).map_err(io("derive"))?;
+                        }
+                    }
+                    Ok(Some((first, volumes)))
+                },
+            )?;
+            chans.release();
+            self.stages.done("derive", derive_start, self.geo.voxel_count(), vec![]);
+        }
+        Ok((chans, derived))
+    }
+
+    /// How every slab derives the value: the kernel, the whole volume's
+    /// epsilon (the same in every slab) and the scanner padding.
+    fn derive_params(&self) -> DeriveParams {
+        let span = self.stats.range("v").map_or(0.0, |(lo, hi)| hi - lo);
+        DeriveParams {
+            items: Vec::new(),
+            kernel: self.p.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
+            epsilon: Some(mdtf_derive::default_epsilon(span, self.geo.min_spacing())),
+            border: mdtf_derive::Border::Clamp,
+            padding: self.padding.map(|r| r.map(|x| x as f32)),
+        }
+    }
+
+    /// Whether the derive pass stores g for the second pass of its median,
+    /// the tracing's noise floor (the tracing of g itself, not of the
+    /// pre-filtered g, and in this process: tasks store every channel).
+    fn median_reads_stored_g(&self) -> bool {
+        self.plan.trace && !self.plan.prefilter && self.tasks.is_none()
+    }
+
+    /// The derived channels a run on tasks reads itself after its derive
+    /// pass, which its derive tasks store ([`stored_for_the_run`]).
+    fn read_later(&self, groups: &[DeriveParams]) -> Vec<String> {
+        let derived: Vec<String> = groups.iter().flat_map(|d| d.items.iter()).flat_map(|&i| made_by(i)).collect();
+        stored_for_the_run(self.p, &self.plan, self.tf.is_some(), &derived)
+    }
+
+    /// The derive groups of the whole run: the plan's items (with g and f''
+    /// for the default TF's histogram volume, which the whole run derives
+    /// on its own from the value), then the deferred normals.
+    fn derive_groups(&self) -> Vec<DeriveParams> {
+        let derive = |items: Vec<Item>| DeriveParams { items, ..self.derive_params() };
+        let mut groups = vec![derive(self.plan.derive.clone())];
+        if self.hvol_needed {
+            for item in [Item::G, Item::F2] {
+                if !groups[0].items.contains(&item) {
+                    groups[0].items.push(item);
+                }
+            }
+        }
+        if self.plan.defer_normals {
+            groups.push(derive(vec![Item::Normal]));
+        }
+        groups
+    }
+
+    /// The kept channels, written slab by slab as volumes.
+    pub(super) fn keep(&mut self, chans: &mut SlabChannels) -> Result<(), RunError> {
+        if self.p.keep.is_empty() {
+            return Ok(());
+        }
+        self.progress.stage("keep")?;
+        let t = Instant::now();
+        let (geo, slabs) = (&self.geo, &self.slabs);
+        let written = crate::run::write_kept(self.p, &self.plan.fields, &self.dir, |c, file| {
+            if !chans.has(c) {
+                return None;
+            }
+            let f32 = mdtf_volume::SampleType::F32;
+            let mut slab = |z, out: &mut Vec<f32>| chans.samples_into(c, z, out).map_err(std::io::Error::other);
+            Some(mdtf_volume::write_slabs(file, geo, f32, slabs, &mut slab).map_err(at("keep")))
+        })?;
+        chans.release();
+        self.stages.done("keep", t, self.geo.voxel_count(), written);
+        Ok(())
+    }
+}
+
+/// The derived channels (of `derived`) a run of `p` on tasks reads itself
+/// after its derive pass, which its derive tasks store (the tasks remake
+/// every other channel): the kept ones, and g where the run takes a median
+/// of it (the tracing's noise floor and the detection before it, the
+/// (v, 1/g) axis, gaussian-tf's default without a TF file, `tf_given`).
+pub(super) fn stored_for_the_run(p: &Pipeline, plan: &Plan, tf_given: bool, derived: &[String]) -> Vec<String> {
+    let mut store: Vec<String> = p.keep.iter().filter(|c| derived.contains(c)).cloned().collect();
+    let joint = p.histogram.as_ref().is_some_and(|h| h.joint);
+    let medians_of_g = plan.trace
+        || (joint && derived.iter().any(|c| c == "inv_g"))
+        || (p.pack.profile == Profile::GaussianTf && !tf_given);
+    if medians_of_g && derived.iter().any(|c| c == "g") && !store.iter().any(|c| c == "g") {
+        store.push("g".into());
+    }
+    store
+}
+
+/// Copies the input's value slab by slab into `store`, taking its
+/// statistics; the samples in the `padding` range, counted.
+fn copy_input(
+    source: &mut Source,
+    store: &mut ChannelStore,
+    slabs: &[Range<usize>],
+    stats: &mut Stats,
+    padding: Option<[f64; 2]>,
+    progress: &Progress,
+) -> Result<u64, RunError> {
+    let mut writer = store.writer(&["v"]).map_err(io("input"))?;
+    let mut padded = 0u64;
+    // a slab is read while the one before is summarised and stored
+    overlapped(
+        slabs.len(),
+        &mut |k| progress.slab(k + 1, slabs.len()),
+        &mut |k, _| Ok((slabs[k].start, source.read(slabs[k].clone())?)),
+        &mut |(first, v)| {
+            stats.add("v", v.samples());
+            if let Some(range) = padding {
+                padded += crate::inputs::count_padding(v.samples(), range);
+            }
+            writer.put_volume("v", first, &v).map_err(io("input"))?;
+            Ok(None)
+        },
+    )?;
+    Ok(padded)
+}
