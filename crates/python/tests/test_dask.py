@@ -163,7 +163,13 @@ def chunked_store(sphere: Path, tmp_path_factory: pytest.TempPathFactory) -> Pat
 
 @pytest.mark.parametrize("name", ["slicer-3dtf", "distance-tf"])
 def test_a_pipeline_run_on_the_cluster_writes_mdtf_runs_files(
-    client: distributed.Client, chunked_store: Path, mdtf_bin: Path, pipelines: Path, tmp_path: Path, name: str
+    client: distributed.Client,
+    chunked_store: Path,
+    mdtf_bin: Path,
+    pipelines: Path,
+    tmp_path: Path,
+    name: str,
+    capfd: pytest.CaptureFixture[str],
 ) -> None:
     pipeline = pipelines / f"{name}.toml"
     cli(mdtf_bin, "run", pipeline, "--input", chunked_store, "-o", tmp_path / "cli", "--set", "preview=false")
@@ -175,6 +181,11 @@ def test_a_pipeline_run_on_the_cluster_writes_mdtf_runs_files(
     traced = ["prefilter", "select", "boundary"] if name == "distance-tf" else []
     assert passes == ["input", "derive", *traced, "pack"], slabs["tasks"]
     assert all(t["retries"] == 0 for t in slabs["tasks"]), slabs["tasks"]
+    # each pass said how far its tasks got
+    err = capfd.readouterr().err
+    for t in slabs["tasks"]:
+        line = f"mdtf.dask.run: {t['pass']}: {t['tasks']}/{t['tasks']} tasks in "
+        assert line in err, err
     want, got = _outputs(tmp_path / "cli"), _outputs(tmp_path / "dask")
     assert any(f.startswith("pack/") and f.endswith(".raw") for f in want), sorted(want)
     assert sorted(got) == sorted(want)

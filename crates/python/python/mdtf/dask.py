@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import time
 from pathlib import Path
 from typing import Any, Iterable, Mapping
@@ -320,6 +321,28 @@ def _slab_task(job: str, start: int, end: int, threads: int) -> None:
     _mdtf.slab_task(job, start, end, threads)
 
 
+class _PassProgress:
+    """How far the tasks of one pass of ``run`` are, on stderr: ``done`` of
+    ``total`` counted in place on a terminal, one line when they finish."""
+
+    def __init__(self, job: str, total: int, shown: bool) -> None:
+        kind = next(iter(json.loads(job)["pass"]), "pass")
+        self.name = "boundary" if kind == "Trace" else kind.lower()
+        self.total, self.shown, self.start, self.done = total, shown, time.monotonic(), -1
+        self.live = shown and sys.stderr.isatty()
+
+    def update(self, done: int) -> None:
+        if self.live and done != self.done:
+            self.done = done
+            print(f"\rmdtf.dask.run: {self.name}: {done}/{self.total} tasks", end="", file=sys.stderr, flush=True)
+
+    def finished(self) -> None:
+        if self.shown:
+            took = time.monotonic() - self.start
+            line = f"mdtf.dask.run: {self.name}: {self.total}/{self.total} tasks in {took:.1f} s"
+            print(("\r" if self.live else "") + line, file=sys.stderr, flush=True)
+
+
 def _executing(dask_worker: Any) -> int:
     """How many tasks a worker is running (for ``client.run``)."""
     return len(dask_worker.state.executing)
@@ -348,6 +371,7 @@ def run(
     memory_budget: int | None = None,
     retries: int = 3,
     task_threads: int = 1,
+    progress: bool = True,
     **overrides: Any,
 ) -> dict[str, Any]:
     """Runs a pipeline file like ``mdtf.run`` (``mdtf run``), slab by slab,
@@ -380,8 +404,10 @@ def run(
     client = client if client is not None else _current_client()
 
     def submit(job: str, slabs: list[tuple[int, int]], cancelled: Any) -> None:
+        shown = _PassProgress(job, len(slabs), progress)
         if client is None:
             dask.compute(*[dask.delayed(_slab_task, pure=False)(job, a, b, task_threads) for a, b in slabs])
+            shown.finished()
             return
         starts, ends = [a for a, _ in slabs], [b for _, b in slabs]
         threads = [task_threads] * len(slabs)
@@ -396,7 +422,9 @@ def run(
                 while any(client.run(_executing).values()) and time.monotonic() < deadline:
                     time.sleep(0.05)
                 return
+            shown.update(sum(f.done() for f in futures))
             time.sleep(0.05)
         client.gather(futures)
+        shown.finished()
 
     return _run(pipeline, output, input, _overrides(settings, overrides), memory_budget, slab_planes, submit)
