@@ -299,9 +299,11 @@ fn run_slabs(
     crate::run::finish(&finishing, opts, out, report, &table_names, start, &run.progress)
 }
 
-/// `p` without its preview when a `size` budget cannot hold the pack
-/// decoded at full resolution (`mdtf preview` renders it where there is
-/// the memory), with a warning saying so.
+/// `p` without its preview when the memory it may take (a `size` budget,
+/// else three quarters of the available memory: slabs of a given height
+/// are no budget, and a cluster run's pack can be any size) cannot hold the
+/// pack decoded at full resolution (`mdtf preview` renders it where there
+/// is the memory), with a warning saying so.
 fn without_unaffordable_preview(
     p: &Pipeline,
     opts: &RunOptions,
@@ -310,19 +312,52 @@ fn without_unaffordable_preview(
     warnings: &mut Vec<String>,
 ) -> Pipeline {
     let mut finishing = p.clone();
-    let preview_bytes = (PREVIEW_CHANNELS * geo.voxel_count() * 4) as u64;
-    if let SlabSize::Budget(b) = size
+    if let Some(why) = preview_unaffordable(size, geo, mdtf_volume::available_memory())
         && p.preview
-        && preview_bytes > b
     {
         finishing.preview = false;
+        let pack = opts.output.join("pack");
         warnings.push(format!(
-            "preview: not rendered: it decodes the pack at full resolution (about {}), more than the memory budget \
-             of {}; `mdtf preview {}` renders it where there is the memory",
-            mdtf_volume::human_bytes(preview_bytes as u128),
-            mdtf_volume::human_bytes(b as u128),
-            opts.output.join("pack").display()
+            "preview: not rendered: {why}; `mdtf preview {}` renders it where there is the memory",
+            pack.display()
         ));
     }
     finishing
+}
+
+/// Why the preview of a run of slabs of `size` on `geo` would not fit, with
+/// `available` bytes of memory, if it would not.
+fn preview_unaffordable(size: SlabSize, geo: &Geometry, available: u64) -> Option<String> {
+    let preview_bytes = (PREVIEW_CHANNELS * geo.voxel_count() * 4) as u64;
+    let (limit, what) = match size {
+        SlabSize::Budget(b) => (b, "the memory budget of"),
+        SlabSize::Planes(_) | SlabSize::Strips { .. } => (available / 4 * 3, "three quarters of the available memory,"),
+    };
+    let human = |b: u64| mdtf_volume::human_bytes(b as u128);
+    (preview_bytes > limit).then(|| {
+        format!(
+            "it decodes the pack at full resolution (about {}), more than {what} {}",
+            human(preview_bytes),
+            human(limit)
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_preview_larger_than_the_memory_it_may_take_is_skipped_whatever_cut_the_slabs() {
+        // 6 f32 volumes of 512^3 are 3 GiB
+        let (big, small) = (Geometry::new([512; 3], [1.0; 3]), Geometry::new([64; 3], [1.0; 3]));
+        let gib = 1u64 << 30;
+        let why = preview_unaffordable(SlabSize::Planes(64), &big, 2 * gib).unwrap();
+        assert!(why.contains("three quarters of the available memory, 1.5 GiB") && why.contains("3.0 GiB"), "{why}");
+        assert!(preview_unaffordable(SlabSize::Strips { planes: 8, rows: 8 }, &big, 2 * gib).is_some());
+        assert!(preview_unaffordable(SlabSize::Planes(64), &big, 8 * gib).is_none());
+        assert!(preview_unaffordable(SlabSize::Planes(64), &small, 2 * gib).is_none());
+        let why = preview_unaffordable(SlabSize::Budget(gib), &big, 64 * gib).unwrap();
+        assert!(why.contains("the memory budget of 1.0 GiB"), "{why}");
+    }
 }
