@@ -110,11 +110,14 @@ pub fn count(channels: &[&[f32]], axes: Vec<Axis>, mask: Option<&[bool]>) -> Res
     Ok(Histogram { axes, counts })
 }
 
+/// The most voxels a histogram counts: its counts are u32.
+pub const MAX_COUNTED_VOXELS: u64 = u32::MAX as u64 - 1;
+
 /// The number of bins of `axes`, checked together with the voxel count `n`
 /// against what u32 counts and indices hold.
 pub(crate) fn check_size(n: usize, axes: &[Axis]) -> Result<usize, HistogramError> {
-    if n as u64 >= u32::MAX as u64 {
-        return Err(HistogramError::Geometry(format!("{n} voxels: histograms count at most 2^32 - 1")));
+    if n as u64 > MAX_COUNTED_VOXELS {
+        return Err(HistogramError::Geometry(format!("{n} voxels: histograms count at most {MAX_COUNTED_VOXELS}")));
     }
     let bins: Vec<String> = axes.iter().map(|a| a.bins.to_string()).collect();
     match axes.iter().try_fold(1usize, |p, a| p.checked_mul(a.bins)) {

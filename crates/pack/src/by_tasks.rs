@@ -45,26 +45,8 @@ impl TextureTarget {
         chans: &[(String, Volume)],
         bytes: &mut Vec<u8>,
     ) -> Result<(), PackError> {
-        let [nx, ny] = self.plane;
-        let mut decodes = Vec::with_capacity(self.decodes.len());
-        for (c, d) in self.layout.components.iter().zip(&self.decodes) {
-            let (Some(c), Some(d)) = (c, d) else {
-                decodes.push(None);
-                continue;
-            };
-            let Some((_, v)) = chans.iter().find(|(n, _)| n == c) else {
-                return Err(PackError::Geometry(format!("texture {}: channel {c} was not given", self.layout.name)));
-            };
-            if v.geometry.dims != [nx, ny, z.len()] {
-                return Err(PackError::Geometry(format!(
-                    "channel {c} of planes {z:?} has {} voxels, not {nx} x {ny} x {}",
-                    v.geometry.dims_string(),
-                    z.len()
-                )));
-            }
-            decodes.push(Some((v.samples(), *d)));
-        }
-        let prepared = Prepared { dtype: self.layout.dtype, dims: [nx, ny, z.len()], decodes };
+        let missing = |c: &str| PackError::Geometry(format!("texture {}: channel {c} was not given", self.layout.name));
+        let prepared = Prepared::of_slab(&self.layout, &self.decodes, self.plane, &z, chans, &missing)?;
         // every byte is encoded over
         bytes.resize(prepared.plane_bytes() * z.len(), 0);
         prepared.encode_planes(0, bytes);

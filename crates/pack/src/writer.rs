@@ -180,7 +180,37 @@ pub(crate) struct Prepared<'v> {
     pub(crate) decodes: Vec<Option<(&'v [f32], Decode)>>,
 }
 
-impl Prepared<'_> {
+impl<'v> Prepared<'v> {
+    /// Texture `layout` on the planes `z` (of `plane` voxels: x, y) of a slab
+    /// whose channels are `chans`, ready to quantise with its components'
+    /// `decodes`; `missing(c)` is the error when channel `c` is not among them.
+    pub(crate) fn of_slab(
+        layout: &TextureLayout,
+        decodes: &[Option<Decode>],
+        [nx, ny]: [usize; 2],
+        z: &Range<usize>,
+        chans: &'v [(String, Volume)],
+        missing: &dyn Fn(&str) -> PackError,
+    ) -> Result<Prepared<'v>, PackError> {
+        let mut slab_decodes = Vec::with_capacity(decodes.len());
+        for (c, d) in layout.components.iter().zip(decodes) {
+            let (Some(c), Some(d)) = (c, d) else {
+                slab_decodes.push(None);
+                continue;
+            };
+            let Some((_, v)) = chans.iter().find(|(n, _)| n == c) else { return Err(missing(c)) };
+            if v.geometry.dims != [nx, ny, z.len()] {
+                return Err(PackError::Geometry(format!(
+                    "channel {c} of planes {z:?} has {} voxels, not {nx} x {ny} x {}",
+                    v.geometry.dims_string(),
+                    z.len()
+                )));
+            }
+            slab_decodes.push(Some((v.samples(), *d)));
+        }
+        Ok(Prepared { dtype: layout.dtype, dims: [nx, ny, z.len()], decodes: slab_decodes })
+    }
+
     pub(crate) fn plane_bytes(&self) -> usize {
         self.dims[0] * self.dims[1] * self.decodes.len() * self.dtype.size()
     }
@@ -350,7 +380,7 @@ impl<'a> PackWriter<'a> {
     /// their manifest entries recorded from the code ranges in the pack's
     /// parameters, their data files created empty in the pack's folder
     /// (itself inside a staging folder: a failed run publishes none of
-    /// them). [`PackWriter::adopt_task_textures`] takes them in once every
+    /// them; a file already there is refused, never truncated). [`PackWriter::adopt_task_textures`] takes them in once every
     /// plane is written.
     pub fn task_textures(&mut self, layouts: &[TextureLayout]) -> Result<Vec<TextureTarget>, PackError> {
         let geometry = &self.encoder.geometry;
@@ -359,7 +389,8 @@ impl<'a> PackWriter<'a> {
         for layout in layouts {
             let decodes = self.encoder.prepare_ranged(layout)?;
             let file = self.dir.join(format!("{}.raw", layout.name));
-            std::fs::File::create(&file)
+            // a new file only: the pack's folder is a staging folder, and nothing there is replaced
+            std::fs::File::create_new(&file)
                 .map_err(|cause| PackError::Io(VolumeError::Io { path: file.clone(), cause }))?;
             targets.push(TextureTarget { file, layout: layout.clone(), decodes, plane });
         }
@@ -395,28 +426,8 @@ impl<'a> PackWriter<'a> {
         z: &Range<usize>,
         chans: &'v [(String, Volume)],
     ) -> Result<Prepared<'v>, PackError> {
-        let geometry = &self.encoder.geometry;
-        let mut slab_decodes = Vec::with_capacity(decodes.len());
-        for (c, d) in layout.components.iter().zip(decodes) {
-            let (Some(c), Some(d)) = (c, d) else {
-                slab_decodes.push(None);
-                continue;
-            };
-            let Some((_, v)) = chans.iter().find(|(n, _)| n == c) else {
-                return Err(self.encoder.missing(c));
-            };
-            if v.geometry.dims != [geometry.dims[0], geometry.dims[1], z.len()] {
-                return Err(PackError::Geometry(format!(
-                    "channel {c} of planes {z:?} has {} voxels, not {} x {} x {}",
-                    v.geometry.dims_string(),
-                    geometry.dims[0],
-                    geometry.dims[1],
-                    z.len()
-                )));
-            }
-            slab_decodes.push(Some((v.samples(), *d)));
-        }
-        Ok(Prepared { dtype: layout.dtype, dims: [geometry.dims[0], geometry.dims[1], z.len()], decodes: slab_decodes })
+        let [nx, ny, _] = self.encoder.geometry.dims;
+        Prepared::of_slab(layout, decodes, [nx, ny], z, chans, &|c| self.encoder.missing(c))
     }
 
     /// Writes the lookup tables and `manifest.json`; returns the manifest.

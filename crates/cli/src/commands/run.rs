@@ -65,11 +65,7 @@ fn print_plan(args: &RunArgs, pipeline: &Pipeline, opts: &RunOptions, progress: 
     let geo = mdtf_volume::Geometry::new(crate::input::parse_dims(dims, "--dims")?, [1.0; 3]);
     let plan = mdtf_pipeline::plan::Plan::resolve(pipeline, &[], &geo)?;
     crate::input::print_plan(&args.pipeline.display().to_string(), "a grid of --dims", &geo, &plan);
-    let size = match (args.memory_budget, args.slab_planes) {
-        (Some(b), _) => SlabSize::Budget(b),
-        (None, Some(h)) => SlabSize::Planes(h as usize),
-        (None, None) => SlabSize::Budget(mdtf_volume::available_memory() / 4 * 3),
-    };
+    let size = given_slab_size(args).unwrap_or(SlabSize::Budget(mdtf_volume::available_memory() / 4 * 3));
     let sizing = mdtf_pipeline::blocks::sizing(pipeline, &geo, size).map_err(anyhow::Error::msg)?;
     println!("{sizing}");
     progress.note("timing the pipeline by slabs on two small phantoms for the time per voxel ...");
@@ -82,13 +78,18 @@ fn print_plan(args: &RunArgs, pipeline: &Pipeline, opts: &RunOptions, progress: 
 /// of their own when the whole volume would not fit in memory (said in a
 /// note); None for a whole-volume run.
 fn slab_size(args: &RunArgs, pipeline: &Pipeline, opts: &RunOptions, progress: &Progress) -> Option<SlabSize> {
+    given_slab_size(args).or_else(|| {
+        let auto = mdtf_pipeline::blocks::automatic(pipeline, opts);
+        crate::input::announce_slabs(progress, "running", auto).map(SlabSize::Budget)
+    })
+}
+
+/// The slabs `--memory-budget` or `--slab-planes` asks for, if either.
+fn given_slab_size(args: &RunArgs) -> Option<SlabSize> {
     match (args.memory_budget, args.slab_planes) {
         (Some(b), _) => Some(SlabSize::Budget(b)),
         (None, Some(h)) => Some(SlabSize::Planes(h as usize)),
-        (None, None) => {
-            let auto = mdtf_pipeline::blocks::automatic(pipeline, opts);
-            crate::input::announce_slabs(progress, "running", auto).map(SlabSize::Budget)
-        }
+        (None, None) => None,
     }
 }
 

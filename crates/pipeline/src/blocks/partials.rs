@@ -1,9 +1,10 @@
 //! What a task of a run on a cluster hands back besides the planes it
 //! stores: its slab's part of the pass's whole-volume reductions (channel
-//! statistics, the first radix pass of g's median, the tracing's counts
-//! and report sums), a few KB in a file beside the channel store. The run
-//! merges the parts in z order, as it would have merged its own slabs', so
-//! it never reads a task's channels back for them.
+//! statistics, both radix passes of g's median, the detection's (v, g)
+//! counts, the tracing's counts and report sums, the histograms' counts),
+//! a few KB to a few MB in a file beside the channel store. The run merges
+//! the parts in z order, as it would have merged its own slabs', so it
+//! never reads a task's channels back for them.
 //!
 //! Binary (CBOR): every float bit is kept, infinities included, which JSON
 //! cannot hold.
@@ -25,9 +26,10 @@ pub struct SlabPartial {
     /// The statistics of each channel the task summarised, of its slab alone.
     pub stats: Vec<(String, ChannelStats)>,
     /// The first radix pass of the traced g's median over the slab (derive,
-    /// when g is summarised; pre-filter, of the pre-filtered g), or the
-    /// second (select: the slab's samples in one upper bucket).
+    /// when g is summarised; pre-filter, of the pre-filtered g).
     pub g_buckets: Option<KeyBuckets>,
+    /// The second pass (select): the slab's samples in one upper bucket.
+    pub g_lower: Option<KeyBuckets>,
     /// The smallest positive 1/g of the slab (derive; infinite without one).
     pub smallest_inv_g: Option<f32>,
     /// Samples of the slab in the scanner padding's range (input).
@@ -87,7 +89,7 @@ impl SlabPartial {
 
 impl TracePartial {
     /// The sums of one block's tracing.
-    pub(super) fn of(slab: &SlabTrace) -> TracePartial {
+    fn of(slab: &SlabTrace) -> TracePartial {
         let b = &slab.trace;
         let mut report = ReportAccumulator::new(b.resolved.report_thresholds());
         let (hit, dot, distance, g_hit) = (b.hit.samples(), b.dot.samples(), b.distance.samples(), b.g_hit.samples());
@@ -96,11 +98,30 @@ impl TracePartial {
     }
 
     /// Adds the tracing of the next strip or slab.
-    pub fn merge(&mut self, other: TracePartial) {
+    fn merge(&mut self, other: TracePartial) {
         self.counts += other.counts;
         self.crossings.merge(&other.crossings);
         self.report.merge(&other.report);
         self.resolved = other.resolved;
+    }
+}
+
+/// The tracing's sums over the blocks or tasks seen so far (none yet: None).
+#[derive(Default)]
+pub(super) struct TraceSums(pub(super) Option<TracePartial>);
+
+impl TraceSums {
+    /// Adds a block's tracing.
+    pub(super) fn add(&mut self, slab: &SlabTrace) {
+        self.merge(TracePartial::of(slab));
+    }
+
+    /// Adds the sums of a block or task.
+    pub(super) fn merge(&mut self, part: TracePartial) {
+        match &mut self.0 {
+            Some(sums) => sums.merge(part),
+            None => self.0 = Some(part),
+        }
     }
 }
 

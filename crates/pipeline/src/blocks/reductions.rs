@@ -4,9 +4,10 @@
 //! (the histograms: [`super::slab_histograms`]).
 
 use super::SlabChannels;
+use crate::pre_detect::{HVOL_BINS, VgCounts};
 use crate::run::{RunError, at, fail};
 use mdtf_boundary::VolumeStats;
-use mdtf_histogram::{AxisSpec, ChannelStats, HvolAxes};
+use mdtf_histogram::{Axis, AxisSpec, ChannelStats, HvolAxes};
 use mdtf_volume::KeyBuckets;
 use std::collections::BTreeMap;
 use std::ops::Range;
@@ -51,6 +52,28 @@ impl Stats {
     }
 }
 
+/// The rank of the median (the lower one) among the finite samples of
+/// channel `g_name` that `stats` summarised (None without any).
+pub(super) fn median_rank(stats: &Stats, g_name: &str) -> Result<Option<u64>, RunError> {
+    let s = stats.0.get(g_name).ok_or_else(|| fail("boundary")(format!("no statistics of {g_name}")))?;
+    Ok(s.finite_count().checked_sub(1).map(|last| last / 2))
+}
+
+/// The tracing's whole-volume statistics of the g it traces (`g_name`),
+/// whose median is `median`: its noise floor and largest value (no
+/// detection yet).
+pub(super) fn g_volume_stats(
+    stats: &Stats,
+    g_name: &str,
+    median: Option<f32>,
+    value_range: f64,
+    l_min: f64,
+) -> VolumeStats {
+    let g_max = stats.range(g_name).map_or(0.0, |r| r.1);
+    let noise_floor = mdtf_boundary::noise_floor_of_median(median, value_range, l_min);
+    VolumeStats { value_range, noise_floor, g_max, detected: mdtf_boundary::Detected::default() }
+}
+
 /// The tracing's whole-volume statistics of the g it traces (`g_name`):
 /// the noise floor from its median (a two-pass select over the slabs, one
 /// pass when `buckets` counted the first) and its largest value.
@@ -63,11 +86,9 @@ pub(super) fn g_stats(
     l_min: f64,
     stats: &Stats,
 ) -> Result<VolumeStats, RunError> {
-    let s = stats.0.get(g_name).ok_or_else(|| fail("boundary")(format!("no statistics of {g_name}")))?;
-    let g_max = s.finite_range().map_or(0.0, |r| r.1);
-    let median = match s.finite_count().checked_sub(1) {
+    let median = match median_rank(stats, g_name)? {
         None => None,
-        Some(last) => {
+        Some(k) => {
             let pass = |visit: &mut dyn FnMut(&[f32])| {
                 for z in slabs {
                     visit(chans.samples(g_name, z.clone())?);
@@ -75,14 +96,20 @@ pub(super) fn g_stats(
                 Ok::<(), String>(())
             };
             match buckets {
-                Some(b) => mdtf_volume::order_statistic_from_buckets(last / 2, b, pass),
-                None => mdtf_volume::order_statistic_of_pieces(last / 2, pass),
+                Some(b) => mdtf_volume::order_statistic_from_buckets(k, b, pass),
+                None => mdtf_volume::order_statistic_of_pieces(k, pass),
             }
             .map_err(fail("boundary"))?
         }
     };
-    let noise_floor = mdtf_boundary::noise_floor_of_median(median, value_range, l_min);
-    Ok(VolumeStats { value_range, noise_floor, g_max, detected: mdtf_boundary::Detected::default() })
+    Ok(g_volume_stats(stats, g_name, median, value_range, l_min))
+}
+
+/// The (v, g) axes the detection before the tracing counts over, from the
+/// statistics of v and g; None when those hold none or `chans` has no v or g.
+pub(super) fn detection_axes(chans: &SlabChannels, stats: &Stats) -> Option<(Axis, Axis)> {
+    let axis = |name: &str| stats.axis(&HvolAxes::spec(name, HVOL_BINS), name).ok();
+    (chans.has("v") && chans.has("g")).then(|| axis("v").zip(axis("g"))).flatten()
 }
 
 /// What boundary detection finds in the (v, g) histogram of every voxel
@@ -94,12 +121,7 @@ pub(super) fn detected_before_tracing(
     stats: &Stats,
     spacing: f64,
 ) -> Result<mdtf_boundary::Detected, RunError> {
-    use crate::pre_detect::{HVOL_BINS, VgCounts};
-    let axis = |name: &str| stats.axis(&HvolAxes::spec(name, HVOL_BINS), name).ok();
-    let (Some(av), Some(ag)) = (axis("v"), axis("g")) else { return Ok(Default::default()) };
-    if !(chans.has("v") && chans.has("g")) {
-        return Ok(Default::default());
-    }
+    let Some((av, ag)) = detection_axes(chans, stats) else { return Ok(Default::default()) };
     let mut counts = VgCounts::new(av, ag);
     let mut v = Vec::new();
     for z in slabs {

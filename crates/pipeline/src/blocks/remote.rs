@@ -1,14 +1,16 @@
-//! A slab-by-slab run whose heavy passes (reading an OME-Zarr input,
-//! derive, pre-filter, tracing) run as tasks elsewhere: other processes,
-//! other machines of a cluster (the Python package's `mdtf.dask.run` hands
-//! them to Dask). A task reads the input or the run's [`ChannelStore`]
-//! folder (both must be on a file system every task sees), writes only the
-//! planes of its own slab, and leaves its part of the pass's whole-volume
-//! reductions beside the store ([`SlabPartial`]), so a task rerun after a
-//! lost worker writes the same bytes again. The run merges the parts in z
-//! order, exactly as it would have merged its own slabs': the outputs are
-//! the single-process run's bit for bit. The run itself still makes the
-//! histograms, the pack and the kept volumes from the stored channels.
+//! A slab-by-slab run whose passes (reading an OME-Zarr input, derive,
+//! pre-filter, the tracing's statistics, tracing, histograms and textures)
+//! run as tasks elsewhere: other processes, other machines of a cluster
+//! (the Python package's `mdtf.dask.run` hands them to Dask). A task reads
+//! the input or the run's [`ChannelStore`] folder (both must be on a file
+//! system every task sees), writes only the planes of its own slab (the
+//! textures' at their place in the pack's files), and leaves its part of
+//! the pass's whole-volume reductions beside the store ([`SlabPartial`]),
+//! so a task rerun after a lost worker writes the same bytes again. The run
+//! merges the parts in z order, exactly as it would have merged its own
+//! slabs': the outputs are the single-process run's bit for bit. The run
+//! itself writes the kept volumes, the histogram files, the tables and the
+//! report. The task bodies are in [`super::tasks`].
 
 use super::ChannelStore;
 use super::partials::SlabPartial;
@@ -88,7 +90,8 @@ pub enum SlabPass {
         /// The channels stored.
         store: Vec<String>,
     },
-    /// Pre-filters stored channels into new ones, with their statistics.
+    /// Pre-filters channels (remade from the value) into new ones, with
+    /// their statistics.
     Prefilter {
         /// The channels filtered.
         filters: Vec<Prefilter>,
@@ -105,23 +108,10 @@ pub enum SlabPass {
         /// The (v, g) axes of the detection, when it runs.
         detect: Option<(Axis, Axis)>,
     },
-    /// Counts the slab's histograms and writes its planes of every pack
-    /// texture, from the stored channels, a sub-slab at a time; a pack
-    /// pass counting the histogram volume gives each task whole fixed
-    /// parts of its slices.
-    Pack {
-        /// The textures, each written at its planes' place in its file.
-        textures: Vec<TextureTarget>,
-        /// What the histograms are counted over, when they are counted.
-        histograms: Option<HistogramAxes>,
-        /// The stored channels read.
-        read: Vec<String>,
-        /// Planes read at a time (the run's slab height).
-        height: usize,
-    },
     /// Traces g and f'' (derived, or stored pre-filtered ones) with the
     /// derived normal and stores the distance, g_hit, hit and dot, with
-    /// g_hit's statistics and the slab's [`TracePartial`].
+    /// g_hit's statistics and the slab's
+    /// [`TracePartial`](super::partials::TracePartial).
     Trace {
         /// The g traced.
         g: String,
@@ -143,12 +133,25 @@ pub enum SlabPass {
         /// Value range (max - min) of the input, value units.
         value_range: f64,
     },
+    /// Counts the slab's histograms and writes its planes of every pack
+    /// texture, a sub-slab at a time; a pack pass counting the histogram
+    /// volume gives each task whole fixed parts of its slices.
+    Pack {
+        /// The textures, each written at its planes' place in its file.
+        textures: Vec<TextureTarget>,
+        /// What the histograms are counted over, when they are counted.
+        histograms: Option<HistogramAxes>,
+        /// The channels read (stored, or remade from the value).
+        read: Vec<String>,
+        /// Planes read at a time (the run's slab height).
+        height: usize,
+    },
 }
 
 /// One stored channel pre-filtered into another.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Prefilter {
-    /// The stored channel read.
+    /// The channel read (remade from the value where it is not stored).
     pub input: String,
     /// The channel written.
     pub output: String,

@@ -58,11 +58,12 @@ pub struct Sizing {
 pub(crate) fn too_many_to_count(p: &Pipeline, geometry: &Geometry, hvol: bool) -> Option<String> {
     let voxels = geometry.voxel_count() as u64;
     let counts = p.histogram.is_some() || hvol;
-    (counts && voxels >= u32::MAX as u64).then(|| {
+    (counts && voxels > mdtf_histogram::MAX_COUNTED_VOXELS).then(|| {
         format!(
             "{voxels} voxels: the histograms (and the histogram volume behind the default TF) count at most \
-             2^32 - 1 voxels; give the pack a TF file (pack.tf) and leave out [histogram], or run on a grid of \
-             fewer voxels"
+             {} voxels; give the pack a TF file (pack.tf) and leave out [histogram], or run on a grid of \
+             fewer voxels",
+            mdtf_histogram::MAX_COUNTED_VOXELS
         )
     })
 }
@@ -73,7 +74,7 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
         return Err(why);
     }
     let plan = Plan::resolve(p, &[], geometry).map_err(|e| e.to_string())?;
-    let hvol = p.histogram.as_ref().is_some_and(|h| h.hvol) || p.pack.tf.is_none();
+    let hvol = super::slab_histograms::counts_hvol(p, p.pack.tf.is_some());
     let refused = too_many_to_count(p, geometry, hvol);
     let (height, trace) = cut(size, geometry, &plan, hvol)?;
     let [nx, ny, nz] = geometry.dims;
@@ -218,7 +219,7 @@ mod tests {
         assert!(too_many_to_count(&p, &Geometry::new([65535, 65537, 1], [1.0; 3]), true).is_some());
         let at = Geometry::new([2048, 2048, 1024], [1.0; 3]);
         let why = too_many_to_count(&p, &at, true).unwrap();
-        assert!(why.contains("4294967296 voxels") && why.contains("2^32 - 1"), "{why}");
+        assert!(why.contains("4294967296 voxels") && why.contains("at most 4294967294 voxels"), "{why}");
         // no histograms and no histogram volume (a TF file): nothing is counted
         let mut quiet = p.clone();
         quiet.histogram = None;

@@ -119,14 +119,19 @@ impl HistogramCounts {
         }
         Ok(())
     }
-}
 
-impl HistogramCounts {
-    /// The counts of a task's last slab added, ready to hand over.
+    /// The counts of every slab the task added, ready to hand over (the
+    /// histogram volume's as an [`HvolPart`]).
     pub fn finish_task(mut self) -> HistogramCounts {
         self.hvol = self.counting.take().map(|acc| acc.part());
         self
     }
+}
+
+/// Whether a run of `p` counts the histogram volume: its histograms ask for
+/// it, or its default TF reads it (no TF file, `tf_given`).
+pub(super) fn counts_hvol(p: &Pipeline, tf_given: bool) -> bool {
+    p.histogram.as_ref().is_some_and(|h| h.hvol) || !tf_given
 }
 
 /// Channel `c`'s samples in `slab`.

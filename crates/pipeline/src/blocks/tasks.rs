@@ -5,7 +5,7 @@
 //! the stored value, as the run's own passes do.
 
 use super::budget::slabs;
-use super::partials::{SlabPartial, TracePartial};
+use super::partials::{SlabPartial, TraceSums};
 use super::remote::{Prefilter, SlabJob, SlabPass, TRACED};
 use super::slab_histograms::{HistogramAxes, HistogramCounts};
 use super::trace::{TraceSetup, prefilter_slab, trace_slab};
@@ -177,19 +177,25 @@ impl Task<'_> {
     /// counts over the axes `detect`.
     fn select(&self, median: Option<&(String, usize)>, detect: Option<&(Axis, Axis)>) -> Result<SlabPartial, RunError> {
         let mut chans = self.channels()?;
+        // each channel read once (the median's is g itself without the pre-filter)
+        let mut names: Vec<&str> = median.iter().map(|(c, _)| c.as_str()).collect();
+        if detect.is_some() {
+            names.extend(["v", "g"].into_iter().filter(|c| median.is_none_or(|(m, _)| m != c)));
+        }
+        let slab = chans.volumes(self.z.clone(), &names).map_err(fail("boundary"))?;
+        let samples = |c: &str| slab.iter().find(|(n, _)| n == c).map(|(_, v)| v.samples()).unwrap_or_default();
         let mut partial = SlabPartial::default();
         if let Some((channel, within)) = median {
             let mut lower = mdtf_volume::KeyBuckets::new();
-            lower.add_within(*within, chans.samples(channel, self.z.clone()).map_err(fail("boundary"))?);
-            partial.g_buckets = Some(lower);
+            lower.add_within(*within, samples(channel));
+            partial.g_lower = Some(lower);
         }
         if let Some((v_axis, g_axis)) = detect {
-            let slab = chans.volumes(self.z.clone(), &["v", "g"]).map_err(fail("boundary"))?;
             let mut counts = VgCounts::new(v_axis.clone(), g_axis.clone());
-            counts.add(slab[0].1.samples(), slab[1].1.samples()).map_err(at("boundary"))?;
+            counts.add(samples("v"), samples("g")).map_err(at("boundary"))?;
             partial.vg = Some(counts);
-            chans.give_back(slab);
         }
+        chans.give_back(slab);
         self.keep(chans);
         Ok(partial)
     }
@@ -213,7 +219,7 @@ impl Task<'_> {
             halo_rows: *halo_rows,
             value_range: *value_range,
         };
-        let (mut partial, mut sums, mut spent) = (SlabPartial::default(), None::<TracePartial>, None);
+        let (mut partial, mut sums, mut spent) = (SlabPartial::default(), TraceSums::default(), None);
         for strip in slabs(chans.ny(), (*rows).max(1)) {
             let slab = trace_slab(&mut chans, &setup, &self.z, &strip, spent.take())?;
             let b = &slab.trace;
@@ -221,14 +227,10 @@ impl Task<'_> {
                 out.put_rows(c, self.z.start, strip.clone(), v).map_err(at("boundary"))?;
             }
             partial.summarise("g_hit", b.g_hit.samples(), self.voxels);
-            let strip_sums = TracePartial::of(&slab);
-            match &mut sums {
-                Some(s) => s.merge(strip_sums),
-                None => sums = Some(strip_sums),
-            }
+            sums.add(&slab);
             spent = Some(slab);
         }
-        partial.trace = sums;
+        partial.trace = sums.0;
         self.keep(chans);
         Ok(partial)
     }

@@ -130,7 +130,7 @@ impl<'a> SlabPasses<'a> {
         let plan = Plan::resolve(p, &[], &geo).map_err(at("plan"))?;
         let tf = crate::inputs::read_tf(p, &base)?;
         let hvol_asked = p.histogram.as_ref().is_some_and(|h| h.hvol);
-        let hvol_needed = packs && (hvol_asked || tf.is_none());
+        let hvol_needed = packs && super::slab_histograms::counts_hvol(p, tf.is_some());
         if let Some(why) = super::sizing::too_many_to_count(p, &geo, hvol_needed) {
             return Err(fail("plan")(why));
         }
@@ -189,15 +189,17 @@ impl<'a> SlabPasses<'a> {
         Ok((run, store))
     }
 
-    /// [`remote::run_pass`], its tasks counted for the report.
+    /// [`remote::run_pass`] with the run's derivation (its derive groups and
+    /// kernel reach), its tasks counted for the report.
     fn on_tasks(
         &mut self,
         tasks: &dyn SlabTasks,
         pass: SlabPass,
         store: &mut ChannelStore,
-        derivation: Derivation,
         slabs: &[Range<usize>],
     ) -> Result<Vec<SlabPartial>, RunError> {
+        let groups = self.derive_groups();
+        let derivation = Derivation { groups: &groups, kernel_reach: self.plan.reach.kernel[2] };
         let (parts, ran) = remote::run_pass(tasks, pass, store, derivation, slabs)?;
         self.task_passes.push(ran);
         Ok(parts)
@@ -216,8 +218,9 @@ impl<'a> SlabPasses<'a> {
     /// The derive pass. The derivatives are remade from the stored value by
     /// every later pass that reads them, in the whole run's groups (the
     /// normals on their own when it defers them); this pass takes their
-    /// statistics. With tasks, the tasks store every derived channel and the
-    /// later passes read them instead.
+    /// statistics. With tasks, the tasks take them and store only what this
+    /// process reads later ([`stored_for_the_run`]); their later tasks remake
+    /// the others as this process's passes do.
     pub(super) fn derive(&mut self, store: ChannelStore) -> Result<(SlabChannels, Derived), RunError> {
         let groups = self.derive_groups();
         let derive_start = Instant::now();
@@ -233,8 +236,7 @@ impl<'a> SlabPasses<'a> {
             self.progress.stage("derive (tasks)")?;
             let summarise = summarised.iter().map(|c| c.to_string()).collect();
             let pass = SlabPass::Derive { summarise, store: self.read_later(&groups) };
-            let derivation = Derivation { groups: &groups, kernel_reach };
-            for mut part in self.on_tasks(tasks, pass, &mut chans.store, derivation, &self.slabs.clone())? {
+            for mut part in self.on_tasks(tasks, pass, &mut chans.store, &self.slabs.clone())? {
                 part.merge_stats_into(&mut self.stats);
                 derived.merge(&part);
             }

@@ -3,7 +3,7 @@
 //! the Gaussians and the TF figures.
 
 use super::{Derived, SlabPasses, io};
-use crate::blocks::remote::{Derivation, SlabPass};
+use crate::blocks::remote::SlabPass;
 use crate::blocks::slab_histograms::SlabHistograms;
 use crate::blocks::{SlabChannels, medians};
 use crate::hist_files::Written;
@@ -97,9 +97,7 @@ impl SlabPasses<'_> {
             };
             let read = read.iter().map(|c| c.to_string()).collect();
             let pass = SlabPass::Pack { textures: targets.clone(), histograms: axes, read, height: self.height };
-            let groups = self.derive_groups();
-            let derivation = Derivation { groups: &groups, kernel_reach: self.plan.reach.kernel[2] };
-            for part in self.on_tasks(tasks, pass, &mut chans.store, derivation, &task_slabs)? {
+            for part in self.on_tasks(tasks, pass, &mut chans.store, &task_slabs)? {
                 if let (Some(h), Some(counts)) = (&mut histograms, part.histograms) {
                     h.merge(counts)?;
                 }

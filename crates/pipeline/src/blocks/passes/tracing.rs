@@ -2,17 +2,16 @@
 //! itself, in this process or as tasks.
 
 use super::{Derived, SlabPasses, io};
-use crate::blocks::partials::TracePartial;
-use crate::blocks::remote::{Derivation, Prefilter, SlabPass, SlabTasks};
+use crate::blocks::partials::{TracePartial, TraceSums};
+use crate::blocks::remote::{Prefilter, SlabPass, SlabTasks};
 use crate::blocks::trace::{self, SlabTrace, TraceSetup};
 use crate::blocks::{SlabChannels, TraceBlocks, reductions, slabs};
-use crate::pre_detect::HVOL_BINS;
+use crate::pre_detect::VgCounts;
 use crate::report::{BoundarySummary, Traced};
 use crate::run::{RunError, at, fail};
 use mdtf_boundary::VolumeStats;
-use mdtf_histogram::HvolAxes;
 use mdtf_volume::{KeyBuckets, overlapped};
-use reductions::{detected_before_tracing, g_stats};
+use reductions::{detected_before_tracing, detection_axes, g_stats, g_volume_stats, median_rank};
 use std::ops::Range;
 use std::time::Instant;
 
@@ -44,10 +43,8 @@ impl SlabPasses<'_> {
                 let (params, [_, halo_rows, halo]) = (self.p.boundary.clone(), self.plan.reach.trace);
                 let (g, f2, rows) = (g.into(), f2.into(), self.trace_blocks.rows);
                 let pass = SlabPass::Trace { g, f2, prefiltered, params, stats, halo, halo_rows, rows, value_range };
-                let groups = self.derive_groups();
-                let derivation = Derivation { groups: &groups, kernel_reach: self.plan.reach.kernel[2] };
                 let (_, tslabs) = self.trace_strips_and_slabs();
-                for mut part in self.on_tasks(tasks, pass, &mut chans.store, derivation, &tslabs)? {
+                for mut part in self.on_tasks(tasks, pass, &mut chans.store, &tslabs)? {
                     part.merge_stats_into(&mut self.stats);
                     let no_trace = || fail("boundary")("a tracing task left no tracing partial".into());
                     sums.merge(part.trace.ok_or_else(no_trace)?);
@@ -119,22 +116,14 @@ impl SlabPasses<'_> {
         buckets: &KeyBuckets,
     ) -> Result<VolumeStats, RunError> {
         let (l_min, value_range) = (self.geo.min_spacing(), self.value_range());
-        let s = self.stats.0.get(g).ok_or_else(|| fail("boundary")(format!("no statistics of {g}")))?;
-        let g_max = s.finite_range().map_or(0.0, |r| r.1);
-        let k = s.finite_count().checked_sub(1).map(|last| last / 2);
-        let median = k.and_then(|k| mdtf_volume::upper_bucket_of(k, buckets)).map(|hi| (g.to_string(), hi));
-        let axis = |name: &str| self.stats.axis(&HvolAxes::spec(name, HVOL_BINS), name).ok();
-        let detect = match self.plan.detects_before_tracing() && chans.has("v") && chans.has("g") {
-            true => axis("v").zip(axis("g")),
-            false => None,
-        };
-        let (mut lower, mut vg) = (KeyBuckets::new(), None::<crate::pre_detect::VgCounts>);
-        if median.is_some() || detect.is_some() {
-            let pass = SlabPass::Select { median: median.clone(), detect };
-            let groups = self.derive_groups();
-            let derivation = Derivation { groups: &groups, kernel_reach: self.plan.reach.kernel[2] };
-            for part in self.on_tasks(tasks, pass, &mut chans.store, derivation, &self.slabs.clone())? {
-                if let Some(b) = &part.g_buckets {
+        let k = median_rank(&self.stats, g)?;
+        let within = k.and_then(|k| mdtf_volume::upper_bucket_of(k, buckets));
+        let detect = if self.plan.detects_before_tracing() { detection_axes(chans, &self.stats) } else { None };
+        let (mut lower, mut vg) = (KeyBuckets::new(), None::<VgCounts>);
+        if within.is_some() || detect.is_some() {
+            let pass = SlabPass::Select { median: within.map(|hi| (g.to_string(), hi)), detect };
+            for part in self.on_tasks(tasks, pass, &mut chans.store, &self.slabs.clone())? {
+                if let Some(b) = &part.g_lower {
                     lower.merge(b);
                 }
                 match (&mut vg, part.vg) {
@@ -144,10 +133,9 @@ impl SlabPasses<'_> {
             }
         }
         let median =
-            k.filter(|_| median.is_some()).and_then(|k| mdtf_volume::order_statistic_from_counts(k, buckets, &lower));
-        let noise_floor = mdtf_boundary::noise_floor_of_median(median, value_range, l_min);
+            k.filter(|_| within.is_some()).and_then(|k| mdtf_volume::order_statistic_from_counts(k, buckets, &lower));
         let detected = vg.map(|c| c.detected(l_min)).unwrap_or_default();
-        Ok(VolumeStats { value_range, noise_floor, g_max, detected })
+        Ok(VolumeStats { detected, ..g_volume_stats(&self.stats, g, median, value_range, l_min) })
     }
 
     /// The tracing in this process, block by block (strips of rows, z-slabs
@@ -213,10 +201,8 @@ impl SlabPasses<'_> {
         match self.tasks {
             Some(tasks) => {
                 let pass = SlabPass::Prefilter { filters, halo };
-                let groups = self.derive_groups();
-                let derivation = Derivation { groups: &groups, kernel_reach: self.plan.reach.kernel[2] };
                 let mut buckets = KeyBuckets::new();
-                for mut part in self.on_tasks(tasks, pass, &mut chans.store, derivation, &self.slabs.clone())? {
+                for mut part in self.on_tasks(tasks, pass, &mut chans.store, &self.slabs.clone())? {
                     part.merge_stats_into(&mut self.stats);
                     if let Some(b) = &part.g_buckets {
                         buckets.merge(b);
@@ -253,24 +239,5 @@ impl SlabPasses<'_> {
         report.write(&rdir).map_err(at("boundary"))?;
         let boundary = Some(BoundarySummary { resolved: r, counts, lost });
         Ok(Traced { d_max: Some(r.d_max), boundary, report: Some(report) })
-    }
-}
-
-/// The tracing's whole-volume sums, fed block by block (or task by task).
-#[derive(Default)]
-struct TraceSums(Option<TracePartial>);
-
-impl TraceSums {
-    /// Adds the next block's tracing.
-    fn add(&mut self, slab: &SlabTrace) {
-        self.merge(TracePartial::of(slab));
-    }
-
-    /// Adds the next slab's tracing, made by a task.
-    fn merge(&mut self, part: TracePartial) {
-        match &mut self.0 {
-            Some(sums) => sums.merge(part),
-            None => self.0 = Some(part),
-        }
     }
 }
