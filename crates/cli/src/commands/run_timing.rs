@@ -10,7 +10,7 @@ use mdtf_pipeline::file::{PhantomKind, Pipeline};
 use mdtf_pipeline::run::RunOptions;
 
 /// Edges of the phantoms timed, voxels.
-const PHANTOMS: [usize; 2] = [48, 96];
+const PHANTOMS: [usize; 2] = [64, 128];
 
 /// Each stage's seconds per voxel of one thread, as timed here.
 pub struct Timing {
@@ -20,7 +20,7 @@ pub struct Timing {
     threads: usize,
 }
 
-/// Times `p` by slabs (16 planes) on 48^3 and 96^3 erf spheres with
+/// Times `p` by slabs (16 planes) on 64^3 and 128^3 erf spheres with
 /// noise, its input replaced, its preview off, in a temporary folder.
 pub fn time_per_voxel(p: &Pipeline, opts: &RunOptions) -> Result<Timing> {
     let dir = tempfile::tempdir().context("a temporary folder for the timing runs")?;
