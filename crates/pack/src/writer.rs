@@ -380,9 +380,12 @@ impl<'a> PackWriter<'a> {
     /// their manifest entries recorded from the code ranges in the pack's
     /// parameters, their data files created empty in the pack's folder
     /// (itself inside a staging folder: a failed run publishes none of
-    /// them; a file already there is refused, never truncated). [`PackWriter::adopt_task_textures`] takes them in once every
-    /// plane is written.
-    pub fn task_textures(&mut self, layouts: &[TextureLayout]) -> Result<Vec<TextureTarget>, PackError> {
+    /// them; a file already there is refused, never truncated, unless
+    /// `resumed`: then the pack's folder is a killed run's, whose files
+    /// are taken as they are, for the tasks to find their planes written).
+    /// [`PackWriter::adopt_task_textures`] takes them in once every plane
+    /// is written.
+    pub fn task_textures(&mut self, layouts: &[TextureLayout], resumed: bool) -> Result<Vec<TextureTarget>, PackError> {
         let geometry = &self.encoder.geometry;
         let plane = [geometry.dims[0], geometry.dims[1]];
         let mut targets = Vec::with_capacity(layouts.len());
@@ -390,8 +393,11 @@ impl<'a> PackWriter<'a> {
             let decodes = self.encoder.prepare_ranged(layout)?;
             let file = self.dir.join(format!("{}.raw", layout.name));
             // a new file only: the pack's folder is a staging folder, and nothing there is replaced
-            std::fs::File::create_new(&file)
-                .map_err(|cause| PackError::Io(VolumeError::Io { path: file.clone(), cause }))?;
+            let created = match resumed {
+                true => std::fs::File::options().write(true).create(true).truncate(false).open(&file),
+                false => std::fs::File::create_new(&file),
+            };
+            created.map_err(|cause| PackError::Io(VolumeError::Io { path: file.clone(), cause }))?;
             targets.push(TextureTarget { file, layout: layout.clone(), decodes, plane });
         }
         Ok(targets)

@@ -81,6 +81,9 @@ pub struct SlabRun {
     /// The passes that ran as tasks elsewhere (a cluster run), in order.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub tasks: Vec<TaskPass>,
+    /// The run took over what a killed run of the same settings and input left.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub resumed: bool,
 }
 
 /// One pass of a run whose work went to tasks.
@@ -93,6 +96,8 @@ pub struct TaskPass {
     /// Task runs beyond one per task: reruns after a lost worker, or the
     /// scheduler's duplicates; each wrote the same bytes.
     pub retries: u64,
+    /// Tasks that found their slab done by the run this one resumed, and did nothing.
+    pub reused: usize,
 }
 
 impl RunReport {

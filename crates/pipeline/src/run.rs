@@ -37,6 +37,10 @@ pub struct RunOptions {
     /// run: None in this process, else as tasks the runner hands out (see
     /// [`crate::blocks::SlabTasks`]; a whole-volume run ignores it).
     pub tasks: Option<std::sync::Arc<dyn crate::blocks::SlabTasks>>,
+    /// A run with [`RunOptions::tasks`] takes over what a killed run of the
+    /// same settings and input into the same output left, its finished
+    /// tasks not run again (see the `blocks::resume` module).
+    pub resume: bool,
 }
 
 impl RunOptions {

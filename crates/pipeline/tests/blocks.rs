@@ -9,7 +9,7 @@
 //! order, on several threads, one of them twice, each from the job's JSON,
 //! as `mdtf.dask` hands them to a cluster).
 
-use mdtf_pipeline::blocks::{SlabJob, SlabSize, SlabTasks, run as run_blocks, run_task};
+use mdtf_pipeline::blocks::{SlabJob, SlabPass, SlabSize, SlabTasks, run as run_blocks, run_task};
 use mdtf_pipeline::file::{Pipeline, parse};
 use mdtf_pipeline::run::{RunOptions, run as run_whole};
 use mdtf_volume::{Geometry, SampleType, Volume, WriteOptions, write_volume};
@@ -312,8 +312,10 @@ fn a_run_cancelled_inside_each_pass_stops_there_and_leaves_no_output() {
     }
 }
 
-/// Runs each pass's tasks on threads, the last slab first, the first slab's
-/// task twice (a rerun after a lost worker), each from the job's JSON; counts them.
+/// Runs each pass's tasks on threads, the last slab first, then the first
+/// slab's task again without its partial (a rerun after a worker lost
+/// between writing its planes and publishing), each from the job's JSON;
+/// counts them.
 #[derive(Debug, Default)]
 struct ThreadTasks {
     ran: Mutex<Vec<(String, usize)>>,
@@ -321,27 +323,37 @@ struct ThreadTasks {
 
 impl SlabTasks for ThreadTasks {
     fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
-        let json = serde_json::to_string(job).map_err(|e| e.to_string())?;
-        let value: serde_json::Value = serde_json::from_str(&json).map_err(|e| e.to_string())?;
-        let pass = value["pass"].as_object().and_then(|o| o.keys().next().cloned()).unwrap_or_default();
-        let mut order: Vec<Range<usize>> = slabs.iter().rev().cloned().collect();
-        order.extend(slabs.first().cloned());
-        let results: Vec<Result<(), String>> = std::thread::scope(|s| {
-            let handles: Vec<_> = order
-                .chunks(3)
-                .map(|group| {
-                    let json = &json;
-                    s.spawn(move || {
-                        let job: SlabJob = serde_json::from_str(json).map_err(|e| e.to_string())?;
-                        group.iter().try_for_each(|z| run_task(&job, z.clone()).map_err(|e| e.to_string()))
-                    })
-                })
-                .collect();
-            handles.into_iter().map(|h| h.join().unwrap()).collect()
-        });
-        self.ran.lock().unwrap().push((pass, order.len()));
-        results.into_iter().collect()
+        let (pass, ran) = run_on_threads(job, slabs)?;
+        let first = slabs.first().cloned().unwrap_or(0..0);
+        std::fs::remove_file(job.partial_file(first.start)).map_err(|e| e.to_string())?;
+        run_task(job, first).map_err(|e| e.to_string())?;
+        self.ran.lock().unwrap().push((pass, ran + 1));
+        Ok(())
     }
+}
+
+/// Runs `job`'s tasks of `slabs` on threads, the last slab first, each
+/// from the job's JSON: the pass's name in the JSON and the tasks run.
+fn run_on_threads(job: &SlabJob, slabs: &[Range<usize>]) -> Result<(String, usize), String> {
+    let json = serde_json::to_string(job).map_err(|e| e.to_string())?;
+    let value: serde_json::Value = serde_json::from_str(&json).map_err(|e| e.to_string())?;
+    let pass = value["pass"].as_object().and_then(|o| o.keys().next().cloned()).unwrap_or_default();
+    let order: Vec<Range<usize>> = slabs.iter().rev().cloned().collect();
+    let results: Vec<Result<(), String>> = std::thread::scope(|s| {
+        let handles: Vec<_> = order
+            .chunks(3)
+            .map(|group| {
+                let json = &json;
+                s.spawn(move || {
+                    let job: SlabJob = serde_json::from_str(json).map_err(|e| e.to_string())?;
+                    group.iter().try_for_each(|z| run_task(&job, z.clone()).map_err(|e| e.to_string()))
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    results.into_iter().collect::<Result<(), String>>()?;
+    Ok((pass, order.len()))
 }
 
 #[test]
@@ -442,6 +454,136 @@ fn tracing_tasks_cut_their_slabs_in_strips_of_rows_with_the_same_files() {
     assert_eq!(passes, want);
 }
 
+/// Runs each pass's tasks on threads, then, when the first slab's task
+/// wrote something, damages its first byte (a write the disk lost) and
+/// runs every task again: only that one is made again.
+#[derive(Debug, Default)]
+struct DamagingTasks;
+
+impl SlabTasks for DamagingTasks {
+    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
+        run_on_threads(job, slabs)?;
+        let written = job.partial(slabs[0].start).map_err(|e| e.to_string())?.written;
+        if let Some(piece) = written.first() {
+            let mut bytes = std::fs::read(&piece.file).map_err(|e| e.to_string())?;
+            bytes[piece.bytes.start as usize] ^= 0x5a;
+            std::fs::write(&piece.file, bytes).map_err(|e| e.to_string())?;
+        }
+        run_on_threads(job, slabs).map(drop)
+    }
+}
+
+#[test]
+fn a_task_whose_slab_is_done_does_nothing_and_one_whose_bytes_were_damaged_is_run_again() {
+    let p = shipped("distance-tf", &["input.size=28", "input.phantom=\"shells\"", "preview=false"]);
+    let size = SlabSize::Planes(6);
+    assert_runs_equal_the_whole("distance-tf", &p, None, &[size], Some(Arc::new(DamagingTasks)));
+    let dir = tempfile::tempdir().unwrap();
+    let opts = RunOptions {
+        pipeline_path: pipelines_dir().join("distance-tf.toml"),
+        output: dir.path().join("out"),
+        tasks: Some(Arc::new(DamagingTasks)),
+        ..Default::default()
+    };
+    let report = run_blocks(&p, &opts, size, &|_| {}, &|_, _| {}).unwrap();
+    let passes: Vec<(String, u64, usize)> =
+        report.slabs.unwrap().tasks.into_iter().map(|t| (t.pass, t.retries, t.reused)).collect();
+    // the select pass writes no planes: nothing to damage
+    let want: Vec<(String, u64, usize)> =
+        [("derive", 1), ("prefilter", 1), ("select", 0), ("boundary", 1), ("pack", 1)]
+            .into_iter()
+            .map(|(p, r)| (p.to_string(), r, 0))
+            .collect();
+    assert_eq!(passes, want);
+}
+
+/// Runs each pass's tasks on threads (each once).
+#[derive(Debug, Default)]
+struct PlainTasks;
+
+impl SlabTasks for PlainTasks {
+    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
+        run_on_threads(job, slabs).map(drop)
+    }
+}
+
+/// Runs each pass's tasks on threads up to the tracing, whose first half
+/// of the slabs' tasks run before the process dies as `kill -9` kills it.
+#[derive(Debug, Default)]
+struct DyingTasks;
+
+impl SlabTasks for DyingTasks {
+    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
+        if matches!(job.pass, SlabPass::Trace { .. }) {
+            run_on_threads(job, &slabs[..slabs.len() / 2])?;
+            std::process::abort();
+        }
+        run_on_threads(job, slabs).map(drop)
+    }
+}
+
+/// The environment variable that makes [`a_killed_run_resumes_running_only_its_unfinished_tasks_with_the_same_files`]
+/// the run that dies (in a process of its own), into the output it names.
+const DIE_INTO: &str = "MDTF_TEST_RUN_DIES_INTO";
+
+#[test]
+fn a_killed_run_resumes_running_only_its_unfinished_tasks_with_the_same_files() {
+    let p = shipped("distance-tf", &["input.size=28", "input.phantom=\"shells\"", "preview=false"]);
+    let size = SlabSize::Planes(6);
+    let opts = |output: PathBuf, tasks: Arc<dyn SlabTasks>| RunOptions {
+        pipeline_path: pipelines_dir().join("distance-tf.toml"),
+        output,
+        tasks: Some(tasks),
+        resume: true,
+        ..Default::default()
+    };
+    if let Some(out) = std::env::var_os(DIE_INTO) {
+        let e = run_blocks(&p, &opts(out.into(), Arc::new(DyingTasks)), size, &|_| {}, &|_, _| {});
+        panic!("the run was to die in its tracing: {e:?}");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let name = "a_killed_run_resumes_running_only_its_unfinished_tasks_with_the_same_files";
+    let status = std::process::Command::new(std::env::current_exe().unwrap())
+        .args(["--exact", name, "--test-threads=1"])
+        .env(DIE_INTO, &out)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .status()
+        .unwrap();
+    assert!(!status.success(), "the first run died");
+    let left: Vec<String> =
+        std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert!(left.iter().any(|n| n.starts_with(".mdtf-partial-out-")) && !out.exists(), "{left:?}");
+    let report = run_blocks(&p, &opts(out.clone(), Arc::new(PlainTasks)), size, &|_| {}, &|_, _| {}).unwrap();
+    let slabs = report.slabs.unwrap();
+    assert!(slabs.resumed);
+    let passes: Vec<(String, usize, u64, usize)> =
+        slabs.tasks.into_iter().map(|t| (t.pass, t.tasks, t.retries, t.reused)).collect();
+    // every pass before the tracing was done, and half the tracing's slabs
+    let n = 28usize.div_ceil(6);
+    let want: Vec<(String, usize, u64, usize)> = [
+        ("derive", n, n),
+        ("prefilter", n, n),
+        ("select", n, n),
+        ("boundary", n, n / 2),
+        ("pack", mdtf_histogram::HVOL_PARTS, 0),
+    ]
+    .into_iter()
+    .map(|(p, tasks, reused)| (p.to_string(), tasks, 0, reused))
+    .collect();
+    assert_eq!(passes, want);
+    let resumed = files(&out);
+    assert!(!resumed.contains_key(mdtf_volume::output::RESUME_NAME), "the resume key is not an output");
+    let left: Vec<String> =
+        std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert_eq!(left, ["out"], "no partial folder is left");
+    // the whole run into the same output (the report names it)
+    std::fs::remove_dir_all(&out).unwrap();
+    run_whole(&p, &RunOptions { tasks: None, ..opts(out.clone(), Arc::new(PlainTasks)) }, &|_| {}).unwrap();
+    assert_eq!(differing(&files(&out), &resumed), Vec::<String>::new());
+}
+
 /// Tasks that fail as a lost store would make them.
 #[derive(Debug)]
 struct FailingTasks;
@@ -477,9 +619,38 @@ fn a_failed_task_fails_the_run_with_its_message_and_no_output() {
         groups: vec![],
         kernel_reach: 1,
         pass: mdtf_pipeline::blocks::SlabPass::Derive { summarise: vec![], store: vec![] },
+        token: String::new(),
     };
     let e = run_task(&job, 2..9).unwrap_err().to_string();
     assert!(e.contains("not a slab of the volume's 4"), "{e}");
+}
+
+/// Runs the first slab's task as a killed driver's would, its run token
+/// not the current one; then the pass as it should.
+#[derive(Debug, Default)]
+struct OrphanTasks {
+    refused: Mutex<Vec<String>>,
+}
+
+impl SlabTasks for OrphanTasks {
+    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
+        let orphan = SlabJob { token: format!("{}-before", job.token), ..job.clone() };
+        let e = run_task(&orphan, slabs[0].clone()).expect_err("an orphaned task is refused");
+        // it published nothing: the slab is not done
+        assert!(!orphan.partial_file(slabs[0].start).exists());
+        self.refused.lock().unwrap().push(e.to_string());
+        run_on_threads(job, slabs).map(drop)
+    }
+}
+
+#[test]
+fn a_task_of_a_run_that_was_taken_over_publishes_nothing() {
+    let p = shipped("slicer-3dtf", &["input.size=20", "preview=false"]);
+    let tasks = Arc::new(OrphanTasks::default());
+    assert_runs_equal_the_whole("slicer-3dtf", &p, None, &[SlabSize::Planes(7)], Some(tasks.clone()));
+    let refused = tasks.refused.lock().unwrap().clone();
+    assert_eq!(refused.len(), 2, "derive and pack: {refused:?}");
+    assert!(refused.iter().all(|e| e.contains("taken over by a later run")), "{refused:?}");
 }
 
 #[test]

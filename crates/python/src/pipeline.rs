@@ -29,10 +29,12 @@ fn load(path: &Path, overrides: &[String]) -> PyResult<Pipeline> {
 /// (64 planes unless told) and its passes (reading an OME-Zarr input,
 /// derive, pre-filter, tracing, histograms and textures) are handed to
 /// `submit(job, slabs, cancelled)` as tasks (see `mdtf.dask.run` and
-/// [`PythonTasks`]); the outputs are the same, byte for byte. Returns
+/// [`PythonTasks`]); the outputs are the same, byte for byte, and with
+/// `resume` the run takes over what a killed run of the same settings and
+/// input into `output` left, its finished tasks not run again. Returns
 /// run_report.json's text.
 #[pyfunction]
-#[pyo3(signature = (pipeline, output, input=None, overrides=vec![], memory_budget=None, slab_planes=None, submit=None))]
+#[pyo3(signature = (pipeline, output, input=None, overrides=vec![], memory_budget=None, slab_planes=None, submit=None, resume=false))]
 #[allow(clippy::too_many_arguments)]
 pub fn run(
     py: Python<'_>,
@@ -43,12 +45,13 @@ pub fn run(
     memory_budget: Option<u64>,
     slab_planes: Option<usize>,
     submit: Option<Py<PyAny>>,
+    resume: bool,
 ) -> PyResult<String> {
     let p = load(&pipeline, &overrides)?;
     let cancel = Arc::new(AtomicBool::new(false));
     let tasks = submit.map(|submit| Arc::new(PythonTasks { submit, cancel: cancel.clone() }) as Arc<dyn SlabTasks>);
     let by_tasks = tasks.is_some();
-    let opts = RunOptions { pipeline_path: pipeline, input, output, cancel: Some(cancel.clone()), tasks };
+    let opts = RunOptions { pipeline_path: pipeline, input, output, cancel: Some(cancel.clone()), tasks, resume };
     let report = run_released(py, Some(&cancel), || {
         let size = match (memory_budget, slab_planes) {
             (Some(b), _) => Some(SlabSize::Budget(b)),

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -234,6 +236,50 @@ def test_a_worker_killed_in_a_pipeline_run_changes_nothing(
     want, got = _outputs(tmp_path / "cli"), _outputs(tmp_path / "dask")
     assert sorted(got) == sorted(want)
     assert [f for f in want if got[f] != want[f]] == []
+
+
+_DRIVER = """
+import sys
+import mdtf.dask as mdask
+mdask.run(sys.argv[1], sys.argv[2], input=sys.argv[3], slab_planes=6, preview=False)
+"""
+
+
+def test_a_run_whose_driver_was_killed_resumes_with_the_same_files(
+    sphere96: Path, mdtf_bin: Path, pipelines: Path, tmp_path: Path
+) -> None:
+    pipeline = pipelines / "distance-tf.toml"
+    out = tmp_path / "out"
+    cli(mdtf_bin, "run", pipeline, "--input", sphere96, "-o", tmp_path / "cli", "--set", "preview=false")
+    # the driver (dask's own scheduler, in its process) is killed once its tracing pass has begun
+    args = [sys.executable, "-c", _DRIVER, str(pipeline), str(out), str(sphere96)]
+    driver = subprocess.Popen(args, stderr=subprocess.PIPE, text=True)
+    assert driver.stderr is not None
+    seen = []
+    for line in driver.stderr:
+        seen.append(line)
+        if line.startswith("mdtf.dask.run: select: "):
+            driver.kill()
+            break
+    driver.wait(timeout=120)
+    assert driver.returncode == -signal.SIGKILL, "".join(seen)
+    partial = [p.name for p in tmp_path.iterdir() if p.name.startswith(".mdtf-partial-out-")]
+    assert len(partial) == 1 and not out.exists(), sorted(p.name for p in tmp_path.iterdir())
+    report = mdask.run(pipeline, out, input=sphere96, slab_planes=6, preview=False, progress=False)
+    slabs = report["slabs"]
+    assert slabs["resumed"] is True
+    tasks = {t["pass"]: t for t in slabs["tasks"]}
+    assert list(tasks) == ["derive", "prefilter", "select", "boundary", "pack"]
+    # the passes that had finished ran no task again; the rest did
+    assert all(tasks[p]["reused"] == tasks[p]["tasks"] for p in ("derive", "prefilter", "select")), tasks
+    assert sum(t["tasks"] - t["reused"] for t in tasks.values()) > 0, tasks
+    want, got = _outputs(tmp_path / "cli"), _outputs(out)
+    assert sorted(got) == sorted(want)
+    assert [f for f in want if got[f] != want[f]] == []
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cli", "out"], "no partial folder is left"
+    # resume=False starts afresh
+    again = mdask.run(pipeline, out, input=sphere96, slab_planes=6, preview=False, progress=False, resume=False)
+    assert "resumed" not in again["slabs"] and all(t["reused"] == 0 for t in again["slabs"]["tasks"])
 
 
 def test_ctrl_c_during_a_pipeline_run_drops_its_tasks_and_leaves_nothing(

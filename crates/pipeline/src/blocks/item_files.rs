@@ -111,7 +111,7 @@ pub fn derive_item_files(
         writers.push((item, path, fields, w));
     }
 
-    let mut store = ChannelStore::create(dir.join(".slabs"), geo.clone()).map_err(at("input"))?;
+    let mut store = ChannelStore::create(dir.join(super::store::STORE_DIR), geo.clone()).map_err(at("input"))?;
     let n = cut.len();
     let range = copy_value(&mut source, &mut store, &cut, &|k| on_slab(k, 2 * n))?;
     drop(source);

@@ -61,6 +61,7 @@ mod passes;
 mod pool;
 mod reductions;
 mod remote;
+mod resume;
 mod sizing;
 mod slab_channels;
 mod slab_histograms;
@@ -75,6 +76,7 @@ pub use item_files::{ItemFiles, automatic_item_budget, derive_item_files, items_
 pub use partials::{SlabPartial, TracePartial};
 pub use pool::SamplePool;
 pub use remote::{Prefilter, SlabJob, SlabPass, SlabTasks};
+pub use resume::WrittenPiece;
 pub use sizing::{PassSize, Sizing, sizing};
 pub use slab_channels::SlabChannels;
 pub use slab_histograms::{HistogramAxes, HistogramCounts};
@@ -269,9 +271,17 @@ fn run_slabs(
         return Err(fail("plan")(why));
     }
     let base = opts.base();
-    let out = OutputFolder::begin(&opts.output, &crate::inputs::run_inputs(p, opts, &base)).map_err(at("output"))?;
+    let inputs = crate::inputs::run_inputs(p, opts, &base);
+    let out = match opts.tasks.is_some() && opts.resume {
+        true => OutputFolder::begin_resumable(&opts.output, &inputs, &resume::resume_key(p, opts, size)?),
+        false => OutputFolder::begin(&opts.output, &inputs),
+    }
+    .map_err(at("output"))?;
+    if out.resumed() {
+        resume::keep_task_outputs(out.path())?;
+    }
     let progress = Progress::new(opts, on_stage, on_slab);
-    let (mut run, store) = SlabPasses::read_input(p, opts, size, out.path(), progress, true)?;
+    let (mut run, store) = SlabPasses::read_input(p, opts, size, (out.path(), out.resumed()), progress, true)?;
     let (mut chans, derived) = run.derive(store)?;
     let traced = run.trace(&mut chans, &derived)?;
     run.keep(&mut chans)?;
@@ -291,6 +301,7 @@ fn run_slabs(
                 SlabSize::Planes(_) | SlabSize::Strips { .. } => None,
             },
             tasks: std::mem::take(&mut run.task_passes),
+            resumed: run.resumed,
         }),
         units: run.units.clone(),
         ..RunReport::of(opts, run.input_name.clone(), &run.geo)

@@ -10,6 +10,7 @@
 //! cannot hold.
 
 use super::reductions::Stats;
+use super::resume::WrittenPiece;
 use super::slab_histograms::HistogramCounts;
 use super::trace::SlabTrace;
 use crate::pre_detect::VgCounts;
@@ -40,6 +41,10 @@ pub struct SlabPartial {
     pub histograms: Option<HistogramCounts>,
     /// The (v, g) counts of the detection before the tracing (select).
     pub vg: Option<VgCounts>,
+    /// The digest of the task's job ([`super::resume::job_digest`]).
+    pub job: String,
+    /// What the task wrote, hashed, for a resumed run to check.
+    pub written: Vec<WrittenPiece>,
 }
 
 /// What a tracing task hands back besides its planes.
@@ -126,7 +131,7 @@ impl TraceSums {
 }
 
 /// Where the task of `stage` for the slab from plane `first` leaves its partial.
-fn path(store: &Path, stage: &str, first: usize) -> PathBuf {
+pub(super) fn path(store: &Path, stage: &str, first: usize) -> PathBuf {
     store.join(format!("{stage}-{first}.partial"))
 }
 

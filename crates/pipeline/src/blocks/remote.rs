@@ -52,6 +52,25 @@ pub struct SlabJob {
     pub kernel_reach: usize,
     /// What each task does to its slab.
     pub pass: SlabPass,
+    /// The run's token: a task whose token is no longer the one in the
+    /// store (a later driver took the run over, or it ended) stops without
+    /// publishing anything.
+    pub token: String,
+}
+
+impl SlabJob {
+    /// Where the task for the slab from plane `first` leaves its part of
+    /// the pass's reductions once it has written everything (its slab is
+    /// done when this file is there).
+    pub fn partial_file(&self, first: usize) -> PathBuf {
+        super::partials::path(&self.store, self.pass.name(), first)
+    }
+
+    /// The partial the task for the slab from plane `first` left (an error
+    /// if it has not finished).
+    pub fn partial(&self, first: usize) -> Result<SlabPartial, RunError> {
+        SlabPartial::read(&self.store, self.pass.name(), first)
+    }
 }
 
 /// How the channels a pass reads and does not find stored are derived:
@@ -183,7 +202,7 @@ impl SlabPass {
     }
 
     /// The channels its tasks store.
-    fn outputs(&self) -> Vec<String> {
+    pub(super) fn outputs(&self) -> Vec<String> {
         match self {
             SlabPass::Input { .. } => vec!["v".into()],
             SlabPass::Derive { store, .. } => store.clone(),
@@ -196,13 +215,15 @@ impl SlabPass {
 
 /// Runs `pass` as `tasks` over `slabs` of the volume of `store`, then takes
 /// the channels they stored into `store`; the tasks' partials, in z order,
-/// and how many tasks ran and were rerun.
+/// and how many tasks ran, were rerun and found their slab done already
+/// (a resumed run). `token` is the run's ([`super::resume::new_token`]).
 pub(super) fn run_pass(
     tasks: &dyn SlabTasks,
     pass: SlabPass,
     store: &mut ChannelStore,
     derivation: Derivation,
     slabs: &[Range<usize>],
+    token: &str,
 ) -> Result<(Vec<SlabPartial>, TaskPass), RunError> {
     let (stage, name, outputs) = (pass.stage(), pass.name(), pass.outputs());
     let job = SlabJob {
@@ -212,18 +233,25 @@ pub(super) fn run_pass(
         groups: derivation.groups.to_vec(),
         kernel_reach: derivation.kernel_reach,
         pass,
+        token: token.to_string(),
     };
+    // a task's runs are counted in its attempts file, across the runs a resumed run follows
+    let dir = store.dir().to_path_buf();
+    let runs = |z: &Range<usize>| std::fs::metadata(attempts_path(&dir, name, z.start)).map_or(0, |m| m.len());
+    let before: Vec<u64> = slabs.iter().map(runs).collect();
     tasks.run(&job, slabs).map_err(fail(stage))?;
     for c in &outputs {
         store.adopt(c).map_err(at(stage))?;
     }
-    let mut retries = 0;
-    for z in slabs {
-        let runs = std::fs::metadata(attempts_path(store.dir(), name, z.start)).map_or(0, |m| m.len());
-        retries += runs.saturating_sub(1);
+    let (mut retries, mut reused) = (0, 0);
+    for (z, before) in slabs.iter().zip(before) {
+        match runs(z).saturating_sub(before) {
+            0 => reused += 1,
+            ran => retries += ran - 1,
+        }
     }
     let partials = slabs.iter().map(|z| SlabPartial::read(store.dir(), name, z.start)).collect::<Result<_, _>>()?;
-    Ok((partials, TaskPass { pass: name.into(), tasks: slabs.len(), retries }))
+    Ok((partials, TaskPass { pass: name.into(), tasks: slabs.len(), retries, reused }))
 }
 
 /// The file a task of pass `name` for the slab from plane `first` adds a

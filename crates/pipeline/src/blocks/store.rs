@@ -13,6 +13,14 @@ use std::io::{Read, Seek, SeekFrom, Write};
 use std::ops::Range;
 use std::path::PathBuf;
 
+/// The store's folder inside a run's staging folder.
+pub(crate) const STORE_DIR: &str = ".slabs";
+
+/// The file in the store folder holding channel `name`.
+pub(crate) fn file_name(name: &str) -> String {
+    format!("{name}.f32")
+}
+
 /// The channels of a run, on disk (see the module docs).
 pub struct ChannelStore {
     dir: PathBuf,
@@ -26,6 +34,15 @@ impl ChannelStore {
     /// removes it whole).
     pub fn create(dir: PathBuf, geometry: Geometry) -> std::io::Result<ChannelStore> {
         std::fs::create_dir(&dir)?;
+        Ok(ChannelStore { dir, geometry, files: BTreeMap::new() })
+    }
+
+    /// The store a killed run left in `dir` for channels on `geometry`,
+    /// taken over by the run resuming it: its files are taken in as the
+    /// passes write them again (or find them written by their tasks), none
+    /// before. A missing folder is created.
+    pub fn resume(dir: PathBuf, geometry: Geometry) -> std::io::Result<ChannelStore> {
+        std::fs::create_dir_all(&dir)?;
         Ok(ChannelStore { dir, geometry, files: BTreeMap::new() })
     }
 
@@ -43,7 +60,7 @@ impl ChannelStore {
 
     /// Takes in channel `name`, written into the folder by another process.
     pub fn adopt(&mut self, name: &str) -> std::io::Result<()> {
-        let path = self.dir.join(format!("{name}.f32"));
+        let path = self.dir.join(file_name(name));
         let file = File::options()
             .read(true)
             .write(true)
@@ -113,7 +130,7 @@ impl ChannelStore {
         for name in names {
             self.create_channel(name)?;
             // its own handle: its own position in the file
-            let file = File::options().write(true).open(self.dir.join(format!("{name}.f32")))?;
+            let file = File::options().write(true).open(self.dir.join(file_name(name)))?;
             files.insert(name.to_string(), file);
         }
         Ok(StoreWriter { geometry: self.geometry.clone(), files })
@@ -122,7 +139,7 @@ impl ChannelStore {
     /// Creates channel `name`'s file, or takes the one another task of the run created.
     fn create_channel(&mut self, name: &str) -> std::io::Result<()> {
         if !self.files.contains_key(name) {
-            let path = self.dir.join(format!("{name}.f32"));
+            let path = self.dir.join(file_name(name));
             let file = File::options().read(true).write(true).create(true).truncate(false).open(path)?;
             self.files.insert(name.to_string(), file);
         }
@@ -194,7 +211,7 @@ impl ChannelStore {
     /// Drops channel `name` and its file.
     pub fn remove(&mut self, name: &str) {
         if self.files.remove(name).is_some() {
-            let _ = std::fs::remove_file(self.dir.join(format!("{name}.f32")));
+            let _ = std::fs::remove_file(self.dir.join(file_name(name)));
         }
     }
 

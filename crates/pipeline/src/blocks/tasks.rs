@@ -7,6 +7,7 @@
 use super::budget::slabs;
 use super::partials::{SlabPartial, TraceSums};
 use super::remote::{Prefilter, SlabJob, SlabPass, TRACED};
+use super::resume;
 use super::slab_histograms::{HistogramAxes, HistogramCounts};
 use super::trace::{TraceSetup, prefilter_slab, trace_slab};
 use super::{ChannelStore, SlabChannels};
@@ -19,11 +20,18 @@ use std::ops::Range;
 use std::path::Path;
 use std::sync::{Mutex, PoisonError};
 
-/// Runs `job` on the planes `z` of the volume: the body of one task.
+/// Runs `job` on the planes `z` of the volume: the body of one task. A
+/// task whose slab is done already (its partial and every byte it wrote
+/// there: a rerun, or a resumed run) does nothing; a task of a run that
+/// has ended or was taken over fails without publishing.
 pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<(), RunError> {
     let nz = job.geometry.dims[2];
     if z.start >= z.end || z.end > nz {
         return Err(fail("plan")(format!("planes {z:?} are not a slab of the volume's {nz}")));
+    }
+    resume::check_token(job)?;
+    if resume::already_done(job, &z) {
+        return Ok(());
     }
     let attempts = super::remote::attempts_path(&job.store, job.pass.name(), z.start);
     let stage = job.pass.stage();
@@ -44,6 +52,10 @@ pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<(), RunError> {
             task.pack(textures, histograms.as_ref(), read, *height)?
         }
     };
+    let partial =
+        SlabPartial { job: resume::job_digest(job)?, written: resume::hash_written(job, &task.z)?, ..partial };
+    // the last check: a task the run no longer waits for publishes nothing
+    resume::check_token(job)?;
     partial.write(&job.store, job.pass.name(), task.z.start)
 }
 

@@ -115,10 +115,9 @@ pub fn trace_files(
     // a format that cannot be written by slabs is refused before any work
     mdtf_volume::SlabWriter::check_format(&dir.join(format!("distance{ext}"))).map_err(at("write"))?;
     let p = tracing_pipeline(input, read, chain);
-    let opts =
-        RunOptions { pipeline_path: PathBuf::new(), input: None, output: dir.to_path_buf(), cancel: None, tasks: None };
+    let opts = RunOptions { output: dir.to_path_buf(), ..RunOptions::default() };
     let progress = Progress::new(&opts, on_stage, on_slab);
-    let (mut run, store) = SlabPasses::read_input(&p, &opts, size, dir, progress, false)?;
+    let (mut run, store) = SlabPasses::read_input(&p, &opts, size, (dir, false), progress, false)?;
     let (mut chans, derived) = run.derive(store)?;
     let traced = run.trace(&mut chans, &derived)?;
     // the passes write the report into the run's folder (`dir`/boundary, made by them); it is returned instead

@@ -403,10 +403,12 @@ def _run(
     memory_budget: int | None,
     slab_planes: int | None,
     submit: Any = None,
+    resume: bool = False,
 ) -> dict[str, Any]:
-    """``run``, and ``mdtf.dask.run`` with its ``submit`` of the tasks: the run report."""
+    """``run``, and ``mdtf.dask.run`` with its ``submit`` of the tasks (and
+    whether it resumes a killed run): the run report."""
     path = None if input is None else _existing(input)
-    text = _mdtf.run(_existing(pipeline), os.fspath(output), path, overrides, memory_budget, slab_planes, submit)
+    text = _mdtf.run(_existing(pipeline), os.fspath(output), path, overrides, memory_budget, slab_planes, submit, resume)
     return json.loads(text)
 
 

@@ -372,6 +372,7 @@ def run(
     retries: int = 3,
     task_threads: int = 1,
     progress: bool = True,
+    resume: bool = True,
     **overrides: Any,
 ) -> dict[str, Any]:
     """Runs a pipeline file like ``mdtf.run`` (``mdtf run``), slab by slab,
@@ -399,6 +400,18 @@ def run(
     runs as many tasks at once as it has threads, so give workers one
     thread per core; 0: one per core of the worker's machine, for workers
     of one thread).
+    ``resume``: a run whose caller was killed (``kill -9``, a lost node, a
+    job's time limit) leaves its partial folder beside ``output``
+    (``.mdtf-partial-<name>-XXXXXX``); the next run into ``output`` with the
+    same pipeline, settings, input files (names, sizes and modification
+    times) and slabs takes it over and runs only the tasks that had not
+    finished: a task whose slab is done (its partial there, and every byte
+    it wrote still hashing as it recorded) does nothing. The report's
+    ``slabs.resumed`` says so and ``slabs.tasks[].reused`` counts those
+    tasks. ``resume=False`` starts afresh. Ctrl-C is not a kill: it cancels
+    the run and removes its partial folder. Tasks a killed caller left
+    running on workers write the same bytes as the new run's, and publish
+    nothing (each checks the run's token first).
     ``settings`` and keyword overrides as for ``mdtf.run``. Returns the run
     report (run_report.json)."""
     client = client if client is not None else _current_client()
@@ -427,4 +440,4 @@ def run(
         client.gather(futures)
         shown.finished()
 
-    return _run(pipeline, output, input, _overrides(settings, overrides), memory_budget, slab_planes, submit)
+    return _run(pipeline, output, input, _overrides(settings, overrides), memory_budget, slab_planes, submit, resume)

@@ -127,7 +127,7 @@ impl Write for AtomicWriter {
 /// Removes leftovers of killed writes to `path` (the caller holds its lock).
 pub(crate) fn sweep(path: &Path) {
     if let Ok((parent, name)) = super::parent_and_name(path) {
-        staging::sweep_leftovers(&parent, &name.to_string_lossy());
+        staging::sweep_leftovers(&parent, &name.to_string_lossy(), None);
     }
 }
 

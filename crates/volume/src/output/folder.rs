@@ -24,8 +24,13 @@ pub struct OutputFolder {
     target: PathBuf,
     staging: PathBuf,
     published: bool,
+    resumed: bool,
     _lock: OutputLock,
 }
+
+/// The file in the partial folder of a run that can be resumed
+/// ([`OutputFolder::begin_resumable`]): its content is the run's key.
+pub const RESUME_NAME: &str = ".mdtf-resume";
 
 impl OutputFolder {
     /// Checks that `target` may be written (it is new, empty, or an mdtf
@@ -33,18 +38,56 @@ impl OutputFolder {
     /// makes the partial folder beside it; leftovers of killed runs into the
     /// same target are removed.
     pub fn begin(target: &Path, inputs: &Inputs) -> Result<OutputFolder> {
+        Self::begin_with(target, inputs, None)
+    }
+
+    /// [`OutputFolder::begin`] for a run that can pick up where a killed
+    /// run of the same `key` (the run's settings and input, as its caller
+    /// names them) stopped: the partial folder such a run left beside
+    /// `target` is taken as this one's, whatever it holds
+    /// ([`OutputFolder::resumed`] says so; the caller decides what of it to
+    /// keep), instead of being removed. Otherwise a new folder, marked
+    /// with `key` ([`RESUME_NAME`], removed again on publishing).
+    pub fn begin_resumable(target: &Path, inputs: &Inputs, key: &str) -> Result<OutputFolder> {
+        Self::begin_with(target, inputs, Some(key))
+    }
+
+    fn begin_with(target: &Path, inputs: &Inputs, key: Option<&str>) -> Result<OutputFolder> {
         if let Some(parent) = target.parent().filter(|p| !p.as_os_str().is_empty()) {
             std::fs::create_dir_all(parent).map_err(|e| VolumeError::io(parent, e))?;
         }
         let (parent, name) = super::parent_and_name(target)?;
         let absolute = parent.join(&name);
         let lock = OutputLock::acquire(&absolute)?;
-        let prefix = prefix_for(&name.to_string_lossy());
-        staging::sweep_leftovers(&parent, &name.to_string_lossy());
+        let name = name.to_string_lossy();
+        // holding the lock, every partial folder of the target is a killed run's
+        let resumable = key.and_then(|key| {
+            staging::leftovers(&parent, &name)
+                .into_iter()
+                .find(|dir| dir.is_dir() && std::fs::read_to_string(dir.join(RESUME_NAME)).is_ok_and(|k| k == key))
+        });
+        staging::sweep_leftovers(&parent, &name, resumable.as_deref());
         check_replaceable(&absolute, target, inputs)?;
-        let staging = staging::builder(&prefix).tempdir_in(&parent).map_err(|e| VolumeError::io(target, e))?.keep();
+        let resumed = resumable.is_some();
+        let staging = match resumable {
+            Some(dir) => dir,
+            None => {
+                staging::builder(&prefix_for(&name)).tempdir_in(&parent).map_err(|e| VolumeError::io(target, e))?.keep()
+            }
+        };
         register(&staging);
-        Ok(OutputFolder { target: absolute, staging, published: false, _lock: lock })
+        let folder = OutputFolder { target: absolute, staging, published: false, resumed, _lock: lock };
+        if let Some(key) = key {
+            let path = folder.staging.join(RESUME_NAME);
+            std::fs::write(&path, key).map_err(|e| VolumeError::io(&path, e))?;
+        }
+        Ok(folder)
+    }
+
+    /// Whether this folder is the partial folder of an earlier, killed run
+    /// of the same key ([`OutputFolder::begin_resumable`]), as it left it.
+    pub fn resumed(&self) -> bool {
+        self.resumed
     }
 
     /// The partial folder to write every output into.
@@ -60,6 +103,10 @@ impl OutputFolder {
     /// Marks the folder as mdtf's and puts it in place of the target in one
     /// step; the replaced folder, if any, is then removed.
     pub fn publish(mut self, inputs: &Inputs) -> Result<()> {
+        let resume = self.staging.join(RESUME_NAME);
+        if resume.exists() {
+            std::fs::remove_file(&resume).map_err(|e| VolumeError::io(&resume, e))?;
+        }
         write_marker(&self.staging)?;
         // Checked again: the user may have put a file into the old output meanwhile.
         check_replaceable(&self.target, &self.target, inputs)?;
@@ -304,6 +351,44 @@ mod tests {
         }
         assert_eq!(std::fs::read(target.join("a.txt")).unwrap(), b"1");
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    /// A partial folder of `target` as a killed resumable run of `key` leaves it, holding `file`.
+    fn killed_run(target: &Path, key: &str, file: &str) -> PathBuf {
+        let name = target.file_name().unwrap().to_string_lossy();
+        let dir = staging::builder(&prefix_for(&name)).tempdir_in(target.parent().unwrap()).unwrap().keep();
+        std::fs::write(dir.join(RESUME_NAME), key).unwrap();
+        std::fs::write(dir.join(file), file).unwrap();
+        dir
+    }
+
+    #[test]
+    fn a_resumable_run_takes_over_the_partial_folder_of_a_killed_run_of_its_key_only() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("out");
+        let same = killed_run(&target, "key-1", "done.bin");
+        let other = killed_run(&target, "key-2", "other.bin");
+        let out = OutputFolder::begin_resumable(&target, &Inputs::new(), "key-1").unwrap();
+        assert!(out.resumed());
+        assert_eq!(out.path(), same);
+        assert_eq!(std::fs::read(out.path().join("done.bin")).unwrap(), b"done.bin");
+        assert!(!other.exists(), "another key's leftovers are removed");
+        out.publish(&Inputs::new()).unwrap();
+        assert!(target.join("done.bin").exists());
+        assert!(!target.join(RESUME_NAME).exists(), "the key is not an output");
+        let marker = std::fs::read_to_string(target.join(MARKER_NAME)).unwrap();
+        assert!(!marker.contains(RESUME_NAME), "{marker}");
+        // a different key starts afresh, marked with its own key; a plain begin never resumes
+        let stale = killed_run(&target, "key-1", "stale.bin");
+        let fresh = OutputFolder::begin_resumable(&target, &Inputs::new(), "key-3").unwrap();
+        assert!(!fresh.resumed() && !stale.exists());
+        assert_eq!(std::fs::read_to_string(fresh.path().join(RESUME_NAME)).unwrap(), "key-3");
+        drop(fresh);
+        let stale = killed_run(&target, "key-1", "stale.bin");
+        let plain = OutputFolder::begin(&target, &Inputs::new()).unwrap();
+        assert!(!plain.resumed() && !stale.exists());
+        drop(plain);
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "only the output is left");
     }
 
     #[test]

@@ -22,7 +22,7 @@ mod staging;
 
 pub use file::{AtomicWriter, write_file_atomically};
 pub(crate) use file::{StagedFile, old_pair_data, publish_pair, sweep};
-pub use folder::{MARKER_NAME, OutputFolder};
+pub use folder::{MARKER_NAME, OutputFolder, RESUME_NAME};
 pub use identity::{FileId, Inputs};
 pub use lock::OutputLock;
 pub use staging::{PARTIAL_PREFIX, remove_partial_outputs};

@@ -67,24 +67,34 @@ pub fn remove_partial_outputs() -> Vec<PathBuf> {
 
 /// Removes partial outputs of the target `name` in `parent` that no live
 /// writer owns: the caller holds the target's lock, so any such entry is
-/// left from a killed run. Returns the paths removed.
-pub(crate) fn sweep_leftovers(parent: &Path, name: &str) -> Vec<PathBuf> {
-    let prefix = prefix_for(name);
-    let Ok(entries) = std::fs::read_dir(parent) else { return Vec::new() };
+/// left from a killed run; but `keep`, which a resumed run takes over.
+/// Returns the paths removed.
+pub(crate) fn sweep_leftovers(parent: &Path, name: &str, keep: Option<&Path>) -> Vec<PathBuf> {
     let mine = live().clone();
     let mut removed = Vec::new();
-    for entry in entries.flatten() {
-        let file_name = entry.file_name();
-        let Some(rest) = file_name.to_str().and_then(|n| n.strip_prefix(&prefix)) else { continue };
-        if rest.len() != RANDOM_LEN || !rest.chars().all(|c| c.is_ascii_alphanumeric()) {
-            continue;
-        }
-        let path = entry.path();
-        if !mine.contains(&path) && remove_any(&path).is_ok() {
+    for path in leftovers(parent, name) {
+        if !mine.contains(&path) && keep != Some(path.as_path()) && remove_any(&path).is_ok() {
             removed.push(path);
         }
     }
     removed
+}
+
+/// The partial outputs of the target `name` in `parent` (this process's
+/// own included), in name order.
+pub(crate) fn leftovers(parent: &Path, name: &str) -> Vec<PathBuf> {
+    let prefix = prefix_for(name);
+    let Ok(entries) = std::fs::read_dir(parent) else { return Vec::new() };
+    let mut found = Vec::new();
+    for entry in entries.flatten() {
+        let file_name = entry.file_name();
+        let Some(rest) = file_name.to_str().and_then(|n| n.strip_prefix(&prefix)) else { continue };
+        if rest.len() == RANDOM_LEN && rest.chars().all(|c| c.is_ascii_alphanumeric()) {
+            found.push(entry.path());
+        }
+    }
+    found.sort();
+    found
 }
 
 #[cfg(test)]
@@ -97,7 +107,7 @@ mod tests {
         let a = builder(&prefix_for("a")).tempdir_in(dir.path()).unwrap().keep();
         let ab = builder(&prefix_for("a-b")).tempdir_in(dir.path()).unwrap().keep();
         std::fs::write(dir.path().join("a"), b"user").unwrap();
-        let removed = sweep_leftovers(dir.path(), "a");
+        let removed = sweep_leftovers(dir.path(), "a", None);
         assert_eq!(removed, vec![a.clone()]);
         assert!(!a.exists());
         assert!(ab.exists());

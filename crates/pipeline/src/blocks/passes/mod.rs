@@ -62,6 +62,10 @@ pub(super) struct SlabPasses<'a> {
     stats: Stats,
     pub(super) warnings: Vec<String>,
     tasks: Option<&'a dyn SlabTasks>,
+    /// The run token its tasks check (empty without tasks).
+    token: String,
+    /// The run took over a killed run's staging folder ([`super::resume`]).
+    pub(super) resumed: bool,
     /// The passes that ran as tasks, for the report.
     pub(super) task_passes: Vec<crate::report::TaskPass>,
     /// The first radix pass of the pre-filtered g's median, when tasks pre-filtered it.
@@ -113,11 +117,12 @@ impl<'a> SlabPasses<'a> {
     /// (`size`), and copies the value slab by slab into a channel store in
     /// `dir`, taking its statistics. Without `packs` the run stops after its
     /// tracing and kept volumes (no histogram volume is counted or budgeted).
+    /// `resumed`: `dir` is a killed run's, whose store the run takes over.
     pub(super) fn read_input(
         p: &'a Pipeline,
         opts: &'a RunOptions,
         size: SlabSize,
-        dir: &Path,
+        (dir, resumed): (&Path, bool),
         progress: Progress<'a>,
         packs: bool,
     ) -> Result<(SlabPasses<'a>, ChannelStore), RunError> {
@@ -137,7 +142,16 @@ impl<'a> SlabPasses<'a> {
         let (height, trace_blocks) = super::cut(size, &geo, &plan, hvol_needed).map_err(fail("plan"))?;
         let slabs = slabs(nz, height);
         progress.stage(&format!("input: {} slabs of {height} planes", slabs.len()))?;
-        let mut store = ChannelStore::create(dir.join(".slabs"), geo.clone()).map_err(at("input"))?;
+        let store_dir = dir.join(super::store::STORE_DIR);
+        let mut store = match resumed {
+            true => ChannelStore::resume(store_dir, geo.clone()),
+            false => ChannelStore::create(store_dir, geo.clone()),
+        }
+        .map_err(at("input"))?;
+        let token = match opts.tasks {
+            Some(_) => super::resume::new_token(store.dir())?,
+            None => String::new(),
+        };
         let mut stats = Stats::new(&["v", "g", "f2", "g_hit", "g_prefiltered", "inv_g"], geo.voxel_count());
         let mut task_passes = Vec::new();
         let padded = match (opts.tasks.as_deref(), &source) {
@@ -148,7 +162,7 @@ impl<'a> SlabPasses<'a> {
                 let pass = SlabPass::Input { input, level, nan, padding };
                 let mut padded = 0;
                 let nothing_derived = Derivation { groups: &[], kernel_reach: 0 };
-                let (parts, ran) = remote::run_pass(tasks, pass, &mut store, nothing_derived, &slabs)?;
+                let (parts, ran) = remote::run_pass(tasks, pass, &mut store, nothing_derived, &slabs, &token)?;
                 task_passes.push(ran);
                 for mut part in parts {
                     part.merge_stats_into(&mut stats);
@@ -183,6 +197,8 @@ impl<'a> SlabPasses<'a> {
             stats,
             warnings,
             tasks: opts.tasks.as_deref(),
+            token,
+            resumed,
             task_passes,
             prefiltered_buckets: None,
         };
@@ -200,7 +216,7 @@ impl<'a> SlabPasses<'a> {
     ) -> Result<Vec<SlabPartial>, RunError> {
         let groups = self.derive_groups();
         let derivation = Derivation { groups: &groups, kernel_reach: self.plan.reach.kernel[2] };
-        let (parts, ran) = remote::run_pass(tasks, pass, store, derivation, slabs)?;
+        let (parts, ran) = remote::run_pass(tasks, pass, store, derivation, slabs, &self.token)?;
         self.task_passes.push(ran);
         Ok(parts)
     }

@@ -88,7 +88,7 @@ impl SlabPasses<'_> {
             }
         }
         if let Some(tasks) = self.tasks {
-            let targets = writer.task_textures(&layouts).map_err(at("pack"))?;
+            let targets = writer.task_textures(&layouts, self.resumed).map_err(at("pack"))?;
             let axes = histograms.as_ref().map(|h| h.axes().clone());
             // a task counting the histogram volume holds whole fixed parts of its slices
             let task_slabs = match axes.as_ref().is_some_and(|a| a.counts_hvol()) {
