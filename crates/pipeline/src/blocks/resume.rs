@@ -9,7 +9,8 @@
 //! tasks wrote (the channel store with the tasks' partials, the pack's
 //! texture files: [`keep_task_outputs`]) and writes the rest again. Each
 //! task records in its partial which pass it ran (the job's digest, see
-//! [`job_digest`]) and a SHA-256 of every byte range it wrote
+//! [`job_digest`]) and a hash of every byte range it wrote (XXH3-128: it
+//! finds damage or a write that never happened, at memory speed)
 //! ([`WrittenPiece`]); a task that finds its partial with the same job and
 //! every range still hashing the same does nothing ([`already_done`]).
 //!
@@ -25,7 +26,7 @@ use super::{SlabSize, store};
 use crate::file::Pipeline;
 use crate::run::{RunError, RunOptions, fail};
 use serde::{Deserialize, Serialize};
-use sha2::Digest;
+use twox_hash::XxHash3_128;
 use std::io::{Read, Seek, SeekFrom};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -36,34 +37,34 @@ const TOKEN_FILE: &str = "run.token";
 /// Bytes read at a time when hashing what a task wrote.
 const HASH_CHUNK: usize = 1 << 22;
 
-/// A byte range of one file a task wrote, and its SHA-256 (hex).
+/// A byte range of one file a task wrote, and its hash.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct WrittenPiece {
     /// The file.
     pub file: PathBuf,
     /// The byte range written.
     pub bytes: Range<u64>,
-    /// SHA-256 of those bytes, hex.
-    pub sha256: String,
+    /// XXH3-128 of those bytes, hex.
+    pub xxh3: String,
 }
 
 /// The key of a run of `p` with `opts` cut by `size`: mdtf's version, the
 /// run's settings with every default filled in, the input's files (names,
 /// lengths and modification times: an input rewritten since is another
-/// input) and the slab size, hashed (SHA-256, hex). Two runs of one key
+/// input) and the slab size, hashed (XXH3-128, hex). Two runs of one key
 /// make the same tasks with the same outputs.
 pub(super) fn resume_key(p: &Pipeline, opts: &RunOptions, size: SlabSize) -> Result<String, RunError> {
     let settings = crate::inputs::resolved_settings(p, opts).map_err(fail("plan"))?;
-    let mut h = sha2::Sha256::new();
-    h.update(format!("mdtf {}\n{settings}\n{size:?}\n", env!("CARGO_PKG_VERSION")));
+    let mut h = XxHash3_128::new();
+    h.write(format!("mdtf {}\n{settings}\n{size:?}\n", env!("CARGO_PKG_VERSION")).as_bytes());
     if let Some(input) = crate::inputs::input_file(p, opts, &opts.base()) {
         let input = std::path::absolute(&input).unwrap_or(input);
-        h.update(format!("input {}\n", input.display()));
+        h.write(format!("input {}\n", input.display()).as_bytes());
         for (name, len, modified) in files_of(&input) {
-            h.update(format!("{name} {len} {modified}\n"));
+            h.write(format!("{name} {len} {modified}\n").as_bytes());
         }
     }
-    Ok(hex(&h.finalize()))
+    Ok(format!("{:032x}", h.finish_128()))
 }
 
 /// The files under `path` (itself, when it is a file): each name relative
@@ -158,12 +159,12 @@ pub(super) fn check_token(job: &SlabJob) -> Result<(), RunError> {
     }
 }
 
-/// SHA-256 (hex) of `job` as its tasks run it, but for its run token: the
+/// XXH3-128 (hex) of `job` as its tasks run it, but for its run token: the
 /// same pass of a resumed run has the same digest.
 pub(super) fn job_digest(job: &SlabJob) -> Result<String, RunError> {
     let job = SlabJob { token: String::new(), ..job.clone() };
     let json = serde_json::to_vec(&job).map_err(|e| fail(job.pass.stage())(format!("a task's job: {e}")))?;
-    Ok(hex(&sha2::Sha256::digest(&json)))
+    Ok(format!("{:032x}", XxHash3_128::oneshot(&json)))
 }
 
 /// The byte ranges of files the task of `job` on planes `z` writes.
@@ -184,8 +185,8 @@ pub(super) fn hash_written(job: &SlabJob, z: &Range<usize>) -> Result<Vec<Writte
     written_ranges(job, z)
         .into_iter()
         .map(|(file, bytes)| {
-            let sha256 = hash_range(&file, &bytes).map_err(|e| fail(stage)(format!("{}: {e}", file.display())))?;
-            Ok(WrittenPiece { file, bytes, sha256 })
+            let xxh3 = hash_range(&file, &bytes).map_err(|e| fail(stage)(format!("{}: {e}", file.display())))?;
+            Ok(WrittenPiece { file, bytes, xxh3 })
         })
         .collect()
 }
@@ -200,28 +201,23 @@ pub(super) fn already_done(job: &SlabJob, z: &Range<usize>) -> bool {
     let same_job = partial.job == digest
         && partial.written.len() == ranges.len()
         && partial.written.iter().zip(&ranges).all(|(w, (file, bytes))| w.file == *file && w.bytes == *bytes);
-    same_job && partial.written.iter().all(|w| hash_range(&w.file, &w.bytes).is_ok_and(|h| h == w.sha256))
+    same_job && partial.written.iter().all(|w| hash_range(&w.file, &w.bytes).is_ok_and(|h| h == w.xxh3))
 }
 
-/// SHA-256 (hex) of bytes `range` of `file` (an error if it holds fewer).
+/// XXH3-128 (hex) of bytes `range` of `file` (an error if it holds fewer).
 fn hash_range(file: &Path, range: &Range<u64>) -> std::io::Result<String> {
     let mut f = std::fs::File::open(file)?;
     f.seek(SeekFrom::Start(range.start))?;
-    let mut h = sha2::Sha256::new();
+    let mut h = XxHash3_128::new();
     let mut buf = vec![0u8; HASH_CHUNK];
     let mut left = range.end.saturating_sub(range.start);
     while left > 0 {
         let n = (left as usize).min(HASH_CHUNK);
         f.read_exact(&mut buf[..n])?;
-        h.update(&buf[..n]);
+        h.write(&buf[..n]);
         left -= n as u64;
     }
-    Ok(hex(&h.finalize()))
-}
-
-/// Lower-case hex of `bytes`.
-fn hex(bytes: &[u8]) -> String {
-    bytes.iter().map(|b| format!("{b:02x}")).collect()
+    Ok(format!("{:032x}", h.finish_128()))
 }
 
 #[cfg(test)]
@@ -229,14 +225,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_range_hashes_as_sha256_of_its_bytes() {
+    fn a_range_hashes_as_xxh3_128_of_its_bytes_read_in_any_number_of_chunks() {
         let dir = tempfile::tempdir().unwrap();
         let file = dir.path().join("f");
-        std::fs::write(&file, b"xxabcyy").unwrap();
-        // SHA-256("abc"), FIPS 180-2's first example
-        let abc = "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad";
-        assert_eq!(hash_range(&file, &(2..5)).unwrap(), abc);
-        assert!(hash_range(&file, &(5..9)).is_err(), "a file too short is not a written range");
+        let bytes: Vec<u8> = (0..HASH_CHUNK * 2 + 12345).map(|i| (i * 7 % 251) as u8).collect();
+        std::fs::write(&file, &bytes).unwrap();
+        // xxHash's own test vector: XXH3_128 of no bytes, seed 0
+        assert_eq!(hash_range(&file, &(5..5)).unwrap(), "99aa06d3014798d86001c324468d497f");
+        let whole = format!("{:032x}", XxHash3_128::oneshot(&bytes[3..]));
+        assert_eq!(hash_range(&file, &(3..bytes.len() as u64)).unwrap(), whole);
+        let end = bytes.len() as u64;
+        assert!(hash_range(&file, &(end - 4..end + 1)).is_err(), "a file too short is not a written range");
     }
 
     #[test]
