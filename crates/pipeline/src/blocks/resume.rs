@@ -26,10 +26,10 @@ use super::{SlabSize, store};
 use crate::file::Pipeline;
 use crate::run::{RunError, RunOptions, fail};
 use serde::{Deserialize, Serialize};
-use twox_hash::XxHash3_128;
 use std::io::{Read, Seek, SeekFrom};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
+use twox_hash::XxHash3_128;
 
 /// The file in the channel store holding the current driver's run token.
 const TOKEN_FILE: &str = "run.token";
