@@ -147,7 +147,7 @@ fn distance_tf_pack_decodes_to_the_analytic_distance_and_hit_gradient() {
     let file = dir.path().join("distance-tf-clean.toml");
     std::fs::write(&file, clean).unwrap();
     let (p, pack, m) = run_file(&file, "distance-tf", dir.path());
-    assert!(p.prefilter.is_none() && p.derive.kernel == Some(mdtf_derive::Kernel::Central4));
+    assert!(p.prefilter.is_none() && p.derive.kernel == mdtf_derive::Kernel::Central4);
     let ph = sphere(&p);
     let truth: Vec<_> = positions(&geometry()).into_iter().map(|x| ph.at(x)).collect();
     let peak_g = truth.iter().map(|t| t.g).fold(0.0, f64::max);

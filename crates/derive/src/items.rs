@@ -22,6 +22,11 @@ pub enum Item {
     F2,
     /// Laplacian, trace of the Hessian.
     Laplacian,
+    /// Mean curvature of the isosurface through the sample, (k1 + k2) / 2 =
+    /// (f'' - Laplacian) / (2 g), per world unit: positive where the
+    /// brighter side is convex (1/r on a bright sphere of radius r), 0
+    /// where g < epsilon.
+    Curvature,
     /// Inverse gradient magnitude (the peak-finding paper's second axis): one
     /// field, 1 / max(g, epsilon), world units per value unit; several fields,
     /// 1 / max(sqrt(||G||), epsilon) with ||G|| the Frobenius norm of Df^T Df
@@ -37,11 +42,11 @@ pub enum Item {
 }
 
 /// Item names, for messages and `--help`.
-pub const ITEM_NAMES: &str = "value, grad, g, normal, hessian, f2, laplacian, inv_g, shade, gnorm, jacobian";
+pub const ITEM_NAMES: &str = "value, grad, g, normal, hessian, f2, laplacian, curvature, inv_g, shade, gnorm, jacobian";
 
 impl Item {
     /// Every item.
-    pub const ALL: [Item; 11] = [
+    pub const ALL: [Item; 12] = [
         Item::Value,
         Item::Grad,
         Item::G,
@@ -49,6 +54,7 @@ impl Item {
         Item::Hessian,
         Item::F2,
         Item::Laplacian,
+        Item::Curvature,
         Item::InvG,
         Item::Shade,
         Item::Gnorm,
@@ -65,6 +71,7 @@ impl Item {
             Item::Hessian => "hessian",
             Item::F2 => "f2",
             Item::Laplacian => "laplacian",
+            Item::Curvature => "curvature",
             Item::InvG => "inv_g",
             Item::Shade => "shade",
             Item::Gnorm => "gnorm",
@@ -92,6 +99,7 @@ impl Item {
             Item::G => &["g"],
             Item::F2 => &["f2"],
             Item::Laplacian => &["laplacian"],
+            Item::Curvature => &["curvature"],
             Item::InvG => &["inv_g"],
             Item::Shade => &["shade"],
             Item::Gnorm => &["gnorm"],
@@ -122,7 +130,7 @@ impl Needs {
                     n.grad = true
                 }
                 Item::Hessian | Item::Laplacian => n.hessian = true,
-                Item::F2 => {
+                Item::F2 | Item::Curvature => {
                     n.grad = true;
                     n.hessian = true;
                 }

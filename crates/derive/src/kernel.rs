@@ -38,6 +38,13 @@ pub enum Kernel {
 /// The default family: the most accurate on the erf sphere (see the crate tests).
 pub const DEFAULT_KERNEL: Kernel = Kernel::Central4;
 
+impl Default for Kernel {
+    /// [`DEFAULT_KERNEL`].
+    fn default() -> Kernel {
+        DEFAULT_KERNEL
+    }
+}
+
 /// Names accepted by `Kernel::from_str`, for messages and `--help`.
 pub const KERNEL_NAMES: &str = "central, central4, bspline3, catmull-rom, gauss:SIGMA";
 

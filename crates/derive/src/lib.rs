@@ -58,7 +58,7 @@ impl Default for DeriveParams {
     fn default() -> Self {
         DeriveParams {
             items: vec![Item::G, Item::F2],
-            kernel: DEFAULT_KERNEL,
+            kernel: Kernel::default(),
             border: Border::Clamp,
             epsilon: None,
             padding: None,

@@ -117,6 +117,25 @@ impl Layout {
                         *o = a + b + c;
                     }
                 }
+                Item::Curvature => {
+                    let out = &mut outs[first][span.clone()];
+                    for (i, o) in out.iter_mut().enumerate().take(nx) {
+                        let v = Voxel {
+                            gx: r.gx[i],
+                            gy: r.gy[i],
+                            gz: r.gz[i],
+                            hxx: r.hxx[i],
+                            hyy: r.hyy[i],
+                            hzz: r.hzz[i],
+                            hxy: r.hxy[i],
+                            hxz: r.hxz[i],
+                            hyz: r.hyz[i],
+                        };
+                        // -div(grad f / g) / 2, with div(n) = (Laplacian - n^T H n) / g
+                        let g_inv = r.g_inv[i];
+                        *o = 0.5 * g_inv * (v.f2(g_inv) - (v.hxx + v.hyy + v.hzz));
+                    }
+                }
                 Item::InvG if self.fields > 1 => {
                     for (i, o) in outs[first][span.clone()].iter_mut().enumerate() {
                         let g = gnorm_at(rows, self.fields, i).sqrt();

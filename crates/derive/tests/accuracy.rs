@@ -527,3 +527,40 @@ fn border_policies_differ_only_at_the_border() {
     assert_eq!(c[[4, 4, 0]], (d[[4, 4, 1]] - d[[4, 4, 0]]) * 0.5);
     assert_eq!(w[[4, 4, 0]], (d[[4, 4, 1]] - d[[4, 4, 9]]) * 0.5);
 }
+
+/// Mean relative error of the mean curvature against 1/rho, the curvature
+/// of the sphere of radius rho through each voxel (every isosurface of a
+/// radial field is one), over the shell |x| < 2 sigma.
+fn curvature_error(ph: &RadialPhantom, kernel: Kernel) -> f64 {
+    let input = MultiField::from(ph.volume());
+    let params = DeriveParams { items: vec![Item::Curvature], kernel, ..DeriveParams::default() };
+    let out = run(&input, &params).unwrap();
+    let k = &out.get(Item::Curvature).unwrap().fields[0].data;
+    let truth = ph.truth();
+    let (mut e, mut n) = (0.0, 0usize);
+    for ((z, y, x), &d) in truth.x.data.indexed_iter() {
+        if (d as f64).abs() < 2.0 * ph.sigma {
+            let p = mdtf_datagen::voxel_position(&ph.geometry, x, y, z);
+            let rho = (0..3).map(|a| (p[a] - ph.centre[a]).powi(2)).sum::<f64>().sqrt();
+            e += (k[[z, y, x]] as f64 * rho - 1.0).abs();
+            n += 1;
+        }
+    }
+    assert!(n > 10_000, "shell too small: {n}");
+    e / n as f64
+}
+
+#[test]
+fn the_mean_curvature_is_one_over_the_radius_on_the_erf_sphere() {
+    let e = curvature_error(&issue_sphere(), DeriveParams::default().kernel);
+    eprintln!("curvature, default kernel: mean relative error {e:.3e}");
+    assert!(e < 5e-3, "mean relative error {e:.3e}");
+    // anisotropic voxels, the sphere dark on a bright background: the sign follows the brighter side
+    let g = Geometry::new([72, 60, 90], [1.0, 1.2, 0.8]);
+    let dark = erf_sphere(g.clone(), 24.0, 2.5, 200.0, 10.0, None);
+    let e = curvature_error(&dark, DeriveParams::default().kernel);
+    eprintln!("curvature, dark anisotropic sphere: mean relative error against -1/rho {e:.3e}");
+    assert!(e > 1.9, "a dark sphere's curvature is negative: {e:.3e}");
+    let flipped = curvature_error(&erf_sphere(g, 24.0, 2.5, 10.0, 200.0, None), DeriveParams::default().kernel);
+    assert!(flipped < 1e-2, "mean relative error {flipped:.3e}");
+}

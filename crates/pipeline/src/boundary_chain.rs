@@ -1,18 +1,67 @@
 //! value volume -> derive (g, f'', normal) -> optional bilateral pre-filter
 //! of g and f'' (as the distance paper does) -> boundary tracing.
 
+use crate::channel::Channel;
 use mdtf_bilateral::{BilateralError, BilateralParams, RangeUnits};
-use mdtf_boundary::{BoundaryError, BoundaryInput, BoundaryOutput, BoundaryParams};
+use mdtf_boundary::{BlockTrace, BoundaryError, BoundaryInput, BoundaryOutput, BoundaryParams};
 use mdtf_derive::{Border, DeriveError, DeriveParams, FieldView, FieldsView, Item, Kernel};
 use mdtf_volume::{Geometry, MultiField, Volume};
 use serde::{Deserialize, Serialize};
+
+/// What holds the tracing's output volumes: a whole volume's tracing
+/// ([`BoundaryOutput`]) or a block's ([`BlockTrace`]).
+pub trait TracedVolumes {
+    /// The volume holding traced channel `c` (one of
+    /// [`crate::channel::traced`]; None for any other).
+    fn traced(&self, c: Channel) -> Option<&Volume>;
+    /// The same, to take it out.
+    fn traced_mut(&mut self, c: Channel) -> Option<&mut Volume>;
+}
+
+/// The tracing's outputs matched to their rows of the channel table, here only.
+macro_rules! traced_volumes {
+    ($($t:ty),*) => {$(
+        impl TracedVolumes for $t {
+            fn traced(&self, c: Channel) -> Option<&Volume> {
+                match c {
+                    Channel::GHit => Some(&self.g_hit),
+                    Channel::Hit => Some(&self.hit),
+                    Channel::Distance => Some(&self.distance),
+                    Channel::Dot => Some(&self.dot),
+                    _ => None,
+                }
+            }
+
+            fn traced_mut(&mut self, c: Channel) -> Option<&mut Volume> {
+                match c {
+                    Channel::GHit => Some(&mut self.g_hit),
+                    Channel::Hit => Some(&mut self.hit),
+                    Channel::Distance => Some(&mut self.distance),
+                    Channel::Dot => Some(&mut self.dot),
+                    _ => None,
+                }
+            }
+        }
+    )*};
+}
+
+traced_volumes!(BoundaryOutput, BlockTrace);
+
+/// The traced volumes of `b` by name, in the table's order, taken out of
+/// it (it keeps empty ones in their place).
+pub fn take_traced(b: &mut impl TracedVolumes) -> Vec<(String, Volume)> {
+    let empty = || Volume::zeros(Geometry::new([0; 3], [1.0; 3]));
+    crate::channel::traced()
+        .filter_map(|c| b.traced_mut(c).map(|v| (c.name(&[]), std::mem::replace(v, empty()))))
+        .collect()
+}
 
 /// Parameters of the chain.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields, default)]
 pub struct BoundaryChainParams {
     /// Derivative kernel (default: derive's default; use gauss:1 or bspline3 on noisy data).
-    pub kernel: Option<Kernel>,
+    pub kernel: Kernel,
     /// Derive's border policy (None: derive's default, clamp).
     pub border: Option<Border>,
     /// Derive's epsilon, value units per world unit: g below it counts as 0
@@ -62,7 +111,7 @@ impl BoundaryChainParams {
         let defaults = DeriveParams::default();
         DeriveParams {
             items,
-            kernel: self.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
+            kernel: self.kernel,
             border: self.border.unwrap_or(defaults.border),
             epsilon: self.epsilon,
             padding: None,

@@ -58,6 +58,9 @@ pub enum Channel {
     Hzz,
     /// Laplacian, the Hessian's trace, value units per world unit squared.
     Laplacian,
+    /// Mean curvature of the isosurface through the voxel, per world unit
+    /// (positive where the brighter side is convex).
+    Curvature,
     /// Surface-shading weight 1 - (1 - g / g_max)^2 in [0, 1], g_max the
     /// largest g of the whole volume.
     Shade,
@@ -132,7 +135,7 @@ const PER_UNIT2: &str = "value units per world unit^2";
 
 /// Every named channel (the fields and the Jacobian's components are not
 /// rows: their names come from the input's fields).
-pub const TABLE: [Row; 24] = [
+pub const TABLE: [Row; 25] = [
     row(Channel::Value, "v", Producer::Input, &[], texts::V),
     derived(Channel::G, "g", Item::G, texts::G),
     derived(Channel::F2, "f2", Item::F2, texts::F2),
@@ -187,12 +190,36 @@ pub const TABLE: [Row; 24] = [
         text("Laplacian, the Hessian's trace", PER_UNIT2, "derive", true),
     ),
     derived(
+        Channel::Curvature,
+        "curvature",
+        Item::Curvature,
+        text(
+            "mean curvature (k1 + k2) / 2 of the isosurface through the voxel, positive where the brighter side \
+             is convex (1/r on a bright sphere of radius r)",
+            "per world unit",
+            "derive",
+            true,
+        ),
+    ),
+    derived(
         Channel::Shade,
         "shade",
         Item::Shade,
         text("surface-shading weight 1 - (1 - g / g_max)^2, g_max the volume's largest g", "1", "derive", false),
     ),
 ];
+
+/// The channels the tracing makes, in table order (g_hit, hit, distance,
+/// dot): the rows whose producer is the tracing. Where each is in the
+/// tracing's output: [`crate::boundary_chain::TracedVolumes`].
+pub fn traced() -> impl Iterator<Item = Channel> + Clone {
+    TABLE.iter().filter(|r| r.producer == Producer::Trace).map(|r| r.channel)
+}
+
+/// The names of [`traced`]'s channels, in its order.
+pub fn traced_names() -> Vec<String> {
+    traced().map(|c| c.name(&[])).collect()
+}
 
 /// The text of a Jacobian component (not a row).
 const JACOBIAN: ChannelText = text(
@@ -202,9 +229,11 @@ const JACOBIAN: ChannelText = text(
     true,
 );
 
-/// Every channel name, for messages and `--help`.
-pub const CHANNEL_NAMES: &str = "v, g, f2, nx, ny, nz, inv_g, gnorm, g_hit, hit, distance, dot, value, gx, gy, gz, \
-                                 hxx, hxy, hxz, hyy, hyz, hzz, laplacian, shade, or d{field}/d{x,y,z} (jacobian)";
+/// Every channel name, for messages and `--help`: the table's, then the Jacobian's components.
+pub fn channel_names() -> String {
+    let names: Vec<&str> = TABLE.iter().map(|r| r.name).collect();
+    format!("{}, or d{{field}}/d{{x,y,z}} (jacobian)", names.join(", "))
+}
 
 /// The axis names of the Jacobian's components.
 const AXES: [&str; 3] = ["x", "y", "z"];
@@ -315,7 +344,7 @@ impl Reach {
 
 /// A channel name that is neither in the table nor a field.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("unknown channel '{name}' (valid: {CHANNEL_NAMES}{fields})")]
+#[error("unknown channel '{name}' (valid: {}{fields})", channel_names())]
 pub struct UnknownChannel {
     /// The name asked for.
     pub name: String,
@@ -329,8 +358,11 @@ mod tests {
 
     #[test]
     fn every_row_is_found_by_its_name_and_names_are_the_listed_ones() {
-        let names: Vec<&str> = TABLE.iter().map(|r| r.name).collect();
-        assert!(CHANNEL_NAMES.starts_with(&format!("{}, or ", names.join(", "))), "{CHANNEL_NAMES}");
+        let listed = channel_names();
+        assert!(
+            listed.starts_with("v, g, f2, nx, ny, nz, inv_g, ") && listed.contains("laplacian, curvature"),
+            "{listed}"
+        );
         let distinct: std::collections::BTreeSet<Channel> = TABLE.iter().map(|r| r.channel).collect();
         assert_eq!(distinct.len(), TABLE.len(), "one row per channel");
         for r in &TABLE {
@@ -377,7 +409,24 @@ mod tests {
         let signed: Vec<&str> = TABLE.iter().filter(|r| r.text.signed).map(|r| r.name).collect();
         assert_eq!(
             signed,
-            ["f2", "nx", "ny", "nz", "dot", "gx", "gy", "gz", "hxx", "hxy", "hxz", "hyy", "hyz", "hzz", "laplacian"]
+            [
+                "f2",
+                "nx",
+                "ny",
+                "nz",
+                "dot",
+                "gx",
+                "gy",
+                "gz",
+                "hxx",
+                "hxy",
+                "hxz",
+                "hyy",
+                "hyz",
+                "hzz",
+                "laplacian",
+                "curvature"
+            ]
         );
         assert_eq!(Channel::InvG.text(true).units, "world units");
         assert_eq!(Channel::InvG.text(false).units, "world units per value unit");

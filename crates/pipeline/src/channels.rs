@@ -10,7 +10,7 @@ use mdtf_derive::{DeriveError, Item};
 use mdtf_volume::{MultiField, Volume};
 use std::collections::BTreeMap;
 
-pub use crate::channel::CHANNEL_NAMES;
+pub use crate::channel::channel_names;
 
 /// Called as the derive pass finishes z-slices: (done, of).
 pub type Ticks<'a> = &'a (dyn Fn(usize, usize) + Sync);
@@ -159,7 +159,7 @@ fn execute(
         let out = mdtf_derive::run_with_progress(input, &chain.derive(plan.derive_fields.clone()), None, ticks)?;
         derived.extend(out.items.into_iter().flat_map(|(_, mf)| mf.into_volumes()));
     }
-    let mut traced: BTreeMap<&str, Volume> = BTreeMap::new();
+    let mut traced: BTreeMap<String, Volume> = BTreeMap::new();
     let tracing = if plan.trace {
         // the tracing consumes g, f'' and the normal: copied only if they are asked for too
         let mut take = |c: &str| {
@@ -172,8 +172,8 @@ fn execute(
         let normal = MultiField::from_volumes(normal).map_err(|e| ChainError::Unknown(e.to_string()))?;
         let out = boundary_chain::trace_derived(g, f2, normal, value_range, chain)?;
         let report = out.boundary.report(&out.g);
-        let b = out.boundary;
-        traced.extend([("g_hit", b.g_hit), ("hit", b.hit), ("distance", b.distance), ("dot", b.dot)]);
+        let mut b = out.boundary;
+        traced.extend(boundary_chain::take_traced(&mut b));
         let summary = BoundarySummary { resolved: b.resolved, counts: b.counts, lost: b.lost };
         Some(Tracing { summary, warnings: b.warnings, flipped: b.flipped, alpha: b.alpha, report })
     } else {
@@ -190,7 +190,7 @@ fn execute(
         } else if name == "v" {
             input.field_volume(0)
         } else {
-            derived.remove(name).or_else(|| traced.remove(name.as_str()))
+            derived.remove(name).or_else(|| traced.remove(name))
         };
         let v = v.ok_or_else(|| match Channel::named(name, fields) {
             Err(unknown) => ChainError::Unknown(unknown.to_string()),
@@ -235,7 +235,7 @@ mod tests {
         let geo = Geometry::new([20, 18, 16], [1.0, 1.2, 0.9]);
         let v = erf_sphere(geo.clone(), 6.0, 1.5, 0.0, 100.0, None).volume();
         let chain = BoundaryChainParams {
-            kernel: Some(mdtf_derive::Kernel::BSpline3),
+            kernel: mdtf_derive::Kernel::BSpline3,
             border: Some(mdtf_derive::Border::Mirror),
             epsilon: Some(0.5),
             ..Default::default()

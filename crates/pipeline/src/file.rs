@@ -111,7 +111,7 @@ impl Default for InputSection {
 pub struct DeriveSection {
     /// Kernel (central4, central, bspline3, catmull-rom, gauss:SIGMA), checked
     /// when the file is read; default [`mdtf_derive::DEFAULT_KERNEL`].
-    pub kernel: Option<mdtf_derive::Kernel>,
+    pub kernel: mdtf_derive::Kernel,
 }
 
 /// `[histogram]`: which pictures to make.
@@ -281,7 +281,7 @@ mod tests {
             .unwrap();
         assert_eq!(p.input.size, 32);
         assert_eq!(p.boundary.g_min, Some(2.5));
-        assert_eq!(p.derive.kernel, Some(mdtf_derive::Kernel::Central));
+        assert_eq!(p.derive.kernel, mdtf_derive::Kernel::Central);
         let e = parse(text, &["input.sise=3".into()]).unwrap_err();
         assert!(e.contains("sise") && e.contains("--set"), "{e}");
     }
@@ -314,7 +314,7 @@ mod tests {
         let p = parse("[pack]\nprofile = \"peak-finding\"\n[derive]\nkernel = \"gauss:1.5\"\n", &[]).unwrap();
         assert_eq!(
             (p.pack.profile, p.derive.kernel),
-            (mdtf_pack::Profile::PeakFinding, Some(mdtf_derive::Kernel::Gauss { sigma: 1.5 }))
+            (mdtf_pack::Profile::PeakFinding, mdtf_derive::Kernel::Gauss { sigma: 1.5 })
         );
     }
 }

@@ -32,7 +32,6 @@ pub fn resolved_settings(p: &Pipeline, opts: &RunOptions) -> Result<toml::Table,
     if let Some(f) = &opts.input {
         resolved.input.file = Some(f.clone());
     }
-    resolved.derive.kernel.get_or_insert(mdtf_derive::DEFAULT_KERNEL);
     let mut table = toml::Table::try_from(&resolved).map_err(|e| e.to_string())?;
     if resolved.pack.profile != Profile::ProjectedTetrahedra {
         table.remove("tetra");

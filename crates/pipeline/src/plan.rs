@@ -338,7 +338,7 @@ fn channel_steps(
     }
     if trace {
         let reads = Channel::Distance.row().map_or(&[][..], |r| r.prerequisites).iter().copied().collect();
-        let makes = [Channel::GHit, Channel::Hit, Channel::Distance, Channel::Dot].into();
+        let makes = crate::channel::traced().collect();
         steps.push(PlannedStep { step: Step::Trace, reads, makes });
     }
     steps
@@ -346,8 +346,8 @@ fn channel_steps(
 
 /// What makes a plan's channels: the derivative kernel, the pre-filter and the tracing.
 struct Making<'a> {
-    /// The derivative kernel (None: derive's default).
-    kernel: Option<Kernel>,
+    /// The derivative kernel.
+    kernel: Kernel,
     /// The pre-filter's parameters, when there is one.
     prefilter: Option<&'a BilateralParams>,
     /// The tracing's parameters (d_max, world units, None: the tracing's
@@ -371,7 +371,7 @@ impl Making<'_> {
         trace: bool,
         geometry: &Geometry,
     ) -> (Reach, [usize; 3]) {
-        let kernel = self.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL);
+        let kernel = self.kernel;
         let prefilter_radius = match (self.prefilter, prefilter) {
             (Some(pf), true) => {
                 mdtf_bilateral::box_radius(geometry.spacing, &crate::boundary_chain::prefilter_params(pf, 1.0))

@@ -122,12 +122,15 @@ impl Sphere {
             boundary: params.boundary.clone(),
             ..Default::default()
         };
-        let names = ["g", "f2", "distance", "g_hit", "hit", "dot"].map(String::from);
+        let names: Vec<String> =
+            ["g", "f2"].map(String::from).into_iter().chain(crate::channel::traced_names()).collect();
         let computed = crate::channels::compute_all(&MultiField::from(value.clone()), &names, &chain, &|_, _| {})
             .map_err(|e| e.to_string())?;
         let report = computed.tracing.ok_or("the plan did not trace")?.report;
-        let [g, f2, distance, g_hit, hit, dot] =
-            <[(String, Volume); 6]>::try_from(computed.channels).map_err(|_| "a channel is missing")?.map(|(_, v)| v);
+        let mut made: std::collections::BTreeMap<String, Volume> = computed.channels.into_iter().collect();
+        let mut take = |c: &str| made.remove(c).ok_or_else(|| format!("the run made no {c}"));
+        let (g, f2, distance, g_hit, hit, dot) =
+            (take("g")?, take("f2")?, take("distance")?, take("g_hit")?, take("hit")?, take("dot")?);
         let x = truth.x.samples();
         let shell = (0..x.len()).filter(|&i| x[i].abs() < 2.0 * sigma as f32).collect();
         let a = 255.0 / (sigma * (2.0 * PI).sqrt());

@@ -100,7 +100,7 @@ impl<'a> WholeRun<'a> {
             geo,
             plan,
             derive: DeriveParams {
-                kernel: p.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
+                kernel: p.derive.kernel,
                 padding: meta.padding.map(|r| r.map(|x| x as f32)),
                 ..Default::default()
             },
@@ -222,7 +222,7 @@ impl<'a> WholeRun<'a> {
             _ => mdtf_boundary::Detected::default(),
         };
         let input = BoundaryInput { g, f2, normal: nm, value_range };
-        let out = mdtf_boundary::run_detected(&input, &self.p.boundary, &detected).map_err(at("boundary"))?;
+        let mut out = mdtf_boundary::run_detected(&input, &self.p.boundary, &detected).map_err(at("boundary"))?;
         self.warnings.extend(out.warnings.iter().map(|w| format!("boundary: {w}")));
         let traced = Traced {
             d_max: Some(out.resolved.d_max),
@@ -234,9 +234,9 @@ impl<'a> WholeRun<'a> {
         std::fs::create_dir_all(&rdir).map_err(at("boundary"))?;
         report.write(&rdir).map_err(at("boundary"))?;
         drop(filtered);
-        for (c, v) in [("g_hit", out.g_hit), ("hit", out.hit), ("distance", out.distance), ("dot", out.dot)] {
-            if self.needs(c) {
-                self.chans.insert(c.into(), v);
+        for (c, v) in crate::boundary_chain::take_traced(&mut out) {
+            if self.needs(&c) {
+                self.chans.insert(c, v);
             }
         }
         // derived only for the tracing: free them now

@@ -656,7 +656,8 @@ fn a_task_of_a_run_that_was_taken_over_publishes_nothing() {
 #[test]
 fn every_derivative_channel_and_dot_are_kept_right_and_the_same_slab_by_slab() {
     let keep = ["v", "value", "g", "f2", "nx", "ny", "nz", "gx", "gy", "gz", "hxx", "hxy", "hxz", "hyy", "hyz"];
-    let keep: Vec<String> = keep.iter().chain(&["hzz", "laplacian", "dot", "hit"]).map(|s| s.to_string()).collect();
+    let keep: Vec<String> =
+        keep.iter().chain(&["hzz", "laplacian", "curvature", "dot", "hit"]).map(|s| s.to_string()).collect();
     let keep_set = format!("keep={keep:?}");
     let p = distance_tf_for_clean_data(&["input.size=40", "input.sigma=2.0", &keep_set, "preview=false"]);
     let dir = tempfile::tempdir().unwrap();
@@ -675,6 +676,7 @@ fn every_derivative_channel_and_dot_are_kept_right_and_the_same_slab_by_slab() {
     let g_max = k["g"].iter().fold(0.0f32, |a, &b| a.max(b));
     let f2_max = k["f2"].iter().fold(0.0f32, |a, &b| a.max(b.abs()));
     let (mut dots, mut hits) = (0.0f64, 0usize);
+    let (mut curvature_error, mut near) = (0.0f64, 0usize);
     for i in 0..k["v"].len() {
         let n = [k["nx"][i], k["ny"][i], k["nz"][i]];
         // the gradient is g along the normal
@@ -697,9 +699,18 @@ fn every_derivative_channel_and_dot_are_kept_right_and_the_same_slab_by_slab() {
             dots += k["dot"][i] as f64;
             hits += 1;
         }
+        // every isosurface of the sphere is a sphere: its mean curvature is 1 / rho
+        if k["g"][i] > 0.2 * g_max {
+            let (x, y, z) = (i % 40, i / 40 % 40, i / 1600);
+            let rho = [x, y, z].iter().map(|&c| (c as f64 - 19.5).powi(2)).sum::<f64>().sqrt();
+            curvature_error += (k["curvature"][i] as f64 * rho - 1.0).abs();
+            near += 1;
+        }
     }
     // on a sphere the normals at a voxel and at its boundary hit are both radial
     assert!(hits > 1000 && dots / hits as f64 > 0.99, "mean dot {} over {hits} hits", dots / hits as f64);
+    let curvature_error = curvature_error / near as f64;
+    assert!(near > 1000 && curvature_error < 0.01, "curvature x rho: mean |error| {curvature_error} over {near}");
     // the sidecar says what each kept file is, in its units
     let sidecar: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(opts.output.join("volumes/channels.json")).unwrap()).unwrap();
@@ -711,6 +722,7 @@ fn every_derivative_channel_and_dot_are_kept_right_and_the_same_slab_by_slab() {
         ("g", "value units per world unit", false, "derive"),
         ("gx", "value units per world unit", true, "derive"),
         ("laplacian", "value units per world unit^2", true, "derive"),
+        ("curvature", "per world unit", true, "derive"),
         ("dot", "1", true, "boundary"),
         ("hit", "code", false, "boundary"),
     ] {

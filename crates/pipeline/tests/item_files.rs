@@ -30,7 +30,7 @@ fn items_written_slab_by_slab_have_the_whole_derives_bytes() {
     }
     let items = [Item::Hessian, Item::Value, Item::Grad, Item::G, Item::Laplacian, Item::Normal, Item::F2, Item::InvG];
     let default = BoundaryChainParams::default();
-    let bspline = BoundaryChainParams { kernel: Some(Kernel::BSpline3), epsilon: Some(0.25), ..Default::default() };
+    let bspline = BoundaryChainParams { kernel: Kernel::BSpline3, epsilon: Some(0.25), ..Default::default() };
     for (input_name, ext, chain) in
         [("in.nii", ".nii.gz", &default), ("in.nrrd", ".nrrd", &bspline), ("in.mha", ".nii", &default)]
     {

@@ -5,7 +5,7 @@
 //! pre-filter, on a noisy anisotropic sphere.
 
 use mdtf_datagen::erf_sphere;
-use mdtf_pipeline::blocks::{SlabSize, TRACED_CHANNELS, trace_files};
+use mdtf_pipeline::blocks::{SlabSize, trace_files};
 use mdtf_pipeline::boundary_chain::BoundaryChainParams;
 use mdtf_pipeline::channels;
 use mdtf_pipeline::stages::bilateral::BilateralParams;
@@ -17,7 +17,7 @@ use std::path::Path;
 /// `dir` (channels, flipped, alpha maps; the report in `dir`/boundary); its mean dot.
 fn whole_files(input: &Path, chain: &BoundaryChainParams, dir: &Path) -> f64 {
     let v = mdtf_volume::read(input, &ReadOptions::default()).unwrap();
-    let names = TRACED_CHANNELS.map(String::from).to_vec();
+    let names = mdtf_pipeline::channel::traced_names();
     let mut all = channels::compute_all(&v, &names, chain, &|_, _| {}).unwrap();
     let mut t = all.tracing.take().unwrap();
     let mut files: Vec<(String, Volume)> = all.channels;

@@ -17,8 +17,7 @@ fn zyx([x, y, z]: [usize; 3]) -> (usize, usize, usize) {
 #[pyfunction]
 #[pyo3(signature = (spacing, kernel=None))]
 pub fn kernel_reach(spacing: [f64; 3], kernel: Option<&str>) -> PyResult<(usize, usize, usize)> {
-    let kernel = kernel
-        .map_or(Ok(mdtf_pipeline::stages::derive::DEFAULT_KERNEL), |k| k.parse::<Kernel>().map_err(value_error))?;
+    let kernel = kernel.map_or(Ok(Kernel::default()), |k| k.parse::<Kernel>().map_err(value_error))?;
     let [sz, sy, sx] = spacing;
     Ok(zyx([sx, sy, sz].map(|s| kernel.axis_taps(s).radius())))
 }
@@ -65,8 +64,7 @@ pub fn derive_components(items: Vec<String>) -> PyResult<Vec<String>> {
 #[pyfunction]
 pub fn trace_reach(spacing: [f64; 3], d_max: f64) -> (usize, usize, usize) {
     let [sz, sy, sx] = spacing;
-    zyx(mdtf_pipeline::channel::Reach::new(mdtf_pipeline::stages::derive::DEFAULT_KERNEL, [0; 3], d_max, [sx, sy, sz])
-        .trace)
+    zyx(mdtf_pipeline::channel::Reach::new(Kernel::default(), [0; 3], d_max, [sx, sy, sz]).trace)
 }
 
 /// The tracing's thresholds for a whole volume of `shape` (z, y, x): `median_g` (its lower median

@@ -19,7 +19,7 @@ use pyo3::types::PyDict;
 
 /// The derivative kernel named `kernel` (None: derive's default).
 fn kernel(kernel: Option<&str>) -> PyResult<Kernel> {
-    kernel.map_or(Ok(mdtf_pipeline::stages::derive::DEFAULT_KERNEL), |k| k.parse::<Kernel>().map_err(value_error))
+    kernel.map_or(Ok(Kernel::default()), |k| k.parse::<Kernel>().map_err(value_error))
 }
 
 /// Views of named (z, y, x) arrays, checked to share one shape.
@@ -138,7 +138,7 @@ pub fn boundary<'py>(
 ) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyDict>)> {
     let defaults = BoundaryParams::default();
     let params = BoundaryChainParams {
-        kernel: kernel.map(|k| k.parse::<Kernel>().map_err(value_error)).transpose()?,
+        kernel: self::kernel(kernel)?,
         prefilter: prefilter.map(|(sigma_d, sigma_r)| BilateralParams { sigma_d, sigma_r, ..Default::default() }),
         boundary: BoundaryParams {
             g_min,
@@ -157,9 +157,9 @@ pub fn boundary<'py>(
         boundary_chain::run_on(&geo, v.as_slice().unwrap_or(&[]), &params, &at)
     })?
     .map_err(mdtf_error)?;
-    let b = out.boundary;
+    let mut b = out.boundary;
     let arrays = PyDict::new(py);
-    for (name, v) in [("distance", b.distance), ("g_hit", b.g_hit), ("hit", b.hit), ("dot", b.dot)] {
+    for (name, v) in boundary_chain::take_traced(&mut b) {
         arrays.set_item(name, array(py, v))?;
     }
     arrays.set_item("g", array(py, out.g))?;

@@ -21,6 +21,8 @@ use std::path::PathBuf;
     hessian    hxx, hxy, hxz, hyy, hyz, hzz (per world unit squared)\n  \
     f2         second derivative along the gradient, (grad f)^T H (grad f) / g^2 (0 where g < epsilon)\n  \
     laplacian  hxx + hyy + hzz\n  \
+    curvature  mean curvature of the isosurface, (f2 - laplacian) / (2 g), per world unit\n             \
+(positive where the brighter side is convex: 1/r on a bright sphere of radius r)\n  \
     inv_g      1 / max(g, epsilon); several fields: 1 / max(sqrt(gnorm), epsilon)\n  \
     shade      surface-shading weight 1 - (1 - g/g_max)^2\n  \
     gnorm      multi-field: ||Df^T Df|| (Frobenius) of the fields normalised to [0,1]\n  \

@@ -5,7 +5,8 @@ use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
 use mdtf_pipeline::blocks::{self, SlabSize};
-use mdtf_pipeline::boundary_chain::BoundaryChainParams;
+use mdtf_pipeline::boundary_chain::{BoundaryChainParams, take_traced};
+use mdtf_pipeline::channel::traced_names;
 use mdtf_pipeline::channels::{self, Tracing};
 use mdtf_pipeline::run::BoundarySummary;
 use mdtf_pipeline::stages::bilateral::BilateralParams;
@@ -44,7 +45,7 @@ fn prefilter(text: &str) -> Result<BilateralParams> {
 /// The chain from a value volume: `--kernel`, `--prefilter` and the tracing's parameters `p`.
 fn chain(args: &BoundaryArgs, p: BoundaryParams) -> Result<BoundaryChainParams> {
     Ok(BoundaryChainParams {
-        kernel: args.kernel,
+        kernel: args.kernel.unwrap_or_default(),
         prefilter: args.prefilter.as_deref().map(prefilter).transpose()?,
         boundary: p,
         ..Default::default()
@@ -61,7 +62,7 @@ pub fn run(args: &BoundaryArgs, progress: &Progress) -> Result<()> {
     let p = params(args)?;
     if let (Some(input), true) = (&args.input, args.plan) {
         let chain = chain(args, p)?;
-        let traced = |_: &[String]| TRACED.map(String::from).to_vec();
+        let traced = |_: &[String]| traced_names();
         return crate::input::print_channel_plan(input, &args.read, &traced, &chain);
     }
     let budget = slab_budget(args, progress)?;
@@ -167,9 +168,6 @@ struct Traced {
     tracing: Tracing,
 }
 
-/// The files of the tracing's channels, in the order they are written.
-const TRACED: [&str; 4] = ["distance", "g_hit", "hit", "dot"];
-
 /// The tracing: the planned chain from a value volume (derive, the
 /// pre-filter if asked, tracing), or the tracing alone on given g, f'' and normal.
 fn trace(args: &BoundaryArgs, p: BoundaryParams, progress: &Progress) -> Result<Traced> {
@@ -177,7 +175,7 @@ fn trace(args: &BoundaryArgs, p: BoundaryParams, progress: &Progress) -> Result<
         (Some(input), None, None, None) => {
             let value = progress.step("reading", || scalar(input, args))?;
             let chain = chain(args, p)?;
-            let names = TRACED.map(String::from).to_vec();
+            let names = traced_names();
             let nz = value.geometry.dims[2] as u64;
             let computed = progress
                 .counted("deriving, then tracing", nz, |tick| {
@@ -196,9 +194,9 @@ fn trace(args: &BoundaryArgs, p: BoundaryParams, progress: &Progress) -> Result<
             let (gv, f2v) = progress.step("reading", || -> Result<_> { Ok((scalar(g, args)?, scalar(f2, args)?)) })?;
             let nv = read_input(normal, &args.read, &read_options(&args.read))?.0;
             let input = BoundaryInput { g: &gv, f2: &f2v, normal: &nv, value_range: args.value_range.unwrap_or(255.0) };
-            let out = progress.step("tracing", || mdtf_pipeline::stages::boundary::run(&input, &p))?;
+            let mut out = progress.step("tracing", || mdtf_pipeline::stages::boundary::run(&input, &p))?;
             let report = out.report(&gv);
-            let files = TRACED.map(String::from).into_iter().zip([out.distance, out.g_hit, out.hit, out.dot]).collect();
+            let files = take_traced(&mut out);
             let summary = BoundarySummary { resolved: out.resolved, counts: out.counts, lost: out.lost };
             (files, Tracing { summary, warnings: out.warnings, flipped: out.flipped, alpha: out.alpha, report })
         }

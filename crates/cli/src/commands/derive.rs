@@ -16,12 +16,8 @@ use std::time::Instant;
 /// The items asked for and how they are derived (kernel, border, epsilon).
 fn params(args: &DeriveArgs) -> Result<(Vec<Item>, BoundaryChainParams)> {
     let items = args.items.iter().map(|s| s.parse::<Item>()).collect::<Result<Vec<_>, _>>()?;
-    let chain = BoundaryChainParams {
-        kernel: Some(args.kernel),
-        border: args.border,
-        epsilon: args.epsilon,
-        ..Default::default()
-    };
+    let chain =
+        BoundaryChainParams { kernel: args.kernel, border: args.border, epsilon: args.epsilon, ..Default::default() };
     Ok((items, chain))
 }
 

@@ -36,7 +36,7 @@ fn spec_for(args: &HistogramArgs, i: usize, name: &str) -> Result<AxisSpec> {
 /// Computes and writes the requested histograms.
 pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
     check_axes(args)?;
-    let chain = BoundaryChainParams { kernel: args.kernel, ..Default::default() };
+    let chain = BoundaryChainParams { kernel: args.kernel.unwrap_or_default(), ..Default::default() };
     if args.plan {
         return crate::input::print_channel_plan(&args.input, &args.read, &|_| wanted(args), &chain);
     }
@@ -177,7 +177,7 @@ impl Counting<'_> {
             tent_width: args.tent_width,
             ..HvolParams::on_grid(input.geometry.spacing)
         };
-        let kernel = args.kernel.unwrap_or(mdtf_pipeline::stages::derive::DEFAULT_KERNEL);
+        let kernel = args.kernel.unwrap_or_default();
         let d = DeriveParams { kernel, ..DeriveParams::default() };
         let value;
         let values = if input.fields.len() == 1 {

@@ -39,7 +39,7 @@ pub fn run(args: &PackArgs, progress: &Progress) -> Result<()> {
     let folder = OutputFolder::begin(output, &inputs)?;
     let ((chans, fields), d_max) = read_channels(input, profile, args, progress)?;
     let ranges = pack_inputs::ranges(&chans, &given_ranges(args)?, d_max)?;
-    let kernel = args.kernel.unwrap_or(mdtf_pipeline::stages::derive::DEFAULT_KERNEL);
+    let kernel = args.kernel.unwrap_or_default();
     let provenance = provenance(input, profile, &ranges, kernel);
     let tf = read_tf(args.tf.as_deref())?;
     let alpha: AlphaMap = args.alpha.parse().map_err(anyhow::Error::msg)?;
@@ -76,7 +76,7 @@ fn plan_only(input: &Path, profile: Profile, args: &PackArgs) -> Result<()> {
     if input.is_dir() {
         bail!("--plan: {} is a folder of stage outputs, which the pack reads as they are", input.display());
     }
-    let chain = BoundaryChainParams { kernel: args.kernel, ..Default::default() };
+    let chain = BoundaryChainParams { kernel: args.kernel.unwrap_or_default(), ..Default::default() };
     crate::input::print_channel_plan(input, &args.read, &|fields| profile.channels(fields), &chain)
 }
 
@@ -177,7 +177,7 @@ fn gaussians_of(
 /// Channels of a value volume computed in process; a multi-field input's field names are the fields.
 fn from_value(input: &Path, profile: Profile, args: &PackArgs) -> Result<ChannelsAndFields> {
     let (mf, _) = read_input(input, &args.read, &read_options(&args.read))?;
-    let kernel = args.kernel;
+    let kernel = args.kernel.unwrap_or_default();
     let fields: Vec<String> =
         if mf.fields.len() > 1 { mf.fields.iter().map(|f| f.name.clone()).collect() } else { Vec::new() };
     let names = profile.channels(&fields);

@@ -82,7 +82,7 @@ pub use slab_channels::SlabChannels;
 pub use slab_histograms::{HistogramAxes, HistogramCounts};
 pub use store::{ChannelStore, StoreWriter};
 pub use tasks::run_task;
-pub use trace_files::{TRACED_CHANNELS, TracedFiles, automatic_trace_budget, trace_files};
+pub use trace_files::{TracedFiles, automatic_trace_budget, trace_files};
 
 use crate::file::Pipeline;
 use crate::progress::{Progress, cancelled};

@@ -178,9 +178,6 @@ pub struct Prefilter {
     pub params: BilateralParams,
 }
 
-/// The channels the tracing stores for each slab.
-pub(super) const TRACED: [&str; 4] = ["g_hit", "hit", "distance", "dot"];
-
 impl SlabPass {
     /// The run's stage this pass belongs to (its errors and partials name it).
     pub(super) fn stage(&self) -> &'static str {
@@ -207,7 +204,7 @@ impl SlabPass {
             SlabPass::Input { .. } => vec!["v".into()],
             SlabPass::Derive { store, .. } => store.clone(),
             SlabPass::Prefilter { filters, .. } => filters.iter().map(|f| f.output.clone()).collect(),
-            SlabPass::Trace { .. } => TRACED.map(String::from).to_vec(),
+            SlabPass::Trace { .. } => crate::channel::traced_names(),
             SlabPass::Select { .. } | SlabPass::Pack { .. } => Vec::new(),
         }
     }

@@ -124,7 +124,7 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
         let tasks = nz.div_ceil(trace.planes.max(1));
         let memory = trace_block_bytes(trace.planes, trace.rows, geometry, &plan);
         passes.push(PassSize { pass: "boundary", tasks, memory, read, written: 4 * tp * plane });
-        stored.extend(["g_hit", "hit", "distance", "dot"].map(String::from));
+        stored.extend(crate::channel::traced_names());
     }
     let texel = texel_bytes(p);
     let pack_planes = if hvol { nz.div_ceil(mdtf_histogram::HVOL_PARTS) as u64 } else { h };

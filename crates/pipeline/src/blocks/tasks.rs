@@ -6,11 +6,12 @@
 
 use super::budget::slabs;
 use super::partials::{SlabPartial, TraceSums};
-use super::remote::{Prefilter, SlabJob, SlabPass, TRACED};
+use super::remote::{Prefilter, SlabJob, SlabPass};
 use super::resume;
 use super::slab_histograms::{HistogramAxes, HistogramCounts};
 use super::trace::{TraceSetup, prefilter_slab, trace_slab};
 use super::{ChannelStore, SlabChannels};
+use crate::boundary_chain::TracedVolumes;
 use crate::pre_detect::VgCounts;
 use crate::run::{RunError, at, fail};
 use mdtf_histogram::Axis;
@@ -235,8 +236,10 @@ impl Task<'_> {
         for strip in slabs(chans.ny(), (*rows).max(1)) {
             let slab = trace_slab(&mut chans, &setup, &self.z, &strip, spent.take())?;
             let b = &slab.trace;
-            for (c, v) in TRACED.iter().zip([&b.g_hit, &b.hit, &b.distance, &b.dot]) {
-                out.put_rows(c, self.z.start, strip.clone(), v).map_err(at("boundary"))?;
+            for c in crate::channel::traced() {
+                if let Some(v) = b.traced(c) {
+                    out.put_rows(&c.name(&[]), self.z.start, strip.clone(), v).map_err(at("boundary"))?;
+                }
             }
             partial.summarise("g_hit", b.g_hit.samples(), self.voxels);
             sums.add(&slab);

@@ -20,9 +20,6 @@ use mdtf_volume::{ReadOptions, SampleType, SlabWriter};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
-/// The traced channels written, in order.
-pub const TRACED_CHANNELS: [&str; 4] = ["distance", "g_hit", "hit", "dot"];
-
 /// What [`trace_files`] wrote and found.
 #[derive(Debug)]
 pub struct TracedFiles {
@@ -84,7 +81,7 @@ fn tracing_pipeline(input: &Path, read: &ReadOptions, chain: &BoundaryChainParam
             nifti: false,
         },
         tetra: Default::default(),
-        keep: TRACED_CHANNELS.map(String::from).to_vec(),
+        keep: crate::channel::traced_names(),
         keep_format: Default::default(),
         preview: false,
     }
@@ -127,8 +124,10 @@ pub fn trace_files(
     };
     run.progress.stage("write")?;
     let maps = mdtf_boundary::hit_maps(&chain.boundary, summary.resolved.d_max);
-    let names: Vec<String> =
-        TRACED_CHANNELS.iter().map(|c| c.to_string()).chain(maps.iter().map(|m| m.name.clone())).collect();
+    let traced = crate::channel::traced_names();
+    let names: Vec<String> = traced.iter().cloned().chain(maps.iter().map(|m| m.name.clone())).collect();
+    let index = |c: &str| traced.iter().position(|t| t == c).ok_or_else(|| fail("write")(format!("no traced {c}")));
+    let (distance_at, hit_at) = (index("distance")?, index("hit")?);
     let mut writers = Vec::with_capacity(names.len());
     let mut files = Vec::with_capacity(names.len());
     for name in names {
@@ -140,11 +139,11 @@ pub fn trace_files(
     for (k, z) in run.slabs.iter().enumerate() {
         run.progress.slab(k + 1, run.slabs.len())?;
         // the stored channels, then each map from the distance and hit
-        for (c, (_, samples)) in TRACED_CHANNELS.iter().zip(writers.iter_mut()) {
+        for (c, (_, samples)) in traced.iter().zip(writers.iter_mut()) {
             chans.samples_into(c, z.clone(), samples).map_err(fail("write"))?;
         }
-        let (stored, made) = writers.split_at_mut(TRACED_CHANNELS.len());
-        let (distance, hit) = (&stored[0].1, &stored[2].1);
+        let (stored, made) = writers.split_at_mut(traced.len());
+        let (distance, hit) = (&stored[distance_at].1, &stored[hit_at].1);
         for (map, (_, out)) in maps.iter().zip(made.iter_mut()) {
             out.clear();
             out.extend(distance.iter().zip(hit).map(|(&d, &h)| map.at(d, h)));

@@ -213,7 +213,7 @@ def derive(
     """Derivative measures of a (z, y, x) array, or of several fields (a
     mapping name -> array) for the multi-field items (gnorm, jacobian).
 
-    ``items``: value, grad, g, normal, hessian, f2, laplacian, inv_g, shade,
+    ``items``: value, grad, g, normal, hessian, f2, laplacian, curvature, inv_g, shade,
     gnorm, jacobian (one name, or several). ``kernel``: central, central4 (the default), bspline3,
     catmull-rom or gauss:SIGMA (voxels). ``border``: clamp (the default),
     mirror or wrap. Derivatives are per world unit. Returns one array per

@@ -297,7 +297,7 @@ impl<'a> SlabPasses<'a> {
         let span = self.stats.range("v").map_or(0.0, |(lo, hi)| hi - lo);
         DeriveParams {
             items: Vec::new(),
-            kernel: self.p.derive.kernel.unwrap_or(mdtf_derive::DEFAULT_KERNEL),
+            kernel: self.p.derive.kernel,
             epsilon: Some(mdtf_derive::default_epsilon(span, self.geo.min_spacing())),
             border: mdtf_derive::Border::Clamp,
             padding: self.padding.map(|r| r.map(|x| x as f32)),

@@ -6,6 +6,8 @@ use crate::blocks::partials::{TracePartial, TraceSums};
 use crate::blocks::remote::{Prefilter, SlabPass, SlabTasks};
 use crate::blocks::trace::{self, SlabTrace, TraceSetup};
 use crate::blocks::{SlabChannels, TraceBlocks, reductions, slabs};
+use crate::boundary_chain::TracedVolumes;
+use crate::channel::{Channel, traced};
 use crate::pre_detect::VgCounts;
 use crate::report::{BoundarySummary, Traced};
 use crate::run::{RunError, at, fail};
@@ -155,8 +157,10 @@ impl SlabPasses<'_> {
         let blocks: Vec<(Range<usize>, Range<usize>)> =
             strips.iter().flat_map(|rows| tslabs.iter().map(move |z| (rows.clone(), z.clone()))).collect();
         // dot only when the run keeps it
-        let outputs = &["g_hit", "hit", "distance", "dot"][..if self.plan.wants("dot") { 4 } else { 3 }];
-        let mut writer = chans.store.writer(outputs).map_err(io("boundary"))?;
+        let outputs: Vec<Channel> = traced().filter(|&c| c != Channel::Dot || self.plan.wants("dot")).collect();
+        let names: Vec<String> = outputs.iter().map(|c| c.name(&[])).collect();
+        let mut writer =
+            chans.store.writer(&names.iter().map(String::as_str).collect::<Vec<_>>()).map_err(io("boundary"))?;
         let (progress, stats) = (&self.progress, &mut self.stats);
         // a block is traced (in the memory of one written and summed) while the one before is written and summed
         let mut make = |k: usize, spent: Option<(usize, SlabTrace)>| {
@@ -165,9 +169,10 @@ impl SlabPasses<'_> {
         };
         let mut take = |(k, slab): (usize, SlabTrace)| {
             let (rows, z) = &blocks[k];
-            let made = [&slab.trace.g_hit, &slab.trace.hit, &slab.trace.distance, &slab.trace.dot];
-            for (c, v) in outputs.iter().zip(made) {
-                writer.put_rows(c, z.start, rows.clone(), v).map_err(io("boundary"))?;
+            for (&c, name) in outputs.iter().zip(&names) {
+                if let Some(v) = slab.trace.traced(c) {
+                    writer.put_rows(name, z.start, rows.clone(), v).map_err(io("boundary"))?;
+                }
             }
             stats.add("g_hit", slab.trace.g_hit.samples());
             sums.add(&slab);
