@@ -42,6 +42,13 @@ pub enum AlphaMap {
     },
 }
 
+impl Default for AlphaMap {
+    /// Linear in distance, a = 1, reaching 0 at d_max.
+    fn default() -> AlphaMap {
+        AlphaMap::Linear { a: 1.0, dc: None }
+    }
+}
+
 impl AlphaMap {
     /// The opacity at distance d >= 0, with `d_max` standing for an omitted dc.
     pub fn eval(&self, d: f64, d_max: f64) -> f64 {

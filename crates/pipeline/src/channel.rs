@@ -147,6 +147,7 @@ pub const TABLE: [Row; 25] = [
         ..derived(Channel::InvG, "inv_g", Item::InvG, texts::INV_G)
     },
     row(Channel::Gnorm, "gnorm", Producer::DeriveFields(Item::Gnorm), &[], texts::GNORM),
+    row(Channel::Distance, "distance", Producer::Trace, TRACE_IN, texts::DISTANCE),
     row(Channel::GHit, "g_hit", Producer::Trace, TRACE_IN, texts::G_HIT),
     row(
         Channel::Hit,
@@ -160,7 +161,6 @@ pub const TABLE: [Row; 25] = [
             false,
         ),
     ),
-    row(Channel::Distance, "distance", Producer::Trace, TRACE_IN, texts::DISTANCE),
     row(
         Channel::Dot,
         "dot",
@@ -209,7 +209,7 @@ pub const TABLE: [Row; 25] = [
     ),
 ];
 
-/// The channels the tracing makes, in table order (g_hit, hit, distance,
+/// The channels the tracing makes, in table order (distance, g_hit, hit,
 /// dot): the rows whose producer is the tracing. Where each is in the
 /// tracing's output: [`crate::boundary_chain::TracedVolumes`].
 pub fn traced() -> impl Iterator<Item = Channel> + Clone {

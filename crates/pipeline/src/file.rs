@@ -141,9 +141,9 @@ pub struct PackSection {
     /// Transfer-function file (relative to the pipeline file).
     #[serde(default)]
     pub tf: Option<PathBuf>,
-    /// distance-tf: the alpha map of distance.
+    /// distance-tf: the alpha map of distance (default: linear, a = 1).
     #[serde(default)]
-    pub alpha: Option<AlphaMap>,
+    pub alpha: AlphaMap,
     /// gaussian-tf without a TF file: fit the Gaussian to the voxels where
     /// this mask volume (relative to the pipeline file) is positive.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -151,13 +151,6 @@ pub struct PackSection {
     /// Also write every texture as NIfTI-1.
     #[serde(default)]
     pub nifti: bool,
-}
-
-impl PackSection {
-    /// The alpha map of distance: the pipeline's, else linear in distance (a = 1).
-    pub fn alpha_map(&self) -> AlphaMap {
-        self.alpha.unwrap_or(AlphaMap::Linear { a: 1.0, dc: None })
-    }
 }
 
 /// The file format of kept channels (`keep_format`).

@@ -168,158 +168,200 @@ pub fn luts(
     hvol: Option<&HistogramVolume>,
     derive: &mdtf_derive::DeriveParams,
 ) -> Result<Vec<Lut>, crate::error::StageError> {
-    let get = |n: &str| chans.iter().find(|(c, _)| c == n).map(|(_, v)| v);
-    let mut out = Vec::new();
-    match profile {
-        Profile::Slicer3dtf => match tf {
-            Some(tf) => out.extend(tf.slicer_luts()),
-            None => {
-                let computed;
-                let hv = match hvol {
-                    Some(h) => h,
-                    None => {
-                        let (Some(v), Some(g), Some(f2)) = (get("v"), get("g"), get("f2")) else {
-                            return Err(
-                                HistogramError::Degenerate("the default opacity needs v, g and f2".into()).into()
-                            );
-                        };
-                        computed = histogram_volume(
-                            v.samples(),
-                            g.samples(),
-                            f2.samples(),
-                            v.plane_len(),
-                            &HvolParams::on_grid(v.geometry.spacing),
-                        )?;
-                        &computed
-                    }
-                };
-                let [av, ag] = &hv.vg_axes;
-                let axis = |c: &str, a: &mdtf_histogram::Axis| LutAxis {
-                    channel: c.into(),
-                    size: a.bins,
-                    min: a.min,
-                    max: a.max,
-                };
-                let (v_axis, g_axis) = (axis("v", av), axis("g", ag));
-                let arches = arches_of(hv);
-                if arches.is_empty() {
-                    out.push(Lut {
-                        name: "tf2d_default".into(),
-                        meaning: format!(
-                            "opacity over (v, g): tent of half-width {:.4} around p(v, g) = 0 (Kindlmann-Durkin, sigma {:.4}); colour white (no boundary found to colour)",
-                            hv.tent_width, hv.sigma
-                        ),
-                        axes: vec![v_axis, g_axis],
-                        components: 4,
-                        values: hv.opacity.iter().flat_map(|&a| [1.0, 1.0, 1.0, a]).collect(),
-                        unit_range: true,
-                        u16_range: None,
-                    });
-                } else {
-                    let spacing = chans.first().map_or(1.0, |(_, v)| v.geometry.min_spacing());
-                    let tent =
-                        Tent { opacity: &hv.opacity, peak: hv.max_opacity, half_width_voxels: hv.tent_width / spacing };
-                    out.push(boundary_tf(&v_axis, &g_axis, tent, &arches));
-                }
-            }
-        },
-        Profile::DistanceTf => {
-            let d_max = ranges
-                .get("distance")
-                .map(|r| r[1])
-                .or_else(|| get("distance").and_then(|d| d.finite_range()).map(|r| r.1 as f64));
-            let d_max = d_max.filter(|d| *d > 0.0).unwrap_or(15.0);
-            out.push(Lut {
-                name: "alpha_d".into(),
-                meaning: format!("opacity over the distance to the boundary: {alpha} (distance paper eqs. 9-11)"),
-                axes: vec![LutAxis { channel: "distance".into(), size: 256, min: 0.0, max: d_max }],
-                components: 1,
-                values: (0..256).map(|k| alpha.eval((k as f64 + 0.5) * d_max / 256.0, d_max) as f32).collect(),
-                unit_range: true,
-                u16_range: None,
-            });
-            if let Some(tf) = tf {
-                out.push(tf.distance_alpha_u());
-            } else if let Some(v) = get("v") {
-                // without a TF: alpha_u from the boundaries the histogram volume shows
-                let hv = hvol_or_computed(hvol, v, derive)?;
-                let arches = arches_of(&hv);
-                if !arches.is_empty() {
-                    let spacing = v.geometry.min_spacing();
-                    let cells = 256;
-                    let step = d_max / cells as f64;
-                    let alpha_d_voxels = 2.0
-                        * (0..cells).map(|k| alpha.eval((k as f64 + 0.5) * step, d_max) * step).sum::<f64>()
-                        / spacing;
-                    let [av, _] = &hv.vg_axes;
-                    let g_top = arches.iter().map(|a| 1.3 * a.g_peak).fold(0.0, f64::max);
-                    let v_axis = LutAxis { channel: "v".into(), size: 256, min: av.min, max: av.max };
-                    let g_axis = LutAxis { channel: "g_hit".into(), size: 256, min: 0.0, max: g_top };
-                    out.push(boundary_alpha_u(&v_axis, &g_axis, alpha_d_voxels, &arches));
-                }
-            }
-        }
+    let mut out = match profile {
+        Profile::Slicer3dtf => slicer_luts(tf, chans, hvol)?,
+        Profile::DistanceTf => distance_luts(tf, alpha, chans, ranges, hvol, derive)?,
         // the mesh pack's tables come from mdtf-tetra
-        Profile::ProjectedTetrahedra => return Ok(out),
-        Profile::GaussianTf | Profile::PeakFinding => {
-            if profile == Profile::GaussianTf {
-                out.extend(crate::gaussians::analytic_integration_tables());
-            }
-            if let Some(tf) = tf {
-                let step = chans.first().map_or(1.0, |(_, v)| v.geometry.min_spacing());
-                out.extend(tf.table_luts(step));
-                // peak-finding: the widgets over (v, 1/g) for multidimensional peak finding
-                if profile == Profile::PeakFinding
-                    && let Some(r) = ranges.get("inv_g")
-                    && let Some(lut) = tf.peak_finding_tf2d(*r, [1024, 1024])
-                {
-                    out.push(lut);
-                }
-            } else if profile == Profile::PeakFinding
-                && let (Some(v), Some(r)) = (get("v"), ranges.get("inv_g"))
-            {
-                // scalar data without a TF: a thin widget at each boundary the histogram volume shows
-                let hv = hvol_or_computed(hvol, v, derive)?;
-                let arches = arches_of(&hv);
-                let default = boundary_isosurface_tf(&arches, [hv.vg_axes[0].min, hv.vg_axes[0].max]);
-                if let Some(mut lut) = default.peak_finding_tf2d(*r, [1024, 1024]) {
-                    lut.meaning = format!(
-                        "{}; the default TF: a thin constant rectangle at the centre value of each boundary found in the \
-                         histogram volume ({} found), its colour and surface opacity as slicer-3dtf's default gives them",
-                        lut.meaning,
-                        arches.len()
-                    );
-                    out.push(lut);
-                }
-            } else if profile == Profile::PeakFinding
-                && let Some(r) = ranges.get("inv_g")
-                && let Some((name, first)) = chans.first().filter(|(c, _)| c != "inv_g")
-                && let Some((lo, hi)) = first.finite_range()
-            {
-                // multi-field data without a TF: thin widgets at the boundaries of the first field
-                let arches = detected_arches(first, None, derive, true)?;
-                let (lo, hi) = (lo as f64, hi as f64);
-                let default = multi_field_isosurface_tf(&arches, [lo, hi], hi - lo);
-                if let Some(mut lut) = default.peak_finding_tf2d(*r, [1024, 1024]) {
-                    lut.axes[0].channel = name.clone();
-                    lut.meaning = format!(
-                        "RGBA over ({name}, inv_g), for multidimensional peak finding; the default TF: a thin constant \
-                         rectangle at the centre value of each boundary found in the histogram volume of {name} ({} \
-                         found), open towards small inv_g (the other fields only raise ||G||), its colour and surface \
-                         opacity as slicer-3dtf's default gives them",
-                        arches.len()
-                    );
-                    out.push(lut);
-                }
-            }
-        }
-    }
+        Profile::ProjectedTetrahedra => return Ok(Vec::new()),
+        Profile::GaussianTf | Profile::PeakFinding => table_profile_luts(profile, tf, chans, ranges, hvol, derive)?,
+    };
     // a product TF over any of the pack's channels, each factor a table
     // (peak finding's 2D factors at the 1024^2 its paper recommends)
     if let Some(product) = tf.and_then(|t| t.product.as_ref()) {
         let packed: Vec<String> = chans.iter().map(|(c, _)| c.clone()).collect();
         let cells = if profile == Profile::PeakFinding { 1024 } else { 256 };
         out.extend(product.luts(&packed, cells).map_err(HistogramError::BadAxis)?);
+    }
+    Ok(out)
+}
+
+/// Channel `n` of `chans`, if there.
+fn named<'v>(chans: &'v [(String, Volume)], n: &str) -> Option<&'v Volume> {
+    chans.iter().find(|(c, _)| c == n).map(|(_, v)| v)
+}
+
+/// slicer-3dtf's tables: the TF file's, else the default opacity over
+/// (v, g) from the histogram volume (`hvol`, or counted from `chans`),
+/// coloured at the boundaries it shows.
+fn slicer_luts(
+    tf: Option<&TfFile>,
+    chans: &[(String, Volume)],
+    hvol: Option<&HistogramVolume>,
+) -> Result<Vec<Lut>, crate::error::StageError> {
+    let get = |n: &str| named(chans, n);
+    let mut out = Vec::new();
+    match tf {
+        Some(tf) => out.extend(tf.slicer_luts()),
+        None => {
+            let computed;
+            let hv = match hvol {
+                Some(h) => h,
+                None => {
+                    let (Some(v), Some(g), Some(f2)) = (get("v"), get("g"), get("f2")) else {
+                        return Err(HistogramError::Degenerate("the default opacity needs v, g and f2".into()).into());
+                    };
+                    computed = histogram_volume(
+                        v.samples(),
+                        g.samples(),
+                        f2.samples(),
+                        v.plane_len(),
+                        &HvolParams::on_grid(v.geometry.spacing),
+                    )?;
+                    &computed
+                }
+            };
+            let [av, ag] = &hv.vg_axes;
+            let axis =
+                |c: &str, a: &mdtf_histogram::Axis| LutAxis { channel: c.into(), size: a.bins, min: a.min, max: a.max };
+            let (v_axis, g_axis) = (axis("v", av), axis("g", ag));
+            let arches = arches_of(hv);
+            if arches.is_empty() {
+                out.push(Lut {
+                            name: "tf2d_default".into(),
+                            meaning: format!(
+                                "opacity over (v, g): tent of half-width {:.4} around p(v, g) = 0 (Kindlmann-Durkin, sigma {:.4}); colour white (no boundary found to colour)",
+                                hv.tent_width, hv.sigma
+                            ),
+                            axes: vec![v_axis, g_axis],
+                            components: 4,
+                            values: hv.opacity.iter().flat_map(|&a| [1.0, 1.0, 1.0, a]).collect(),
+                            unit_range: true,
+                            u16_range: None,
+                        });
+            } else {
+                let spacing = chans.first().map_or(1.0, |(_, v)| v.geometry.min_spacing());
+                let tent =
+                    Tent { opacity: &hv.opacity, peak: hv.max_opacity, half_width_voxels: hv.tent_width / spacing };
+                out.push(boundary_tf(&v_axis, &g_axis, tent, &arches));
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// distance-tf's tables: `alpha_d` from `alpha`, and `alpha_u` from the
+/// TF file or, without one, from the boundaries the histogram volume shows.
+fn distance_luts(
+    tf: Option<&TfFile>,
+    alpha: &AlphaMap,
+    chans: &[(String, Volume)],
+    ranges: &BTreeMap<String, [f64; 2]>,
+    hvol: Option<&HistogramVolume>,
+    derive: &mdtf_derive::DeriveParams,
+) -> Result<Vec<Lut>, crate::error::StageError> {
+    let get = |n: &str| named(chans, n);
+    let mut out = Vec::new();
+
+    let d_max = ranges
+        .get("distance")
+        .map(|r| r[1])
+        .or_else(|| get("distance").and_then(|d| d.finite_range()).map(|r| r.1 as f64));
+    let d_max = d_max.filter(|d| *d > 0.0).unwrap_or(15.0);
+    out.push(Lut {
+        name: "alpha_d".into(),
+        meaning: format!("opacity over the distance to the boundary: {alpha} (distance paper eqs. 9-11)"),
+        axes: vec![LutAxis { channel: "distance".into(), size: 256, min: 0.0, max: d_max }],
+        components: 1,
+        values: (0..256).map(|k| alpha.eval((k as f64 + 0.5) * d_max / 256.0, d_max) as f32).collect(),
+        unit_range: true,
+        u16_range: None,
+    });
+    if let Some(tf) = tf {
+        out.push(tf.distance_alpha_u());
+    } else if let Some(v) = get("v") {
+        // without a TF: alpha_u from the boundaries the histogram volume shows
+        let hv = hvol_or_computed(hvol, v, derive)?;
+        let arches = arches_of(&hv);
+        if !arches.is_empty() {
+            let spacing = v.geometry.min_spacing();
+            let cells = 256;
+            let step = d_max / cells as f64;
+            let alpha_d_voxels =
+                2.0 * (0..cells).map(|k| alpha.eval((k as f64 + 0.5) * step, d_max) * step).sum::<f64>() / spacing;
+            let [av, _] = &hv.vg_axes;
+            let g_top = arches.iter().map(|a| 1.3 * a.g_peak).fold(0.0, f64::max);
+            let v_axis = LutAxis { channel: "v".into(), size: 256, min: av.min, max: av.max };
+            let g_axis = LutAxis { channel: "g_hit".into(), size: 256, min: 0.0, max: g_top };
+            out.push(boundary_alpha_u(&v_axis, &g_axis, alpha_d_voxels, &arches));
+        }
+    }
+
+    Ok(out)
+}
+
+/// gaussian-tf's and peak-finding's tables: the analytic integration
+/// tables (gaussian-tf), the TF file's tables, and peak-finding's tf2d over
+/// (v, 1/g): the TF file's, else the default at the boundaries found.
+fn table_profile_luts(
+    profile: Profile,
+    tf: Option<&TfFile>,
+    chans: &[(String, Volume)],
+    ranges: &BTreeMap<String, [f64; 2]>,
+    hvol: Option<&HistogramVolume>,
+    derive: &mdtf_derive::DeriveParams,
+) -> Result<Vec<Lut>, crate::error::StageError> {
+    let get = |n: &str| named(chans, n);
+    let mut out = Vec::new();
+
+    if profile == Profile::GaussianTf {
+        out.extend(crate::gaussians::analytic_integration_tables());
+    }
+    if let Some(tf) = tf {
+        let step = chans.first().map_or(1.0, |(_, v)| v.geometry.min_spacing());
+        out.extend(tf.table_luts(step));
+        // peak-finding: the widgets over (v, 1/g) for multidimensional peak finding
+        if profile == Profile::PeakFinding
+            && let Some(r) = ranges.get("inv_g")
+            && let Some(lut) = tf.peak_finding_tf2d(*r, [1024, 1024])
+        {
+            out.push(lut);
+        }
+    } else if profile == Profile::PeakFinding
+        && let (Some(v), Some(r)) = (get("v"), ranges.get("inv_g"))
+    {
+        // scalar data without a TF: a thin widget at each boundary the histogram volume shows
+        let hv = hvol_or_computed(hvol, v, derive)?;
+        let arches = arches_of(&hv);
+        let default = boundary_isosurface_tf(&arches, [hv.vg_axes[0].min, hv.vg_axes[0].max]);
+        if let Some(mut lut) = default.peak_finding_tf2d(*r, [1024, 1024]) {
+            lut.meaning = format!(
+                "{}; the default TF: a thin constant rectangle at the centre value of each boundary found in the \
+                 histogram volume ({} found), its colour and surface opacity as slicer-3dtf's default gives them",
+                lut.meaning,
+                arches.len()
+            );
+            out.push(lut);
+        }
+    } else if profile == Profile::PeakFinding
+        && let Some(r) = ranges.get("inv_g")
+        && let Some((name, first)) = chans.first().filter(|(c, _)| c != "inv_g")
+        && let Some((lo, hi)) = first.finite_range()
+    {
+        // multi-field data without a TF: thin widgets at the boundaries of the first field
+        let arches = detected_arches(first, None, derive, true)?;
+        let (lo, hi) = (lo as f64, hi as f64);
+        let default = multi_field_isosurface_tf(&arches, [lo, hi], hi - lo);
+        if let Some(mut lut) = default.peak_finding_tf2d(*r, [1024, 1024]) {
+            lut.axes[0].channel = name.clone();
+            lut.meaning = format!(
+                "RGBA over ({name}, inv_g), for multidimensional peak finding; the default TF: a thin constant \
+                 rectangle at the centre value of each boundary found in the histogram volume of {name} ({} \
+                 found), open towards small inv_g (the other fields only raise ||G||), its colour and surface \
+                 opacity as slicer-3dtf's default gives them",
+                arches.len()
+            );
+            out.push(lut);
+        }
     }
     Ok(out)
 }

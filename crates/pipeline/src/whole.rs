@@ -473,7 +473,7 @@ impl<'a> WholeRun<'a> {
             .filter_map(|c| self.chans.remove(&c).map(|v| (c, v)))
             .collect();
         let ranges = crate::pack_inputs::ranges(&pack_chans, &BTreeMap::new(), traced.d_max).map_err(at("pack"))?;
-        let alpha = self.p.pack.alpha_map();
+        let alpha = self.p.pack.alpha;
         let luts = crate::pack_inputs::luts(profile, tf, &alpha, &pack_chans, &ranges, hvol, &self.derive)
             .map_err(at("pack"))?;
         let gaussians = self.gaussians(tf, hvol, &pack_chans)?;

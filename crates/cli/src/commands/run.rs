@@ -65,7 +65,8 @@ fn print_plan(args: &RunArgs, pipeline: &Pipeline, opts: &RunOptions, progress: 
     let geo = mdtf_volume::Geometry::new(crate::input::parse_dims(dims, "--dims")?, [1.0; 3]);
     let plan = mdtf_pipeline::plan::Plan::resolve(pipeline, &[], &geo)?;
     crate::input::print_plan(&args.pipeline.display().to_string(), "a grid of --dims", &geo, &plan);
-    let size = given_slab_size(args).unwrap_or(SlabSize::Budget(mdtf_volume::available_memory() / 4 * 3));
+    let usable = mdtf_pipeline::blocks::usable_memory(mdtf_volume::available_memory());
+    let size = given_slab_size(args).unwrap_or(SlabSize::Budget(usable));
     let sizing = mdtf_pipeline::blocks::sizing(pipeline, &geo, size).map_err(anyhow::Error::msg)?;
     println!("{sizing}");
     progress.note("timing the pipeline by slabs on two small phantoms for the time per voxel ...");

@@ -219,12 +219,17 @@ fn whole_run_bytes_per_voxel(profile: mdtf_pack::Profile) -> u64 {
     }
 }
 
+/// The memory a run may take of `available` bytes when not told: three quarters.
+pub fn usable_memory(available: u64) -> u64 {
+    available / 4 * 3
+}
+
 /// The budget a run without `--memory-budget` takes: None (the whole
 /// volume at once) when the whole run of `voxels` voxels with `profile`
 /// fits in three quarters of `available` bytes, else those three quarters
 /// (slab by slab).
 pub fn automatic_budget(profile: mdtf_pack::Profile, voxels: u64, available: u64) -> Option<u64> {
-    let usable = available / 4 * 3;
+    let usable = usable_memory(available);
     (whole_run_bytes_per_voxel(profile).saturating_mul(voxels) > usable).then_some(usable)
 }
 
@@ -241,7 +246,7 @@ pub fn automatic_file_budget(
 ) -> Option<(u64, Geometry)> {
     let reader = mdtf_volume::PlaneReader::open(input, read).ok()??;
     let geo = reader.geometry().clone();
-    let usable = available / 4 * 3;
+    let usable = usable_memory(available);
     (bytes_per_voxel.saturating_mul(geo.voxel_count() as u64) > usable).then_some((usable, geo))
 }
 

@@ -71,7 +71,9 @@ mod trace;
 mod trace_files;
 
 use crate::inputs::InputMeta;
-pub use budget::{TraceBlocks, automatic_budget, automatic_file_budget, fit_slabs, fit_trace, slab_height, slabs};
+pub use budget::{
+    TraceBlocks, automatic_budget, automatic_file_budget, fit_slabs, fit_trace, slab_height, slabs, usable_memory,
+};
 pub use item_files::{ItemFiles, automatic_item_budget, derive_item_files, items_unsupported};
 pub use partials::{SlabPartial, TracePartial};
 pub use pool::SamplePool;
@@ -342,7 +344,9 @@ fn preview_unaffordable(size: SlabSize, geo: &Geometry, available: u64) -> Optio
     let preview_bytes = (PREVIEW_CHANNELS * geo.voxel_count() * 4) as u64;
     let (limit, what) = match size {
         SlabSize::Budget(b) => (b, "the memory budget of"),
-        SlabSize::Planes(_) | SlabSize::Strips { .. } => (available / 4 * 3, "three quarters of the available memory,"),
+        SlabSize::Planes(_) | SlabSize::Strips { .. } => {
+            (usable_memory(available), "three quarters of the available memory,")
+        }
     };
     let human = |b: u64| mdtf_volume::human_bytes(b as u128);
     (preview_bytes > limit).then(|| {

@@ -76,7 +76,7 @@ fn tracing_pipeline(input: &Path, read: &ReadOptions, chain: &BoundaryChainParam
         pack: PackSection {
             profile: mdtf_pack::Profile::DistanceTf,
             tf: None,
-            alpha: None,
+            alpha: Default::default(),
             gtf_from_mask: None,
             nifti: false,
         },

@@ -31,6 +31,39 @@ fn io(stage: &'static str) -> impl Fn(std::io::Error) -> RunError {
     at::<std::io::Error>(stage)
 }
 
+/// The run's channel store in `dir` (a killed run's, taken over, when
+/// `resumed`) and, for a run with tasks, its new run token (else empty).
+fn open_store(dir: &Path, resumed: bool, geo: &Geometry, tasks: bool) -> Result<(ChannelStore, String), RunError> {
+    let store_dir = dir.join(super::store::STORE_DIR);
+    let store = match resumed {
+        true => ChannelStore::resume(store_dir, geo.clone()),
+        false => ChannelStore::create(store_dir, geo.clone()),
+    }
+    .map_err(at("input"))?;
+    let token = if tasks { super::resume::new_token(store.dir())? } else { String::new() };
+    Ok((store, token))
+}
+
+/// The input pass `pass` as tasks, their statistics merged into `stats`:
+/// the samples in the padding's range, and the pass for the report.
+fn input_by_tasks(
+    tasks: &dyn SlabTasks,
+    pass: SlabPass,
+    store: &mut ChannelStore,
+    slabs: &[Range<usize>],
+    token: &str,
+    stats: &mut Stats,
+) -> Result<(u64, crate::report::TaskPass), RunError> {
+    let nothing_derived = Derivation { groups: &[], kernel_reach: 0 };
+    let (parts, ran) = remote::run_pass(tasks, pass, store, nothing_derived, slabs, token)?;
+    let mut padded = 0;
+    for mut part in parts {
+        part.merge_stats_into(stats);
+        padded += part.padded;
+    }
+    Ok((padded, ran))
+}
+
 /// What a slab-by-slab run hands from pass to pass.
 pub(super) struct SlabPasses<'a> {
     p: &'a Pipeline,
@@ -142,32 +175,16 @@ impl<'a> SlabPasses<'a> {
         let (height, trace_blocks) = super::cut(size, &geo, &plan, hvol_needed).map_err(fail("plan"))?;
         let slabs = slabs(nz, height);
         progress.stage(&format!("input: {} slabs of {height} planes", slabs.len()))?;
-        let store_dir = dir.join(super::store::STORE_DIR);
-        let mut store = match resumed {
-            true => ChannelStore::resume(store_dir, geo.clone()),
-            false => ChannelStore::create(store_dir, geo.clone()),
-        }
-        .map_err(at("input"))?;
-        let token = match opts.tasks {
-            Some(_) => super::resume::new_token(store.dir())?,
-            None => String::new(),
-        };
+        let (mut store, token) = open_store(dir, resumed, &geo, opts.tasks.is_some())?;
         let mut stats = Stats::new(&["v", "g", "f2", "g_hit", "g_prefiltered", "inv_g"], geo.voxel_count());
         let mut task_passes = Vec::new();
         let padded = match (opts.tasks.as_deref(), &source) {
             (Some(tasks), Source::Planes(reader)) if reader.reads_any_planes() => {
                 progress.stage("input (tasks)")?;
                 let input = std::path::absolute(reader.path()).map_err(io("input"))?;
-                let (level, nan, padding) = (p.input.level, p.input.nan, meta.padding);
-                let pass = SlabPass::Input { input, level, nan, padding };
-                let mut padded = 0;
-                let nothing_derived = Derivation { groups: &[], kernel_reach: 0 };
-                let (parts, ran) = remote::run_pass(tasks, pass, &mut store, nothing_derived, &slabs, &token)?;
+                let pass = SlabPass::Input { input, level: p.input.level, nan: p.input.nan, padding: meta.padding };
+                let (padded, ran) = input_by_tasks(tasks, pass, &mut store, &slabs, &token, &mut stats)?;
                 task_passes.push(ran);
-                for mut part in parts {
-                    part.merge_stats_into(&mut stats);
-                    padded += part.padded;
-                }
                 padded
             }
             _ => copy_input(&mut source, &mut store, &slabs, &mut stats, meta.padding, &progress)?,

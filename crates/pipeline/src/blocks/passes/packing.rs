@@ -175,7 +175,7 @@ impl SlabPasses<'_> {
         // the tables read the channels' names and grid (their data only without a histogram volume)
         let stubs: Vec<(String, Volume)> =
             profile.channels(&[]).into_iter().map(|c| (c, Volume::zeros(self.geo.z_slab(0..1)))).collect();
-        let alpha = self.p.pack.alpha_map();
+        let alpha = self.p.pack.alpha;
         let tf = self.tf.as_ref();
         let luts =
             crate::pack_inputs::luts(profile, tf, &alpha, &stubs, &params.ranges, hvol.as_ref(), &derived.derive)
