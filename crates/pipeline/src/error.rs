@@ -37,6 +37,9 @@ pub enum StageError {
     /// A file of the run (a report, a figure) could not be written.
     #[error("{0}")]
     Io(#[from] std::io::Error),
+    /// A slab's channels could not be read or derived (a run by slabs).
+    #[error("{0}")]
+    Channels(#[from] crate::blocks::ChannelError),
     /// A report could not be serialised.
     #[error("{0}")]
     Json(#[from] serde_json::Error),

@@ -168,12 +168,13 @@ pub fn luts(
     hvol: Option<&HistogramVolume>,
     derive: &mdtf_derive::DeriveParams,
 ) -> Result<Vec<Lut>, crate::error::StageError> {
+    let from = LutSources { tf, chans, ranges, hvol, derive };
     let mut out = match profile {
-        Profile::Slicer3dtf => slicer_luts(tf, chans, hvol)?,
-        Profile::DistanceTf => distance_luts(tf, alpha, chans, ranges, hvol, derive)?,
+        Profile::Slicer3dtf => slicer_luts(&from)?,
+        Profile::DistanceTf => distance_luts(&from, alpha)?,
         // the mesh pack's tables come from mdtf-tetra
         Profile::ProjectedTetrahedra => return Ok(Vec::new()),
-        Profile::GaussianTf | Profile::PeakFinding => table_profile_luts(profile, tf, chans, ranges, hvol, derive)?,
+        Profile::GaussianTf | Profile::PeakFinding => table_profile_luts(&from, profile)?,
     };
     // a product TF over any of the pack's channels, each factor a table
     // (peak finding's 2D factors at the 1024^2 its paper recommends)
@@ -185,6 +186,16 @@ pub fn luts(
     Ok(out)
 }
 
+/// What a profile's tables are made from (see [`luts`]).
+#[derive(Clone, Copy)]
+struct LutSources<'a> {
+    tf: Option<&'a TfFile>,
+    chans: &'a [(String, Volume)],
+    ranges: &'a BTreeMap<String, [f64; 2]>,
+    hvol: Option<&'a HistogramVolume>,
+    derive: &'a mdtf_derive::DeriveParams,
+}
+
 /// Channel `n` of `chans`, if there.
 fn named<'v>(chans: &'v [(String, Volume)], n: &str) -> Option<&'v Volume> {
     chans.iter().find(|(c, _)| c == n).map(|(_, v)| v)
@@ -193,11 +204,8 @@ fn named<'v>(chans: &'v [(String, Volume)], n: &str) -> Option<&'v Volume> {
 /// slicer-3dtf's tables: the TF file's, else the default opacity over
 /// (v, g) from the histogram volume (`hvol`, or counted from `chans`),
 /// coloured at the boundaries it shows.
-fn slicer_luts(
-    tf: Option<&TfFile>,
-    chans: &[(String, Volume)],
-    hvol: Option<&HistogramVolume>,
-) -> Result<Vec<Lut>, crate::error::StageError> {
+fn slicer_luts(from: &LutSources) -> Result<Vec<Lut>, crate::error::StageError> {
+    let LutSources { tf, chans, hvol, .. } = *from;
     let get = |n: &str| named(chans, n);
     let mut out = Vec::new();
     match tf {
@@ -251,14 +259,8 @@ fn slicer_luts(
 
 /// distance-tf's tables: `alpha_d` from `alpha`, and `alpha_u` from the
 /// TF file or, without one, from the boundaries the histogram volume shows.
-fn distance_luts(
-    tf: Option<&TfFile>,
-    alpha: &AlphaMap,
-    chans: &[(String, Volume)],
-    ranges: &BTreeMap<String, [f64; 2]>,
-    hvol: Option<&HistogramVolume>,
-    derive: &mdtf_derive::DeriveParams,
-) -> Result<Vec<Lut>, crate::error::StageError> {
+fn distance_luts(from: &LutSources, alpha: &AlphaMap) -> Result<Vec<Lut>, crate::error::StageError> {
+    let LutSources { tf, chans, ranges, hvol, derive } = *from;
     let get = |n: &str| named(chans, n);
     let mut out = Vec::new();
 
@@ -302,14 +304,8 @@ fn distance_luts(
 /// gaussian-tf's and peak-finding's tables: the analytic integration
 /// tables (gaussian-tf), the TF file's tables, and peak-finding's tf2d over
 /// (v, 1/g): the TF file's, else the default at the boundaries found.
-fn table_profile_luts(
-    profile: Profile,
-    tf: Option<&TfFile>,
-    chans: &[(String, Volume)],
-    ranges: &BTreeMap<String, [f64; 2]>,
-    hvol: Option<&HistogramVolume>,
-    derive: &mdtf_derive::DeriveParams,
-) -> Result<Vec<Lut>, crate::error::StageError> {
+fn table_profile_luts(from: &LutSources, profile: Profile) -> Result<Vec<Lut>, crate::error::StageError> {
+    let LutSources { tf, chans, ranges, hvol, derive } = *from;
     let get = |n: &str| named(chans, n);
     let mut out = Vec::new();
 

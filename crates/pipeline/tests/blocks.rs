@@ -430,16 +430,10 @@ fn tracing_tasks_cut_their_slabs_in_strips_of_rows_with_the_same_files() {
     unfiltered.prefilter = None;
     assert_runs_equal_the_whole("distance-tf", &unfiltered, None, &[strips], Some(Arc::new(ThreadTasks::default())));
     // the report counts each pass's tasks and the rerun of its first
-    let dir = tempfile::tempdir().unwrap();
-    let opts = RunOptions {
-        pipeline_path: pipelines_dir().join("distance-tf.toml"),
-        output: dir.path().join("out"),
-        tasks: Some(Arc::new(ThreadTasks::default())),
-        ..Default::default()
-    };
-    let report = run_blocks(&p, &opts, strips, &|_| {}, &|_, _| {}).unwrap();
-    let passes: Vec<(String, usize, u64)> =
-        report.slabs.unwrap().tasks.into_iter().map(|t| (t.pass, t.tasks, t.retries)).collect();
+    let passes: Vec<(String, usize, u64)> = task_passes(&p, Arc::new(ThreadTasks::default()), strips)
+        .into_iter()
+        .map(|t| (t.pass, t.tasks, t.retries))
+        .collect();
     let slabs = 28usize.div_ceil(6);
     let want: Vec<(String, usize, u64)> = [
         ("derive", slabs),
@@ -478,16 +472,8 @@ fn a_task_whose_slab_is_done_does_nothing_and_one_whose_bytes_were_damaged_is_ru
     let p = shipped("distance-tf", &["input.size=28", "input.phantom=\"shells\"", "preview=false"]);
     let size = SlabSize::Planes(6);
     assert_runs_equal_the_whole("distance-tf", &p, None, &[size], Some(Arc::new(DamagingTasks)));
-    let dir = tempfile::tempdir().unwrap();
-    let opts = RunOptions {
-        pipeline_path: pipelines_dir().join("distance-tf.toml"),
-        output: dir.path().join("out"),
-        tasks: Some(Arc::new(DamagingTasks)),
-        ..Default::default()
-    };
-    let report = run_blocks(&p, &opts, size, &|_| {}, &|_, _| {}).unwrap();
     let passes: Vec<(String, u64, usize)> =
-        report.slabs.unwrap().tasks.into_iter().map(|t| (t.pass, t.retries, t.reused)).collect();
+        task_passes(&p, Arc::new(DamagingTasks), size).into_iter().map(|t| (t.pass, t.retries, t.reused)).collect();
     // the select pass writes no planes: nothing to damage
     let want: Vec<(String, u64, usize)> =
         [("derive", 1), ("prefilter", 1), ("select", 0), ("boundary", 1), ("pack", 1)]
@@ -582,6 +568,18 @@ fn a_killed_run_resumes_running_only_its_unfinished_tasks_with_the_same_files() 
     std::fs::remove_dir_all(&out).unwrap();
     run_whole(&p, &RunOptions { tasks: None, ..opts(out.clone(), Arc::new(PlainTasks)) }, &|_| {}).unwrap();
     assert_eq!(differing(&files(&out), &resumed), Vec::<String>::new());
+}
+
+/// The passes' tasks, as the report counts them, of a run of the distance-tf `p` with `tasks` in slabs of `size`.
+fn task_passes(p: &Pipeline, tasks: Arc<dyn SlabTasks>, size: SlabSize) -> Vec<mdtf_pipeline::report::TaskPass> {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = RunOptions {
+        pipeline_path: pipelines_dir().join("distance-tf.toml"),
+        output: dir.path().join("out"),
+        tasks: Some(tasks),
+        ..Default::default()
+    };
+    run_blocks(p, &opts, size, &|_| {}, &|_, _| {}).unwrap().slabs.unwrap().tasks
 }
 
 /// Tasks that fail as a lost store would make them.

@@ -130,7 +130,7 @@ pub fn derive_item_files(
         },
         &mut |k, spent: Option<(usize, Vec<(String, Volume)>)>| {
             chans.give_back(spent.map(|(_, v)| v).unwrap_or_default());
-            Ok((cut[k].start, chans.volumes(cut[k].clone(), &wanted).map_err(fail("derive"))?))
+            Ok((cut[k].start, chans.volumes(cut[k].clone(), &wanted).map_err(at("derive"))?))
         },
         &mut |(first, volumes)| {
             // the files are encoded (and compressed) side by side

@@ -4,7 +4,7 @@
 //! select over the selection, the first also counting it; one pass for g's
 //! median when the derive pass counted its first).
 
-use super::SlabChannels;
+use super::{ChannelError, SlabChannels};
 use mdtf_histogram::Axis;
 use mdtf_pack::GaussianPrimitive;
 use mdtf_volume::KeyBuckets;
@@ -14,8 +14,8 @@ use std::ops::Range;
 /// (as [`mdtf_volume::median`] of the whole), or None without any.
 fn median_of_slabs(
     slabs: &[Range<usize>],
-    piece: &mut dyn FnMut(Range<usize>) -> Result<Vec<f32>, String>,
-) -> Result<Option<f32>, String> {
+    piece: &mut dyn FnMut(Range<usize>) -> Result<Vec<f32>, ChannelError>,
+) -> Result<Option<f32>, ChannelError> {
     mdtf_volume::median_of_pieces(|visit| {
         for z in slabs {
             visit(&piece(z.clone())?);
@@ -29,7 +29,7 @@ fn median_of_g(
     chans: &mut SlabChannels,
     slabs: &[Range<usize>],
     buckets: Option<&KeyBuckets>,
-) -> Result<Option<f32>, String> {
+) -> Result<Option<f32>, ChannelError> {
     match buckets {
         Some(b) => mdtf_volume::median_from_buckets(b, |visit| {
             for z in slabs {
@@ -47,7 +47,7 @@ pub(super) fn inverse_gradient_axis(
     chans: &mut SlabChannels,
     slabs: &[Range<usize>],
     g_buckets: Option<&KeyBuckets>,
-) -> Result<Option<Axis>, String> {
+) -> Result<Option<Axis>, ChannelError> {
     let Some(median) = median_of_g(chans, slabs, g_buckets)? else { return Ok(None) };
     let cut = 2.0 * median;
     let above = median_of_slabs(slabs, &mut |z| {
@@ -62,7 +62,7 @@ pub(super) fn median_tgtf(
     chans: &mut SlabChannels,
     slabs: &[Range<usize>],
     g_buckets: Option<&KeyBuckets>,
-) -> Result<GaussianPrimitive, String> {
+) -> Result<GaussianPrimitive, ChannelError> {
     let g_cut = 2.0 * median_of_g(chans, slabs, g_buckets)?.unwrap_or(0.0);
     let (mut structured, mut voxels) = (0usize, 0usize);
     for z in slabs {
@@ -79,6 +79,6 @@ pub(super) fn median_tgtf(
         let g = chans.samples("g", z)?;
         Ok(v.into_iter().zip(g).filter(|(_, g)| **g > g_cut).map(|(v, _)| v).collect())
     })?
-    .ok_or("channel 'v' has no finite sample")?;
+    .ok_or(ChannelError::Missing("channel 'v' has no finite sample"))?;
     Ok(crate::gaussians::median_tgtf(vec![centre as f64], &[1.0]))
 }

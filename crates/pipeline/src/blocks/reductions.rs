@@ -93,13 +93,13 @@ pub(super) fn g_stats(
                 for z in slabs {
                     visit(chans.samples(g_name, z.clone())?);
                 }
-                Ok::<(), String>(())
+                Ok::<(), super::ChannelError>(())
             };
             match buckets {
                 Some(b) => mdtf_volume::order_statistic_from_buckets(k, b, pass),
                 None => mdtf_volume::order_statistic_of_pieces(k, pass),
             }
-            .map_err(fail("boundary"))?
+            .map_err(at("boundary"))?
         }
     };
     Ok(g_volume_stats(stats, g_name, median, value_range, l_min))
@@ -125,8 +125,8 @@ pub(super) fn detected_before_tracing(
     let mut counts = VgCounts::new(av, ag);
     let mut v = Vec::new();
     for z in slabs {
-        chans.samples_into("v", z.clone(), &mut v).map_err(fail("boundary"))?;
-        let g = chans.samples("g", z.clone()).map_err(fail("boundary"))?;
+        chans.samples_into("v", z.clone(), &mut v).map_err(at("boundary"))?;
+        let g = chans.samples("g", z.clone()).map_err(at("boundary"))?;
         counts.add(&v, g).map_err(at("boundary"))?;
     }
     Ok(counts.detected(spacing))

@@ -15,6 +15,26 @@ use std::ops::Range;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
+/// Why a slab's channels could not be had.
+#[derive(Debug, thiserror::Error)]
+pub enum ChannelError {
+    /// The run was cancelled.
+    #[error("cancelled")]
+    Cancelled,
+    /// The channel store could not be read.
+    #[error("{0}")]
+    Io(#[from] std::io::Error),
+    /// A channel's samples do not make a volume of its planes.
+    #[error("{0}")]
+    Volume(#[from] mdtf_volume::VolumeError),
+    /// The derivation failed.
+    #[error("derive: {0}")]
+    Derive(#[from] mdtf_derive::DeriveError),
+    /// The derivation did not give what it was asked for (a bug, not the input's fault).
+    #[error("{0}")]
+    Missing(&'static str),
+}
+
 /// Stored and derivable channels (see the module docs).
 pub struct SlabChannels {
     /// The stored channels.
@@ -106,8 +126,8 @@ impl SlabChannels {
     }
 
     /// An error once the run is cancelled.
-    fn check(&self) -> Result<(), String> {
-        if crate::progress::is_set(&self.cancel) { Err("cancelled".into()) } else { Ok(()) }
+    fn check(&self) -> Result<(), ChannelError> {
+        if crate::progress::is_set(&self.cancel) { Err(ChannelError::Cancelled) } else { Ok(()) }
     }
 
     /// Planes of the volume.
@@ -126,7 +146,7 @@ impl SlabChannels {
     }
 
     /// Channels `names` on planes `z`, in that order.
-    pub fn volumes(&mut self, z: Range<usize>, names: &[&str]) -> Result<Vec<(String, Volume)>, String> {
+    pub fn volumes(&mut self, z: Range<usize>, names: &[&str]) -> Result<Vec<(String, Volume)>, ChannelError> {
         self.check()?;
         let mut derived: Vec<(String, Volume)> = Vec::new();
         for g in 0..self.groups.len() {
@@ -141,8 +161,7 @@ impl SlabChannels {
             let k = self.kernel_reach;
             let read = grown(&z, k, 2 * k + 1, self.nz);
             let value = self.value_planes(read.clone())?;
-            let out = mdtf_derive::run_with_progress(&value, &d, self.previous[g].take(), &|_, _| {})
-                .map_err(|e| format!("derive: {e}"))?;
+            let out = mdtf_derive::run_with_progress(&value, &d, self.previous[g].take(), &|_, _| {})?;
             self.keep_value(value);
             let own = z.start - read.start..z.end - read.start;
             for (_, mf) in &out.items {
@@ -164,23 +183,29 @@ impl SlabChannels {
     }
 
     /// Planes `own` of field `f` of the derive output `mf`, copied into the pool's memory.
-    fn own_planes(&mut self, mf: &MultiField, f: &mdtf_volume::Field, own: Range<usize>) -> Result<Volume, String> {
+    fn own_planes(
+        &mut self,
+        mf: &MultiField,
+        f: &mdtf_volume::Field,
+        own: Range<usize>,
+    ) -> Result<Volume, ChannelError> {
         let plane = mf.geometry.dims[0] * mf.geometry.dims[1];
-        let all = f.data.as_slice().ok_or("a derived field is not contiguous")?;
-        let from = all.get(own.start * plane..own.end * plane).ok_or("a derived field is too short")?;
+        let all = f.data.as_slice().ok_or(ChannelError::Missing("a derived field is not contiguous"))?;
+        let from =
+            all.get(own.start * plane..own.end * plane).ok_or(ChannelError::Missing("a derived field is too short"))?;
         let mut samples = self.pool.take(from.len());
         samples.copy_from_slice(from);
-        Volume::from_samples(mf.geometry.z_slab(own), samples).map_err(|e| e.to_string())
+        Ok(Volume::from_samples(mf.geometry.z_slab(own), samples)?)
     }
 
     /// Stored channel `name` on planes `z` (clamped to the grid), read into the pool's memory.
-    fn stored(&mut self, name: &str, z: Range<usize>) -> Result<Volume, String> {
+    fn stored(&mut self, name: &str, z: Range<usize>) -> Result<Volume, ChannelError> {
         let geometry = self.store.geometry().clone();
         let nz = geometry.dims[2];
         let z = z.start.min(nz)..z.end.min(nz).max(z.start.min(nz));
         let mut samples = self.pool.take(z.len() * self.store.plane_len());
-        self.store.rows_into_slice(name, z.clone(), 0..geometry.dims[1], &mut samples).map_err(|e| e.to_string())?;
-        Volume::from_samples(geometry.z_slab(z), samples).map_err(|e| e.to_string())
+        self.store.rows_into_slice(name, z.clone(), 0..geometry.dims[1], &mut samples)?;
+        Ok(Volume::from_samples(geometry.z_slab(z), samples)?)
     }
 
     /// Takes back channels handed out by [`SlabChannels::volumes`], done
@@ -201,8 +226,12 @@ impl SlabChannels {
     /// it in z (blocks grown by a halo, visited in z order), the planes the
     /// last one had exact are moved to their new place and only the others
     /// are derived: they are the same samples a derivation would give.
-    pub fn derive_block(&mut self, z: Range<usize>, rows: Range<usize>) -> Result<(BlockRange, DeriveOutput), String> {
-        let Some((d, _)) = self.groups.first() else { return Err("nothing is derived".into()) };
+    pub fn derive_block(
+        &mut self,
+        z: Range<usize>,
+        rows: Range<usize>,
+    ) -> Result<(BlockRange, DeriveOutput), ChannelError> {
+        let Some((d, _)) = self.groups.first() else { return Err(ChannelError::Missing("nothing is derived")) };
         let k = self.kernel_reach;
         let read = BlockRange { planes: grown(&z, k, 2 * k + 1, self.nz), rows: grown(&rows, k, 2 * k + 1, self.ny()) };
         let mut d = d.clone();
@@ -215,8 +244,7 @@ impl SlabChannels {
                 mdtf_derive::run_keeping(&value, &d, out, kept)
             }
             recycled => mdtf_derive::run_with_progress(&value, &d, recycled.map(|(_, o)| o), &|_, _| {}),
-        }
-        .map_err(|e| format!("derive: {e}"))?;
+        }?;
         self.keep_value(value);
         self.last_block = read.clone();
         Ok((read, out))
@@ -255,7 +283,7 @@ impl SlabChannels {
     }
 
     /// The stored value on planes `z` (every row), read into the memory of the last one.
-    fn value_planes(&mut self, z: Range<usize>) -> Result<MultiField, String> {
+    fn value_planes(&mut self, z: Range<usize>) -> Result<MultiField, ChannelError> {
         let rows = 0..self.ny();
         self.value(&BlockRange { planes: z, rows })
     }
@@ -263,7 +291,7 @@ impl SlabChannels {
     /// The stored value on a block, read into the memory of the last one.
     /// When the block slides along z from the last (the same rows), the
     /// planes they share are moved, and only the new ones read.
-    fn value(&mut self, block: &BlockRange) -> Result<MultiField, String> {
+    fn value(&mut self, block: &BlockRange) -> Result<MultiField, ChannelError> {
         self.check()?;
         let mut buffer = std::mem::take(&mut self.value_buffer);
         let last = std::mem::replace(&mut self.value_block, BlockRange::NONE);
@@ -274,18 +302,17 @@ impl SlabChannels {
             && planes.start < last.planes.end
             && last.planes.end <= planes.end
             && buffer.len() == last.planes.len() * plane;
-        let io = |e: std::io::Error| e.to_string();
         if shared {
             let kept = last.planes.end - planes.start;
             buffer.copy_within((planes.start - last.planes.start) * plane.., 0);
             buffer.resize(planes.len() * plane, 0.0);
             let new_planes = last.planes.end..planes.end;
-            self.store.rows_into_slice("v", new_planes, rows.clone(), &mut buffer[kept * plane..]).map_err(io)?;
+            self.store.rows_into_slice("v", new_planes, rows.clone(), &mut buffer[kept * plane..])?;
         } else {
-            self.store.rows_into("v", planes.clone(), rows.clone(), &mut buffer).map_err(io)?;
+            self.store.rows_into("v", planes.clone(), rows.clone(), &mut buffer)?;
         }
         let geometry = self.store.geometry().z_slab(planes.clone()).y_rows(rows.clone());
-        let value = Volume::from_samples(geometry, buffer).map_err(|e| e.to_string())?;
+        let value = Volume::from_samples(geometry, buffer)?;
         self.value_block = block.clone();
         Ok(MultiField::from(value))
     }
@@ -314,7 +341,7 @@ impl SlabChannels {
 
     /// The samples of channel `name` on planes `z`, in memory of the
     /// channels' own that the next call reuses.
-    pub fn samples(&mut self, name: &str, z: Range<usize>) -> Result<&[f32], String> {
+    pub fn samples(&mut self, name: &str, z: Range<usize>) -> Result<&[f32], ChannelError> {
         let mut samples = std::mem::take(&mut self.samples_buffer);
         let read = self.samples_into(name, z, &mut samples);
         self.samples_buffer = samples;
@@ -322,12 +349,12 @@ impl SlabChannels {
     }
 
     /// Sets `samples` (its memory reused) to those of channel `name` on planes `z`.
-    pub fn samples_into(&mut self, name: &str, z: Range<usize>, samples: &mut Vec<f32>) -> Result<(), String> {
+    pub fn samples_into(&mut self, name: &str, z: Range<usize>, samples: &mut Vec<f32>) -> Result<(), ChannelError> {
         self.check()?;
         if self.store.has(name) {
-            return self.store.samples_into(name, z, samples).map_err(|e| e.to_string());
+            return Ok(self.store.samples_into(name, z, samples)?);
         }
-        let (_, v) = self.volumes(z, &[name])?.pop().ok_or("no samples")?;
+        let (_, v) = self.volumes(z, &[name])?.pop().ok_or(ChannelError::Missing("no samples"))?;
         self.pool.give(std::mem::replace(samples, v.data.into_raw_vec_and_offset().0));
         Ok(())
     }

@@ -189,7 +189,7 @@ impl SlabHistograms {
         };
         let inv_g = match joint && chans.has("inv_g") {
             true => medians::inverse_gradient_axis(chans, slabs, g_buckets)
-                .map_err(fail("histogram"))?
+                .map_err(at("histogram"))?
                 .map(|ia| vec![axes[0].clone(), ia]),
             false => None,
         };

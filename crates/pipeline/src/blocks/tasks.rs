@@ -148,7 +148,7 @@ impl Task<'_> {
         let mut names: Vec<&str> = summarise.iter().map(String::as_str).collect();
         names.extend(store.iter().map(String::as_str).filter(|c| !summarise.iter().any(|s| s == c)));
         let mut partial = SlabPartial::default();
-        for (name, v) in chans.volumes(self.z.clone(), &names).map_err(fail("derive"))? {
+        for (name, v) in chans.volumes(self.z.clone(), &names).map_err(at("derive"))? {
             if store.contains(&name) {
                 out.put_volume(&name, self.z.start, &v).map_err(at("derive"))?;
             }
@@ -195,7 +195,7 @@ impl Task<'_> {
         if detect.is_some() {
             names.extend(["v", "g"].into_iter().filter(|c| median.is_none_or(|(m, _)| m != c)));
         }
-        let slab = chans.volumes(self.z.clone(), &names).map_err(fail("boundary"))?;
+        let slab = chans.volumes(self.z.clone(), &names).map_err(at("boundary"))?;
         let samples = |c: &str| slab.iter().find(|(n, _)| n == c).map(|(_, v)| v.samples()).unwrap_or_default();
         let mut partial = SlabPartial::default();
         if let Some((channel, within)) = median {
@@ -267,7 +267,7 @@ impl Task<'_> {
         let nz = self.job.geometry.dims[2];
         for planes in slabs(self.z.len(), height.max(1)) {
             let planes = self.z.start + planes.start..self.z.start + planes.end;
-            let slab = chans.volumes(planes.clone(), &reads).map_err(fail("pack"))?;
+            let slab = chans.volumes(planes.clone(), &reads).map_err(at("pack"))?;
             if let Some(axes) = histograms {
                 counts.of_task_slab(axes, &planes, nz, self.voxels, &slab)?;
             }

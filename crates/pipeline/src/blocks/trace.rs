@@ -21,7 +21,7 @@ pub(super) fn prefilter_slab(
     halo: usize,
 ) -> Result<Volume, RunError> {
     let read = grown(z, halo, 1, chans.nz());
-    let v = chans.volumes(read.clone(), &[channel]).map_err(fail("prefilter"))?.remove(0).1;
+    let v = chans.volumes(read.clone(), &[channel]).map_err(at("prefilter"))?.remove(0).1;
     let filtered = mdtf_bilateral::run(&v, params).map_err(at("prefilter"))?;
     Ok(filtered.z_slab(z.start - read.start..z.end - read.start))
 }
@@ -67,7 +67,7 @@ pub(super) fn trace_slab(
     let read = grown(z, setup.halo, 1, chans.nz());
     // the derivatives over the block as derived (its planes and rows beyond the halo are never reached)
     let read_rows = grown(rows, setup.halo_rows, 1, chans.ny());
-    let (place, out) = chans.derive_block(read.clone(), read_rows).map_err(fail("boundary"))?;
+    let (place, out) = chans.derive_block(read.clone(), read_rows).map_err(at("boundary"))?;
     let block = TraceBlock::of(place, out).map_err(fail("boundary"))?;
     let block = match setup.prefiltered {
         false => block,

@@ -140,7 +140,7 @@ pub fn trace_files(
         run.progress.slab(k + 1, run.slabs.len())?;
         // the stored channels, then each map from the distance and hit
         for (c, (_, samples)) in traced.iter().zip(writers.iter_mut()) {
-            chans.samples_into(c, z.clone(), samples).map_err(fail("write"))?;
+            chans.samples_into(c, z.clone(), samples).map_err(at("write"))?;
         }
         let (stored, made) = writers.split_at_mut(traced.len());
         let (distance, hit) = (&stored[distance_at].1, &stored[hit_at].1);

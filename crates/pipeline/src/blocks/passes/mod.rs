@@ -289,7 +289,7 @@ impl<'a> SlabPasses<'a> {
                 &mut |k| progress.slab(k + 1, slabs.len()),
                 &mut |k, spent| {
                     chans.give_back(spent.map(|(_, volumes)| volumes).unwrap_or_default());
-                    Ok((slabs[k].start, chans.volumes(slabs[k].clone(), &summarised).map_err(fail("derive"))?))
+                    Ok((slabs[k].start, chans.volumes(slabs[k].clone(), &summarised).map_err(at("derive"))?))
                 },
                 &mut |(first, volumes)| {
                     for (name, v) in &volumes {

@@ -115,7 +115,7 @@ impl SlabPasses<'_> {
             chans.give_back(spent);
             let slab = chans
                 .volumes(z.clone(), &read)
-                .map_err(|e| mdtf_pack::PackError::Io(mdtf_volume::VolumeError::Fields(e)))?;
+                .map_err(|e| mdtf_pack::PackError::Io(mdtf_volume::VolumeError::Fields(e.to_string())))?;
             if let Some(h) = &mut histograms
                 && let Err(e) = h.add(z.start, &slab)
             {
@@ -217,9 +217,9 @@ impl SlabPasses<'_> {
                 let arches = crate::pack_inputs::arches_from(&mdtf_histogram::detect_boundaries(hv));
                 match arches.is_empty() {
                     false => crate::gaussians::boundary_tgtfs(&arches, &self.geo),
-                    true => vec![
-                        medians::median_tgtf(chans, &self.slabs, derived.g_buckets.as_ref()).map_err(fail("pack"))?,
-                    ],
+                    true => {
+                        vec![medians::median_tgtf(chans, &self.slabs, derived.g_buckets.as_ref()).map_err(at("pack"))?]
+                    }
                 }
             }
             (None, None) => return Err(fail("pack")("the default Gaussians need the histogram volume".into())),
