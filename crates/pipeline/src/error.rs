@@ -43,6 +43,19 @@ pub enum StageError {
     /// A report could not be serialised.
     #[error("{0}")]
     Json(#[from] serde_json::Error),
+    /// A resumable run's error, its partial folder kept for a rerun with
+    /// the same settings and input to resume.
+    #[error(
+        "{error} (the run's finished tasks are kept in {}: run it again with the same settings and input to \
+         resume, or with resume=False to start afresh)",
+        folder.display()
+    )]
+    Kept {
+        /// What stopped the run.
+        error: Box<StageError>,
+        /// The partial folder kept.
+        folder: std::path::PathBuf,
+    },
     /// What no library error describes: an input the plan refuses, a
     /// channel missing where the plan promised it, a bad TF file.
     #[error("{0}")]

@@ -582,6 +582,60 @@ fn task_passes(p: &Pipeline, tasks: Arc<dyn SlabTasks>, size: SlabSize) -> Vec<m
     run_blocks(p, &opts, size, &|_| {}, &|_, _| {}).unwrap().slabs.unwrap().tasks
 }
 
+/// Runs each pass's tasks on threads, but the pack pass's, which fail (a
+/// worker out of memory) until `healed` is set.
+#[derive(Debug, Default)]
+struct FailingPackTasks {
+    healed: std::sync::atomic::AtomicBool,
+}
+
+impl SlabTasks for FailingPackTasks {
+    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
+        if matches!(job.pass, SlabPass::Pack { .. }) && !self.healed.load(std::sync::atomic::Ordering::Relaxed) {
+            return Err("a task failed: KilledWorker: the worker ran out of memory".into());
+        }
+        run_on_threads(job, slabs).map(drop)
+    }
+}
+
+#[test]
+fn a_resumable_run_whose_tasks_failed_keeps_what_they_did_for_the_rerun() {
+    let p = shipped("distance-tf", &["input.size=28", "input.phantom=\"shells\"", "preview=false"]);
+    let size = SlabSize::Planes(6);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let tasks = Arc::new(FailingPackTasks::default());
+    let opts = RunOptions {
+        pipeline_path: pipelines_dir().join("distance-tf.toml"),
+        output: out.clone(),
+        tasks: Some(tasks.clone()),
+        resume: true,
+        ..Default::default()
+    };
+    let e = run_blocks(&p, &opts, size, &|_| {}, &|_, _| {}).unwrap_err().to_string();
+    let left: Vec<String> =
+        std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert!(left.len() == 1 && left[0].starts_with(".mdtf-partial-out-"), "{left:?}");
+    assert!(
+        e.starts_with("pack: a task failed: KilledWorker")
+            && e.contains(&format!("kept in {}", dir.path().join(&left[0]).display())),
+        "{e}"
+    );
+    tasks.healed.store(true, std::sync::atomic::Ordering::Relaxed);
+    let slabs = run_blocks(&p, &opts, size, &|_| {}, &|_, _| {}).unwrap().slabs.unwrap();
+    let reused: Vec<(String, usize)> = slabs.tasks.into_iter().map(|t| (t.pass, t.reused)).collect();
+    let n = 28usize.div_ceil(6);
+    let want: Vec<(String, usize)> = [("derive", n), ("prefilter", n), ("select", n), ("boundary", n), ("pack", 0)]
+        .map(|(p, k)| (p.to_string(), k))
+        .into();
+    assert!(slabs.resumed);
+    assert_eq!(reused, want);
+    let resumed = files(&out);
+    std::fs::remove_dir_all(&out).unwrap();
+    run_whole(&p, &RunOptions { tasks: None, ..opts }, &|_| {}).unwrap();
+    assert_eq!(differing(&files(&out), &resumed), Vec::<String>::new());
+}
+
 /// Tasks that fail as a lost store would make them.
 #[derive(Debug)]
 struct FailingTasks;
@@ -598,10 +652,12 @@ impl SlabTasks for FailingTasks {
 fn a_failed_task_fails_the_run_with_its_message_and_no_output() {
     let p = shipped("distance-tf", &["input.size=24", "preview=false"]);
     let dir = tempfile::tempdir().unwrap();
+    // resumable, but no task had finished: nothing is kept
     let opts = RunOptions {
         pipeline_path: pipelines_dir().join("distance-tf.toml"),
         output: dir.path().join("out"),
         tasks: Some(Arc::new(FailingTasks)),
+        resume: true,
         ..Default::default()
     };
     let e = run_blocks(&p, &opts, SlabSize::Planes(4), &|_| {}, &|_, _| {}).unwrap_err().to_string();

@@ -274,7 +274,8 @@ fn run_slabs(
     }
     let base = opts.base();
     let inputs = crate::inputs::run_inputs(p, opts, &base);
-    let out = match opts.tasks.is_some() && opts.resume {
+    let resumable = opts.tasks.is_some() && opts.resume;
+    let out = match resumable {
         true => OutputFolder::begin_resumable(&opts.output, &inputs, &resume::resume_key(p, opts, size)?),
         false => OutputFolder::begin(&opts.output, &inputs),
     }
@@ -283,6 +284,32 @@ fn run_slabs(
         resume::keep_task_outputs(out.path())?;
     }
     let progress = Progress::new(opts, on_stage, on_slab);
+    match run_passes(p, opts, size, &out, progress) {
+        Ok(done) => crate::run::finish(&done.pipeline, opts, out, done.report, &done.tables, start, &done.progress),
+        // a failed task (a worker out of memory, a full disk) need not cost the tasks done: a rerun resumes
+        Err(e) if resumable && !opts.is_cancelled() && resume::some_task_done(out.path()) => Err(resume::kept(out, e)),
+        Err(e) => Err(e),
+    }
+}
+
+/// What the passes of a run leave for its end: the pipeline as it
+/// finishes (without an unaffordable preview), the report, the pack's
+/// tables and the progress.
+struct Passed<'a> {
+    pipeline: Pipeline,
+    report: RunReport,
+    tables: Vec<String>,
+    progress: Progress<'a>,
+}
+
+/// The passes of [`run`] in order, into the staging folder `out`.
+fn run_passes<'a>(
+    p: &'a Pipeline,
+    opts: &'a RunOptions,
+    size: SlabSize,
+    out: &OutputFolder,
+    progress: Progress<'a>,
+) -> Result<Passed<'a>, RunError> {
     let (mut run, store) = SlabPasses::read_input(p, opts, size, (out.path(), out.resumed()), progress, true)?;
     let (mut chans, derived) = run.derive(store)?;
     let traced = run.trace(&mut chans, &derived)?;
@@ -309,7 +336,7 @@ fn run_slabs(
         ..RunReport::of(opts, run.input_name.clone(), &run.geo)
     };
     let report = RunReport { warnings: run.warnings, stages: run.stages.0, ..report };
-    crate::run::finish(&finishing, opts, out, report, &table_names, start, &run.progress)
+    Ok(Passed { pipeline: finishing, report, tables: table_names, progress: run.progress })
 }
 
 /// `p` without its preview when the memory it may take (a `size` budget,

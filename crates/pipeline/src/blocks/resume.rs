@@ -119,6 +119,20 @@ pub(super) fn keep_task_outputs(dir: &Path) -> Result<(), RunError> {
     Ok(())
 }
 
+/// `error`, which stopped a resumable run in `out`, with the run's partial
+/// folder kept for a rerun to resume (and the error saying where).
+pub(super) fn kept(out: mdtf_volume::OutputFolder, error: RunError) -> RunError {
+    let RunError { stage, error } = error;
+    let folder = out.keep_for_resume();
+    RunError { stage, error: Box::new(crate::error::StageError::Kept { error, folder }) }
+}
+
+/// Whether a task of the run in the staging folder `dir` has finished (left its partial).
+pub(super) fn some_task_done(dir: &Path) -> bool {
+    let partial = |e: std::fs::DirEntry| e.path().extension().is_some_and(|x| x == "partial");
+    std::fs::read_dir(dir.join(store::STORE_DIR)).is_ok_and(|mut d| d.any(|e| e.is_ok_and(partial)))
+}
+
 /// Removes a file or a folder.
 fn remove(path: &Path) -> std::io::Result<()> {
     if path.is_dir() { std::fs::remove_dir_all(path) } else { std::fs::remove_file(path) }

@@ -408,8 +408,11 @@ def run(
     finished: a task whose slab is done (its partial there, and every byte
     it wrote still hashing as it recorded) does nothing. The report's
     ``slabs.resumed`` says so and ``slabs.tasks[].reused`` counts those
-    tasks. ``resume=False`` starts afresh. Ctrl-C is not a kill: it cancels
-    the run and removes its partial folder. Tasks a killed caller left
+    tasks. A run whose task fails for good (a worker out of memory, a full
+    disk) after some tasks finished keeps its partial folder too, and its
+    error says where: rerun once the cause is fixed. ``resume=False``
+    starts afresh. Ctrl-C is not a kill: it cancels the run and removes its
+    partial folder. Tasks a killed caller left
     running on workers write the same bytes as the new run's, and publish
     nothing (each checks the run's token first).
     ``settings`` and keyword overrides as for ``mdtf.run``. Returns the run

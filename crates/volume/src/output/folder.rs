@@ -84,6 +84,18 @@ impl OutputFolder {
         Ok(folder)
     }
 
+    /// Leaves the partial folder where it is, for a later run of the same
+    /// key to resume ([`OutputFolder::begin_resumable`]), instead of removing
+    /// it: a run that failed after work worth keeping. Returns its path.
+    pub fn keep_for_resume(mut self) -> PathBuf {
+        let mut live = staging::live();
+        staging::unregister_locked(&mut live, &self.staging);
+        drop(live);
+        // not published: but no longer this folder's to remove
+        self.published = true;
+        std::mem::take(&mut self.staging)
+    }
+
     /// Whether this folder is the partial folder of an earlier, killed run
     /// of the same key ([`OutputFolder::begin_resumable`]), as it left it.
     pub fn resumed(&self) -> bool {

@@ -238,6 +238,14 @@ impl<'a> SlabPasses<'a> {
         Ok(parts)
     }
 
+    /// Whether a killed or failed run could be resumed: its tasks' outputs
+    /// stay in the store until the run ends (a task whose outputs are gone
+    /// would run again), which the store's peak already holds but for g in
+    /// a run whose median reads it stored.
+    fn resumable(&self) -> bool {
+        self.tasks.is_some() && self.opts.resume
+    }
+
     /// The input's finite value range, value units.
     pub(super) fn finite_range(&self) -> Option<[f64; 2]> {
         self.stats.range("v").map(|(lo, hi)| [lo as f64, hi as f64])

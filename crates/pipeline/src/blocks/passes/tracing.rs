@@ -34,7 +34,7 @@ impl SlabPasses<'_> {
         let t = Instant::now();
         let value_range = self.value_range();
         let stats = self.tracing_stats(chans, derived, g, prefiltered)?;
-        if self.median_reads_stored_g() {
+        if self.median_reads_stored_g() && !self.resumable() {
             chans.store.remove("g");
         }
         // the median's reads are done: their memory is not the tracing's size
@@ -69,7 +69,7 @@ impl SlabPasses<'_> {
         }
         let traced = self.finish_trace(sums)?;
         for c in ["g_prefiltered", "f2_prefiltered", "dot"] {
-            if !self.plan.wants(c) {
+            if !self.plan.wants(c) && !self.resumable() {
                 chans.store.remove(c);
             }
         }
