@@ -240,8 +240,7 @@ impl<'a> SlabPasses<'a> {
 
     /// Whether a killed or failed run could be resumed: its tasks' outputs
     /// stay in the store until the run ends (a task whose outputs are gone
-    /// would run again), which the store's peak already holds but for g in
-    /// a run whose median reads it stored.
+    /// would run again), as the plan on paper's store at its fullest counts them.
     fn resumable(&self) -> bool {
         self.tasks.is_some() && self.opts.resume
     }
