@@ -9,7 +9,7 @@
 //! order, on several threads, one of them twice, each from the job's JSON,
 //! as `mdtf.dask` hands them to a cluster).
 
-use mdtf_pipeline::blocks::{SlabJob, SlabPass, SlabSize, SlabTasks, run as run_blocks, run_task};
+use mdtf_pipeline::blocks::{SlabJob, SlabPass, SlabSize, SlabTasks, TaskOutcome, run as run_blocks, run_task};
 use mdtf_pipeline::file::{Pipeline, parse};
 use mdtf_pipeline::run::{RunOptions, run as run_whole};
 use mdtf_volume::{Geometry, SampleType, Volume, WriteOptions, write_volume};
@@ -326,7 +326,11 @@ impl SlabTasks for ThreadTasks {
         let (pass, ran) = run_on_threads(job, slabs)?;
         let first = slabs.first().cloned().unwrap_or(0..0);
         std::fs::remove_file(job.partial_file(first.start)).map_err(|e| e.to_string())?;
-        run_task(job, first).map_err(|e| e.to_string())?;
+        // without its partial the slab is not done: the task runs again
+        let again = run_task(job, first.clone()).map_err(|e| e.to_string())?;
+        assert_eq!(again, TaskOutcome::Ran);
+        // with it, a task finds its slab done
+        assert_eq!(run_task(job, first).map_err(|e| e.to_string())?, TaskOutcome::FoundDone);
         self.ran.lock().unwrap().push((pass, ran + 1));
         Ok(())
     }
@@ -346,7 +350,7 @@ fn run_on_threads(job: &SlabJob, slabs: &[Range<usize>]) -> Result<(String, usiz
                 let json = &json;
                 s.spawn(move || {
                     let job: SlabJob = serde_json::from_str(json).map_err(|e| e.to_string())?;
-                    group.iter().try_for_each(|z| run_task(&job, z.clone()).map_err(|e| e.to_string()))
+                    group.iter().try_for_each(|z| run_task(&job, z.clone()).map(drop).map_err(|e| e.to_string()))
                 })
             })
             .collect();
@@ -644,7 +648,7 @@ impl SlabTasks for FailingTasks {
     fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
         let mut job = job.clone();
         job.store = job.store.join("gone");
-        run_task(&job, slabs[0].clone()).map_err(|e| format!("a task failed: {e}"))
+        run_task(&job, slabs[0].clone()).map(drop).map_err(|e| format!("a task failed: {e}"))
     }
 }
 

@@ -122,9 +122,10 @@ impl SlabTasks for PythonTasks {
 /// Runs one task of a [`run`] with `submit`: `job` (the pass, as JSON) on the
 /// planes `start..end`, writing them into the run's channel store, on
 /// `threads` threads (0: the pool [`set_threads`](crate::call::set_threads) set, else one per core).
+/// True when it ran, false when it found its slab done (a resumed run).
 #[pyfunction]
 #[pyo3(signature = (job, start, end, threads=0))]
-pub fn slab_task(py: Python<'_>, job: &str, start: usize, end: usize, threads: usize) -> PyResult<()> {
+pub fn slab_task(py: Python<'_>, job: &str, start: usize, end: usize, threads: usize) -> PyResult<bool> {
     let job: SlabJob = serde_json::from_str(job).map_err(|e| value_error(format!("not a slab job: {e}")))?;
     let pool = if threads > 0 { Some(crate::call::task_pool(threads)?) } else { None };
     let task = || mdtf_pipeline::blocks::run_task(&job, start..end);
@@ -132,5 +133,6 @@ pub fn slab_task(py: Python<'_>, job: &str, start: usize, end: usize, threads: u
         Some(pool) => pool.install(task),
         None => task(),
     })?
+    .map(|outcome| outcome == mdtf_pipeline::blocks::TaskOutcome::Ran)
     .map_err(mdtf_error)
 }

@@ -246,7 +246,7 @@ mdask.run(sys.argv[1], sys.argv[2], input=sys.argv[3], slab_planes=6, preview=Fa
 
 
 def test_a_run_whose_driver_was_killed_resumes_with_the_same_files(
-    sphere96: Path, mdtf_bin: Path, pipelines: Path, tmp_path: Path
+    sphere96: Path, mdtf_bin: Path, pipelines: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
 ) -> None:
     pipeline = pipelines / "distance-tf.toml"
     out = tmp_path / "out"
@@ -265,7 +265,8 @@ def test_a_run_whose_driver_was_killed_resumes_with_the_same_files(
     assert driver.returncode == -signal.SIGKILL, "".join(seen)
     partial = [p.name for p in tmp_path.iterdir() if p.name.startswith(".mdtf-partial-out-")]
     assert len(partial) == 1 and not out.exists(), sorted(p.name for p in tmp_path.iterdir())
-    report = mdask.run(pipeline, out, input=sphere96, slab_planes=6, preview=False, progress=False)
+    capfd.readouterr()
+    report = mdask.run(pipeline, out, input=sphere96, slab_planes=6, preview=False)
     slabs = report["slabs"]
     assert slabs["resumed"] is True
     tasks = {t["pass"]: t for t in slabs["tasks"]}
@@ -273,6 +274,10 @@ def test_a_run_whose_driver_was_killed_resumes_with_the_same_files(
     # the passes that had finished ran no task again; the rest did
     assert all(tasks[p]["reused"] == tasks[p]["tasks"] for p in ("derive", "prefilter", "select")), tasks
     assert sum(t["tasks"] - t["reused"] for t in tasks.values()) > 0, tasks
+    # and said so as each pass ended
+    err = capfd.readouterr().err
+    n = tasks["derive"]["tasks"]
+    assert f"mdtf.dask.run: derive: {n}/{n} tasks in " in err and f"({n} found their slab done by the run this one resumes)" in err, err
     want, got = _outputs(tmp_path / "cli"), _outputs(out)
     assert sorted(got) == sorted(want)
     assert [f for f in want if got[f] != want[f]] == []

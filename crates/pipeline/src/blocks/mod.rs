@@ -83,7 +83,7 @@ pub use sizing::{PassSize, Sizing, sizing};
 pub use slab_channels::{ChannelError, SlabChannels};
 pub use slab_histograms::{HistogramAxes, HistogramCounts};
 pub use store::{ChannelStore, StoreWriter};
-pub use tasks::run_task;
+pub use tasks::{TaskOutcome, run_task};
 pub use trace_files::{TracedFiles, automatic_trace_budget, trace_files};
 
 use crate::file::Pipeline;

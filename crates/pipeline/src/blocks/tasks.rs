@@ -21,18 +21,27 @@ use std::ops::Range;
 use std::path::Path;
 use std::sync::{Mutex, PoisonError};
 
+/// What a task did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TaskOutcome {
+    /// It ran its pass on its slab.
+    Ran,
+    /// It found its slab done already (its partial and every byte it
+    /// wrote there: a rerun, or a resumed run) and did nothing.
+    FoundDone,
+}
+
 /// Runs `job` on the planes `z` of the volume: the body of one task. A
-/// task whose slab is done already (its partial and every byte it wrote
-/// there: a rerun, or a resumed run) does nothing; a task of a run that
-/// has ended or was taken over fails without publishing.
-pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<(), RunError> {
+/// task whose slab is done already does nothing; a task of a run that has
+/// ended or was taken over fails without publishing.
+pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<TaskOutcome, RunError> {
     let nz = job.geometry.dims[2];
     if z.start >= z.end || z.end > nz {
         return Err(fail("plan")(format!("planes {z:?} are not a slab of the volume's {nz}")));
     }
     resume::check_token(job)?;
     if resume::already_done(job, &z) {
-        return Ok(());
+        return Ok(TaskOutcome::FoundDone);
     }
     let attempts = super::remote::attempts_path(&job.store, job.pass.name(), z.start);
     let stage = job.pass.stage();
@@ -57,7 +66,8 @@ pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<(), RunError> {
         SlabPartial { job: resume::job_digest(job)?, written: resume::hash_written(job, &task.z)?, ..partial };
     // the last check: a task the run no longer waits for publishes nothing
     resume::check_token(job)?;
-    partial.write(&job.store, job.pass.name(), task.z.start)
+    partial.write(&job.store, job.pass.name(), task.z.start)?;
+    Ok(TaskOutcome::Ran)
 }
 
 /// The channels (and the memory they hold: the slabs' samples, the

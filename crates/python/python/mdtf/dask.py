@@ -314,11 +314,11 @@ def to_ome_zarr(
         raise
 
 
-def _slab_task(job: str, start: int, end: int, threads: int) -> None:
+def _slab_task(job: str, start: int, end: int, threads: int) -> bool:
     """One task of ``run``: ``job``'s pass on the z-planes ``start:end`` on
     ``threads`` threads (a module function, so that workers import it
-    rather than unpickle it)."""
-    _mdtf.slab_task(job, start, end, threads)
+    rather than unpickle it); False when it found its slab done (a resumed run)."""
+    return _mdtf.slab_task(job, start, end, threads)
 
 
 class _PassProgress:
@@ -336,10 +336,13 @@ class _PassProgress:
             self.done = done
             print(f"\rmdtf.dask.run: {self.name}: {done}/{self.total} tasks", end="", file=sys.stderr, flush=True)
 
-    def finished(self) -> None:
+    def finished(self, ran: Iterable[bool]) -> None:
         if self.shown:
             took = time.monotonic() - self.start
             line = f"mdtf.dask.run: {self.name}: {self.total}/{self.total} tasks in {took:.1f} s"
+            done_before = sum(not r for r in ran)
+            if done_before:
+                line += f" ({done_before} found their slab done by the run this one resumes)"
             print(("\r" if self.live else "") + line, file=sys.stderr, flush=True)
 
 
@@ -422,8 +425,8 @@ def run(
     def submit(job: str, slabs: list[tuple[int, int]], cancelled: Any) -> None:
         shown = _PassProgress(job, len(slabs), progress)
         if client is None:
-            dask.compute(*[dask.delayed(_slab_task, pure=False)(job, a, b, task_threads) for a, b in slabs])
-            shown.finished()
+            ran = dask.compute(*[dask.delayed(_slab_task, pure=False)(job, a, b, task_threads) for a, b in slabs])
+            shown.finished(ran)
             return
         starts, ends = [a for a, _ in slabs], [b for _, b in slabs]
         threads = [task_threads] * len(slabs)
@@ -440,7 +443,6 @@ def run(
                 return
             shown.update(sum(f.done() for f in futures))
             time.sleep(0.05)
-        client.gather(futures)
-        shown.finished()
+        shown.finished(client.gather(futures))
 
     return _run(pipeline, output, input, _overrides(settings, overrides), memory_budget, slab_planes, submit, resume)
