@@ -1,6 +1,6 @@
 //! Per-row evaluation of the requested items from the derivative rows.
 
-use crate::engine::RowSet;
+use crate::engine::{RowSet, RowsView};
 use crate::fused::{FusedOut, Spare, Voxel};
 use crate::items::Item;
 
@@ -90,52 +90,17 @@ impl Layout {
                         outs[first + c][span.clone()].copy_from_slice(h);
                     }
                 }
-                Item::F2 => {
-                    let out = &mut outs[first][span.clone()];
-                    // Slices of one length let the compiler drop bounds checks and vectorise.
-                    let (gx, gy, gz, gi) = (&r.gx[..nx], &r.gy[..nx], &r.gz[..nx], &r.g_inv[..nx]);
-                    let (hxx, hyy, hzz) = (&r.hxx[..nx], &r.hyy[..nx], &r.hzz[..nx]);
-                    let (hxy, hxz, hyz) = (&r.hxy[..nx], &r.hxz[..nx], &r.hyz[..nx]);
-                    for i in 0..out.len().min(nx) {
-                        let v = Voxel {
-                            gx: gx[i],
-                            gy: gy[i],
-                            gz: gz[i],
-                            hxx: hxx[i],
-                            hyy: hyy[i],
-                            hzz: hzz[i],
-                            hxy: hxy[i],
-                            hxz: hxz[i],
-                            hyz: hyz[i],
-                        };
-                        out[i] = v.f2(gi[i]);
-                    }
-                }
+                Item::F2 => per_voxel(&r, nx, &mut outs[first][span.clone()], |v, g_inv| v.f2(g_inv)),
                 Item::Laplacian => {
                     let out = &mut outs[first][span.clone()];
                     for (o, ((a, b), c)) in out.iter_mut().zip(r.hxx.iter().zip(r.hyy).zip(r.hzz)) {
                         *o = a + b + c;
                     }
                 }
-                Item::Curvature => {
-                    let out = &mut outs[first][span.clone()];
-                    for (i, o) in out.iter_mut().enumerate().take(nx) {
-                        let v = Voxel {
-                            gx: r.gx[i],
-                            gy: r.gy[i],
-                            gz: r.gz[i],
-                            hxx: r.hxx[i],
-                            hyy: r.hyy[i],
-                            hzz: r.hzz[i],
-                            hxy: r.hxy[i],
-                            hxz: r.hxz[i],
-                            hyz: r.hyz[i],
-                        };
-                        // -div(grad f / g) / 2, with div(n) = (Laplacian - n^T H n) / g
-                        let g_inv = r.g_inv[i];
-                        *o = 0.5 * g_inv * (v.f2(g_inv) - (v.hxx + v.hyy + v.hzz));
-                    }
-                }
+                // -div(grad f / g) / 2, with div(n) = (Laplacian - n^T H n) / g
+                Item::Curvature => per_voxel(&r, nx, &mut outs[first][span.clone()], |v, g_inv| {
+                    0.5 * g_inv * (v.f2(g_inv) - (v.hxx + v.hyy + v.hzz))
+                }),
                 Item::InvG if self.fields > 1 => {
                     for (i, o) in outs[first][span.clone()].iter_mut().enumerate() {
                         let g = gnorm_at(rows, self.fields, i).sqrt();
@@ -162,6 +127,30 @@ impl Layout {
                 }
             }
         }
+    }
+}
+
+/// `out[i] = measure(voxel i's gradient and Hessian, its 1/g)` over a row
+/// of `nx` samples.
+#[inline(always)]
+fn per_voxel(r: &RowsView, nx: usize, out: &mut [f32], measure: impl Fn(Voxel, f32) -> f32) {
+    // Slices of one length let the compiler drop bounds checks and vectorise.
+    let (gx, gy, gz, gi) = (&r.gx[..nx], &r.gy[..nx], &r.gz[..nx], &r.g_inv[..nx]);
+    let (hxx, hyy, hzz) = (&r.hxx[..nx], &r.hyy[..nx], &r.hzz[..nx]);
+    let (hxy, hxz, hyz) = (&r.hxy[..nx], &r.hxz[..nx], &r.hyz[..nx]);
+    for i in 0..out.len().min(nx) {
+        let v = Voxel {
+            gx: gx[i],
+            gy: gy[i],
+            gz: gz[i],
+            hxx: hxx[i],
+            hyy: hyy[i],
+            hzz: hzz[i],
+            hxy: hxy[i],
+            hxz: hxz[i],
+            hyz: hyz[i],
+        };
+        out[i] = measure(v, gi[i]);
     }
 }
 

@@ -25,6 +25,7 @@ use super::remote::{SlabJob, SlabPass};
 use super::{SlabSize, store};
 use crate::file::Pipeline;
 use crate::run::{RunError, RunOptions, fail};
+use mdtf_volume::output::remove_any;
 use serde::{Deserialize, Serialize};
 use std::io::{Read, Seek, SeekFrom};
 use std::ops::Range;
@@ -105,16 +106,16 @@ pub(super) fn keep_task_outputs(dir: &Path) -> Result<(), RunError> {
         if name == store::STORE_DIR || name == mdtf_volume::output::RESUME_NAME {
             continue;
         }
-        if name == "pack" && path.is_dir() {
+        if name == "pack" && std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_dir()) {
             for texture in std::fs::read_dir(&path).map_err(io(&path))? {
                 let file = texture.map_err(io(&path))?.path();
                 if file.extension().is_none_or(|e| e != "raw") {
-                    remove(&file).map_err(io(&file))?;
+                    remove_any(&file).map_err(io(&file))?;
                 }
             }
             continue;
         }
-        remove(&path).map_err(io(&path))?;
+        remove_any(&path).map_err(io(&path))?;
     }
     Ok(())
 }
@@ -131,11 +132,6 @@ pub(super) fn kept(out: mdtf_volume::OutputFolder, error: RunError) -> RunError 
 pub(super) fn some_task_done(dir: &Path) -> bool {
     let partial = |e: std::fs::DirEntry| e.path().extension().is_some_and(|x| x == "partial");
     std::fs::read_dir(dir.join(store::STORE_DIR)).is_ok_and(|mut d| d.any(|e| e.is_ok_and(partial)))
-}
-
-/// Removes a file or a folder.
-fn remove(path: &Path) -> std::io::Result<()> {
-    if path.is_dir() { std::fs::remove_dir_all(path) } else { std::fs::remove_file(path) }
 }
 
 /// A new run token, written into the channel store folder `store` (for

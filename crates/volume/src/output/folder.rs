@@ -64,7 +64,11 @@ impl OutputFolder {
         let resumable = key.and_then(|key| {
             staging::leftovers(&parent, &name)
                 .into_iter()
-                .find(|dir| dir.is_dir() && std::fs::read_to_string(dir.join(RESUME_NAME)).is_ok_and(|k| k == key))
+                // a folder, not a link to one
+                .find(|dir| {
+                    std::fs::symlink_metadata(dir).is_ok_and(|m| m.is_dir())
+                        && std::fs::read_to_string(dir.join(RESUME_NAME)).is_ok_and(|k| k == key)
+                })
         });
         staging::sweep_leftovers(&parent, &name, resumable.as_deref());
         check_replaceable(&absolute, target, inputs)?;

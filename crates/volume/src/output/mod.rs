@@ -25,7 +25,7 @@ pub(crate) use file::{StagedFile, old_pair_data, publish_pair, sweep};
 pub use folder::{MARKER_NAME, OutputFolder, RESUME_NAME};
 pub use identity::{FileId, Inputs};
 pub use lock::OutputLock;
-pub use staging::{PARTIAL_PREFIX, remove_partial_outputs};
+pub use staging::{PARTIAL_PREFIX, remove_any, remove_partial_outputs};
 
 use crate::error::{Result, VolumeError};
 use std::ffi::OsString;

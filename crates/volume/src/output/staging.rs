@@ -45,8 +45,9 @@ pub(crate) fn builder(prefix: &str) -> tempfile::Builder<'_, '_> {
     b
 }
 
-/// Removes a file or a folder, whichever `path` is.
-pub(crate) fn remove_any(path: &Path) -> std::io::Result<()> {
+/// Removes a file or a folder, whichever `path` is (a link itself, never
+/// what it points to; a path that is not there is no error).
+pub fn remove_any(path: &Path) -> std::io::Result<()> {
     match std::fs::symlink_metadata(path) {
         Ok(m) if m.is_dir() => std::fs::remove_dir_all(path),
         Ok(_) => std::fs::remove_file(path),
