@@ -247,7 +247,7 @@ impl Plan {
             }
             _ => 0,
         };
-        let steps = channel_steps(&fields, &derive, &derive_fields, defer_normals, prefilter, trace);
+        let steps = channel_steps(&fields, &derive, &derive_fields, defer_normals, prefilter, trace.then_some(&wanted));
         let (reach, halo) = how.reach(&wanted, multi, prefilter, trace, geometry);
         let median_of_g = trace && how.boundary.g_min.is_none();
         let reductions = channel_reductions(&steps, median_of_g, prefilter, multi);
@@ -281,6 +281,13 @@ impl Plan {
         Channel::parse(name, &self.fields).is_some_and(|c| self.wanted.contains(&c))
     }
 
+    /// The tracing's outputs the run stores (those an output reads), in the
+    /// channel table's order; none when it does not trace.
+    pub fn traced_stored(&self) -> Vec<Channel> {
+        let step = self.steps.iter().find(|s| s.step == Step::Trace);
+        crate::channel::traced().filter(|c| step.is_some_and(|s| s.makes.contains(c))).collect()
+    }
+
     /// The last step that reads `c` (after it the channel can be freed).
     pub fn last_reader(&self, c: Channel) -> Option<Step> {
         self.steps.iter().rev().find(|s| s.reads.contains(&c)).map(|s| s.step)
@@ -297,14 +304,16 @@ impl Plan {
 /// The steps that make channels, in order: the input (the value, and the
 /// fields of a several-field input), the derive passes with the `derive`
 /// and `derive_fields` items (the normals left out when deferred), the
-/// pre-filter and the tracing when planned.
+/// pre-filter and the tracing when planned (`trace`: the channels the run
+/// wants, of which the tracing keeps its own: it makes every traced channel
+/// in one go, and one nothing reads is not stored).
 fn channel_steps(
     fields: &[String],
     derive: &[Item],
     derive_fields: &[Item],
     defer_normals: bool,
     prefilter: bool,
-    trace: bool,
+    trace: Option<&BTreeSet<Channel>>,
 ) -> Vec<PlannedStep> {
     let multi = !fields.is_empty();
     let normals = [Channel::Nx, Channel::Ny, Channel::Nz];
@@ -336,9 +345,9 @@ fn channel_steps(
             makes: BTreeSet::new(),
         });
     }
-    if trace {
+    if let Some(wanted) = trace {
         let reads = Channel::Distance.row().map_or(&[][..], |r| r.prerequisites).iter().copied().collect();
-        let makes = crate::channel::traced().collect();
+        let makes = crate::channel::traced().filter(|c| wanted.contains(c)).collect();
         steps.push(PlannedStep { step: Step::Trace, reads, makes });
     }
     steps

@@ -151,6 +151,8 @@ pub enum SlabPass {
         rows: usize,
         /// Value range (max - min) of the input, value units.
         value_range: f64,
+        /// The traced channels stored (those the run reads later).
+        stores: Vec<String>,
     },
     /// Counts the slab's histograms and writes its planes of every pack
     /// texture, a sub-slab at a time; a pack pass counting the histogram
@@ -204,7 +206,7 @@ impl SlabPass {
             SlabPass::Input { .. } => vec!["v".into()],
             SlabPass::Derive { store, .. } => store.clone(),
             SlabPass::Prefilter { filters, .. } => filters.iter().map(|f| f.output.clone()).collect(),
-            SlabPass::Trace { .. } => crate::channel::traced_names(),
+            SlabPass::Trace { stores, .. } => stores.clone(),
             SlabPass::Select { .. } | SlabPass::Pack { .. } => Vec::new(),
         }
     }

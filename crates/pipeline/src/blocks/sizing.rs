@@ -123,8 +123,10 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
         let read = grown * if plan.prefilter { 3 } else { 1 };
         let tasks = nz.div_ceil(trace.planes.max(1));
         let memory = trace_block_bytes(trace.planes, trace.rows, geometry, &plan);
-        passes.push(PassSize { pass: "boundary", tasks, memory, read, written: 4 * tp * plane });
-        stored.extend(crate::channel::traced_names());
+        let traced: Vec<String> = plan.traced_stored().iter().map(|c| c.name(&[])).collect();
+        let written = traced.len() as u64 * tp * plane;
+        passes.push(PassSize { pass: "boundary", tasks, memory, read, written });
+        stored.extend(traced);
     }
     let texel = texel_bytes(p);
     let pack_planes = if hvol { nz.div_ceil(mdtf_histogram::HVOL_PARTS) as u64 } else { h };

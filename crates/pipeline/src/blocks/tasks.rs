@@ -225,7 +225,8 @@ impl Task<'_> {
 
     /// Traces the slab strip by strip and stores its outputs.
     fn trace(&self) -> Result<SlabPartial, RunError> {
-        let SlabPass::Trace { g, f2, prefiltered, params, stats, halo, halo_rows, rows, value_range } = &self.job.pass
+        let SlabPass::Trace { g, f2, prefiltered, params, stats, halo, halo_rows, rows, value_range, stores } =
+            &self.job.pass
         else {
             return Err(fail("boundary")("not a tracing pass".into()));
         };
@@ -246,7 +247,7 @@ impl Task<'_> {
         for strip in slabs(chans.ny(), (*rows).max(1)) {
             let slab = trace_slab(&mut chans, &setup, &self.z, &strip, spent.take())?;
             let b = &slab.trace;
-            for c in crate::channel::traced() {
+            for c in crate::channel::traced().filter(|c| stores.contains(&c.name(&[]))) {
                 if let Some(v) = b.traced(c) {
                     out.put_rows(&c.name(&[]), self.z.start, strip.clone(), v).map_err(at("boundary"))?;
                 }

@@ -7,7 +7,6 @@ use crate::blocks::remote::{Prefilter, SlabPass, SlabTasks};
 use crate::blocks::trace::{self, SlabTrace, TraceSetup};
 use crate::blocks::{SlabChannels, TraceBlocks, reductions, slabs};
 use crate::boundary_chain::TracedVolumes;
-use crate::channel::{Channel, traced};
 use crate::pre_detect::VgCounts;
 use crate::report::{BoundarySummary, Traced};
 use crate::run::{RunError, at, fail};
@@ -44,7 +43,9 @@ impl SlabPasses<'_> {
             Some(tasks) => {
                 let (params, [_, halo_rows, halo]) = (self.p.boundary.clone(), self.plan.reach.trace);
                 let (g, f2, rows) = (g.into(), f2.into(), self.trace_blocks.rows);
-                let pass = SlabPass::Trace { g, f2, prefiltered, params, stats, halo, halo_rows, rows, value_range };
+                let stores = self.plan.traced_stored().iter().map(|c| c.name(&[])).collect();
+                let pass =
+                    SlabPass::Trace { g, f2, prefiltered, params, stats, halo, halo_rows, rows, value_range, stores };
                 let (_, tslabs) = self.trace_strips_and_slabs();
                 for mut part in self.on_tasks(tasks, pass, &mut chans.store, &tslabs)? {
                     part.merge_stats_into(&mut self.stats);
@@ -156,8 +157,7 @@ impl SlabPasses<'_> {
         }
         let blocks: Vec<(Range<usize>, Range<usize>)> =
             strips.iter().flat_map(|rows| tslabs.iter().map(move |z| (rows.clone(), z.clone()))).collect();
-        // dot only when the run keeps it
-        let outputs: Vec<Channel> = traced().filter(|&c| c != Channel::Dot || self.plan.wants("dot")).collect();
+        let outputs = self.plan.traced_stored();
         let names: Vec<String> = outputs.iter().map(|c| c.name(&[])).collect();
         let mut writer =
             chans.store.writer(&names.iter().map(String::as_str).collect::<Vec<_>>()).map_err(io("boundary"))?;
