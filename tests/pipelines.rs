@@ -404,14 +404,19 @@ fn a_run_at_4096_cubed_is_sized_on_paper_before_it_runs() {
         .and_then(|l| l.split_whitespace().next())
         .and_then(|n| n.parse().ok())
         .unwrap_or_else(|| panic!("{plan}"));
+    // the histograms count in 64 bits: 2^36 voxels are no reason to refuse
+    assert!(!plan.contains("REFUSED"), "{plan}");
     let tasks: usize = line("derive ")[1].parse().unwrap();
     assert_eq!(tasks, 4096usize.div_ceil(slab_planes), "{plan}");
     for pass in ["input ", "derive ", "prefilter ", "boundary ", "pack "] {
         assert!(bytes_on(&plan, pass, 2) <= 8.0 * 1024f64.powi(3), "{pass}: {plan}");
     }
-    // the store holds v, g, the pre-filtered g and f'' and the tracing's four outputs, 4 bytes a voxel each
+    // the store holds v, g, the pre-filtered g and f'' and the three traced outputs the run reads
+    // (distance, g_hit, hit: not dot), 4 bytes a voxel each
     let voxels = 4096f64.powi(3);
-    assert_eq!(bytes_on(&plan, "channel store", 5), 8.0 * 4.0 * voxels, "{plan}");
+    // (7 x 4 x 2^36 bytes = 1.75 TiB, printed to a tenth)
+    let store = bytes_on(&plan, "channel store", 5);
+    assert!((store - 7.0 * 4.0 * voxels).abs() < 0.06 * 1024f64.powi(4), "{plan}");
     // kept: distance and g_hit as f32 before compression
     assert_eq!(bytes_on(&plan, "kept volumes", 4), 2.0 * 4.0 * voxels, "{plan}");
     // the textures' bytes a voxel are those of a real pack of this pipeline
@@ -428,8 +433,4 @@ fn a_run_at_4096_cubed_is_sized_on_paper_before_it_runs() {
     let per_voxel = raw as f64 / (24.0 * 24.0 * 24.0);
     assert_eq!(bytes_on(&plan, "pack textures", 2), per_voxel * voxels, "{plan}");
     assert!(plan.contains("us of one core per voxel") && plan.contains("core-hours"), "{plan}");
-    // 4096^3 voxels are more than the histograms' 32-bit counts hold: the plan says the run would be refused
-    assert!(plan.contains("REFUSED before it starts") && plan.contains("68719476736 voxels"), "{plan}");
-    let small = mdtf_ok(&["run", p.to_str().unwrap(), "--plan", "--dims", "1024", "--memory-budget", "8GiB"]);
-    assert!(!small.contains("REFUSED"), "{small}");
 }

@@ -178,7 +178,7 @@ impl DetectedBoundary {
             }
             let (lo, hi) = core_band(self.g_peak, self.g_floor, t);
             for j in (0..ag.bins).filter(|&j| (lo..=hi).contains(&ag.centre(j))) {
-                n += hist.counts[j * av.bins + i] as u64;
+                n += hist.counts[j * av.bins + i];
             }
         }
         n

@@ -11,8 +11,9 @@ use serde::{Deserialize, Serialize};
 pub struct Histogram {
     /// The axes, in order.
     pub axes: Vec<Axis>,
-    /// Counts, length = product of the bin counts (u32: inputs hold fewer than 2^32 voxels).
-    pub counts: Vec<u32>,
+    /// Counts, length = product of the bin counts (u64: a bin of a
+    /// 4096^3 volume's histogram holds more than 2^32 voxels).
+    pub counts: Vec<u64>,
 }
 
 impl Histogram {
@@ -35,19 +36,19 @@ impl Histogram {
 
     /// Sum of all counts (the voxels inside every axis range, within the mask).
     pub fn total(&self) -> u64 {
-        self.counts.iter().map(|&c| c as u64).sum()
+        self.counts.iter().sum()
     }
 
     /// Largest count.
     pub fn max(&self) -> u64 {
-        self.counts.iter().copied().max().unwrap_or(0) as u64
+        self.counts.iter().copied().max().unwrap_or(0)
     }
 
     /// The 2D projection onto axes (a, b) of a 3D histogram (summing the third).
     pub fn project(&self, a: usize, b: usize) -> Histogram {
         let c = 3 - a - b;
         let (na, nb, nc) = (self.axes[a].bins, self.axes[b].bins, self.axes[c].bins);
-        let mut counts = vec![0u32; na * nb];
+        let mut counts = vec![0u64; na * nb];
         let mut t = [0usize; 3];
         for ia in 0..na {
             for ib in 0..nb {
@@ -80,7 +81,7 @@ pub fn count(channels: &[&[f32]], axes: Vec<Axis>, mask: Option<&[bool]>) -> Res
     if channels.iter().any(|c| c.len() != n) || mask.is_some_and(|m| m.len() != n) {
         return Err(HistogramError::Geometry("channels (and mask) must have the same number of voxels".into()));
     }
-    let total_bins = check_size(n, &axes)?;
+    let total_bins = check_size(&axes)?;
     let strides: Vec<usize> = axes
         .iter()
         .scan(1usize, |s, a| {
@@ -110,15 +111,8 @@ pub fn count(channels: &[&[f32]], axes: Vec<Axis>, mask: Option<&[bool]>) -> Res
     Ok(Histogram { axes, counts })
 }
 
-/// The most voxels a histogram counts: its counts are u32.
-pub const MAX_COUNTED_VOXELS: u64 = u32::MAX as u64 - 1;
-
-/// The number of bins of `axes`, checked together with the voxel count `n`
-/// against what u32 counts and indices hold.
-pub(crate) fn check_size(n: usize, axes: &[Axis]) -> Result<usize, HistogramError> {
-    if n as u64 > MAX_COUNTED_VOXELS {
-        return Err(HistogramError::Geometry(format!("{n} voxels: histograms count at most {MAX_COUNTED_VOXELS}")));
-    }
+/// The number of bins of `axes`, checked against what u32 bin indices hold.
+pub(crate) fn check_size(axes: &[Axis]) -> Result<usize, HistogramError> {
     let bins: Vec<String> = axes.iter().map(|a| a.bins.to_string()).collect();
     match axes.iter().try_fold(1usize, |p, a| p.checked_mul(a.bins)) {
         Some(total) if total <= 1 << 28 => Ok(total),
@@ -126,8 +120,8 @@ pub(crate) fn check_size(n: usize, axes: &[Axis]) -> Result<usize, HistogramErro
     }
 }
 
-/// Bins per block of the merge's touched-block bookkeeping (one 4 KiB page of u32 counts).
-const MERGE_BLOCK: usize = 1024;
+/// Bins per block of the merge's touched-block bookkeeping (one 4 KiB page of u64 counts).
+const MERGE_BLOCK: usize = 512;
 
 /// One thread's counts, noting which blocks of bins it touched. A fresh
 /// (calloc) count array costs a page fault only where it is written, and a
@@ -135,7 +129,7 @@ const MERGE_BLOCK: usize = 1024;
 /// a histogram volume) never fault in or scan their empty pages.
 pub(crate) struct SparseCounts {
     /// Counts per bin.
-    pub counts: Vec<u32>,
+    pub counts: Vec<u64>,
     touched: Vec<bool>,
 }
 
@@ -148,13 +142,19 @@ impl SparseCounts {
     /// Adds `run` to bin `idx`.
     #[inline(always)]
     pub fn add(&mut self, idx: usize, run: u32) {
-        self.counts[idx] += run;
+        self.counts[idx] += u64::from(run);
+        self.touched[idx / MERGE_BLOCK] = true;
+    }
+
+    /// Adds `n` to bin `idx` (another table's count).
+    pub fn add_count(&mut self, idx: usize, n: u64) {
+        self.counts[idx] += n;
         self.touched[idx / MERGE_BLOCK] = true;
     }
 
     /// The non-zero counts (bin, count), read block by touched block (an
     /// untouched block's pages were never faulted in).
-    pub fn nonzero(&self) -> Vec<(u32, u32)> {
+    pub fn nonzero(&self) -> Vec<(u32, u64)> {
         let n = self.counts.len();
         let touched = self.touched.iter().enumerate().filter(|(_, t)| **t);
         let blocks = touched.map(|(b, _)| b * MERGE_BLOCK..((b + 1) * MERGE_BLOCK).min(n));
@@ -274,4 +274,22 @@ fn count_n<const N: usize, F: FnMut(usize, u32)>(
     let bn: [Binner; N] = std::array::from_fn(|a| binners[a]);
     let st: [u32; N] = std::array::from_fn(|a| strides[a] as u32);
     for_each_run(&ch, &bn, &st, mask, range, |bin, voxels| add(bin as usize, voxels.len() as u32));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bin_holds_more_than_2_to_the_32_voxels_merged_from_tables() {
+        // two tasks' tables, each with 3e9 voxels in one bin: 6e9 merged, exactly
+        let (mut a, mut b) = (SparseCounts::new(4096), SparseCounts::new(4096));
+        a.add_count(2000, 3_000_000_000);
+        b.add_count(2000, 3_000_000_000);
+        b.add(7, 5);
+        a.merge(&b);
+        assert_eq!(a.nonzero(), vec![(7, 5), (2000, 6_000_000_000)]);
+        let h = Histogram { axes: vec![Axis::new("v", 0.0, 1.0, 4096).unwrap()], counts: a.counts };
+        assert_eq!((h.total(), h.max()), (6_000_000_005, 6_000_000_000));
+    }
 }

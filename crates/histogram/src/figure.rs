@@ -340,7 +340,7 @@ fn fill_heat_map(
     let palette: CountPalette = if overlay.is_some() { dark_count_colour } else { count_colour };
     let alpha_max = overlay.map_or(0.0, |o| o.max_alpha());
     each_plot_pixel(&rect, (ax.bins, ay.bins), |x, y, i, j, tx, ty| {
-        let mut rgb = palette(h.counts[j * ax.bins + i] as u64, max, scale);
+        let mut rgb = palette(h.counts[j * ax.bins + i], max, scale);
         if let Some(cell) = overlay.and_then(|o| o.at(ax.min + tx * (ax.max - ax.min), ay.min + ty * (ay.max - ay.min)))
             && alpha_max > 0.0
         {

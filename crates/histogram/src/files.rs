@@ -136,10 +136,7 @@ pub fn write_hvol(dir: &Path, hv: &HistogramVolume, title: &str, arches: &[ArchM
     let vg = table_axes(&hv.vg_axes);
     write_table_nrrd(&dir.join("position.nrrd"), &vg, &hv.position)?;
     write_table_nrrd(&dir.join("opacity.nrrd"), &vg, &hv.opacity)?;
-    let counts = Histogram {
-        axes: hv.vg_axes.to_vec(),
-        counts: hv.count_vg.iter().map(|&c| c.min(u32::MAX as u64) as u32).collect(),
-    };
+    let counts = Histogram { axes: hv.vg_axes.to_vec(), counts: hv.count_vg.clone() };
     let rgba: Vec<f32> =
         hv.opacity.iter().flat_map(|&a| [OPACITY_COLOUR[0], OPACITY_COLOUR[1], OPACITY_COLOUR[2], a]).collect();
     let [av, ag] = &hv.vg_axes;

@@ -22,7 +22,7 @@ use crate::count::{Histogram, SparseCounts, check_size, for_each_run};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Parameters of the histogram volume.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -161,9 +161,9 @@ pub struct HvolAccumulator {
 }
 
 impl HvolAccumulator {
-    /// An empty accumulator over `axes`, for volumes of `voxels` voxels.
-    pub fn new(axes: &HvolAxes, voxels: usize) -> Result<HvolAccumulator, HistogramError> {
-        let total_bins = check_size(voxels, &axes.list())?;
+    /// An empty accumulator over `axes`.
+    pub fn new(axes: &HvolAxes) -> Result<HvolAccumulator, HistogramError> {
+        let total_bins = check_size(&axes.list())?;
         Ok(HvolAccumulator {
             axes: axes.clone(),
             binners: axes.binners(),
@@ -216,7 +216,7 @@ impl HvolAccumulator {
 #[derive(Serialize, Deserialize)]
 struct StoredAccumulator {
     axes: HvolAxes,
-    counts: Vec<(u32, u32)>,
+    counts: Vec<(u32, u64)>,
     parts: Vec<(usize, Vec<StoredSums>)>,
 }
 
@@ -275,7 +275,7 @@ impl HvolAccumulator {
             }
         }
         for (bin, n) in stored.counts {
-            self.counts.add(bin as usize, n);
+            self.counts.add_count(bin as usize, n);
         }
         for (p, sums) in stored.parts {
             let s = self.sums.of(p, &stored.axes);
@@ -330,7 +330,7 @@ pub struct HvolBySlabs {
     binners: [Binner; 3],
     strides: [u32; 3],
     /// Voxels per (v, g, f'') bin, from every lane at once.
-    counts: Vec<AtomicU32>,
+    counts: Vec<AtomicU64>,
     lanes: Vec<PartSums>,
     parts: Vec<Range<usize>>,
     plane: usize,
@@ -339,9 +339,9 @@ pub struct HvolBySlabs {
 impl HvolBySlabs {
     /// An empty histogram volume over `axes` for a volume of `slices`
     /// z-slices of `plane` voxels, counted on `lanes` parallel lanes (at
-    /// most [`HVOL_PARTS`]); the counts take 4 bytes a bin, whatever the lanes.
+    /// most [`HVOL_PARTS`]); the counts take 8 bytes a bin, whatever the lanes.
     pub fn new(axes: &HvolAxes, plane: usize, slices: usize, lanes: usize) -> Result<HvolBySlabs, HistogramError> {
-        let bins = check_size(plane * slices, &axes.list())?;
+        let bins = check_size(&axes.list())?;
         Ok(HvolBySlabs {
             axes: axes.clone(),
             binners: axes.binners(),
@@ -372,7 +372,7 @@ impl HvolBySlabs {
             (&self.axes, &self.binners, &self.strides, &self.counts, &self.parts);
         let add = |bin: u32, n: u32| {
             if let Some(c) = counts.get(bin as usize) {
-                c.fetch_add(n, Ordering::Relaxed);
+                c.fetch_add(u64::from(n), Ordering::Relaxed);
             }
         };
         self.lanes.par_iter_mut().enumerate().for_each(|(lane, sums)| {
@@ -392,7 +392,7 @@ impl HvolBySlabs {
     pub fn finish(self, params: &HvolParams) -> Result<HistogramVolume, HistogramError> {
         let sums = PartSums::merged(self.lanes, &self.axes);
         // in place: the same memory, now plain counts
-        let counts = self.counts.into_iter().map(AtomicU32::into_inner).collect();
+        let counts = self.counts.into_iter().map(AtomicU64::into_inner).collect();
         derive_tables(Histogram { axes: self.axes.list(), counts }, self.axes, sums, params)
     }
 }
@@ -423,7 +423,7 @@ pub fn histogram_volume(
     let tasks: Vec<HvolAccumulator> = part_groups(rayon::current_num_threads())
         .into_par_iter()
         .map(|group| {
-            let mut acc = HvolAccumulator::new(&axes, n)?;
+            let mut acc = HvolAccumulator::new(&axes)?;
             for k in parts[group.start].start..parts[group.end - 1].end {
                 let at = k * plane..(k + 1) * plane;
                 acc.add_slice(k, slices, &v[at.clone()], &g[at.clone()], &h[at]);

@@ -59,7 +59,7 @@ impl Histogram {
         if self.axes.len() == 1 {
             let (w, h) = (self.axes[0].bins, BAR_HEIGHT);
             let mut pixels = vec![0u8; w * h];
-            let bar = |c: u32, scale: Scale| (grey_level(c as u64, max, scale) as usize * h).div_ceil(255);
+            let bar = |c: u64, scale: Scale| (grey_level(c, max, scale) as usize * h).div_ceil(255);
             for (x, &c) in self.counts.iter().enumerate() {
                 for (height, grey) in [(bar(c, Scale::Log), LOG_BAR_GREY), (bar(c, Scale::Linear), 255)] {
                     for y in 0..height {
@@ -73,7 +73,7 @@ impl Histogram {
         let mut pixels = vec![0u8; w * h];
         for y in 0..h {
             for x in 0..w {
-                pixels[(h - 1 - y) * w + x] = grey_level(self.counts[y * w + x] as u64, max, scale);
+                pixels[(h - 1 - y) * w + x] = grey_level(self.counts[y * w + x], max, scale);
             }
         }
         Grey { width: w, height: h, pixels }

@@ -56,7 +56,7 @@ impl Histogram {
                         t[a] = ia;
                         t[b] = ib;
                         t[c] = ic;
-                        let k = self.counts[self.index(&t)] as u64;
+                        let k = self.counts[self.index(&t)];
                         n += k;
                         m += k as f64 * pos(ic, nc);
                     }

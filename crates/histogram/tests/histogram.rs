@@ -42,7 +42,7 @@ fn joint_counts_equal_a_brute_force_count() {
     let mask: Vec<bool> = (0..50_000).map(|i| i % 7 != 3).collect();
     let h = count(&[&a, &b], axes.clone(), Some(&mask)).unwrap();
     // brute force written here: floor((x - min) / width), max in the last bin
-    let mut want = vec![0u32; 17 * 9];
+    let mut want = vec![0u64; 17 * 9];
     let mut inside = 0u64;
     for i in 0..a.len() {
         let (x, y) = (a[i] as f64, b[i] as f64);
@@ -147,7 +147,7 @@ fn stretched_histogram_collapses_the_arch_to_a_line() {
         let mut near = 0;
         for bg in 0..256 {
             if ((axes[1].centre(bg) - a) / a).abs() <= 0.01 + axes[1].width() / a {
-                near += (0..256).map(|bv| h.counts[bg * 256 + bv] as u64).sum::<u64>();
+                near += (0..256).map(|bv| h.counts[bg * 256 + bv]).sum::<u64>();
             }
         }
         near as f64 / h.total() as f64
@@ -318,10 +318,10 @@ fn histogram_volume_parts_counted_by_tasks_elsewhere_give_the_whole_one() {
     let axes = HvolAxes::of(v, g, f2, &params).unwrap();
     let parts = fixed_parts(48);
     // tasks of 1, 5 and 10 parts, absorbed in reverse order by one accumulator
-    let mut merged = HvolAccumulator::new(&axes, v.len()).unwrap();
+    let mut merged = HvolAccumulator::new(&axes).unwrap();
     let mut stored = Vec::new();
     for group in [0..1, 1..6, 6..16] {
-        let mut acc = HvolAccumulator::new(&axes, v.len()).unwrap();
+        let mut acc = HvolAccumulator::new(&axes).unwrap();
         for k in parts[group.start].start..parts[group.end - 1].end {
             let at = k * plane..(k + 1) * plane;
             acc.add_slice(k, 48, &v[at.clone()], &g[at.clone()], &f2[at]);

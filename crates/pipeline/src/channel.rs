@@ -73,6 +73,11 @@ pub enum Channel {
         /// The axis.
         axis: usize,
     },
+    /// g after the bilateral pre-filter (what the tracing reads when the
+    /// pipeline pre-filters); a run's own, not a row: no output holds it.
+    GPrefiltered,
+    /// f'' after the bilateral pre-filter, likewise.
+    F2Prefiltered,
 }
 
 /// The stage that makes a channel.
@@ -84,6 +89,8 @@ pub enum Producer {
     Derive(Item),
     /// The derive pass over all the fields (several fields only), with this item.
     DeriveFields(Item),
+    /// The bilateral pre-filter of g and f'' before the tracing.
+    Prefilter,
     /// The boundary tracing (after the optional pre-filter of g and f'').
     Trace,
 }
@@ -221,6 +228,10 @@ pub fn traced_names() -> Vec<String> {
     traced().map(|c| c.name(&[])).collect()
 }
 
+/// The pre-filtered channels (not rows) and their names in a run's channel store.
+const PREFILTERED: [(Channel, &str); 2] =
+    [(Channel::GPrefiltered, "g_prefiltered"), (Channel::F2Prefiltered, "f2_prefiltered")];
+
 /// The text of a Jacobian component (not a row).
 const JACOBIAN: ChannelText = text(
     "component d field / d axis of the Jacobian of the fields normalised to [0, 1]",
@@ -248,11 +259,19 @@ impl Channel {
         if let Some(row) = TABLE.iter().find(|r| r.name == name) {
             return Some(row.channel);
         }
+
         // d{field}/d{axis}
         let (field, axis) = name.strip_prefix('d')?.rsplit_once("/d")?;
         let field = fields.iter().position(|f| f == field)?;
         let axis = AXES.iter().position(|a| *a == axis)?;
         Some(Channel::Jacobian { field, axis })
+    }
+
+    /// The one-field run's channel whose channel store file is named
+    /// `name`: a table row's, or a pre-filtered one's.
+    pub fn of_store(name: &str) -> Option<Channel> {
+        let prefiltered = PREFILTERED.iter().find(|(_, n)| *n == name).map(|&(c, _)| c);
+        prefiltered.or_else(|| TABLE.iter().find(|r| r.name == name).map(|r| r.channel))
     }
 
     /// The channel called `name`, or an error listing the valid names.
@@ -270,6 +289,9 @@ impl Channel {
             Channel::Jacobian { field, axis } => {
                 format!("d{}/d{}", Channel::Field(field).name(fields), AXES.get(axis).unwrap_or(&"?"))
             }
+            Channel::GPrefiltered | Channel::F2Prefiltered => {
+                PREFILTERED.iter().find(|(c, _)| *c == self).map_or("?", |(_, n)| n).to_string()
+            }
             c => c.row().map_or("?", |r| r.name).to_string(),
         }
     }
@@ -285,6 +307,7 @@ impl Channel {
             Some(r) if multi => r.multi.map_or(r.producer, |(p, _)| p),
             Some(r) => r.producer,
             None if matches!(self, Channel::Jacobian { .. }) => Producer::DeriveFields(Item::Jacobian),
+            None if matches!(self, Channel::GPrefiltered | Channel::F2Prefiltered) => Producer::Prefilter,
             None => Producer::Input,
         }
     }
@@ -295,6 +318,12 @@ impl Channel {
             Some(r) if multi => r.multi.map_or(r.text, |(_, t)| t),
             Some(r) => r.text,
             None if matches!(self, Channel::Jacobian { .. }) => JACOBIAN,
+            None if self == Channel::GPrefiltered => {
+                text("g after the bilateral pre-filter", PER_UNIT, "prefilter", false)
+            }
+            None if self == Channel::F2Prefiltered => {
+                text("f'' after the bilateral pre-filter", PER_UNIT2, "prefilter", true)
+            }
             None => texts::FIELD,
         }
     }
@@ -306,6 +335,7 @@ impl Channel {
         match self.producer(multi) {
             Producer::Input => [0; 3],
             Producer::Derive(_) | Producer::DeriveFields(_) => reach.kernel,
+            Producer::Prefilter => std::array::from_fn(|a| reach.kernel[a] + reach.prefilter[a]),
             Producer::Trace => {
                 let mut h = [0; 3];
                 for a in 0..3 {
@@ -314,6 +344,21 @@ impl Channel {
                 h
             }
         }
+    }
+}
+
+/// A one-field run's channel travels (in a cluster task's job) as its
+/// channel store name.
+impl serde::Serialize for Channel {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&self.name(&[]))
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for Channel {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Channel, D::Error> {
+        let name = String::deserialize(d)?;
+        Channel::of_store(&name).ok_or_else(|| serde::de::Error::custom(format!("unknown channel '{name}'")))
     }
 }
 
@@ -401,6 +446,7 @@ mod tests {
                 let stage = match r.channel.producer(multi) {
                     Producer::Input => "input",
                     Producer::Derive(_) | Producer::DeriveFields(_) => "derive",
+                    Producer::Prefilter => "prefilter",
                     Producer::Trace => "boundary",
                 };
                 assert_eq!(r.channel.text(multi).stage, stage, "{}", r.name);
@@ -445,5 +491,24 @@ mod tests {
         assert_eq!(Channel::Value.halo(false, &reach), [0, 0, 0]);
         assert_eq!(Channel::InvG.producer(true), Producer::DeriveFields(Item::InvG));
         assert_eq!(Channel::InvG.producer(false), Producer::Derive(Item::InvG));
+    }
+
+    #[test]
+    fn every_derive_item_makes_table_channels_and_store_names_read_back() {
+        for item in Item::ALL {
+            for c in item.components() {
+                let channel = Channel::of_store(c).unwrap_or_else(|| panic!("{item:?} makes {c}, not a table row"));
+                assert_eq!(channel.name(&[]), *c);
+            }
+        }
+        for c in TABLE.iter().map(|r| r.channel).chain([Channel::GPrefiltered, Channel::F2Prefiltered]) {
+            assert_eq!(Channel::of_store(&c.name(&[])), Some(c));
+            let json = serde_json::to_string(&c).unwrap();
+            assert_eq!(serde_json::from_str::<Channel>(&json).unwrap(), c, "{json}");
+        }
+        assert_eq!(serde_json::to_string(&Channel::GPrefiltered).unwrap(), "\"g_prefiltered\"");
+        assert!(serde_json::from_str::<Channel>("\"nope\"").is_err());
+        // a user cannot ask for the run's own pre-filtered channels
+        assert_eq!(Channel::parse("g_prefiltered", &[]), None);
     }
 }

@@ -121,9 +121,8 @@ pub fn mesh_gaussians(tf: Option<&TfFile>, s: &[f32], g: &[f32], spacing: f64) -
         _ => None,
     };
     if let Some(h) = counted {
-        let counts: Vec<u64> = h.counts.iter().map(|&c| c as u64).collect();
         let axes = [h.axes[0].clone(), h.axes[1].clone()];
-        let found = mdtf_histogram::detect_in(&counts, &axes, 0.0).boundaries;
+        let found = mdtf_histogram::detect_in(&h.counts, &axes, 0.0).boundaries;
         if !found.is_empty() {
             let grid = Geometry::new([2, 2, 2], [spacing; 3]);
             return boundary_tgtfs(&crate::pack_inputs::arches_from(&found), &grid);

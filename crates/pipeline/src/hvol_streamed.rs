@@ -65,7 +65,7 @@ pub fn histogram_volume_derived(
         input,
         &d,
         &slabs,
-        |_| HvolAccumulator::new(&axes, n),
+        |_| HvolAccumulator::new(&axes),
         |acc, k, slice| {
             if let Ok(acc) = acc {
                 acc.add_slice(k, nz, &v[k * plane..(k + 1) * plane], &slice[0], &slice[1]);

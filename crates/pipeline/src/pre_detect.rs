@@ -41,7 +41,7 @@ impl VgCounts {
     pub fn add(&mut self, v: &[f32], g: &[f32]) -> Result<(), HistogramError> {
         let piece = count(&[v, g], self.axes.to_vec(), None)?;
         for (total, n) in self.counts.iter_mut().zip(piece.counts) {
-            *total += n as u64;
+            *total += n;
         }
         Ok(())
     }

@@ -21,6 +21,7 @@ fn rendered() -> String {
         Producer::Input => "input".to_string(),
         Producer::Derive(item) => format!("derive `{}`", item.name()),
         Producer::DeriveFields(item) => format!("derive over the fields `{}`", item.name()),
+        Producer::Prefilter => "pre-filter".to_string(),
         Producer::Trace => "tracing".to_string(),
     };
     for r in &TABLE {

@@ -203,7 +203,7 @@ pub fn histogram<'py>(
     channels: Vec<PyReadonlyArray3<'py, f32>>,
     axes: Vec<AxisRequest>,
     mask: Option<PyReadonlyArray3<'py, bool>>,
-) -> PyResult<(Bound<'py, PyArrayDyn<u32>>, Vec<AxisOut>)> {
+) -> PyResult<(Bound<'py, PyArrayDyn<u64>>, Vec<AxisOut>)> {
     if channels.len() != axes.len() {
         return Err(value_error(format!(
             "{} channels and {} axes: give one axis per channel",

@@ -11,9 +11,9 @@ use mdtf_volume::{Geometry, human_bytes};
 /// What the process holds whatever the slab: code, thread stacks, figures (bytes).
 const BASE_BYTES: u64 = 48 << 20;
 /// The histogram volume ([`mdtf_histogram::HvolBySlabs`]): its counts
-/// (256^3 u32 at most, one array whatever its lanes) and the sums of its 16
+/// (256^3 u64 at most, one array whatever its lanes) and the sums of its 16
 /// fixed parts (three 8-byte sums on each of 256^2 (v, g) bins).
-const HVOL_BYTES: u64 = (64 << 20) + 16 * 3 * 8 * 256 * 256;
+const HVOL_BYTES: u64 = (128 << 20) + 16 * 3 * 8 * 256 * 256;
 
 /// Block-sized f32 arrays the tracing holds: the value and its five
 /// derivatives over the block grown by the halo and the kernel's support,
@@ -278,10 +278,11 @@ mod tests {
         assert!(e.contains("too small") && e.contains("1.0 MiB"), "{e}");
         assert_eq!(slab_height(1 << 40, &geo, &plan, true).unwrap(), 256, "a large budget: one slab");
         // the histogram volume's counts come off the slabs' share, once whatever its lanes
-        let h2 = slab_height(budget, &geo, &plan, true).unwrap() as u64;
-        assert!(BASE_BYTES + HVOL_BYTES + pass_planes(h2, &plan, true) * plane <= budget);
-        assert!(BASE_BYTES + HVOL_BYTES + pass_planes(h2 + 1, &plan, true) * plane > budget);
-        assert_eq!(fit_slabs(budget, &geo, &plan, true, false).unwrap(), h2 as usize);
+        let larger = 2 * budget;
+        let h2 = slab_height(larger, &geo, &plan, true).unwrap() as u64;
+        assert!(BASE_BYTES + HVOL_BYTES + pass_planes(h2, &plan, true) * plane <= larger);
+        assert!(BASE_BYTES + HVOL_BYTES + pass_planes(h2 + 1, &plan, true) * plane > larger);
+        assert_eq!(fit_slabs(larger, &geo, &plan, true, false).unwrap(), h2 as usize);
         assert_eq!(fit_slabs(budget, &geo, &plan, false, false).unwrap(), h as usize);
     }
 

@@ -10,6 +10,7 @@
 
 use super::{ChannelStore, SlabChannels, SlabSize, Source, automatic_file_budget, slab_height, slabs};
 use crate::boundary_chain::{BoundaryChainParams, ChainError};
+use crate::channel::Channel;
 use crate::error::{RunError, at, fail};
 use crate::plan::Plan;
 use mdtf_derive::Item;
@@ -120,7 +121,7 @@ pub fn derive_item_files(
     params.epsilon = params.epsilon.or(Some(mdtf_derive::default_epsilon(span, geo.min_spacing())));
     let mut chans = SlabChannels::new(store, vec![params], plan.reach.kernel[2], nz);
 
-    let wanted: Vec<&str> = names.iter().map(String::as_str).collect();
+    let wanted: Vec<Channel> = names.iter().filter_map(|n| Channel::of_store(n)).collect();
     // a slab is derived while the one before is written
     overlapped(
         cut.len(),
@@ -128,7 +129,7 @@ pub fn derive_item_files(
             on_slab(n + k + 1, 2 * n);
             Ok::<(), RunError>(())
         },
-        &mut |k, spent: Option<(usize, Vec<(String, Volume)>)>| {
+        &mut |k, spent: Option<(usize, Vec<(Channel, Volume)>)>| {
             chans.give_back(spent.map(|(_, v)| v).unwrap_or_default());
             Ok((cut[k].start, chans.volumes(cut[k].clone(), &wanted).map_err(at("derive"))?))
         },
@@ -137,7 +138,7 @@ pub fn derive_item_files(
             writers.par_iter_mut().try_for_each(|(_, _, fields, w)| {
                 let samples: Vec<&[f32]> = fields
                     .iter()
-                    .filter_map(|f| volumes.iter().find(|(n, _)| n == f).map(|(_, v)| v.samples()))
+                    .filter_map(|f| volumes.iter().find(|(c, _)| c.name(&[]) == *f).map(|(_, v)| v.samples()))
                     .collect();
                 w.put(first, &samples).map_err(at("write"))
             })?;
@@ -163,7 +164,7 @@ fn copy_value(
     cut: &[Range<usize>],
     on_slab: &(dyn Fn(usize) + Sync),
 ) -> Result<Option<(f32, f32)>, RunError> {
-    let mut writer = store.writer(&["v"]).map_err(at("input"))?;
+    let mut writer = store.writer(&[Channel::Value]).map_err(at("input"))?;
     let mut range: Option<(f32, f32)> = None;
     overlapped(
         cut.len(),
@@ -176,7 +177,7 @@ fn copy_value(
             if let Some((lo, hi)) = mdtf_volume::finite_sample_range(v.samples()) {
                 range = Some(range.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))));
             }
-            writer.put_volume("v", first, &v).map_err(at("input"))?;
+            writer.put_volume(Channel::Value, first, &v).map_err(at("input"))?;
             Ok(None)
         },
     )?;

@@ -5,6 +5,7 @@
 //! median when the derive pass counted its first).
 
 use super::{ChannelError, SlabChannels};
+use crate::channel::Channel;
 use mdtf_histogram::Axis;
 use mdtf_pack::GaussianPrimitive;
 use mdtf_volume::KeyBuckets;
@@ -33,11 +34,11 @@ fn median_of_g(
     match buckets {
         Some(b) => mdtf_volume::median_from_buckets(b, |visit| {
             for z in slabs {
-                visit(chans.samples("g", z.clone())?);
+                visit(chans.samples(Channel::G, z.clone())?);
             }
             Ok(())
         }),
-        None => median_of_slabs(slabs, &mut |z| chans.samples("g", z).map(<[f32]>::to_vec)),
+        None => median_of_slabs(slabs, &mut |z| chans.samples(Channel::G, z).map(<[f32]>::to_vec)),
     }
 }
 
@@ -51,7 +52,7 @@ pub(super) fn inverse_gradient_axis(
     let Some(median) = median_of_g(chans, slabs, g_buckets)? else { return Ok(None) };
     let cut = 2.0 * median;
     let above = median_of_slabs(slabs, &mut |z| {
-        Ok(chans.samples("g", z)?.iter().copied().filter(|&x| x > cut && x.is_finite()).collect())
+        Ok(chans.samples(Channel::G, z)?.iter().copied().filter(|&x| x > cut && x.is_finite()).collect())
     })?;
     Ok(above.and_then(|g_b| Axis::inverse_gradient_at(g_b, 256)))
 }
@@ -66,17 +67,17 @@ pub(super) fn median_tgtf(
     let g_cut = 2.0 * median_of_g(chans, slabs, g_buckets)?.unwrap_or(0.0);
     let (mut structured, mut voxels) = (0usize, 0usize);
     for z in slabs {
-        let g = chans.samples("g", z.clone())?;
+        let g = chans.samples(Channel::G, z.clone())?;
         structured += g.iter().filter(|&&x| x > g_cut).count();
         voxels += g.len();
     }
     let use_all = structured * 100 < voxels;
     let centre = median_of_slabs(slabs, &mut |z| {
-        let v = chans.samples("v", z.clone())?.to_vec();
+        let v = chans.samples(Channel::Value, z.clone())?.to_vec();
         if use_all {
             return Ok(v);
         }
-        let g = chans.samples("g", z)?;
+        let g = chans.samples(Channel::G, z)?;
         Ok(v.into_iter().zip(g).filter(|(_, g)| **g > g_cut).map(|(v, _)| v).collect())
     })?
     .ok_or(ChannelError::Missing("channel 'v' has no finite sample"))?;

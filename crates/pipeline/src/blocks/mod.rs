@@ -80,7 +80,7 @@ pub use pool::SamplePool;
 pub use remote::{Prefilter, SlabJob, SlabPass, SlabTasks};
 pub use resume::WrittenPiece;
 pub use sizing::{PassSize, Sizing, sizing};
-pub use slab_channels::{ChannelError, SlabChannels};
+pub use slab_channels::{ChannelError, SlabChannels, by_name, channels_named};
 pub use slab_histograms::{HistogramAxes, HistogramCounts};
 pub use store::{ChannelStore, StoreWriter};
 pub use tasks::{TaskOutcome, run_task};

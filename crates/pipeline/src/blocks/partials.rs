@@ -13,10 +13,11 @@ use super::reductions::Stats;
 use super::resume::WrittenPiece;
 use super::slab_histograms::HistogramCounts;
 use super::trace::SlabTrace;
+use crate::channel::Channel;
 use crate::pre_detect::VgCounts;
 use crate::run::{RunError, fail};
 use mdtf_boundary::{Crossings, ReportAccumulator, ReportInput, ResolvedParams, TraceCounts};
-use mdtf_histogram::{AxisSpec, ChannelStats};
+use mdtf_histogram::ChannelStats;
 use mdtf_volume::KeyBuckets;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -25,7 +26,7 @@ use std::path::{Path, PathBuf};
 #[derive(Default, Serialize, Deserialize)]
 pub struct SlabPartial {
     /// The statistics of each channel the task summarised, of its slab alone.
-    pub stats: Vec<(String, ChannelStats)>,
+    pub stats: Vec<(Channel, ChannelStats)>,
     /// The first radix pass of the traced g's median over the slab (derive,
     /// when g is summarised; pre-filter, of the pre-filtered g).
     pub g_buckets: Option<KeyBuckets>,
@@ -61,10 +62,10 @@ pub struct TracePartial {
 }
 
 impl SlabPartial {
-    /// Adds the statistics of channel `name`'s slab `samples` (of a volume of `voxels`).
-    pub fn summarise(&mut self, name: &str, samples: &[f32], voxels: usize) {
-        let part = ChannelStats::of_part(samples, AxisSpec::qbert(name).clip_percent, voxels);
-        self.stats.push((name.to_string(), part));
+    /// Adds the statistics of channel `c`'s slab `samples` (of a volume of `voxels`).
+    pub fn summarise(&mut self, c: Channel, samples: &[f32], voxels: usize) {
+        let part = ChannelStats::of_part(samples, super::reductions::clip_of(c), voxels);
+        self.stats.push((c, part));
     }
 
     /// Writes the partial of `stage`'s task of the slab from plane `first`
@@ -86,8 +87,8 @@ impl SlabPartial {
 
     /// Merges the statistics into `stats` (in z order, as the run's own slabs').
     pub(super) fn merge_stats_into(&mut self, stats: &mut Stats) {
-        for (name, part) in self.stats.drain(..) {
-            stats.merge(&name, part);
+        for (c, part) in self.stats.drain(..) {
+            stats.merge(c, part);
         }
     }
 }
@@ -144,7 +145,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let mut p = SlabPartial { smallest_inv_g: Some(f32::INFINITY), padded: 7, ..Default::default() };
         let samples = [1.5f32, -0.0, 3.25e-39, f32::MAX, 2.0];
-        p.summarise("g", &samples, 100);
+        p.summarise(Channel::G, &samples, 100);
         let mut buckets = KeyBuckets::new();
         buckets.add(&samples);
         p.g_buckets = Some(buckets.clone());
@@ -153,8 +154,8 @@ mod tests {
         assert_eq!(back.smallest_inv_g.map(f32::to_bits), Some(f32::INFINITY.to_bits()));
         assert_eq!(back.padded, 7);
         assert_eq!(back.g_buckets, Some(buckets));
-        let (name, stats) = &back.stats[0];
-        assert_eq!(name, "g");
+        let (c, stats) = &back.stats[0];
+        assert_eq!(*c, Channel::G);
         assert_eq!(
             stats.finite_range().map(|(a, b)| (a.to_bits(), b.to_bits())),
             Some(((-0.0f32).to_bits(), f32::MAX.to_bits()))

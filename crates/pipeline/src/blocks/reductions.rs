@@ -4,6 +4,7 @@
 //! (the histograms: [`super::slab_histograms`]).
 
 use super::SlabChannels;
+use crate::channel::Channel;
 use crate::pre_detect::{HVOL_BINS, VgCounts};
 use crate::run::{RunError, at, fail};
 use mdtf_boundary::VolumeStats;
@@ -14,84 +15,90 @@ use std::ops::Range;
 
 /// Percentile statistics of the channels that need them, with qbert's
 /// clips, and the voxels of the whole volume.
-pub(super) struct Stats(pub(super) BTreeMap<&'static str, ChannelStats>, usize);
+pub(super) struct Stats(pub(super) BTreeMap<Channel, ChannelStats>, usize);
+
+/// The clip (low, high percent) of channel `c`'s statistics: qbert's.
+pub(super) fn clip_of(c: Channel) -> (f64, f64) {
+    AxisSpec::qbert(&c.name(&[])).clip_percent
+}
 
 impl Stats {
-    pub(super) fn new(names: &[&'static str], n: usize) -> Stats {
-        Stats(names.iter().map(|&c| (c, ChannelStats::new(AxisSpec::qbert(c).clip_percent, n))).collect(), n)
+    pub(super) fn new(channels: &[Channel], n: usize) -> Stats {
+        Stats(channels.iter().map(|&c| (c, ChannelStats::new(clip_of(c), n))).collect(), n)
     }
 
-    pub(super) fn add(&mut self, name: &str, data: &[f32]) {
-        if self.0.contains_key(name) {
+    pub(super) fn add(&mut self, c: Channel, data: &[f32]) {
+        if self.0.contains_key(&c) {
             // in parallel over the slab; the candidates merge exactly
-            self.merge(name, ChannelStats::of_part(data, AxisSpec::qbert(name).clip_percent, self.1));
+            self.merge(c, ChannelStats::of_part(data, clip_of(c), self.1));
         }
     }
 
-    /// Merges the statistics of the next slab of channel `name`, taken
+    /// Merges the statistics of the next slab of channel `c`, taken
     /// elsewhere as [`Stats::add`] takes them (a task's partial).
-    pub(super) fn merge(&mut self, name: &str, slab: ChannelStats) {
-        if let Some(s) = self.0.get_mut(name) {
+    pub(super) fn merge(&mut self, c: Channel, slab: ChannelStats) {
+        if let Some(s) = self.0.get_mut(&c) {
             let whole = std::mem::replace(s, ChannelStats::new((0.0, 0.0), 0));
             *s = whole.merge(slab);
         }
     }
 
-    pub(super) fn axis(&self, spec: &AxisSpec, name: &str) -> Result<mdtf_histogram::Axis, RunError> {
-        let s = self.0.get(name).ok_or_else(|| fail("histogram")(format!("no statistics of {name}")))?;
-        s.axis(spec, name).map_err(at("histogram"))
+    pub(super) fn axis(&self, spec: &AxisSpec, c: Channel) -> Result<mdtf_histogram::Axis, RunError> {
+        let name = c.name(&[]);
+        let s = self.0.get(&c).ok_or_else(|| fail("histogram")(format!("no statistics of {name}")))?;
+        s.axis(spec, &name).map_err(at("histogram"))
     }
 
-    pub(super) fn range(&self, name: &str) -> Option<(f32, f32)> {
-        self.0.get(name).and_then(ChannelStats::finite_range)
+    pub(super) fn range(&self, c: Channel) -> Option<(f32, f32)> {
+        self.0.get(&c).and_then(ChannelStats::finite_range)
     }
 
-    /// Samples of channel `name` that were not finite (all, when it was never summarised).
-    pub(super) fn not_finite(&self, name: &str) -> u64 {
-        self.1 as u64 - self.0.get(name).map_or(0, ChannelStats::finite_count)
+    /// Samples of channel `c` that were not finite (all, when it was never summarised).
+    pub(super) fn not_finite(&self, c: Channel) -> u64 {
+        self.1 as u64 - self.0.get(&c).map_or(0, ChannelStats::finite_count)
     }
 }
 
 /// The rank of the median (the lower one) among the finite samples of
-/// channel `g_name` that `stats` summarised (None without any).
-pub(super) fn median_rank(stats: &Stats, g_name: &str) -> Result<Option<u64>, RunError> {
-    let s = stats.0.get(g_name).ok_or_else(|| fail("boundary")(format!("no statistics of {g_name}")))?;
+/// channel `g` that `stats` summarised (None without any).
+pub(super) fn median_rank(stats: &Stats, g: Channel) -> Result<Option<u64>, RunError> {
+    let s = stats.0.get(&g).ok_or_else(|| fail("boundary")(format!("no statistics of {}", g.name(&[]))))?;
     Ok(s.finite_count().checked_sub(1).map(|last| last / 2))
 }
 
-/// The tracing's whole-volume statistics of the g it traces (`g_name`),
+/// The tracing's whole-volume statistics of the g it traces (`g`),
 /// whose median is `median`: its noise floor and largest value (no
 /// detection yet).
 pub(super) fn g_volume_stats(
     stats: &Stats,
-    g_name: &str,
+    g: Channel,
     median: Option<f32>,
     value_range: f64,
     l_min: f64,
 ) -> VolumeStats {
-    let g_max = stats.range(g_name).map_or(0.0, |r| r.1);
+    let g_max = stats.range(g).map_or(0.0, |r| r.1);
     let noise_floor = mdtf_boundary::noise_floor_of_median(median, value_range, l_min);
     VolumeStats { value_range, noise_floor, g_max, detected: mdtf_boundary::Detected::default() }
 }
 
-/// The tracing's whole-volume statistics of the g it traces (`g_name`):
+/// The tracing's whole-volume statistics of the g it traces (`g`):
 /// the noise floor from its median (a two-pass select over the slabs, one
 /// pass when `buckets` counted the first) and its largest value.
 pub(super) fn g_stats(
     chans: &mut SlabChannels,
-    g_name: &str,
+    g: Channel,
     buckets: Option<&KeyBuckets>,
     slabs: &[Range<usize>],
     value_range: f64,
     l_min: f64,
     stats: &Stats,
 ) -> Result<VolumeStats, RunError> {
-    let median = match median_rank(stats, g_name)? {
+    let median = match median_rank(stats, g)? {
         None => None,
         Some(k) => {
             let pass = |visit: &mut dyn FnMut(&[f32])| {
                 for z in slabs {
-                    visit(chans.samples(g_name, z.clone())?);
+                    visit(chans.samples(g, z.clone())?);
                 }
                 Ok::<(), super::ChannelError>(())
             };
@@ -102,14 +109,14 @@ pub(super) fn g_stats(
             .map_err(at("boundary"))?
         }
     };
-    Ok(g_volume_stats(stats, g_name, median, value_range, l_min))
+    Ok(g_volume_stats(stats, g, median, value_range, l_min))
 }
 
 /// The (v, g) axes the detection before the tracing counts over, from the
 /// statistics of v and g; None when those hold none or `chans` has no v or g.
 pub(super) fn detection_axes(chans: &SlabChannels, stats: &Stats) -> Option<(Axis, Axis)> {
-    let axis = |name: &str| stats.axis(&HvolAxes::spec(name, HVOL_BINS), name).ok();
-    (chans.has("v") && chans.has("g")).then(|| axis("v").zip(axis("g"))).flatten()
+    let axis = |c: Channel| stats.axis(&HvolAxes::spec(&c.name(&[]), HVOL_BINS), c).ok();
+    (chans.has(Channel::Value) && chans.has(Channel::G)).then(|| axis(Channel::Value).zip(axis(Channel::G))).flatten()
 }
 
 /// What boundary detection finds in the (v, g) histogram of every voxel
@@ -125,8 +132,8 @@ pub(super) fn detected_before_tracing(
     let mut counts = VgCounts::new(av, ag);
     let mut v = Vec::new();
     for z in slabs {
-        chans.samples_into("v", z.clone(), &mut v).map_err(at("boundary"))?;
-        let g = chans.samples("g", z.clone()).map_err(at("boundary"))?;
+        chans.samples_into(Channel::Value, z.clone(), &mut v).map_err(at("boundary"))?;
+        let g = chans.samples(Channel::G, z.clone()).map_err(at("boundary"))?;
         counts.add(&v, g).map_err(at("boundary"))?;
     }
     Ok(counts.detected(spacing))

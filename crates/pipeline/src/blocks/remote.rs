@@ -15,6 +15,7 @@
 use super::ChannelStore;
 use super::partials::SlabPartial;
 use super::slab_histograms::HistogramAxes;
+use crate::channel::Channel;
 use crate::report::TaskPass;
 use crate::run::{RunError, at, fail};
 use mdtf_bilateral::BilateralParams;
@@ -45,7 +46,7 @@ pub struct SlabJob {
     /// The channels the store holds when the pass starts (a task reads
     /// these; what it derives it remakes from the stored value, as the
     /// run's own passes do).
-    pub stored: Vec<String>,
+    pub stored: Vec<Channel>,
     /// The run's derive groups (each its items, kernel and epsilon).
     pub groups: Vec<DeriveParams>,
     /// Planes the derive kernel reads on each side of a slab.
@@ -105,9 +106,9 @@ pub enum SlabPass {
     Derive {
         /// The channels whose statistics the run takes (g also its median's
         /// first radix pass, 1/g its smallest positive value).
-        summarise: Vec<String>,
+        summarise: Vec<Channel>,
         /// The channels stored.
-        store: Vec<String>,
+        store: Vec<Channel>,
     },
     /// Pre-filters channels (remade from the value) into new ones, with
     /// their statistics.
@@ -123,7 +124,7 @@ pub enum SlabPass {
     /// counts of the detection before the tracing.
     Select {
         /// The channel whose median is taken and the upper bucket counted (None: no median).
-        median: Option<(String, usize)>,
+        median: Option<(Channel, usize)>,
         /// The (v, g) axes of the detection, when it runs.
         detect: Option<(Axis, Axis)>,
     },
@@ -133,9 +134,9 @@ pub enum SlabPass {
     /// [`TracePartial`](super::partials::TracePartial).
     Trace {
         /// The g traced.
-        g: String,
+        g: Channel,
         /// The f'' traced.
-        f2: String,
+        f2: Channel,
         /// g and f'' are stored pre-filtered ones.
         prefiltered: bool,
         /// The tracing's parameters.
@@ -152,7 +153,7 @@ pub enum SlabPass {
         /// Value range (max - min) of the input, value units.
         value_range: f64,
         /// The traced channels stored (those the run reads later).
-        stores: Vec<String>,
+        stores: Vec<Channel>,
     },
     /// Counts the slab's histograms and writes its planes of every pack
     /// texture, a sub-slab at a time; a pack pass counting the histogram
@@ -163,7 +164,7 @@ pub enum SlabPass {
         /// What the histograms are counted over, when they are counted.
         histograms: Option<HistogramAxes>,
         /// The channels read (stored, or remade from the value).
-        read: Vec<String>,
+        read: Vec<Channel>,
         /// Planes read at a time (the run's slab height).
         height: usize,
     },
@@ -173,9 +174,9 @@ pub enum SlabPass {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Prefilter {
     /// The channel read (remade from the value where it is not stored).
-    pub input: String,
+    pub input: Channel,
     /// The channel written.
-    pub output: String,
+    pub output: Channel,
     /// The filter, its range sigma in value units.
     pub params: BilateralParams,
 }
@@ -201,11 +202,11 @@ impl SlabPass {
     }
 
     /// The channels its tasks store.
-    pub(super) fn outputs(&self) -> Vec<String> {
+    pub(super) fn outputs(&self) -> Vec<Channel> {
         match self {
-            SlabPass::Input { .. } => vec!["v".into()],
+            SlabPass::Input { .. } => vec![Channel::Value],
             SlabPass::Derive { store, .. } => store.clone(),
-            SlabPass::Prefilter { filters, .. } => filters.iter().map(|f| f.output.clone()).collect(),
+            SlabPass::Prefilter { filters, .. } => filters.iter().map(|f| f.output).collect(),
             SlabPass::Trace { stores, .. } => stores.clone(),
             SlabPass::Select { .. } | SlabPass::Pack { .. } => Vec::new(),
         }
@@ -228,7 +229,7 @@ pub(super) fn run_pass(
     let job = SlabJob {
         store: store.dir().to_path_buf(),
         geometry: store.geometry().clone(),
-        stored: store.names(),
+        stored: store.channels(),
         groups: derivation.groups.to_vec(),
         kernel_reach: derivation.kernel_reach,
         pass,
@@ -239,7 +240,7 @@ pub(super) fn run_pass(
     let runs = |z: &Range<usize>| std::fs::metadata(attempts_path(&dir, name, z.start)).map_or(0, |m| m.len());
     let before: Vec<u64> = slabs.iter().map(runs).collect();
     tasks.run(&job, slabs).map_err(fail(stage))?;
-    for c in &outputs {
+    for &c in &outputs {
         store.adopt(c).map_err(at(stage))?;
     }
     let (mut retries, mut reused) = (0, 0);

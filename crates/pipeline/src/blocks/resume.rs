@@ -185,7 +185,7 @@ pub(super) fn written_ranges(job: &SlabJob, z: &Range<usize>) -> Vec<(PathBuf, R
         SlabPass::Pack { textures, .. } => {
             textures.iter().map(|t| (t.file.clone(), planes(t.plane_bytes() as u64))).collect()
         }
-        pass => pass.outputs().iter().map(|c| (job.store.join(store::file_name(c)), planes(plane))).collect(),
+        pass => pass.outputs().iter().map(|c| (job.store.join(store::file_name(*c)), planes(plane))).collect(),
     }
 }
 

@@ -8,6 +8,7 @@ use super::budget::{fixed_bytes, planes_by_pass, trace_block_bytes};
 use super::passes::stored_for_the_run;
 use super::slab_channels::made_by;
 use super::{SlabSize, TraceBlocks, cut};
+use crate::channel::Channel;
 use crate::file::Pipeline;
 use crate::plan::Plan;
 use mdtf_pack::{PackParams, texture_layouts};
@@ -44,28 +45,11 @@ pub struct Sizing {
     /// The passes, in order.
     pub passes: Vec<PassSize>,
     /// The channels in the run's store on the shared disk at its fullest.
-    pub stored: Vec<String>,
+    pub stored: Vec<Channel>,
     /// The pack's textures, bytes.
     pub pack_bytes: u64,
     /// The kept volumes before compression, bytes.
     pub kept_bytes: u64,
-    /// Why the run would be refused before it starts, if it would.
-    pub refused: Option<String>,
-}
-
-/// Why a run of `p` on `geometry` cannot count its histograms (with the
-/// histogram volume when `hvol`), if it cannot: their counts are 32-bit.
-pub(crate) fn too_many_to_count(p: &Pipeline, geometry: &Geometry, hvol: bool) -> Option<String> {
-    let voxels = geometry.voxel_count() as u64;
-    let counts = p.histogram.is_some() || hvol;
-    (counts && voxels > mdtf_histogram::MAX_COUNTED_VOXELS).then(|| {
-        format!(
-            "{voxels} voxels: the histograms (and the histogram volume behind the default TF) count at most \
-             {} voxels; give the pack a TF file (pack.tf) and leave out [histogram], or run on a grid of \
-             fewer voxels",
-            mdtf_histogram::MAX_COUNTED_VOXELS
-        )
-    })
 }
 
 /// `p`'s run on `geometry` (one field) with slabs of `size`, sized.
@@ -75,7 +59,6 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
     }
     let plan = Plan::resolve(p, &[], geometry).map_err(|e| e.to_string())?;
     let hvol = super::slab_histograms::counts_hvol(p, p.pack.tf.is_some());
-    let refused = too_many_to_count(p, geometry, hvol);
     let (height, trace) = cut(size, geometry, &plan, hvol)?;
     let [nx, ny, nz] = geometry.dims;
     let plane = (nx * ny * 4) as u64;
@@ -84,9 +67,9 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
     let k = plan.reach.kernel[2] as u64;
     let by_pass = planes_by_pass(h, &plan, false);
     let memory = |planes: u64| fixed_bytes(hvol) + planes * plane;
-    let mut derived: Vec<String> = plan.derive.iter().flat_map(|&i| made_by(i)).collect();
+    let mut derived: Vec<Channel> = plan.derive.iter().flat_map(|&i| made_by(i)).collect();
     if hvol {
-        derived.extend(["g".to_string(), "f2".to_string()]);
+        derived.extend([Channel::G, Channel::F2]);
     }
     let stored_derived = stored_for_the_run(p, &plan, p.pack.tf.is_some(), &derived);
     let mut passes = vec![
@@ -99,7 +82,7 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
             written: stored_derived.len() as u64 * h * plane,
         },
     ];
-    let mut stored: Vec<String> = std::iter::once("v".to_string()).chain(stored_derived).collect();
+    let mut stored: Vec<Channel> = std::iter::once(Channel::Value).chain(stored_derived).collect();
     if plan.trace {
         let pf = if plan.prefilter { plan.reach.prefilter[2] as u64 } else { 0 };
         if plan.prefilter {
@@ -112,7 +95,7 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
                 written: 2 * h * plane,
             };
             passes.push(pass);
-            stored.extend(["g_prefiltered".to_string(), "f2_prefiltered".to_string()]);
+            stored.extend([Channel::GPrefiltered, Channel::F2Prefiltered]);
         }
         // the select round reads the traced g (and v and g for the detection) over each slab
         let select = 3 * h * plane;
@@ -123,7 +106,7 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
         let read = grown * if plan.prefilter { 3 } else { 1 };
         let tasks = nz.div_ceil(trace.planes.max(1));
         let memory = trace_block_bytes(trace.planes, trace.rows, geometry, &plan);
-        let traced: Vec<String> = plan.traced_stored().iter().map(|c| c.name(&[])).collect();
+        let traced = plan.traced_stored();
         let written = traced.len() as u64 * tp * plane;
         passes.push(PassSize { pass: "boundary", tasks, memory, read, written });
         stored.extend(traced);
@@ -148,7 +131,6 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
         stored,
         pack_bytes: voxels * texel,
         kept_bytes,
-        refused,
     })
 }
 
@@ -162,9 +144,10 @@ fn texel_bytes(p: &Pipeline) -> u64 {
 /// Bytes a pack task of `planes` planes reads and writes: the value over
 /// each of its slabs of `h` planes with the kernel's halo `k`, the stored
 /// channels it packs over its planes; its textures (`texel_plane` bytes a plane).
-fn pack_bytes(planes: u64, h: u64, k: u64, plane: u64, stored: &[String], texel_plane: u64) -> (u64, u64) {
+fn pack_bytes(planes: u64, h: u64, k: u64, plane: u64, stored: &[Channel], texel_plane: u64) -> (u64, u64) {
     let value_planes = planes + 2 * k * planes.div_ceil(h.max(1));
-    let packed_stored = stored.iter().filter(|c| ["g_hit", "hit", "distance"].contains(&c.as_str())).count() as u64;
+    let packed_stored =
+        stored.iter().filter(|c| [Channel::GHit, Channel::Hit, Channel::Distance].contains(c)).count() as u64;
     ((value_planes + packed_stored * planes) * plane, planes * texel_plane)
 }
 
@@ -181,9 +164,6 @@ impl fmt::Display for Sizing {
         let [nx, ny, nz] = self.geometry.dims;
         let within = self.budget.map_or(String::new(), |x| format!(" within {} a task", b(x)));
         writeln!(f, "by slabs or on a cluster, {nx} x {ny} x {nz} voxels{within}:")?;
-        if let Some(why) = &self.refused {
-            writeln!(f, "  REFUSED before it starts, as things are: {why}")?;
-        }
         let TraceBlocks { planes, rows } = self.trace;
         writeln!(f, "  slabs of {} planes; the tracing in blocks of {planes} planes x {rows} rows", self.height)?;
         writeln!(
@@ -195,7 +175,8 @@ impl fmt::Display for Sizing {
             writeln!(f, "  {:<10} {:>6} {:>12} {:>12} {:>12}", p.pass, p.tasks, b(p.memory), b(p.read), b(p.written))?;
         }
         writeln!(f, "  shared disk (the output's staging folder):")?;
-        writeln!(f, "    channel store at its fullest: {} ({})", b(self.store_bytes()), self.stored.join(", "))?;
+        let names: Vec<String> = self.stored.iter().map(|c| c.name(&[])).collect();
+        writeln!(f, "    channel store at its fullest: {} ({})", b(self.store_bytes()), names.join(", "))?;
         writeln!(f, "    pack textures: {}", b(self.pack_bytes))?;
         if self.kept_bytes > 0 {
             writeln!(f, "    kept volumes: up to {} before compression", b(self.kept_bytes))?;
@@ -205,26 +186,5 @@ impl fmt::Display for Sizing {
             "  the calling process merges the tasks' partial sums and writes the kept volumes, histograms and \
              tables (peak-finding's (v, 1/g) axis and gaussian-tf's default TGTF read g there too)"
         )
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn histograms_of_2_to_the_32_voxels_or_more_are_refused_up_front() {
-        let p = crate::file::parse("[histogram]\njoint = true\n[pack]\nprofile = \"slicer-3dtf\"\n", &[]).unwrap();
-        // 4294901760 voxels count; 2^32 - 1 (the histogram crate's limit) and more do not
-        let under = Geometry::new([65535, 65536, 1], [1.0; 3]);
-        assert!(too_many_to_count(&p, &under, true).is_none());
-        assert!(too_many_to_count(&p, &Geometry::new([65535, 65537, 1], [1.0; 3]), true).is_some());
-        let at = Geometry::new([2048, 2048, 1024], [1.0; 3]);
-        let why = too_many_to_count(&p, &at, true).unwrap();
-        assert!(why.contains("4294967296 voxels") && why.contains("at most 4294967294 voxels"), "{why}");
-        // no histograms and no histogram volume (a TF file): nothing is counted
-        let mut quiet = p.clone();
-        quiet.histogram = None;
-        assert!(too_many_to_count(&quiet, &at, false).is_none());
     }
 }

@@ -9,6 +9,7 @@
 //! ones ([`SlabChannels::derive_block`]).
 
 use super::{ChannelStore, SamplePool, grown};
+use crate::channel::Channel;
 use mdtf_derive::{DeriveOutput, DeriveParams, Item};
 use mdtf_volume::{MultiField, Volume};
 use std::ops::Range;
@@ -33,6 +34,23 @@ pub enum ChannelError {
     /// The derivation did not give what it was asked for (a bug, not the input's fault).
     #[error("{0}")]
     Missing(&'static str),
+    /// A stage asked for a channel by a name no one-field run has.
+    #[error("no channel is named '{0}'")]
+    Unknown(String),
+}
+
+/// The channels a stage crate names (a pack layout's components, a
+/// histogram's axes), as a one-field run's channels.
+pub fn channels_named<S: AsRef<str>>(names: &[S]) -> Result<Vec<Channel>, ChannelError> {
+    names
+        .iter()
+        .map(|n| Channel::of_store(n.as_ref()).ok_or_else(|| ChannelError::Unknown(n.as_ref().into())))
+        .collect()
+}
+
+/// A slab's channels by name, for the stage crates, which take them so.
+pub fn by_name(slab: Vec<(Channel, Volume)>) -> Vec<(String, Volume)> {
+    slab.into_iter().map(|(c, v)| (c.name(&[]), v)).collect()
 }
 
 /// Stored and derivable channels (see the module docs).
@@ -40,7 +58,7 @@ pub struct SlabChannels {
     /// The stored channels.
     pub store: ChannelStore,
     /// The derive passes, each with the channels it makes.
-    groups: Vec<(DeriveParams, Vec<String>)>,
+    groups: Vec<(DeriveParams, Vec<Channel>)>,
     /// Planes (and rows: a kernel's support is the same along every axis) the kernel reads on each side.
     kernel_reach: usize,
     nz: usize,
@@ -85,9 +103,10 @@ impl BlockRange {
     }
 }
 
-/// The channels derive item `item` makes.
-pub(super) fn made_by(item: Item) -> Vec<String> {
-    item.components().iter().map(|c| c.to_string()).collect()
+/// The channels derive item `item` makes (its components are table rows:
+/// `channel::tests::every_derive_item_makes_table_channels`).
+pub(super) fn made_by(item: Item) -> Vec<Channel> {
+    item.components().iter().filter_map(|c| Channel::of_store(c)).collect()
 }
 
 impl SlabChannels {
@@ -95,7 +114,7 @@ impl SlabChannels {
     /// `groups` (each its items, kernel and epsilon); the kernel reads
     /// `kernel_reach` planes each side; the volume has `nz` planes.
     pub fn new(store: ChannelStore, groups: Vec<DeriveParams>, kernel_reach: usize, nz: usize) -> SlabChannels {
-        let groups: Vec<(DeriveParams, Vec<String>)> = groups
+        let groups: Vec<(DeriveParams, Vec<Channel>)> = groups
             .into_iter()
             .filter(|d| !d.items.is_empty())
             .map(|d| {
@@ -140,24 +159,24 @@ impl SlabChannels {
         self.store.geometry().dims[1]
     }
 
-    /// Whether channel `name` is stored or derivable.
-    pub fn has(&self, name: &str) -> bool {
-        self.store.has(name) || self.groups.iter().any(|(_, names)| names.iter().any(|n| n == name))
+    /// Whether channel `c` is stored or derivable.
+    pub fn has(&self, c: Channel) -> bool {
+        self.store.has(c) || self.groups.iter().any(|(_, made)| made.contains(&c))
     }
 
-    /// Channels `names` on planes `z`, in that order.
-    pub fn volumes(&mut self, z: Range<usize>, names: &[&str]) -> Result<Vec<(String, Volume)>, ChannelError> {
+    /// Channels `channels` on planes `z`, in that order.
+    pub fn volumes(&mut self, z: Range<usize>, channels: &[Channel]) -> Result<Vec<(Channel, Volume)>, ChannelError> {
         self.check()?;
-        let mut derived: Vec<(String, Volume)> = Vec::new();
+        let mut derived: Vec<(Channel, Volume)> = Vec::new();
         for g in 0..self.groups.len() {
             let (d, made) = &self.groups[g];
-            if !names.iter().any(|n| !self.store.has(n) && made.iter().any(|m| m == n)) {
+            if !channels.iter().any(|&c| !self.store.has(c) && made.contains(&c)) {
                 continue;
             }
             // only the items asked for: an item alone has the bits it has among others
             // (derive's fused loop equals its general pass), and the others cost time
             let mut d = d.clone();
-            d.items.retain(|&i| made_by(i).iter().any(|m| names.contains(&m.as_str())));
+            d.items.retain(|&i| made_by(i).iter().any(|m| channels.contains(m)));
             let k = self.kernel_reach;
             let read = grown(&z, k, 2 * k + 1, self.nz);
             let value = self.value_planes(read.clone())?;
@@ -166,18 +185,18 @@ impl SlabChannels {
             let own = z.start - read.start..z.end - read.start;
             for (_, mf) in &out.items {
                 for f in &mf.fields {
-                    if names.contains(&f.name.as_str()) {
-                        derived.push((f.name.clone(), self.own_planes(mf, f, own.clone())?));
+                    if let Some(c) = Channel::of_store(&f.name).filter(|c| channels.contains(c)) {
+                        derived.push((c, self.own_planes(mf, f, own.clone())?));
                     }
                 }
             }
             self.previous[g] = Some(out);
         }
-        names
+        channels
             .iter()
-            .map(|&n| match derived.iter().position(|(d, _)| d == n) {
+            .map(|&c| match derived.iter().position(|(d, _)| *d == c) {
                 Some(i) => Ok(derived.swap_remove(i)),
-                None => self.stored(n, z.clone()).map(|v| (n.to_string(), v)),
+                None => self.stored(c, z.clone()).map(|v| (c, v)),
             })
             .collect()
     }
@@ -198,19 +217,19 @@ impl SlabChannels {
         Ok(Volume::from_samples(mf.geometry.z_slab(own), samples)?)
     }
 
-    /// Stored channel `name` on planes `z` (clamped to the grid), read into the pool's memory.
-    fn stored(&mut self, name: &str, z: Range<usize>) -> Result<Volume, ChannelError> {
+    /// Stored channel `c` on planes `z` (clamped to the grid), read into the pool's memory.
+    fn stored(&mut self, c: Channel, z: Range<usize>) -> Result<Volume, ChannelError> {
         let geometry = self.store.geometry().clone();
         let nz = geometry.dims[2];
         let z = z.start.min(nz)..z.end.min(nz).max(z.start.min(nz));
         let mut samples = self.pool.take(z.len() * self.store.plane_len());
-        self.store.rows_into_slice(name, z.clone(), 0..geometry.dims[1], &mut samples)?;
+        self.store.rows_into_slice(c, z.clone(), 0..geometry.dims[1], &mut samples)?;
         Ok(Volume::from_samples(geometry.z_slab(z), samples)?)
     }
 
     /// Takes back channels handed out by [`SlabChannels::volumes`], done
     /// with: the next slab's are made in their memory.
-    pub fn give_back(&mut self, channels: Vec<(String, Volume)>) {
+    pub fn give_back<K>(&mut self, channels: Vec<(K, Volume)>) {
         self.pool.give_volumes(channels.into_iter().map(|(_, v)| v));
     }
 
@@ -307,9 +326,9 @@ impl SlabChannels {
             buffer.copy_within((planes.start - last.planes.start) * plane.., 0);
             buffer.resize(planes.len() * plane, 0.0);
             let new_planes = last.planes.end..planes.end;
-            self.store.rows_into_slice("v", new_planes, rows.clone(), &mut buffer[kept * plane..])?;
+            self.store.rows_into_slice(Channel::Value, new_planes, rows.clone(), &mut buffer[kept * plane..])?;
         } else {
-            self.store.rows_into("v", planes.clone(), rows.clone(), &mut buffer)?;
+            self.store.rows_into(Channel::Value, planes.clone(), rows.clone(), &mut buffer)?;
         }
         let geometry = self.store.geometry().z_slab(planes.clone()).y_rows(rows.clone());
         let value = Volume::from_samples(geometry, buffer)?;
@@ -339,22 +358,22 @@ impl SlabChannels {
         self.recycled = Some((self.last_block.clone(), out));
     }
 
-    /// The samples of channel `name` on planes `z`, in memory of the
+    /// The samples of channel `c` on planes `z`, in memory of the
     /// channels' own that the next call reuses.
-    pub fn samples(&mut self, name: &str, z: Range<usize>) -> Result<&[f32], ChannelError> {
+    pub fn samples(&mut self, c: Channel, z: Range<usize>) -> Result<&[f32], ChannelError> {
         let mut samples = std::mem::take(&mut self.samples_buffer);
-        let read = self.samples_into(name, z, &mut samples);
+        let read = self.samples_into(c, z, &mut samples);
         self.samples_buffer = samples;
         read.map(|()| self.samples_buffer.as_slice())
     }
 
-    /// Sets `samples` (its memory reused) to those of channel `name` on planes `z`.
-    pub fn samples_into(&mut self, name: &str, z: Range<usize>, samples: &mut Vec<f32>) -> Result<(), ChannelError> {
+    /// Sets `samples` (its memory reused) to those of channel `c` on planes `z`.
+    pub fn samples_into(&mut self, c: Channel, z: Range<usize>, samples: &mut Vec<f32>) -> Result<(), ChannelError> {
         self.check()?;
-        if self.store.has(name) {
-            return Ok(self.store.samples_into(name, z, samples)?);
+        if self.store.has(c) {
+            return Ok(self.store.samples_into(c, z, samples)?);
         }
-        let (_, v) = self.volumes(z, &[name])?.pop().ok_or(ChannelError::Missing("no samples"))?;
+        let (_, v) = self.volumes(z, &[c])?.pop().ok_or(ChannelError::Missing("no samples"))?;
         self.pool.give(std::mem::replace(samples, v.data.into_raw_vec_and_offset().0));
         Ok(())
     }

@@ -6,6 +6,7 @@
 
 use super::reductions::Stats;
 use super::{SlabChannels, medians};
+use crate::channel::Channel;
 use crate::file::Pipeline;
 use crate::hist_files::Counted;
 use crate::run::{RunError, at, fail};
@@ -94,21 +95,20 @@ impl HistogramCounts {
     }
 
     /// A task's counts of the slab of planes `z` of a volume of `nz`
-    /// planes and `voxels` voxels: every histogram, the histogram volume's
-    /// slices each into its fixed part (the task must hold whole parts).
+    /// planes: every histogram, the histogram volume's slices each into its
+    /// fixed part (the task must hold whole parts).
     pub fn of_task_slab(
         &mut self,
         axes: &HistogramAxes,
         z: &Range<usize>,
         nz: usize,
-        voxels: usize,
         slab: &[(String, Volume)],
     ) -> Result<(), RunError> {
         self.add(axes, slab)?;
         if let Some(hv_axes) = &axes.hvol {
             let acc = match &mut self.counting {
                 Some(acc) => acc,
-                None => self.counting.insert(HvolAccumulator::new(hv_axes, voxels).map_err(at("histogram"))?),
+                None => self.counting.insert(HvolAccumulator::new(hv_axes).map_err(at("histogram"))?),
             };
             let (v, g, f2) = (channel(slab, "v")?, channel(slab, "g")?, channel(slab, "f2")?);
             let plane = v.len() / z.len().max(1);
@@ -166,17 +166,19 @@ impl SlabHistograms {
         g_buckets: Option<&KeyBuckets>,
     ) -> Result<SlabHistograms, RunError> {
         let joint = p.histogram.as_ref().is_some_and(|h| h.joint);
-        let stretched = p.histogram.as_ref().is_some_and(|h| h.stretched) && chans.has("g_hit") && chans.has("hit");
-        let axes = vec![stats.axis(&AxisSpec::qbert("v"), "v")?, stats.axis(&AxisSpec::qbert("g"), "g")?];
+        let stretched =
+            p.histogram.as_ref().is_some_and(|h| h.stretched) && chans.has(Channel::GHit) && chans.has(Channel::Hit);
+        let axes =
+            vec![stats.axis(&AxisSpec::qbert("v"), Channel::Value)?, stats.axis(&AxisSpec::qbert("g"), Channel::G)?];
         let mut stretched_axes = axes.clone();
         stretched_axes[1].name = "g_hit".into();
         let bins = HvolParams::default().bins;
         let nz = slabs.last().map_or(0, |z| z.end);
         let hvol_axes = match hvol {
             true => Some(HvolAxes {
-                v: stats.axis(&HvolAxes::spec("v", bins[0]), "v")?,
-                g: stats.axis(&HvolAxes::spec("g", bins[1]), "g")?,
-                h: stats.axis(&HvolAxes::spec("f2", bins[2]), "f2")?,
+                v: stats.axis(&HvolAxes::spec("v", bins[0]), Channel::Value)?,
+                g: stats.axis(&HvolAxes::spec("g", bins[1]), Channel::G)?,
+                h: stats.axis(&HvolAxes::spec("f2", bins[2]), Channel::F2)?,
             }),
             false => None,
         };
@@ -187,7 +189,7 @@ impl SlabHistograms {
             }
             None => None,
         };
-        let inv_g = match joint && chans.has("inv_g") {
+        let inv_g = match joint && chans.has(Channel::InvG) {
             true => medians::inverse_gradient_axis(chans, slabs, g_buckets)
                 .map_err(at("histogram"))?
                 .map(|ia| vec![axes[0].clone(), ia]),
@@ -228,7 +230,7 @@ impl SlabHistograms {
         if let (Some(part), Some(axes)) = (hvol, &self.axes.hvol) {
             let acc = match &mut self.hvol_tasks {
                 Some(acc) => acc,
-                None => self.hvol_tasks.insert(HvolAccumulator::new(axes, self.voxels).map_err(at("histogram"))?),
+                None => self.hvol_tasks.insert(HvolAccumulator::new(axes).map_err(at("histogram"))?),
             };
             acc.absorb(part).map_err(at("histogram"))?;
         }

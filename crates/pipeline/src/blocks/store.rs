@@ -6,6 +6,7 @@
 //! Tasks of a run spread over processes ([`super::remote`]) open the same
 //! folder ([`ChannelStore::open`]) and each writes only its own planes.
 
+use crate::channel::Channel;
 use mdtf_volume::{Geometry, Volume};
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -16,16 +17,16 @@ use std::path::PathBuf;
 /// The store's folder inside a run's staging folder.
 pub(crate) const STORE_DIR: &str = ".slabs";
 
-/// The file in the store folder holding channel `name`.
-pub(crate) fn file_name(name: &str) -> String {
-    format!("{name}.f32")
+/// The file in the store folder holding channel `c`.
+pub(crate) fn file_name(c: Channel) -> String {
+    format!("{}.f32", c.name(&[]))
 }
 
 /// The channels of a run, on disk (see the module docs).
 pub struct ChannelStore {
     dir: PathBuf,
     geometry: Geometry,
-    files: BTreeMap<String, File>,
+    files: BTreeMap<Channel, File>,
 }
 
 impl ChannelStore {
@@ -50,23 +51,23 @@ impl ChannelStore {
     /// task of the run in another process: with the channels `reads` (the
     /// ones its pass reads; those it writes are created or joined on write,
     /// and a rerun task must not take its own half-written ones for stored).
-    pub fn open(dir: PathBuf, geometry: Geometry, reads: &[&str]) -> std::io::Result<ChannelStore> {
+    pub fn open(dir: PathBuf, geometry: Geometry, reads: &[Channel]) -> std::io::Result<ChannelStore> {
         let mut store = ChannelStore { dir, geometry, files: BTreeMap::new() };
-        for name in reads {
-            store.adopt(name)?;
+        for &c in reads {
+            store.adopt(c)?;
         }
         Ok(store)
     }
 
-    /// Takes in channel `name`, written into the folder by another process.
-    pub fn adopt(&mut self, name: &str) -> std::io::Result<()> {
-        let path = self.dir.join(file_name(name));
+    /// Takes in channel `c`, written into the folder by another process.
+    pub fn adopt(&mut self, c: Channel) -> std::io::Result<()> {
+        let path = self.dir.join(file_name(c));
         let file = File::options()
             .read(true)
             .write(true)
             .open(&path)
             .map_err(|e| std::io::Error::new(e.kind(), format!("channel store file {}: {e}", path.display())))?;
-        self.files.insert(name.to_string(), file);
+        self.files.insert(c, file);
         Ok(())
     }
 
@@ -85,72 +86,72 @@ impl ChannelStore {
         self.geometry.dims[0] * self.geometry.dims[1]
     }
 
-    /// The channels the store holds, by name.
-    pub fn names(&self) -> Vec<String> {
-        self.files.keys().cloned().collect()
+    /// The channels the store holds.
+    pub fn channels(&self) -> Vec<Channel> {
+        self.files.keys().copied().collect()
     }
 
-    /// Whether the store holds channel `name`.
-    pub fn has(&self, name: &str) -> bool {
-        self.files.contains_key(name)
+    /// Whether the store holds channel `c`.
+    pub fn has(&self, c: Channel) -> bool {
+        self.files.contains_key(&c)
     }
 
-    /// Writes the samples of planes `first..` of channel `name` (whole
+    /// Writes the samples of planes `first..` of channel `c` (whole
     /// planes), creating the channel on its first write (or taking the file
     /// another task of the run created).
-    pub fn put(&mut self, name: &str, first: usize, samples: &[f32]) -> std::io::Result<()> {
-        self.write_at(name, (first * self.plane_len() * 4) as u64, samples)
+    pub fn put(&mut self, c: Channel, first: usize, samples: &[f32]) -> std::io::Result<()> {
+        self.write_at(c, (first * self.plane_len() * 4) as u64, samples)
     }
 
-    /// Writes `samples` at byte `offset` of channel `name`'s file, creating it on the first write.
-    fn write_at(&mut self, name: &str, offset: u64, samples: &[f32]) -> std::io::Result<()> {
-        self.create_channel(name)?;
-        let Some(file) = self.files.get_mut(name) else { return Err(missing(name)) };
+    /// Writes `samples` at byte `offset` of channel `c`'s file, creating it on the first write.
+    fn write_at(&mut self, c: Channel, offset: u64, samples: &[f32]) -> std::io::Result<()> {
+        self.create_channel(c)?;
+        let Some(file) = self.files.get_mut(&c) else { return Err(missing(c)) };
         write_sparse(file, offset, bytemuck::cast_slice(samples))
     }
 
-    /// Writes a volume of planes `first..` of channel `name`.
-    pub fn put_volume(&mut self, name: &str, first: usize, v: &Volume) -> std::io::Result<()> {
-        self.put(name, first, v.samples())
+    /// Writes a volume of planes `first..` of channel `c`.
+    pub fn put_volume(&mut self, c: Channel, first: usize, v: &Volume) -> std::io::Result<()> {
+        self.put(c, first, v.samples())
     }
 
-    /// Writes `v`, rows `rows` of planes `first..` of channel `name` (a
+    /// Writes `v`, rows `rows` of planes `first..` of channel `c` (a
     /// strip of a blocked pass), creating the channel on its first write.
-    pub fn put_rows(&mut self, name: &str, first: usize, rows: Range<usize>, v: &Volume) -> std::io::Result<()> {
-        self.create_channel(name)?;
-        let Some(file) = self.files.get_mut(name) else { return Err(missing(name)) };
+    pub fn put_rows(&mut self, c: Channel, first: usize, rows: Range<usize>, v: &Volume) -> std::io::Result<()> {
+        self.create_channel(c)?;
+        let Some(file) = self.files.get_mut(&c) else { return Err(missing(c)) };
         write_rows(file, &self.geometry, first, rows, v)
     }
 
-    /// A writer of channels `names` (created here when new) that works
+    /// A writer of channels `channels` (created here when new) that works
     /// beside this store's reads: a pass hands it one block's outputs while
     /// it makes the next block's.
-    pub fn writer(&mut self, names: &[&str]) -> std::io::Result<StoreWriter> {
+    pub fn writer(&mut self, channels: &[Channel]) -> std::io::Result<StoreWriter> {
         let mut files = BTreeMap::new();
-        for name in names {
-            self.create_channel(name)?;
+        for &c in channels {
+            self.create_channel(c)?;
             // its own handle: its own position in the file
-            let file = File::options().write(true).open(self.dir.join(file_name(name)))?;
-            files.insert(name.to_string(), file);
+            let file = File::options().write(true).open(self.dir.join(file_name(c)))?;
+            files.insert(c, file);
         }
         Ok(StoreWriter { geometry: self.geometry.clone(), files })
     }
 
-    /// Creates channel `name`'s file, or takes the one another task of the run created.
-    fn create_channel(&mut self, name: &str) -> std::io::Result<()> {
-        if !self.files.contains_key(name) {
-            let path = self.dir.join(file_name(name));
+    /// Creates channel `c`'s file, or takes the one another task of the run created.
+    fn create_channel(&mut self, c: Channel) -> std::io::Result<()> {
+        if !self.files.contains_key(&c) {
+            let path = self.dir.join(file_name(c));
             let file = File::options().read(true).write(true).create(true).truncate(false).open(path)?;
-            self.files.insert(name.to_string(), file);
+            self.files.insert(c, file);
         }
         Ok(())
     }
 
-    /// Rows `rows` of planes `z` of channel `name` into `samples` (resized;
+    /// Rows `rows` of planes `z` of channel `c` into `samples` (resized;
     /// its memory reused), planes clamped to the grid.
     pub fn rows_into(
         &mut self,
-        name: &str,
+        c: Channel,
         z: Range<usize>,
         rows: Range<usize>,
         samples: &mut Vec<f32>,
@@ -158,14 +159,14 @@ impl ChannelStore {
         let [nx, _, nz] = self.geometry.dims;
         let (z0, z1) = (z.start.min(nz), z.end.min(nz).max(z.start.min(nz)));
         samples.resize((z1 - z0) * nx * rows.len(), 0.0);
-        self.rows_into_slice(name, z0..z1, rows, samples)
+        self.rows_into_slice(c, z0..z1, rows, samples)
     }
 
-    /// Rows `rows` of planes `z` (within the grid) of channel `name` into
+    /// Rows `rows` of planes `z` (within the grid) of channel `c` into
     /// `samples`, which holds exactly that many.
     pub fn rows_into_slice(
         &mut self,
-        name: &str,
+        c: Channel,
         z: Range<usize>,
         rows: Range<usize>,
         samples: &mut [f32],
@@ -176,7 +177,7 @@ impl ChannelStore {
             let what = format!("{} samples for {} planes of {chunk}", samples.len(), z.len());
             return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, what));
         }
-        let Some(file) = self.files.get_mut(name) else { return Err(missing(name)) };
+        let Some(file) = self.files.get_mut(&c) else { return Err(missing(c)) };
         if rows.start == 0 && rows.end == ny {
             file.seek(SeekFrom::Start((z.start * chunk * 4) as u64))?;
             return file.read_exact(bytemuck::cast_slice_mut(samples));
@@ -188,30 +189,30 @@ impl ChannelStore {
         Ok(())
     }
 
-    /// The samples of planes `z` (clamped to the grid) of channel `name`.
-    pub fn samples(&mut self, name: &str, z: Range<usize>) -> std::io::Result<Vec<f32>> {
+    /// The samples of planes `z` (clamped to the grid) of channel `c`.
+    pub fn samples(&mut self, c: Channel, z: Range<usize>) -> std::io::Result<Vec<f32>> {
         let mut samples = Vec::new();
-        self.samples_into(name, z, &mut samples)?;
+        self.samples_into(c, z, &mut samples)?;
         Ok(samples)
     }
 
     /// [`ChannelStore::samples`] into `samples` (resized; its memory reused).
-    pub fn samples_into(&mut self, name: &str, z: Range<usize>, samples: &mut Vec<f32>) -> std::io::Result<()> {
-        self.rows_into(name, z, 0..self.geometry.dims[1], samples)
+    pub fn samples_into(&mut self, c: Channel, z: Range<usize>, samples: &mut Vec<f32>) -> std::io::Result<()> {
+        self.rows_into(c, z, 0..self.geometry.dims[1], samples)
     }
 
-    /// Planes `z` (clamped to the grid) of channel `name` as a volume placed where they lie.
-    pub fn volume(&mut self, name: &str, z: Range<usize>) -> std::io::Result<Volume> {
+    /// Planes `z` (clamped to the grid) of channel `c` as a volume placed where they lie.
+    pub fn volume(&mut self, c: Channel, z: Range<usize>) -> std::io::Result<Volume> {
         let nz = self.geometry.dims[2];
         let (z0, z1) = (z.start.min(nz), z.end.min(nz).max(z.start.min(nz)));
-        let data = self.samples(name, z0..z1)?;
+        let data = self.samples(c, z0..z1)?;
         Volume::from_samples(self.geometry.z_slab(z0..z1), data).map_err(std::io::Error::other)
     }
 
-    /// Drops channel `name` and its file.
-    pub fn remove(&mut self, name: &str) {
-        if self.files.remove(name).is_some() {
-            let _ = std::fs::remove_file(self.dir.join(file_name(name)));
+    /// Drops channel `c` and its file.
+    pub fn remove(&mut self, c: Channel) {
+        if self.files.remove(&c).is_some() {
+            let _ = std::fs::remove_file(self.dir.join(file_name(c)));
         }
     }
 
@@ -225,18 +226,18 @@ impl ChannelStore {
 /// Writes channels of a [`ChannelStore`] on handles of their own (see [`ChannelStore::writer`]).
 pub struct StoreWriter {
     geometry: Geometry,
-    files: BTreeMap<String, File>,
+    files: BTreeMap<Channel, File>,
 }
 
 impl StoreWriter {
     /// [`ChannelStore::put_volume`], for one of the writer's channels.
-    pub fn put_volume(&mut self, name: &str, first: usize, v: &Volume) -> std::io::Result<()> {
-        self.put_rows(name, first, 0..self.geometry.dims[1], v)
+    pub fn put_volume(&mut self, c: Channel, first: usize, v: &Volume) -> std::io::Result<()> {
+        self.put_rows(c, first, 0..self.geometry.dims[1], v)
     }
 
     /// [`ChannelStore::put_rows`], for one of the writer's channels.
-    pub fn put_rows(&mut self, name: &str, first: usize, rows: Range<usize>, v: &Volume) -> std::io::Result<()> {
-        let Some(file) = self.files.get_mut(name) else { return Err(missing(name)) };
+    pub fn put_rows(&mut self, c: Channel, first: usize, rows: Range<usize>, v: &Volume) -> std::io::Result<()> {
+        let Some(file) = self.files.get_mut(&c) else { return Err(missing(c)) };
         write_rows(file, &self.geometry, first, rows, v)
     }
 }
@@ -311,8 +312,8 @@ fn punch_hole(file: &File, offset: u64, len: u64) -> bool {
     }
 }
 
-fn missing(name: &str) -> std::io::Error {
-    std::io::Error::new(std::io::ErrorKind::NotFound, format!("channel {name} is not in the store"))
+fn missing(c: Channel) -> std::io::Error {
+    std::io::Error::new(std::io::ErrorKind::NotFound, format!("channel {} is not in the store", c.name(&[])))
 }
 
 #[cfg(test)]
@@ -330,8 +331,8 @@ mod tests {
         let mut samples = vec![0.0f32; 8 * plane];
         samples[2 * plane + 7] = 3.5;
         samples[5 * plane + 100] = -0.0;
-        store.put("v", 0, &samples).unwrap();
-        let back = store.samples("v", 0..8).unwrap();
+        store.put(Channel::Value, 0, &samples).unwrap();
+        let back = store.samples(Channel::Value, 0..8).unwrap();
         assert_eq!(
             back.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
             samples.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
@@ -345,16 +346,16 @@ mod tests {
             assert!(on_disk <= 4 * (64 << 10), "{on_disk} bytes on disk");
         }
         // rewriting data with zeros punches it out: it reads back as zeros
-        store.put("v", 2, &vec![0.0f32; plane]).unwrap();
-        assert!(store.samples("v", 2..3).unwrap().iter().all(|v| v.to_bits() == 0));
+        store.put(Channel::Value, 2, &vec![0.0f32; plane]).unwrap();
+        assert!(store.samples(Channel::Value, 2..3).unwrap().iter().all(|v| v.to_bits() == 0));
         // a zero block at the end of a later write still lengthens the file
         let mut tail = vec![0.0f32; 2 * plane];
         tail[10] = 1.0;
         let mut longer = ChannelStore::create(dir.path().join("t"), Geometry::new([256, 256, 10], [1.0; 3])).unwrap();
-        longer.put("w", 8, &tail).unwrap();
-        assert_eq!(std::fs::metadata(dir.path().join("t/w.f32")).unwrap().len(), (10 * plane * 4) as u64);
-        assert_eq!(longer.samples("w", 8..10).unwrap(), tail);
-        assert!(longer.samples("w", 0..8).unwrap().iter().all(|&v| v == 0.0));
+        longer.put(Channel::Hit, 8, &tail).unwrap();
+        assert_eq!(std::fs::metadata(dir.path().join("t/hit.f32")).unwrap().len(), (10 * plane * 4) as u64);
+        assert_eq!(longer.samples(Channel::Hit, 8..10).unwrap(), tail);
+        assert!(longer.samples(Channel::Hit, 0..8).unwrap().iter().all(|&v| v == 0.0));
     }
 
     #[test]
@@ -363,36 +364,37 @@ mod tests {
         let geo = Geometry::new([3, 2, 5], [1.0, 1.0, 2.0]);
         let mut s = ChannelStore::create(dir.path().join("store"), geo.clone()).unwrap();
         let all: Vec<f32> = (0..30).map(|i| i as f32 * 0.5 - 3.0).collect();
-        s.put("g", 3, &all[18..]).unwrap();
-        s.put("g", 0, &all[..18]).unwrap();
-        assert_eq!(s.samples("g", 0..5).unwrap(), all);
-        let v = s.volume("g", 1..3).unwrap();
+        s.put(Channel::G, 3, &all[18..]).unwrap();
+        s.put(Channel::G, 0, &all[..18]).unwrap();
+        assert_eq!(s.samples(Channel::G, 0..5).unwrap(), all);
+        let v = s.volume(Channel::G, 1..3).unwrap();
         assert_eq!(v.samples(), &all[6..18]);
         assert_eq!(v.geometry, geo.z_slab(1..3));
-        assert!(s.samples("f2", 0..1).is_err());
+        assert!(s.samples(Channel::F2, 0..1).is_err());
         // a strip of rows 1..2 of planes 2..5, written over the planes, reads back
         let strip: Vec<f32> = (0..9).map(|i| 100.0 + i as f32).collect();
-        s.put_rows("g", 2, 1..2, &Volume::from_samples(geo.z_slab(2..5).y_rows(1..2), strip.clone()).unwrap()).unwrap();
+        s.put_rows(Channel::G, 2, 1..2, &Volume::from_samples(geo.z_slab(2..5).y_rows(1..2), strip.clone()).unwrap())
+            .unwrap();
         let mut back = Vec::new();
-        s.rows_into("g", 2..5, 1..2, &mut back).unwrap();
+        s.rows_into(Channel::G, 2..5, 1..2, &mut back).unwrap();
         assert_eq!(back, strip);
-        s.rows_into("g", 0..5, 0..1, &mut back).unwrap();
+        s.rows_into(Channel::G, 0..5, 0..1, &mut back).unwrap();
         let first_rows: Vec<f32> = (0..5).flat_map(|k| all[6 * k..6 * k + 3].to_vec()).collect();
         assert_eq!(back, first_rows, "the other rows are as written first");
-        let whole = s.samples("g", 0..5).unwrap();
+        let whole = s.samples(Channel::G, 0..5).unwrap();
         assert_eq!(&whole[21..24], &strip[3..6], "plane 3's row 1 holds the strip's second plane");
         // a writer's channels, written on its own handles while the store reads others, read back
-        let mut w = s.writer(&["f2"]).unwrap();
-        w.put_volume("f2", 3, &Volume::from_samples(geo.z_slab(3..5), all[18..].to_vec()).unwrap()).unwrap();
-        assert_eq!(s.samples("g", 0..1).unwrap(), &all[..6]);
-        w.put_rows("f2", 0, 1..2, &Volume::from_samples(geo.z_slab(0..3).y_rows(1..2), strip.clone()).unwrap())
+        let mut w = s.writer(&[Channel::F2]).unwrap();
+        w.put_volume(Channel::F2, 3, &Volume::from_samples(geo.z_slab(3..5), all[18..].to_vec()).unwrap()).unwrap();
+        assert_eq!(s.samples(Channel::G, 0..1).unwrap(), &all[..6]);
+        w.put_rows(Channel::F2, 0, 1..2, &Volume::from_samples(geo.z_slab(0..3).y_rows(1..2), strip.clone()).unwrap())
             .unwrap();
-        s.rows_into("f2", 0..3, 1..2, &mut back).unwrap();
+        s.rows_into(Channel::F2, 0..3, 1..2, &mut back).unwrap();
         assert_eq!(back, strip);
-        assert_eq!(s.samples("f2", 3..5).unwrap(), &all[18..]);
-        assert!(w.put_volume("g", 0, &v).is_err(), "only the writer's own channels");
-        s.remove("g");
-        assert!(!s.has("g") && !dir.path().join("store/g.f32").exists());
+        assert_eq!(s.samples(Channel::F2, 3..5).unwrap(), &all[18..]);
+        assert!(w.put_volume(Channel::G, 0, &v).is_err(), "only the writer's own channels");
+        s.remove(Channel::G);
+        assert!(!s.has(Channel::G) && !dir.path().join("store/g.f32").exists());
         s.clear();
         assert!(!dir.path().join("store").exists());
     }

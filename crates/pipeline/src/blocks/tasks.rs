@@ -12,6 +12,7 @@ use super::slab_histograms::{HistogramAxes, HistogramCounts};
 use super::trace::{TraceSetup, prefilter_slab, trace_slab};
 use super::{ChannelStore, SlabChannels};
 use crate::boundary_chain::TracedVolumes;
+use crate::channel::Channel;
 use crate::pre_detect::VgCounts;
 use crate::run::{RunError, at, fail};
 use mdtf_histogram::Axis;
@@ -93,7 +94,7 @@ struct Task<'j> {
 
 impl Task<'_> {
     /// The run's channel store, with the channels `reads` adopted.
-    fn open(&self, reads: &[&str]) -> Result<ChannelStore, RunError> {
+    fn open(&self, reads: &[Channel]) -> Result<ChannelStore, RunError> {
         ChannelStore::open(self.job.store.clone(), self.job.geometry.clone(), reads).map_err(at("input"))
     }
 
@@ -104,13 +105,12 @@ impl Task<'_> {
         let kept = KEPT_CHANNELS.lock().unwrap_or_else(PoisonError::into_inner).take();
         if let Some((key, chans)) = kept
             && key == self.key()
-            && chans.store.names() == self.job.stored
+            && chans.store.channels() == self.job.stored
         {
             return Ok(chans);
         }
-        let stored: Vec<&str> = self.job.stored.iter().map(String::as_str).collect();
         let nz = self.job.geometry.dims[2];
-        Ok(SlabChannels::new(self.open(&stored)?, self.job.groups.clone(), self.job.kernel_reach, nz))
+        Ok(SlabChannels::new(self.open(&self.job.stored)?, self.job.groups.clone(), self.job.kernel_reach, nz))
     }
 
     /// Leaves `chans` for the next task of this pass in this process.
@@ -141,9 +141,9 @@ impl Task<'_> {
             return Err(fail("input")(format!("{}: {dims:?} voxels, the run planned {planned:?}", input.display())));
         }
         let v = reader.read(self.z.clone()).map_err(at("input"))?;
-        self.open(&[])?.put_volume("v", self.z.start, &v).map_err(at("input"))?;
+        self.open(&[])?.put_volume(Channel::Value, self.z.start, &v).map_err(at("input"))?;
         let mut partial = SlabPartial::default();
-        partial.summarise("v", v.samples(), self.voxels);
+        partial.summarise(Channel::Value, v.samples(), self.voxels);
         if let Some(range) = padding {
             partial.padded = crate::inputs::count_padding(v.samples(), range);
         }
@@ -151,24 +151,24 @@ impl Task<'_> {
     }
 
     /// Derives the channels `summarise` (taking their statistics) and `store` (storing them).
-    fn derive(&self, summarise: &[String], store: &[String]) -> Result<SlabPartial, RunError> {
+    fn derive(&self, summarise: &[Channel], store: &[Channel]) -> Result<SlabPartial, RunError> {
         let mut chans = self.channels()?;
         // the outputs through their own handles: the channels kept for the next task hold only the stored ones
         let mut out = self.open(&[])?;
-        let mut names: Vec<&str> = summarise.iter().map(String::as_str).collect();
-        names.extend(store.iter().map(String::as_str).filter(|c| !summarise.iter().any(|s| s == c)));
+        let mut channels = summarise.to_vec();
+        channels.extend(store.iter().filter(|c| !summarise.contains(c)));
         let mut partial = SlabPartial::default();
-        for (name, v) in chans.volumes(self.z.clone(), &names).map_err(at("derive"))? {
-            if store.contains(&name) {
-                out.put_volume(&name, self.z.start, &v).map_err(at("derive"))?;
+        for (c, v) in chans.volumes(self.z.clone(), &channels).map_err(at("derive"))? {
+            if store.contains(&c) {
+                out.put_volume(c, self.z.start, &v).map_err(at("derive"))?;
             }
-            if !summarise.contains(&name) {
+            if !summarise.contains(&c) {
                 continue;
             }
-            partial.summarise(&name, v.samples(), self.voxels);
-            match name.as_str() {
-                "g" => partial.g_buckets.get_or_insert_with(mdtf_volume::KeyBuckets::new).add(v.samples()),
-                "inv_g" => partial.smallest_inv_g = Some(crate::pack_inputs::smallest_positive(v.samples())),
+            partial.summarise(c, v.samples(), self.voxels);
+            match c {
+                Channel::G => partial.g_buckets.get_or_insert_with(mdtf_volume::KeyBuckets::new).add(v.samples()),
+                Channel::InvG => partial.smallest_inv_g = Some(crate::pack_inputs::smallest_positive(v.samples())),
                 _ => {}
             }
         }
@@ -183,11 +183,11 @@ impl Task<'_> {
         let mut out = self.open(&[])?;
         let mut partial = SlabPartial::default();
         for f in filters {
-            let own = prefilter_slab(&mut chans, &f.input, &f.params, &self.z, halo)?;
-            out.put_volume(&f.output, self.z.start, &own).map_err(at("prefilter"))?;
-            partial.summarise(&f.output, own.samples(), self.voxels);
+            let own = prefilter_slab(&mut chans, f.input, &f.params, &self.z, halo)?;
+            out.put_volume(f.output, self.z.start, &own).map_err(at("prefilter"))?;
+            partial.summarise(f.output, own.samples(), self.voxels);
             // the first pass of its median's select, when it is the g traced
-            if f.output == "g_prefiltered" {
+            if f.output == Channel::GPrefiltered {
                 partial.g_buckets.get_or_insert_with(mdtf_volume::KeyBuckets::new).add(own.samples());
             }
         }
@@ -198,24 +198,28 @@ impl Task<'_> {
     /// The slab's part of the tracing's statistics: its samples of the
     /// median's channel in the upper bucket `median` names, and its (v, g)
     /// counts over the axes `detect`.
-    fn select(&self, median: Option<&(String, usize)>, detect: Option<&(Axis, Axis)>) -> Result<SlabPartial, RunError> {
+    fn select(
+        &self,
+        median: Option<&(Channel, usize)>,
+        detect: Option<&(Axis, Axis)>,
+    ) -> Result<SlabPartial, RunError> {
         let mut chans = self.channels()?;
         // each channel read once (the median's is g itself without the pre-filter)
-        let mut names: Vec<&str> = median.iter().map(|(c, _)| c.as_str()).collect();
+        let mut channels: Vec<Channel> = median.iter().map(|&&(c, _)| c).collect();
         if detect.is_some() {
-            names.extend(["v", "g"].into_iter().filter(|c| median.is_none_or(|(m, _)| m != c)));
+            channels.extend([Channel::Value, Channel::G].into_iter().filter(|&c| median.is_none_or(|&(m, _)| m != c)));
         }
-        let slab = chans.volumes(self.z.clone(), &names).map_err(at("boundary"))?;
-        let samples = |c: &str| slab.iter().find(|(n, _)| n == c).map(|(_, v)| v.samples()).unwrap_or_default();
+        let slab = chans.volumes(self.z.clone(), &channels).map_err(at("boundary"))?;
+        let samples = |c: Channel| slab.iter().find(|(n, _)| *n == c).map(|(_, v)| v.samples()).unwrap_or_default();
         let mut partial = SlabPartial::default();
-        if let Some((channel, within)) = median {
+        if let Some(&(channel, within)) = median {
             let mut lower = mdtf_volume::KeyBuckets::new();
-            lower.add_within(*within, samples(channel));
+            lower.add_within(within, samples(channel));
             partial.g_lower = Some(lower);
         }
         if let Some((v_axis, g_axis)) = detect {
             let mut counts = VgCounts::new(v_axis.clone(), g_axis.clone());
-            counts.add(samples("v"), samples("g")).map_err(at("boundary"))?;
+            counts.add(samples(Channel::Value), samples(Channel::G)).map_err(at("boundary"))?;
             partial.vg = Some(counts);
         }
         chans.give_back(slab);
@@ -234,8 +238,8 @@ impl Task<'_> {
         // the outputs through their own handles: the channels kept for the next task hold only the stored ones
         let mut out = self.open(&[])?;
         let setup = TraceSetup {
-            g,
-            f2,
+            g: *g,
+            f2: *f2,
             prefiltered: *prefiltered,
             params,
             stats,
@@ -247,12 +251,12 @@ impl Task<'_> {
         for strip in slabs(chans.ny(), (*rows).max(1)) {
             let slab = trace_slab(&mut chans, &setup, &self.z, &strip, spent.take())?;
             let b = &slab.trace;
-            for c in crate::channel::traced().filter(|c| stores.contains(&c.name(&[]))) {
+            for &c in stores {
                 if let Some(v) = b.traced(c) {
-                    out.put_rows(&c.name(&[]), self.z.start, strip.clone(), v).map_err(at("boundary"))?;
+                    out.put_rows(c, self.z.start, strip.clone(), v).map_err(at("boundary"))?;
                 }
             }
-            partial.summarise("g_hit", b.g_hit.samples(), self.voxels);
+            partial.summarise(Channel::GHit, b.g_hit.samples(), self.voxels);
             sums.add(&slab);
             spent = Some(slab);
         }
@@ -267,10 +271,9 @@ impl Task<'_> {
         &self,
         textures: &[TextureTarget],
         histograms: Option<&HistogramAxes>,
-        read: &[String],
+        read: &[Channel],
         height: usize,
     ) -> Result<SlabPartial, RunError> {
-        let reads: Vec<&str> = read.iter().map(String::as_str).collect();
         let mut chans = self.channels()?;
         let mut counts = HistogramCounts::default();
         let mut bytes = std::mem::take(&mut *KEPT_BYTES.lock().unwrap_or_else(PoisonError::into_inner));
@@ -278,9 +281,9 @@ impl Task<'_> {
         let nz = self.job.geometry.dims[2];
         for planes in slabs(self.z.len(), height.max(1)) {
             let planes = self.z.start + planes.start..self.z.start + planes.end;
-            let slab = chans.volumes(planes.clone(), &reads).map_err(at("pack"))?;
+            let slab = super::by_name(chans.volumes(planes.clone(), read).map_err(at("pack"))?);
             if let Some(axes) = histograms {
-                counts.of_task_slab(axes, &planes, nz, self.voxels, &slab)?;
+                counts.of_task_slab(axes, &planes, nz, &slab)?;
             }
             for (t, bytes) in textures.iter().zip(&mut bytes) {
                 t.write_planes(planes.clone(), &slab, bytes).map_err(at("pack"))?;

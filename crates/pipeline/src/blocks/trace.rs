@@ -5,6 +5,7 @@
 
 use super::slab_channels::BlockRange;
 use super::{ChannelStore, SlabChannels, grown};
+use crate::channel::Channel;
 use crate::run::{RunError, at, fail};
 use mdtf_bilateral::BilateralParams;
 use mdtf_boundary::{BlockTrace, BoundaryInput, BoundaryParams, VolumeStats};
@@ -15,7 +16,7 @@ use std::ops::Range;
 /// from its planes grown by the filter's `halo`.
 pub(super) fn prefilter_slab(
     chans: &mut SlabChannels,
-    channel: &str,
+    channel: Channel,
     params: &BilateralParams,
     z: &Range<usize>,
     halo: usize,
@@ -29,9 +30,9 @@ pub(super) fn prefilter_slab(
 /// What a tracing pass reads and how.
 pub(super) struct TraceSetup<'a> {
     /// The g traced (the pre-filtered one, when there is).
-    pub g: &'a str,
+    pub g: Channel,
     /// The f'' traced (likewise).
-    pub f2: &'a str,
+    pub f2: Channel,
     /// g and f'' are the pre-filtered ones: a derived block reads them from the store over it.
     pub prefiltered: bool,
     /// The tracing's parameters.
@@ -141,12 +142,12 @@ impl TraceBlock {
 
     /// The block with g and f'' replaced by the store's channels `g` and
     /// `f2` over it (the pre-filtered ones), read into the same memory.
-    fn with_stored(self, store: &mut ChannelStore, g: &str, f2: &str) -> std::io::Result<TraceBlock> {
+    fn with_stored(self, store: &mut ChannelStore, g: Channel, f2: Channel) -> std::io::Result<TraceBlock> {
         let TraceBlock { at, g: derived_g, f2: derived_f2, normal, order } = self;
-        let mut over_block = |name: &str, v: Volume| {
+        let mut over_block = |c: Channel, v: Volume| {
             let geometry = v.geometry.clone();
             let mut samples = v.data.into_raw_vec_and_offset().0;
-            store.rows_into(name, at.planes.clone(), at.rows.clone(), &mut samples)?;
+            store.rows_into(c, at.planes.clone(), at.rows.clone(), &mut samples)?;
             Volume::from_samples(geometry, samples).map_err(std::io::Error::other)
         };
         let (g, f2) = (over_block(g, derived_g)?, over_block(f2, derived_f2)?);

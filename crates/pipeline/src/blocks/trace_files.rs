@@ -11,6 +11,7 @@
 use super::SlabSize;
 use super::passes::SlabPasses;
 use crate::boundary_chain::BoundaryChainParams;
+use crate::channel::Channel;
 use crate::error::{RunError, at, fail};
 use crate::file::{DeriveSection, InputSection, PackSection, Pipeline};
 use crate::progress::Progress;
@@ -124,10 +125,11 @@ pub fn trace_files(
     };
     run.progress.stage("write")?;
     let maps = mdtf_boundary::hit_maps(&chain.boundary, summary.resolved.d_max);
-    let traced = crate::channel::traced_names();
-    let names: Vec<String> = traced.iter().cloned().chain(maps.iter().map(|m| m.name.clone())).collect();
-    let index = |c: &str| traced.iter().position(|t| t == c).ok_or_else(|| fail("write")(format!("no traced {c}")));
-    let (distance_at, hit_at) = (index("distance")?, index("hit")?);
+    let traced: Vec<Channel> = crate::channel::traced().collect();
+    let names: Vec<String> = traced.iter().map(|c| c.name(&[])).chain(maps.iter().map(|m| m.name.clone())).collect();
+    let index =
+        |c: Channel| traced.iter().position(|&t| t == c).ok_or_else(|| fail("write")("no traced channel".into()));
+    let (distance_at, hit_at) = (index(Channel::Distance)?, index(Channel::Hit)?);
     let mut writers = Vec::with_capacity(names.len());
     let mut files = Vec::with_capacity(names.len());
     for name in names {
@@ -139,7 +141,7 @@ pub fn trace_files(
     for (k, z) in run.slabs.iter().enumerate() {
         run.progress.slab(k + 1, run.slabs.len())?;
         // the stored channels, then each map from the distance and hit
-        for (c, (_, samples)) in traced.iter().zip(writers.iter_mut()) {
+        for (&c, (_, samples)) in traced.iter().zip(writers.iter_mut()) {
             chans.samples_into(c, z.clone(), samples).map_err(at("write"))?;
         }
         let (stored, made) = writers.split_at_mut(traced.len());

@@ -33,13 +33,20 @@ fn header(axes: &[TableAxis], type_name: &str) -> String {
     s
 }
 
-/// Writes integer counts (first axis fastest) as uint32. Atomic.
-pub fn write_counts_nrrd(path: &Path, axes: &[TableAxis], counts: &[u32]) -> Result<()> {
-    let head = header(axes, "uint32");
+/// Writes integer counts (first axis fastest) as uint32, or as uint64
+/// when a count needs more than 32 bits (a histogram of a volume of over
+/// 2^32 voxels). Atomic.
+pub fn write_counts_nrrd(path: &Path, axes: &[TableAxis], counts: &[u64]) -> Result<()> {
+    let wide = counts.iter().any(|&c| c > u64::from(u32::MAX));
+    let head = header(axes, if wide { "uint64" } else { "uint32" });
     write_file_atomically(path, |w| {
         w.write_all(head.as_bytes())?;
         for chunk in counts.chunks(1 << 16) {
-            let bytes: Vec<u8> = chunk.iter().flat_map(|c| c.to_le_bytes()).collect();
+            let bytes: Vec<u8> = match wide {
+                true => chunk.iter().flat_map(|c| c.to_le_bytes()).collect(),
+                // every count fits: checked above
+                false => chunk.iter().flat_map(|&c| (c as u32).to_le_bytes()).collect(),
+            };
             w.write_all(&bytes)?;
         }
         Ok(())
@@ -88,5 +95,22 @@ mod tests {
         assert!(text.contains("axis maxs: 255 1.5\n") && text.contains("labels: \"v\" \"g\"\n"));
         let data = &bytes[bytes.len() - 24..];
         assert_eq!(u32::from_le_bytes([data[20], data[21], data[22], data[23]]), 6);
+    }
+
+    #[test]
+    fn a_count_beyond_32_bits_makes_the_file_uint64() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("h.nrrd");
+        let axes = [TableAxis { label: "v".into(), size: 3, min: 0.0, max: 1.0 }];
+        let counts = [7, u64::from(u32::MAX) + 1, 1 << 36];
+        write_counts_nrrd(&p, &axes, &counts).unwrap();
+        let bytes = std::fs::read(&p).unwrap();
+        assert!(String::from_utf8_lossy(&bytes).contains(
+            "type: uint64
+"
+        ));
+        let data = &bytes[bytes.len() - 24..];
+        let back: Vec<u64> = data.chunks(8).map(|c| u64::from_le_bytes(c.try_into().unwrap())).collect();
+        assert_eq!(back, counts);
     }
 }

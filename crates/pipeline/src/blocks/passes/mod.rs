@@ -13,6 +13,7 @@ use super::remote::{self, Derivation, SlabPass, SlabTasks};
 use super::slab_channels::made_by;
 use super::{ChannelStore, SlabChannels, SlabSize, Source, open_source};
 use super::{TraceBlocks, reductions, slabs};
+use crate::channel::Channel;
 use crate::file::Pipeline;
 use crate::plan::Plan;
 use crate::progress::Progress;
@@ -120,10 +121,12 @@ impl Derived {
     /// median, behind the tracing's noise floor, the (v, 1/g) axis and
     /// gaussian-tf's default; 1/g: its smallest positive value, whose
     /// multiple is the top of its code range).
-    fn add(&mut self, name: &str, samples: &[f32]) {
-        match name {
-            "g" => self.g_buckets.iter_mut().for_each(|b| b.add(samples)),
-            "inv_g" => self.smallest_inv_g = crate::pack_inputs::smallest_positive(samples).min(self.smallest_inv_g),
+    fn add(&mut self, c: Channel, samples: &[f32]) {
+        match c {
+            Channel::G => self.g_buckets.iter_mut().for_each(|b| b.add(samples)),
+            Channel::InvG => {
+                self.smallest_inv_g = crate::pack_inputs::smallest_positive(samples).min(self.smallest_inv_g)
+            }
             _ => {}
         }
     }
@@ -169,14 +172,12 @@ impl<'a> SlabPasses<'a> {
         let tf = crate::inputs::read_tf(p, &base)?;
         let hvol_asked = p.histogram.as_ref().is_some_and(|h| h.hvol);
         let hvol_needed = packs && super::slab_histograms::counts_hvol(p, tf.is_some());
-        if let Some(why) = super::sizing::too_many_to_count(p, &geo, hvol_needed) {
-            return Err(fail("plan")(why));
-        }
         let (height, trace_blocks) = super::cut(size, &geo, &plan, hvol_needed).map_err(fail("plan"))?;
         let slabs = slabs(nz, height);
         progress.stage(&format!("input: {} slabs of {height} planes", slabs.len()))?;
         let (mut store, token) = open_store(dir, resumed, &geo, opts.tasks.is_some())?;
-        let mut stats = Stats::new(&["v", "g", "f2", "g_hit", "g_prefiltered", "inv_g"], geo.voxel_count());
+        let summarised = [Channel::Value, Channel::G, Channel::F2, Channel::GHit, Channel::GPrefiltered, Channel::InvG];
+        let mut stats = Stats::new(&summarised, geo.voxel_count());
         let mut task_passes = Vec::new();
         let padded = match (opts.tasks.as_deref(), &source) {
             (Some(tasks), Source::Planes(reader)) if reader.reads_any_planes() => {
@@ -247,7 +248,7 @@ impl<'a> SlabPasses<'a> {
 
     /// The input's finite value range, value units.
     pub(super) fn finite_range(&self) -> Option<[f64; 2]> {
-        self.stats.range("v").map(|(lo, hi)| [lo as f64, hi as f64])
+        self.stats.range(Channel::Value).map(|(lo, hi)| [lo as f64, hi as f64])
     }
 
     /// max - min of the input's finite values (0 without any).
@@ -268,14 +269,14 @@ impl<'a> SlabPasses<'a> {
         let kernel_reach = self.plan.reach.kernel[2];
         let mut chans =
             SlabChannels::new(store, groups.clone(), kernel_reach, nz).cancelled_by(self.opts.cancel.clone());
-        let summarised: Vec<&str> = ["g", "f2", "inv_g"].into_iter().filter(|c| chans.has(c)).collect();
-        let g_buckets = summarised.contains(&"g").then(KeyBuckets::new);
+        let summarised: Vec<Channel> =
+            [Channel::G, Channel::F2, Channel::InvG].into_iter().filter(|&c| chans.has(c)).collect();
+        let g_buckets = summarised.contains(&Channel::G).then(KeyBuckets::new);
         let derive = DeriveParams { items: Vec::new(), ..self.derive_params() };
         let mut derived = Derived { derive, g_buckets, smallest_inv_g: f32::INFINITY };
         if let Some(tasks) = self.tasks {
             self.progress.stage("derive (tasks)")?;
-            let summarise = summarised.iter().map(|c| c.to_string()).collect();
-            let pass = SlabPass::Derive { summarise, store: self.read_later(&groups) };
+            let pass = SlabPass::Derive { summarise: summarised, store: self.read_later(&groups) };
             for mut part in self.on_tasks(tasks, pass, &mut chans.store, &self.slabs.clone())? {
                 part.merge_stats_into(&mut self.stats);
                 derived.merge(&part);
@@ -288,7 +289,7 @@ impl<'a> SlabPasses<'a> {
         let keep_g = self.median_reads_stored_g() && derived.g_buckets.is_some();
         if !summarised.is_empty() {
             self.progress.stage("derive")?;
-            let mut writer = chans.store.writer(if keep_g { &["g"] } else { &[] }).map_err(io("derive"))?;
+            let mut writer = chans.store.writer(if keep_g { &[Channel::G] } else { &[] }).map_err(io("derive"))?;
             let (slabs, stats, progress) = (&self.slabs, &mut self.stats, &self.progress);
             // a slab is derived while the one before is summarised (and its g stored)
             overlapped(
@@ -299,11 +300,11 @@ impl<'a> SlabPasses<'a> {
                     Ok((slabs[k].start, chans.volumes(slabs[k].clone(), &summarised).map_err(at("derive"))?))
                 },
                 &mut |(first, volumes)| {
-                    for (name, v) in &volumes {
-                        stats.add(name, v.samples());
-                        derived.add(name, v.samples());
-                        if name == "g" && keep_g {
-                            writer.put_volume("g", first, v).map_err(io("derive"))?;
+                    for &(c, ref v) in &volumes {
+                        stats.add(c, v.samples());
+                        derived.add(c, v.samples());
+                        if c == Channel::G && keep_g {
+                            writer.put_volume(Channel::G, first, v).map_err(io("derive"))?;
                         }
                     }
                     Ok(Some((first, volumes)))
@@ -318,7 +319,7 @@ impl<'a> SlabPasses<'a> {
     /// How every slab derives the value: the kernel, the whole volume's
     /// epsilon (the same in every slab) and the scanner padding.
     fn derive_params(&self) -> DeriveParams {
-        let span = self.stats.range("v").map_or(0.0, |(lo, hi)| hi - lo);
+        let span = self.stats.range(Channel::Value).map_or(0.0, |(lo, hi)| hi - lo);
         DeriveParams {
             items: Vec::new(),
             kernel: self.p.derive.kernel,
@@ -337,8 +338,8 @@ impl<'a> SlabPasses<'a> {
 
     /// The derived channels a run on tasks reads itself after its derive
     /// pass, which its derive tasks store ([`stored_for_the_run`]).
-    fn read_later(&self, groups: &[DeriveParams]) -> Vec<String> {
-        let derived: Vec<String> = groups.iter().flat_map(|d| d.items.iter()).flat_map(|&i| made_by(i)).collect();
+    fn read_later(&self, groups: &[DeriveParams]) -> Vec<Channel> {
+        let derived: Vec<Channel> = groups.iter().flat_map(|d| d.items.iter()).flat_map(|&i| made_by(i)).collect();
         stored_for_the_run(self.p, &self.plan, self.tf.is_some(), &derived)
     }
 
@@ -370,9 +371,7 @@ impl<'a> SlabPasses<'a> {
         let t = Instant::now();
         let (geo, slabs) = (&self.geo, &self.slabs);
         let written = crate::run::write_kept(self.p, &self.plan.fields, &self.dir, |c, file| {
-            if !chans.has(c) {
-                return None;
-            }
+            let c = Channel::of_store(c).filter(|&c| chans.has(c))?;
             let f32 = mdtf_volume::SampleType::F32;
             let mut slab = |z, out: &mut Vec<f32>| chans.samples_into(c, z, out).map_err(std::io::Error::other);
             Some(mdtf_volume::write_slabs(file, geo, f32, slabs, &mut slab).map_err(at("keep")))
@@ -388,14 +387,15 @@ impl<'a> SlabPasses<'a> {
 /// every other channel): the kept ones, and g where the run takes a median
 /// of it (the tracing's noise floor and the detection before it, the
 /// (v, 1/g) axis, gaussian-tf's default without a TF file, `tf_given`).
-pub(super) fn stored_for_the_run(p: &Pipeline, plan: &Plan, tf_given: bool, derived: &[String]) -> Vec<String> {
-    let mut store: Vec<String> = p.keep.iter().filter(|c| derived.contains(c)).cloned().collect();
+pub(super) fn stored_for_the_run(p: &Pipeline, plan: &Plan, tf_given: bool, derived: &[Channel]) -> Vec<Channel> {
+    let kept = p.keep.iter().filter_map(|c| Channel::of_store(c));
+    let mut store: Vec<Channel> = kept.filter(|c| derived.contains(c)).collect();
     let joint = p.histogram.as_ref().is_some_and(|h| h.joint);
     let medians_of_g = plan.trace
-        || (joint && derived.iter().any(|c| c == "inv_g"))
+        || (joint && derived.contains(&Channel::InvG))
         || (p.pack.profile == Profile::GaussianTf && !tf_given);
-    if medians_of_g && derived.iter().any(|c| c == "g") && !store.iter().any(|c| c == "g") {
-        store.push("g".into());
+    if medians_of_g && derived.contains(&Channel::G) && !store.contains(&Channel::G) {
+        store.push(Channel::G);
     }
     store
 }
@@ -410,7 +410,7 @@ fn copy_input(
     padding: Option<[f64; 2]>,
     progress: &Progress,
 ) -> Result<u64, RunError> {
-    let mut writer = store.writer(&["v"]).map_err(io("input"))?;
+    let mut writer = store.writer(&[Channel::Value]).map_err(io("input"))?;
     let mut padded = 0u64;
     // a slab is read while the one before is summarised and stored
     overlapped(
@@ -418,11 +418,11 @@ fn copy_input(
         &mut |k| progress.slab(k + 1, slabs.len()),
         &mut |k, _| Ok((slabs[k].start, source.read(slabs[k].clone())?)),
         &mut |(first, v)| {
-            stats.add("v", v.samples());
+            stats.add(Channel::Value, v.samples());
             if let Some(range) = padding {
                 padded += crate::inputs::count_padding(v.samples(), range);
             }
-            writer.put_volume("v", first, &v).map_err(io("input"))?;
+            writer.put_volume(Channel::Value, first, &v).map_err(io("input"))?;
             Ok(None)
         },
     )?;

@@ -5,7 +5,8 @@
 use super::{Derived, SlabPasses, io};
 use crate::blocks::remote::SlabPass;
 use crate::blocks::slab_histograms::SlabHistograms;
-use crate::blocks::{SlabChannels, medians};
+use crate::blocks::{SlabChannels, by_name, channels_named, medians};
+use crate::channel::Channel;
 use crate::hist_files::Written;
 use crate::report::Traced;
 use crate::run::{RunError, at, fail};
@@ -22,18 +23,19 @@ impl SlabPasses<'_> {
     fn pack_params(&self, derived: &Derived, traced: &Traced) -> Result<PackParams, RunError> {
         let profile = self.p.pack.profile;
         let mut ranges = BTreeMap::new();
-        for c in &profile.channels(&[]) {
-            let whole = || self.stats.0.get(c.as_str()).cloned().unwrap_or_else(|| ChannelStats::new((0.0, 0.0), 0));
-            let r = match crate::pack_inputs::range_of(c, whole, traced.d_max).map_err(at("pack"))? {
+        for name in &profile.channels(&[]) {
+            let c = channels_named(std::slice::from_ref(name)).map_err(at("pack"))?[0];
+            let whole = || self.stats.0.get(&c).cloned().unwrap_or_else(|| ChannelStats::new((0.0, 0.0), 0));
+            let r = match crate::pack_inputs::range_of(name, whole, traced.d_max).map_err(at("pack"))? {
                 Some(r) => Some(r),
-                None if c == "inv_g" && derived.smallest_inv_g.is_finite() => {
+                None if c == Channel::InvG && derived.smallest_inv_g.is_finite() => {
                     Some(crate::pack_inputs::inv_g_range(derived.smallest_inv_g))
                 }
-                None if matches!(c.as_str(), "nx" | "ny" | "nz") => None,
+                None if matches!(c, Channel::Nx | Channel::Ny | Channel::Nz) => None,
                 None => self.stats.range(c).map(|(lo, hi)| [lo as f64, hi as f64]),
             };
             if let Some(r) = r {
-                ranges.insert(c.clone(), r);
+                ranges.insert(name.clone(), r);
             }
         }
         Ok(PackParams { profile, ranges, fields: vec![], dtype: None, nifti: false })
@@ -81,12 +83,13 @@ impl SlabPasses<'_> {
             false => None,
         };
         let layouts = mdtf_pack::texture_layouts(params);
-        let mut read: Vec<&str> = histograms.as_ref().map(|h| h.axes().channels()).unwrap_or_default();
+        let mut names: Vec<&str> = histograms.as_ref().map(|h| h.axes().channels()).unwrap_or_default();
         for c in layouts.iter().flat_map(|l| l.components.iter().flatten()) {
-            if !read.contains(&c.as_str()) {
-                read.push(c);
+            if !names.contains(&c.as_str()) {
+                names.push(c);
             }
         }
+        let read = channels_named(&names).map_err(at("pack"))?;
         if let Some(tasks) = self.tasks {
             let targets = writer.task_textures(&layouts, self.resumed).map_err(at("pack"))?;
             let axes = histograms.as_ref().map(|h| h.axes().clone());
@@ -95,7 +98,6 @@ impl SlabPasses<'_> {
                 true => mdtf_histogram::fixed_parts(self.geo.dims[2]).into_iter().filter(|p| !p.is_empty()).collect(),
                 false => self.slabs.clone(),
             };
-            let read = read.iter().map(|c| c.to_string()).collect();
             let pass = SlabPass::Pack { textures: targets.clone(), histograms: axes, read, height: self.height };
             for part in self.on_tasks(tasks, pass, &mut chans.store, &task_slabs)? {
                 if let (Some(h), Some(counts)) = (&mut histograms, part.histograms) {
@@ -116,6 +118,7 @@ impl SlabPasses<'_> {
             let slab = chans
                 .volumes(z.clone(), &read)
                 .map_err(|e| mdtf_pack::PackError::Io(mdtf_volume::VolumeError::Fields(e.to_string())))?;
+            let slab = by_name(slab);
             if let Some(h) = &mut histograms
                 && let Err(e) = h.add(z.start, &slab)
             {
@@ -141,7 +144,7 @@ impl SlabPasses<'_> {
         let t = Instant::now();
         let mut counted = h.finish(self.geo.spacing)?;
         counted.set_units(&self.units);
-        counted.without_g = self.stats.not_finite("g");
+        counted.without_g = self.stats.not_finite(Channel::G);
         // the default TF's histogram volume is an output only when the histograms ask for it
         let default_hvol = if self.hvol_asked { None } else { counted.hvol.take() };
         let mut hists = Written::default();

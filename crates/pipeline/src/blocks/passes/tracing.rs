@@ -7,6 +7,7 @@ use crate::blocks::remote::{Prefilter, SlabPass, SlabTasks};
 use crate::blocks::trace::{self, SlabTrace, TraceSetup};
 use crate::blocks::{SlabChannels, TraceBlocks, reductions, slabs};
 use crate::boundary_chain::TracedVolumes;
+use crate::channel::Channel;
 use crate::pre_detect::VgCounts;
 use crate::report::{BoundarySummary, Traced};
 use crate::run::{RunError, at, fail};
@@ -25,16 +26,16 @@ impl SlabPasses<'_> {
         let (g, f2, prefiltered) = match (self.plan.prefilter, &self.p.prefilter) {
             (true, Some(pf)) => {
                 self.prefilter(chans, pf)?;
-                ("g_prefiltered", "f2_prefiltered", true)
+                (Channel::GPrefiltered, Channel::F2Prefiltered, true)
             }
-            _ => ("g", "f2", false),
+            _ => (Channel::G, Channel::F2, false),
         };
         self.progress.stage("boundary")?;
         let t = Instant::now();
         let value_range = self.value_range();
         let stats = self.tracing_stats(chans, derived, g, prefiltered)?;
         if self.median_reads_stored_g() && !self.resumable() {
-            chans.store.remove("g");
+            chans.store.remove(Channel::G);
         }
         // the median's reads are done: their memory is not the tracing's size
         chans.release();
@@ -42,8 +43,7 @@ impl SlabPasses<'_> {
         match self.tasks {
             Some(tasks) => {
                 let (params, [_, halo_rows, halo]) = (self.p.boundary.clone(), self.plan.reach.trace);
-                let (g, f2, rows) = (g.into(), f2.into(), self.trace_blocks.rows);
-                let stores = self.plan.traced_stored().iter().map(|c| c.name(&[])).collect();
+                let (rows, stores) = (self.trace_blocks.rows, self.plan.traced_stored());
                 let pass =
                     SlabPass::Trace { g, f2, prefiltered, params, stats, halo, halo_rows, rows, value_range, stores };
                 let (_, tslabs) = self.trace_strips_and_slabs();
@@ -69,8 +69,8 @@ impl SlabPasses<'_> {
             }
         }
         let traced = self.finish_trace(sums)?;
-        for c in ["g_prefiltered", "f2_prefiltered", "dot"] {
-            if !self.plan.wants(c) && !self.resumable() {
+        for c in [Channel::GPrefiltered, Channel::F2Prefiltered, Channel::Dot] {
+            if !self.plan.wanted.contains(&c) && !self.resumable() {
                 chans.store.remove(c);
             }
         }
@@ -87,7 +87,7 @@ impl SlabPasses<'_> {
         &mut self,
         chans: &mut SlabChannels,
         derived: &Derived,
-        g: &str,
+        g: Channel,
         prefiltered: bool,
     ) -> Result<VolumeStats, RunError> {
         let buckets = match prefiltered {
@@ -115,7 +115,7 @@ impl SlabPasses<'_> {
         &mut self,
         tasks: &dyn SlabTasks,
         chans: &mut SlabChannels,
-        g: &str,
+        g: Channel,
         buckets: &KeyBuckets,
     ) -> Result<VolumeStats, RunError> {
         let (l_min, value_range) = (self.geo.min_spacing(), self.value_range());
@@ -124,7 +124,7 @@ impl SlabPasses<'_> {
         let detect = if self.plan.detects_before_tracing() { detection_axes(chans, &self.stats) } else { None };
         let (mut lower, mut vg) = (KeyBuckets::new(), None::<VgCounts>);
         if within.is_some() || detect.is_some() {
-            let pass = SlabPass::Select { median: within.map(|hi| (g.to_string(), hi)), detect };
+            let pass = SlabPass::Select { median: within.map(|hi| (g, hi)), detect };
             for part in self.on_tasks(tasks, pass, &mut chans.store, &self.slabs.clone())? {
                 if let Some(b) = &part.g_lower {
                     lower.merge(b);
@@ -158,9 +158,7 @@ impl SlabPasses<'_> {
         let blocks: Vec<(Range<usize>, Range<usize>)> =
             strips.iter().flat_map(|rows| tslabs.iter().map(move |z| (rows.clone(), z.clone()))).collect();
         let outputs = self.plan.traced_stored();
-        let names: Vec<String> = outputs.iter().map(|c| c.name(&[])).collect();
-        let mut writer =
-            chans.store.writer(&names.iter().map(String::as_str).collect::<Vec<_>>()).map_err(io("boundary"))?;
+        let mut writer = chans.store.writer(&outputs).map_err(io("boundary"))?;
         let (progress, stats) = (&self.progress, &mut self.stats);
         // a block is traced (in the memory of one written and summed) while the one before is written and summed
         let mut make = |k: usize, spent: Option<(usize, SlabTrace)>| {
@@ -169,12 +167,12 @@ impl SlabPasses<'_> {
         };
         let mut take = |(k, slab): (usize, SlabTrace)| {
             let (rows, z) = &blocks[k];
-            for (&c, name) in outputs.iter().zip(&names) {
+            for &c in &outputs {
                 if let Some(v) = slab.trace.traced(c) {
-                    writer.put_rows(name, z.start, rows.clone(), v).map_err(io("boundary"))?;
+                    writer.put_rows(c, z.start, rows.clone(), v).map_err(io("boundary"))?;
                 }
             }
-            stats.add("g_hit", slab.trace.g_hit.samples());
+            stats.add(Channel::GHit, slab.trace.g_hit.samples());
             sums.add(&slab);
             Ok(Some((k, slab)))
         };
@@ -196,11 +194,11 @@ impl SlabPasses<'_> {
         self.progress.stage("prefilter")?;
         let t = Instant::now();
         let halo = self.plan.reach.prefilter[2];
-        let filters: Vec<Prefilter> = [("g", "g_prefiltered"), ("f2", "f2_prefiltered")]
-            .map(|(c, out)| {
-                let range = self.stats.range(c).map_or(0.0, |(lo, hi)| (hi - lo) as f64);
+        let filters: Vec<Prefilter> = [(Channel::G, Channel::GPrefiltered), (Channel::F2, Channel::F2Prefiltered)]
+            .map(|(input, output)| {
+                let range = self.stats.range(input).map_or(0.0, |(lo, hi)| (hi - lo) as f64);
                 let params = crate::boundary_chain::prefilter_params(pf, range);
-                Prefilter { input: c.into(), output: out.into(), params }
+                Prefilter { input, output, params }
             })
             .into();
         match self.tasks {
@@ -219,9 +217,9 @@ impl SlabPasses<'_> {
                 for f in &filters {
                     for (k, z) in self.slabs.iter().enumerate() {
                         self.progress.slab(k + 1, self.slabs.len())?;
-                        let own = trace::prefilter_slab(chans, &f.input, &f.params, z, halo)?;
-                        chans.store.put_volume(&f.output, z.start, &own).map_err(io("prefilter"))?;
-                        self.stats.add(&f.output, own.samples());
+                        let own = trace::prefilter_slab(chans, f.input, &f.params, z, halo)?;
+                        chans.store.put_volume(f.output, z.start, &own).map_err(io("prefilter"))?;
+                        self.stats.add(f.output, own.samples());
                     }
                 }
             }
