@@ -91,7 +91,8 @@ pub fn count(channels: &[&[f32]], axes: Vec<Axis>, mask: Option<&[bool]>) -> Res
         })
         .collect();
     let binners: Vec<_> = axes.iter().map(Axis::binner).collect();
-    let parts = rayon::current_num_threads().clamp(1, 64);
+    // parts of at most u32::MAX voxels: a part counts into one table's u32 counts
+    let parts = rayon::current_num_threads().clamp(1, 64).max(n.div_ceil(u32::MAX as usize));
     let part_len = n.div_ceil(parts).max(1);
     let range_of = |p: usize| (p * part_len).min(n)..((p + 1) * part_len).min(n);
     // One private table per worker, summed in a fixed order.
@@ -99,7 +100,9 @@ pub fn count(channels: &[&[f32]], axes: Vec<Axis>, mask: Option<&[bool]>) -> Res
         .into_par_iter()
         .map(|p| {
             let mut local = SparseCounts::new(total_bins);
-            count_part(channels, &binners, &strides, mask, range_of(p), &mut |idx, run| local.add(idx, run));
+            let range = range_of(p);
+            local.make_room(range.len() as u64);
+            count_part(channels, &binners, &strides, mask, range, &mut |idx, run| local.add(idx, run));
             local
         })
         .collect();
@@ -107,8 +110,7 @@ pub fn count(channels: &[&[f32]], axes: Vec<Axis>, mask: Option<&[bool]>) -> Res
     for local in &partial {
         counts.merge(local);
     }
-    let counts = counts.counts;
-    Ok(Histogram { axes, counts })
+    Ok(Histogram { axes, counts: counts.into_totals() })
 }
 
 /// The number of bins of `axes`, checked against what u32 bin indices hold.
@@ -120,55 +122,120 @@ pub(crate) fn check_size(axes: &[Axis]) -> Result<usize, HistogramError> {
     }
 }
 
-/// Bins per block of the merge's touched-block bookkeeping (one 4 KiB page of u64 counts).
-const MERGE_BLOCK: usize = 512;
+/// Bins per block of the merge's touched-block bookkeeping (one 4 KiB page of u32 counts).
+const MERGE_BLOCK: usize = 1024;
 
 /// One thread's counts, noting which blocks of bins it touched. A fresh
 /// (calloc) count array costs a page fault only where it is written, and a
 /// merge reads only touched blocks, so sparse histograms (the 16.7 M bins of
-/// a histogram volume) never fault in or scan their empty pages.
+/// a histogram volume) never fault in or scan their empty pages. Counts are
+/// made in u32 (half the memory the counting loop touches) and spill into
+/// u64 totals before they could overflow: room for the voxels to come is
+/// made first ([`SparseCounts::make_room`]).
 pub(crate) struct SparseCounts {
-    /// Counts per bin.
-    pub counts: Vec<u64>,
+    /// Counts per bin since the last spill.
+    narrow: Vec<u32>,
     touched: Vec<bool>,
+    /// Voxels in `narrow` (or room made for them): at most u32::MAX.
+    held: u64,
+    /// Counts spilled from `narrow` (empty until the first spill).
+    wide: Vec<u64>,
 }
 
 impl SparseCounts {
     /// Zero counts over `bins` bins.
     pub fn new(bins: usize) -> SparseCounts {
-        SparseCounts { counts: vec![0; bins], touched: vec![false; bins.div_ceil(MERGE_BLOCK)] }
+        SparseCounts { narrow: vec![0; bins], touched: vec![false; bins.div_ceil(MERGE_BLOCK)], held: 0, wide: vec![] }
     }
 
-    /// Adds `run` to bin `idx`.
+    /// Bins counted.
+    pub fn bins(&self) -> usize {
+        self.narrow.len()
+    }
+
+    /// Makes room for `voxels` more voxels (at most u32::MAX) in the u32
+    /// counts, spilling them into the u64 totals first when needed.
+    pub fn make_room(&mut self, voxels: u64) {
+        if self.held + voxels > u64::from(u32::MAX) {
+            self.spill();
+        }
+        self.held += voxels;
+    }
+
+    /// Moves the u32 counts into the u64 totals, block by touched block.
+    fn spill(&mut self) {
+        if self.wide.is_empty() {
+            // calloc memory: a page costs memory only once a count is spilled into it
+            self.wide = vec![0; self.narrow.len()];
+        }
+        let n = self.narrow.len();
+        for (b, touched) in self.touched.iter_mut().enumerate().filter(|(_, t)| **t) {
+            let block = b * MERGE_BLOCK..((b + 1) * MERGE_BLOCK).min(n);
+            for (w, c) in self.wide[block.clone()].iter_mut().zip(&mut self.narrow[block]) {
+                *w += u64::from(std::mem::take(c));
+            }
+            *touched = false;
+        }
+        self.held = 0;
+    }
+
+    /// Adds `run` to bin `idx` (room made for it).
     #[inline(always)]
     pub fn add(&mut self, idx: usize, run: u32) {
-        self.counts[idx] += u64::from(run);
+        self.narrow[idx] += run;
         self.touched[idx / MERGE_BLOCK] = true;
     }
 
     /// Adds `n` to bin `idx` (another table's count).
     pub fn add_count(&mut self, idx: usize, n: u64) {
-        self.counts[idx] += n;
-        self.touched[idx / MERGE_BLOCK] = true;
+        match u32::try_from(n) {
+            Ok(small) => {
+                self.make_room(n);
+                self.add(idx, small);
+            }
+            Err(_) => {
+                if self.wide.is_empty() {
+                    self.wide = vec![0; self.narrow.len()];
+                }
+                self.wide[idx] += n;
+            }
+        }
     }
 
     /// The non-zero counts (bin, count), read block by touched block (an
-    /// untouched block's pages were never faulted in).
+    /// untouched block's pages were never faulted in) until counts spill.
     pub fn nonzero(&self) -> Vec<(u32, u64)> {
-        let n = self.counts.len();
+        let n = self.narrow.len();
+        if !self.wide.is_empty() {
+            let total = |i: usize| self.wide[i] + u64::from(self.narrow[i]);
+            return (0..n).filter(|&i| total(i) > 0).map(|i| (i as u32, total(i))).collect();
+        }
         let touched = self.touched.iter().enumerate().filter(|(_, t)| **t);
         let blocks = touched.map(|(b, _)| b * MERGE_BLOCK..((b + 1) * MERGE_BLOCK).min(n));
-        blocks.flat_map(|r| r.filter(|&i| self.counts[i] > 0).map(|i| (i as u32, self.counts[i]))).collect()
+        blocks.flat_map(|r| r.filter(|&i| self.narrow[i] > 0).map(|i| (i as u32, u64::from(self.narrow[i])))).collect()
     }
 
     /// Adds `other`'s counts, block by touched block.
     pub fn merge(&mut self, other: &SparseCounts) {
-        let n = self.counts.len();
+        self.make_room(other.held);
+        let n = self.narrow.len();
         for (b, _) in other.touched.iter().enumerate().filter(|(_, t)| **t) {
             let block = b * MERGE_BLOCK..((b + 1) * MERGE_BLOCK).min(n);
-            self.counts[block.clone()].iter_mut().zip(&other.counts[block]).for_each(|(c, &o)| *c += o);
+            self.narrow[block.clone()].iter_mut().zip(&other.narrow[block]).for_each(|(c, &o)| *c += o);
             self.touched[b] = true;
         }
+        if !other.wide.is_empty() {
+            if self.wide.is_empty() {
+                self.wide = vec![0; n];
+            }
+            self.wide.iter_mut().zip(&other.wide).for_each(|(c, &o)| *c += o);
+        }
+    }
+
+    /// Every bin's count (pages of bins never counted stay unmapped zeros).
+    pub fn into_totals(mut self) -> Vec<u64> {
+        self.spill();
+        self.wide
     }
 }
 
@@ -289,7 +356,28 @@ mod tests {
         b.add(7, 5);
         a.merge(&b);
         assert_eq!(a.nonzero(), vec![(7, 5), (2000, 6_000_000_000)]);
-        let h = Histogram { axes: vec![Axis::new("v", 0.0, 1.0, 4096).unwrap()], counts: a.counts };
+        let h = Histogram { axes: vec![Axis::new("v", 0.0, 1.0, 4096).unwrap()], counts: a.into_totals() };
         assert_eq!((h.total(), h.max()), (6_000_000_005, 6_000_000_000));
+    }
+
+    #[test]
+    fn u32_counts_spill_into_u64_totals_before_they_overflow() {
+        let mut t = SparseCounts::new(3000);
+        // nearly full: room for u32::MAX - 1 voxels, of which bin 1500 holds them all
+        t.make_room(u64::from(u32::MAX) - 1);
+        t.add(1500, u32::MAX - 1);
+        t.add(2, 0);
+        // ten more voxels do not fit: the u32 counts spill first
+        t.make_room(10);
+        t.add(1500, 10);
+        t.add(2999, 1);
+        let mut other = SparseCounts::new(3000);
+        other.make_room(7);
+        other.add(1500, 7);
+        t.merge(&other);
+        let want = u64::from(u32::MAX) - 1 + 10 + 7;
+        assert_eq!(t.nonzero(), vec![(1500, want), (2999, 1)]);
+        let totals = t.into_totals();
+        assert_eq!((totals[1500], totals[2999], totals.iter().sum::<u64>()), (want, 1, want + 1));
     }
 }

@@ -22,7 +22,7 @@ use crate::count::{Histogram, SparseCounts, check_size, for_each_run};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU32, Ordering};
 
 /// Parameters of the histogram volume.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -180,6 +180,7 @@ impl HvolAccumulator {
     pub fn add(&mut self, part: usize, v: &[f32], g: &[f32], h: &[f32]) {
         let sums = self.sums.of(part, &self.axes);
         let counts = &mut self.counts;
+        counts.make_room(v.len() as u64);
         count_and_sum(&[v, g, h], &self.binners, &self.strides, &mut |bin, n| counts.add(bin as usize, n), sums);
     }
 
@@ -206,7 +207,7 @@ impl HvolAccumulator {
             parts.push(t.sums);
         }
         let sums = PartSums::merged(parts, &axes);
-        let hist = Histogram { axes: axes.list(), counts: counts.counts };
+        let hist = Histogram { axes: axes.list(), counts: counts.into_totals() };
         derive_tables(hist, axes, sums, params)
     }
 }
@@ -262,7 +263,7 @@ impl HvolAccumulator {
             return Err(HistogramError::Geometry("a histogram volume part over other axes".into()));
         }
         // checked whole first: a part refused leaves this accumulator as it was
-        let (bins, vg_bins) = (self.counts.counts.len(), self.axes.v.bins * self.axes.g.bins);
+        let (bins, vg_bins) = (self.counts.bins(), self.axes.v.bins * self.axes.g.bins);
         if let Some((bin, _)) = stored.counts.iter().find(|(b, _)| *b as usize >= bins) {
             return Err(HistogramError::Geometry(format!("bin {bin} of a histogram volume of {bins} bins")));
         }
@@ -329,8 +330,14 @@ pub struct HvolBySlabs {
     axes: HvolAxes,
     binners: [Binner; 3],
     strides: [u32; 3],
-    /// Voxels per (v, g, f'') bin, from every lane at once.
-    counts: Vec<AtomicU64>,
+    /// Voxels per (v, g, f'') bin, from every lane at once, since the last spill.
+    counts: Vec<AtomicU32>,
+    /// Voxels in `counts`: at most `room`.
+    held: u64,
+    /// Voxels the u32 counts take before they spill (u32::MAX: none can overflow).
+    room: u64,
+    /// Counts spilled from `counts` before they could overflow (empty until then).
+    spilled: Vec<u64>,
     lanes: Vec<PartSums>,
     parts: Vec<Range<usize>>,
     plane: usize,
@@ -339,7 +346,8 @@ pub struct HvolBySlabs {
 impl HvolBySlabs {
     /// An empty histogram volume over `axes` for a volume of `slices`
     /// z-slices of `plane` voxels, counted on `lanes` parallel lanes (at
-    /// most [`HVOL_PARTS`]); the counts take 8 bytes a bin, whatever the lanes.
+    /// most [`HVOL_PARTS`]); the counts take 4 bytes a bin, whatever the
+    /// lanes (and 8 more once over 2^32 - 1 voxels were counted).
     pub fn new(axes: &HvolAxes, plane: usize, slices: usize, lanes: usize) -> Result<HvolBySlabs, HistogramError> {
         let bins = check_size(&axes.list())?;
         Ok(HvolBySlabs {
@@ -348,6 +356,9 @@ impl HvolBySlabs {
             strides: axes.strides(),
             // calloc memory: a page of counts costs memory only once a voxel is counted in it
             counts: bytemuck::zeroed_vec(bins),
+            held: 0,
+            room: u64::from(u32::MAX),
+            spilled: Vec::new(),
             lanes: (0..lanes.clamp(1, HVOL_PARTS)).map(|_| PartSums::default()).collect(),
             parts: fixed_parts(slices),
             plane,
@@ -367,12 +378,20 @@ impl HvolBySlabs {
             )));
         }
         let slab = first..first + n / plane;
+        // a slab of at most `room` voxels fits once the counts spill
+        if n as u64 > self.room {
+            return Err(HistogramError::Geometry(format!("a slab of {n} voxels: at most {} at a time", self.room)));
+        }
+        if self.held + n as u64 > self.room {
+            self.spill();
+        }
+        self.held += n as u64;
         let count = self.lanes.len();
         let (axes, binners, strides, counts, parts) =
             (&self.axes, &self.binners, &self.strides, &self.counts, &self.parts);
         let add = |bin: u32, n: u32| {
             if let Some(c) = counts.get(bin as usize) {
-                c.fetch_add(u64::from(n), Ordering::Relaxed);
+                c.fetch_add(n, Ordering::Relaxed);
             }
         };
         self.lanes.par_iter_mut().enumerate().for_each(|(lane, sums)| {
@@ -388,11 +407,27 @@ impl HvolBySlabs {
         Ok(())
     }
 
+    /// Moves the u32 counts into the u64 ones.
+    fn spill(&mut self) {
+        if self.spilled.is_empty() {
+            self.spilled = vec![0; self.counts.len()];
+        }
+        for (s, c) in self.spilled.iter_mut().zip(&mut self.counts) {
+            *s += u64::from(std::mem::take(c.get_mut()));
+        }
+        self.held = 0;
+    }
+
     /// The histogram volume of every slab added.
-    pub fn finish(self, params: &HvolParams) -> Result<HistogramVolume, HistogramError> {
-        let sums = PartSums::merged(self.lanes, &self.axes);
-        // in place: the same memory, now plain counts
-        let counts = self.counts.into_iter().map(AtomicU64::into_inner).collect();
+    pub fn finish(mut self, params: &HvolParams) -> Result<HistogramVolume, HistogramError> {
+        let sums = PartSums::merged(std::mem::take(&mut self.lanes), &self.axes);
+        let counts = match self.spilled.is_empty() {
+            true => self.counts.into_iter().map(|c| u64::from(c.into_inner())).collect(),
+            false => {
+                self.spill();
+                self.spilled
+            }
+        };
         derive_tables(Histogram { axes: self.axes.list(), counts }, self.axes, sums, params)
     }
 }
@@ -603,5 +638,47 @@ impl Sums {
         self.c_vg.iter_mut().zip(&o.c_vg).for_each(|(x, y)| *x += y);
         self.g_vg.iter_mut().zip(&o.g_vg).for_each(|(x, y)| *x += y);
         self.h_vg.iter_mut().zip(&o.h_vg).for_each(|(x, y)| *x += y);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn counts_spilled_into_u64_between_slabs_are_the_counts_of_no_spill() {
+        // pseudo-random v, g, f'' over 12 slices of 30 x 20
+        let (plane, slices) = (600, 12);
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x % 10_000) as f32 / 100.0
+        };
+        let n = plane * slices;
+        let (v, g, h): (Vec<f32>, Vec<f32>, Vec<f32>) = (0..n).map(|_| (next(), next(), next() - 50.0)).collect();
+        let params = HvolParams::default();
+        let axes = HvolAxes::of(&v, &g, &h, &params).unwrap();
+        let run = |room: u64| {
+            let mut by_slabs = HvolBySlabs::new(&axes, plane, slices, 2).unwrap();
+            by_slabs.room = room;
+            for first in (0..slices).step_by(2) {
+                let at = first * plane..(first + 2) * plane;
+                by_slabs.add_slab(first, &v[at.clone()], &g[at.clone()], &h[at]).unwrap();
+            }
+            let spilled = !by_slabs.spilled.is_empty();
+            (by_slabs.finish(&params).unwrap().hist, spilled)
+        };
+        let (plain, spilled) = run(u64::from(u32::MAX));
+        assert!(!spilled);
+        // room for three slices: the counts spill before every second slab
+        let (with_spills, spilled) = run(3 * plane as u64);
+        assert!(spilled);
+        assert_eq!(with_spills, plain);
+        assert_eq!(plain.total(), n as u64);
+        let mut too_small = HvolBySlabs::new(&axes, plane, slices, 2).unwrap();
+        too_small.room = plane as u64;
+        assert!(too_small.add_slab(0, &v[..2 * plane], &g[..2 * plane], &h[..2 * plane]).is_err());
     }
 }

@@ -131,10 +131,10 @@ fn distance_tf_for_clean_data(sets: &[&str]) -> Pipeline {
 }
 
 /// A budget that gives the clean-data distance-tf on 64 x 64 planes slabs of 8 planes (8 slabs of 64) when its
-/// tracing reads whole planes: the fixed costs (48 MiB, 152 MiB for the histogram volume) and 402
+/// tracing reads whole planes: the fixed costs (48 MiB, 88 MiB for the histogram volume) and 402
 /// planes, of which the tracing needs 17 per slab plane (7 arrays over the block, and 10 outputs:
 /// two blocks' five) and 7 x (2 x 17 + 2 x 2) = 266 for its halo.
-const EIGHT_SLAB_BUDGET: u64 = 48 * 1024 * 1024 + 152 * 1024 * 1024 + 402 * 64 * 64 * 4;
+const EIGHT_SLAB_BUDGET: u64 = 48 * 1024 * 1024 + 88 * 1024 * 1024 + 402 * 64 * 64 * 4;
 
 #[test]
 fn the_shipped_pipelines_give_the_same_files_slab_by_slab() {

@@ -11,9 +11,12 @@ use mdtf_volume::{Geometry, human_bytes};
 /// What the process holds whatever the slab: code, thread stacks, figures (bytes).
 const BASE_BYTES: u64 = 48 << 20;
 /// The histogram volume ([`mdtf_histogram::HvolBySlabs`]): its counts
-/// (256^3 u64 at most, one array whatever its lanes) and the sums of its 16
+/// (256^3 u32 at most, one array whatever its lanes) and the sums of its 16
 /// fixed parts (three 8-byte sums on each of 256^2 (v, g) bins).
-const HVOL_BYTES: u64 = (128 << 20) + 16 * 3 * 8 * 256 * 256;
+const HVOL_BYTES: u64 = (64 << 20) + 16 * 3 * 8 * 256 * 256;
+/// The histogram volume's u64 totals, which its u32 counts spill into on a
+/// grid of more than 2^32 - 1 voxels (256^3 u64 at most).
+const HVOL_SPILL_BYTES: u64 = 128 << 20;
 
 /// Block-sized f32 arrays the tracing holds: the value and its five
 /// derivatives over the block grown by the halo and the kernel's support,
@@ -70,9 +73,11 @@ pub(super) fn planes_by_pass(h: u64, plan: &Plan, trace_whole_planes: bool) -> P
     PassPlanes { derive, prefilter, trace, pack }
 }
 
-/// Bytes a process holds whatever its slab, and the histogram volume's when `hvol`.
-pub(super) fn fixed_bytes(hvol: bool) -> u64 {
-    BASE_BYTES + if hvol { HVOL_BYTES } else { 0 }
+/// Bytes a process holds whatever its slab, and the histogram volume's
+/// when `hvol` (of a grid of `voxels`).
+pub(super) fn fixed_bytes(hvol: bool, voxels: u64) -> u64 {
+    let spill = if voxels > u64::from(u32::MAX) { HVOL_SPILL_BYTES } else { 0 };
+    BASE_BYTES + if hvol { HVOL_BYTES + spill } else { 0 }
 }
 
 /// Bytes the tracing holds for a block of `h` planes and `r` rows, with the fixed costs.
@@ -115,7 +120,7 @@ fn slab_height_with(
     trace_whole_planes: bool,
 ) -> Result<usize, String> {
     let plane_bytes = (geometry.dims[0] * geometry.dims[1] * 4) as u64;
-    let fixed = BASE_BYTES + if hvol { HVOL_BYTES } else { 0 };
+    let fixed = fixed_bytes(hvol, geometry.voxel_count() as u64);
     let cost = |h: u64| fixed + pass_planes(h, plan, trace_whole_planes) * plane_bytes;
     let nz = geometry.dims[2] as u64;
     if cost(1) > budget {
@@ -278,11 +283,14 @@ mod tests {
         assert!(e.contains("too small") && e.contains("1.0 MiB"), "{e}");
         assert_eq!(slab_height(1 << 40, &geo, &plan, true).unwrap(), 256, "a large budget: one slab");
         // the histogram volume's counts come off the slabs' share, once whatever its lanes
-        let larger = 2 * budget;
-        let h2 = slab_height(larger, &geo, &plan, true).unwrap() as u64;
-        assert!(BASE_BYTES + HVOL_BYTES + pass_planes(h2, &plan, true) * plane <= larger);
-        assert!(BASE_BYTES + HVOL_BYTES + pass_planes(h2 + 1, &plan, true) * plane > larger);
-        assert_eq!(fit_slabs(larger, &geo, &plan, true, false).unwrap(), h2 as usize);
+        let h2 = slab_height(budget, &geo, &plan, true).unwrap() as u64;
+        assert!(BASE_BYTES + HVOL_BYTES + pass_planes(h2, &plan, true) * plane <= budget);
+        assert!(BASE_BYTES + HVOL_BYTES + pass_planes(h2 + 1, &plan, true) * plane > budget);
+        assert_eq!(fit_slabs(budget, &geo, &plan, true, false).unwrap(), h2 as usize);
+        // over 2^32 - 1 voxels the counts' u64 totals come off it too
+        let huge = Geometry::new([4096, 4096, 4096], [1.0; 3]);
+        assert_eq!(fixed_bytes(true, huge.voxel_count() as u64), BASE_BYTES + HVOL_BYTES + HVOL_SPILL_BYTES);
+        assert_eq!(fixed_bytes(true, geo.voxel_count() as u64), BASE_BYTES + HVOL_BYTES);
         assert_eq!(fit_slabs(budget, &geo, &plan, false, false).unwrap(), h as usize);
     }
 

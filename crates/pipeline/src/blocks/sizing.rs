@@ -66,7 +66,7 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
     let h = height as u64;
     let k = plan.reach.kernel[2] as u64;
     let by_pass = planes_by_pass(h, &plan, false);
-    let memory = |planes: u64| fixed_bytes(hvol) + planes * plane;
+    let memory = |planes: u64| fixed_bytes(hvol, geometry.voxel_count() as u64) + planes * plane;
     let mut derived: Vec<Channel> = plan.derive.iter().flat_map(|&i| made_by(i)).collect();
     if hvol {
         derived.extend([Channel::G, Channel::F2]);
