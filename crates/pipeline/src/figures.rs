@@ -79,12 +79,16 @@ pub const MAX_PAIRED_FIELDS: usize = 4;
 /// of the field pairs (for [`write_gaussian_figures`]).
 pub fn write_field_pair_histograms(
     fields: &[String],
-    chans: &BTreeMap<String, Volume>,
+    chans: &BTreeMap<crate::channel::Channel, Volume>,
     hdir: &Path,
     title: &str,
 ) -> Result<(Vec<String>, Vec<Histogram>), String> {
-    let named: Vec<(&str, &Volume)> =
-        fields.iter().take(MAX_PAIRED_FIELDS).filter_map(|f| chans.get(f).map(|v| (f.as_str(), v))).collect();
+    let named: Vec<(&str, &Volume)> = fields
+        .iter()
+        .take(MAX_PAIRED_FIELDS)
+        .enumerate()
+        .filter_map(|(k, f)| chans.get(&crate::channel::Channel::Field(k)).map(|v| (f.as_str(), v)))
+        .collect();
     let axis = |name: &str, v: &Volume, spec: AxisSpec| spec.resolve(name, v.samples()).map_err(|e| e.to_string());
     let axes: Vec<Axis> = named.iter().map(|(f, v)| axis(f, v, AxisSpec::qbert(f))).collect::<Result<_, _>>()?;
     // (the first field's index, the second channel and its axis)
@@ -92,7 +96,7 @@ pub fn write_field_pair_histograms(
     for a in 0..named.len() {
         pairs.extend((a + 1..named.len()).map(|b| (a, named[b].1, axes[b].clone())));
     }
-    if let Some(gnorm) = chans.get("gnorm") {
+    if let Some(gnorm) = chans.get(&crate::channel::Channel::Gnorm) {
         // ||G|| has g's long tail: clipped as g is
         let spec = AxisSpec { clip_percent: AxisSpec::qbert("g").clip_percent, ..AxisSpec::qbert("gnorm") };
         let gnorm_axis = axis("gnorm", gnorm, spec)?;

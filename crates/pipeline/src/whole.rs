@@ -4,6 +4,7 @@
 //! borrows what it reads, frees what the plan says no later pass reads, and
 //! the pack takes the rest at the end.
 
+use crate::channel::Channel;
 use crate::error::{RunError, at, fail};
 use crate::file::Pipeline;
 use crate::hist_files::{Counted, Written};
@@ -38,8 +39,8 @@ pub(crate) struct WholeRun<'a> {
     pub(crate) progress: Progress<'a>,
     pub(crate) stages: Stages,
     pub(crate) warnings: Vec<String>,
-    /// The channels made so far and still read, by name.
-    chans: BTreeMap<String, Volume>,
+    /// The channels made so far and still read.
+    chans: BTreeMap<Channel, Volume>,
     /// The normal, until the tracing has read it.
     normal: Option<MultiField>,
     /// The value as derive's input; its volume moves into the channels, or
@@ -122,8 +123,18 @@ impl<'a> WholeRun<'a> {
         &self.plan.fields
     }
 
-    fn needs(&self, c: &str) -> bool {
-        self.plan.wants(c)
+    fn needs(&self, c: Channel) -> bool {
+        self.plan.wanted.contains(&c)
+    }
+
+    /// Takes in the volumes a stage crate made, by the names it gives them
+    /// (the table's, or a Jacobian component's `d{field}/d{axis}`).
+    fn take_named(&mut self, volumes: Vec<(String, Volume)>) {
+        for (name, v) in volumes {
+            if let Some(c) = Channel::of_store(&name).or_else(|| Channel::parse(&name, &self.plan.fields)) {
+                self.chans.insert(c, v);
+            }
+        }
     }
 
     fn voxels(&self) -> usize {
@@ -144,7 +155,7 @@ impl<'a> WholeRun<'a> {
             for (item, mf) in out.items {
                 match item {
                     Item::Normal => self.normal = Some(mf),
-                    _ => self.chans.extend(mf.into_volumes()),
+                    _ => self.take_named(mf.into_volumes()),
                 }
             }
             self.stages.done("derive", t, self.voxels(), vec![]);
@@ -158,20 +169,20 @@ impl<'a> WholeRun<'a> {
             let d = DeriveParams { items: multi_items, padding: None, ..self.derive.clone() };
             let out = mdtf_derive::run(mf, &d).map_err(at("derive"))?;
             // gnorm, inv_g, and the Jacobian's d{field}/d{axis}
-            self.chans.extend(out.items.into_iter().flat_map(|(_, m)| m.into_volumes()));
+            self.take_named(out.items.into_iter().flat_map(|(_, m)| m.into_volumes()).collect());
             self.stages.done("derive (multi-field)", t, self.voxels(), vec![]);
         }
         // the input's fields move into the channels once the multi-field derive is done with them
         if let Some(mf) = self.input.take() {
-            for f in mf.fields {
-                if self.needs(&f.name) {
-                    self.chans.insert(f.name, Volume { geometry: self.geo.clone(), data: f.data });
+            for (k, f) in mf.fields.into_iter().enumerate() {
+                if self.needs(Channel::Field(k)) {
+                    self.chans.insert(Channel::Field(k), Volume { geometry: self.geo.clone(), data: f.data });
                 }
             }
         }
-        if self.needs("v") && !self.chans.contains_key("v") {
+        if self.needs(Channel::Value) && !self.chans.contains_key(&Channel::Value) {
             let field = self.value.fields.remove(0);
-            self.chans.insert("v".into(), Volume { geometry: self.geo.clone(), data: field.data });
+            self.chans.insert(Channel::Value, Volume { geometry: self.geo.clone(), data: field.data });
         }
         if !self.plan.defer_normals {
             // nothing reads the value volume from here on unless it is a channel
@@ -185,17 +196,18 @@ impl<'a> WholeRun<'a> {
     pub(crate) fn trace(&mut self) -> Result<Traced, RunError> {
         let value_range = self.finite_range.map_or(0.0, |[lo, hi]| hi - lo);
         let traced = if self.plan.trace { self.prefilter_and_trace(value_range)? } else { Traced::default() };
-        for (c, v) in self.normal.take().map(MultiField::into_volumes).unwrap_or_default() {
-            if self.needs(&c) {
-                self.chans.insert(c, v);
-            }
-        }
+        let normals = self.normal.take().map(MultiField::into_volumes).unwrap_or_default();
+        self.take_named(
+            normals.into_iter().filter(|(n, _)| Channel::of_store(n).is_some_and(|c| self.needs(c))).collect(),
+        );
         Ok(traced)
     }
 
     fn prefilter_and_trace(&mut self, value_range: f64) -> Result<Traced, RunError> {
         let n = self.voxels();
-        let (Some(g0), Some(f20), Some(nm)) = (self.chans.get("g"), self.chans.get("f2"), self.normal.as_ref()) else {
+        let (Some(g0), Some(f20), Some(nm)) =
+            (self.chans.get(&Channel::G), self.chans.get(&Channel::F2), self.normal.as_ref())
+        else {
             return Err(fail("boundary")("derivatives missing".into()));
         };
         let filtered = match &self.p.prefilter {
@@ -216,7 +228,7 @@ impl<'a> WholeRun<'a> {
         self.progress.stage("boundary")?;
         let t = Instant::now();
         // the boundaries of the (v, g) histogram of the unfiltered g, as the default TF reads them
-        let detected = match (self.plan.detects_before_tracing(), self.chans.get("v")) {
+        let detected = match (self.plan.detects_before_tracing(), self.chans.get(&Channel::Value)) {
             (true, Some(v)) => crate::pre_detect::detected_of(v.samples(), g0.samples(), v.geometry.min_spacing())
                 .map_err(at("boundary"))?,
             _ => mdtf_boundary::Detected::default(),
@@ -234,14 +246,13 @@ impl<'a> WholeRun<'a> {
         std::fs::create_dir_all(&rdir).map_err(at("boundary"))?;
         report.write(&rdir).map_err(at("boundary"))?;
         drop(filtered);
-        for (c, v) in crate::boundary_chain::take_traced(&mut out) {
-            if self.needs(&c) {
-                self.chans.insert(c, v);
-            }
-        }
+        let traced_volumes = crate::boundary_chain::take_traced(&mut out);
+        self.take_named(
+            traced_volumes.into_iter().filter(|(n, _)| Channel::of_store(n).is_some_and(|c| self.needs(c))).collect(),
+        );
         // derived only for the tracing: free them now
         for c in self.plan.freed_after(Step::Trace) {
-            self.chans.remove(&c.name(&self.plan.fields));
+            self.chans.remove(&c);
         }
         let outputs = vec!["boundary/boundary_report.csv".into(), "boundary/boundary_report.png".into()];
         self.stages.done("boundary", t, n, outputs);
@@ -255,9 +266,9 @@ impl<'a> WholeRun<'a> {
         }
         self.progress.stage("keep")?;
         let t = Instant::now();
-        let chans = &self.chans;
-        let written = crate::run::write_kept(self.p, &self.plan.fields, &self.dir, |c, file| {
-            let v = chans.get(c)?;
+        let (chans, fields) = (&self.chans, &self.plan.fields);
+        let written = crate::run::write_kept(self.p, fields, &self.dir, |c, file| {
+            let v = chans.get(&Channel::parse(c, fields)?)?;
             Some(mdtf_volume::write_volume(file, v, &WriteOptions::default(), &[]).map_err(at("keep")))
         })?;
         self.stages.done("keep", t, self.voxels(), written);
@@ -299,8 +310,8 @@ impl<'a> WholeRun<'a> {
 
     /// The counts the histogram section `h` asks for.
     fn count(&self, h: &crate::file::HistogramSection) -> Result<Counted, RunError> {
-        let get = |c: &str| self.chans.get(c);
-        let (Some(v), Some(g)) = (get("v"), get("g")) else {
+        let get = |c: Channel| self.chans.get(&c);
+        let (Some(v), Some(g)) = (get(Channel::Value), get(Channel::G)) else {
             return Err(fail("histogram")("v and g missing".into()));
         };
         let axis =
@@ -314,7 +325,7 @@ impl<'a> WholeRun<'a> {
         // asked for, or read by the default TF (no TF file given); once the
         // tracing has freed f'', of v derived again, as the pack would
         if h.hvol || self.p.pack.tf.is_none() {
-            counted.hvol = Some(match get("f2") {
+            counted.hvol = Some(match get(Channel::F2) {
                 Some(f2) => histogram_volume(
                     v.samples(),
                     g.samples(),
@@ -331,9 +342,9 @@ impl<'a> WholeRun<'a> {
             // peak finding's TF domain: (v, 1/g); for several fields 1/g is of
             // their normalised ||G||, so its axis comes from the gradient it inverts
             let inverted: Option<Vec<f32>> = (!self.plan.fields.is_empty())
-                .then(|| get("inv_g").map(|i| i.samples().iter().map(|&x| 1.0 / x).collect()))
+                .then(|| get(Channel::InvG).map(|i| i.samples().iter().map(|&x| 1.0 / x).collect()))
                 .flatten();
-            if let Some(inv_g) = get("inv_g")
+            if let Some(inv_g) = get(Channel::InvG)
                 && let Some(ia) = Axis::inverse_gradient(inverted.as_deref().unwrap_or(g.samples()), 256)
             {
                 // several fields: the value is the first field, named as the pack's TF axis names it
@@ -346,7 +357,7 @@ impl<'a> WholeRun<'a> {
             }
         }
         if h.stretched
-            && let (Some(g_hit), Some(hit)) = (get("g_hit"), get("hit"))
+            && let (Some(g_hit), Some(hit)) = (get(Channel::GHit), get(Channel::Hit))
         {
             let traced = hit_mask(hit.samples());
             let normal = count(&[v.samples(), g.samples()], axes.clone(), Some(&traced)).map_err(at("histogram"))?;
@@ -435,7 +446,7 @@ impl<'a> WholeRun<'a> {
         provenance: Provenance,
     ) -> Result<Vec<GaussianPrimitive>, RunError> {
         let pdir = self.dir.join("pack");
-        let value = self.chans.get("v").ok_or_else(|| fail("pack")("no value volume".into()))?;
+        let value = self.chans.get(&Channel::Value).ok_or_else(|| fail("pack")("no value volume".into()))?;
         let tetra = &self.p.tetra;
         let (mesh, grid, coarsened) =
             mdtf_tetra::tetrahedralise_within(value, tetra.tets, tetra.max_tetrahedra, "v").map_err(at("pack"))?;
@@ -446,8 +457,10 @@ impl<'a> WholeRun<'a> {
         let report = mdtf_tetra::MeshReport::default();
         mdtf_tetra::write_pack(&pdir, &mesh, &report, &out, Some(&grid), provenance).map_err(at("pack"))?;
         drop(mesh);
-        let value_and_g: Vec<(String, Volume)> =
-            ["v", "g"].into_iter().filter_map(|c| self.chans.remove(c).map(|v| (c.to_string(), v))).collect();
+        let value_and_g: Vec<(String, Volume)> = [Channel::Value, Channel::G]
+            .into_iter()
+            .filter_map(|c| self.chans.remove(&c).map(|v| (c.name(&[]), v)))
+            .collect();
         let tf_gaussians = tf.filter(|t| !t.gaussians().is_empty());
         let g = crate::gaussians::gaussians(tf_gaussians, None, &value_and_g, &["v".into()], "g", (hvol, &self.derive))
             .map_err(fail("pack"))?;
@@ -467,10 +480,11 @@ impl<'a> WholeRun<'a> {
     ) -> Result<(Vec<Lut>, Option<Vec<GaussianPrimitive>>), RunError> {
         let profile = self.p.pack.profile;
         let pdir = self.dir.join("pack");
+        let fields = &self.plan.fields;
         let mut pack_chans: Vec<(String, Volume)> = profile
-            .channels(&self.plan.fields)
+            .channels(fields)
             .into_iter()
-            .filter_map(|c| self.chans.remove(&c).map(|v| (c, v)))
+            .filter_map(|name| Channel::parse(&name, fields).and_then(|c| self.chans.remove(&c)).map(|v| (name, v)))
             .collect();
         let ranges = crate::pack_inputs::ranges(&pack_chans, &BTreeMap::new(), traced.d_max).map_err(at("pack"))?;
         let alpha = self.p.pack.alpha;
@@ -488,7 +502,7 @@ impl<'a> WholeRun<'a> {
             if normals_pending && ["nx", "ny", "nz"].iter().any(|c| uses(layout, c)) {
                 // the value volume is in the pack's channels, the others, or still in derive's input
                 let taken = pack_chans.iter().position(|(c, _)| c == "v").map(|k| pack_chans.remove(k).1);
-                let value = match taken.or_else(|| self.chans.remove("v")) {
+                let value = match taken.or_else(|| self.chans.remove(&Channel::Value)) {
                     Some(v) => MultiField::from(v),
                     None => MultiField { geometry: self.geo.clone(), fields: std::mem::take(&mut self.value.fields) },
                 };
