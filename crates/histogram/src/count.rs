@@ -186,6 +186,20 @@ impl SparseCounts {
         self.touched[idx / MERGE_BLOCK] = true;
     }
 
+    /// Adds another table's non-zero counts (bin, count), made room for
+    /// at once when they fit the u32 counts together.
+    pub fn add_counts(&mut self, counts: &[(u32, u64)]) {
+        let total = counts.iter().try_fold(0u64, |t, &(_, n)| t.checked_add(n).filter(|&t| t <= u64::from(u32::MAX)));
+        match total {
+            Some(total) => {
+                self.make_room(total);
+                // each count is at most the total, which fits u32
+                counts.iter().for_each(|&(bin, n)| self.add(bin as usize, n as u32));
+            }
+            None => counts.iter().for_each(|&(bin, n)| self.add_count(bin as usize, n)),
+        }
+    }
+
     /// Adds `n` to bin `idx` (another table's count).
     pub fn add_count(&mut self, idx: usize, n: u64) {
         match u32::try_from(n) {
@@ -377,6 +391,11 @@ mod tests {
         t.merge(&other);
         let want = u64::from(u32::MAX) - 1 + 10 + 7;
         assert_eq!(t.nonzero(), vec![(1500, want), (2999, 1)]);
+        // another table's counts, small and large, added as a part absorbed elsewhere is
+        let mut absorbed = SparseCounts::new(3000);
+        absorbed.add_counts(&[(3, 5), (1500, 6)]);
+        absorbed.add_counts(&[(1500, 5_000_000_000), (3, 1)]);
+        assert_eq!(absorbed.nonzero(), vec![(3, 6), (1500, 5_000_000_006)]);
         let totals = t.into_totals();
         assert_eq!((totals[1500], totals[2999], totals.iter().sum::<u64>()), (want, 1, want + 1));
     }

@@ -275,9 +275,7 @@ impl HvolAccumulator {
                 return Err(HistogramError::Geometry(format!("(v, g) bin {i} of {vg_bins}")));
             }
         }
-        for (bin, n) in stored.counts {
-            self.counts.add_count(bin as usize, n);
-        }
+        self.counts.add_counts(&stored.counts);
         for (p, sums) in stored.parts {
             let s = self.sums.of(p, &stored.axes);
             for (i, c, g, h) in sums {

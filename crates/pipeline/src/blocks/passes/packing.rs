@@ -24,7 +24,8 @@ impl SlabPasses<'_> {
         let profile = self.p.pack.profile;
         let mut ranges = BTreeMap::new();
         for name in &profile.channels(&[]) {
-            let c = channels_named(std::slice::from_ref(name)).map_err(at("pack"))?[0];
+            let unknown = || fail("pack")(format!("the {profile} pack reads an unknown channel '{name}'"));
+            let c = Channel::of_store(name).ok_or_else(unknown)?;
             let whole = || self.stats.0.get(&c).cloned().unwrap_or_else(|| ChannelStats::new((0.0, 0.0), 0));
             let r = match crate::pack_inputs::range_of(name, whole, traced.d_max).map_err(at("pack"))? {
                 Some(r) => Some(r),
