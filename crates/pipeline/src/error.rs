@@ -40,6 +40,9 @@ pub enum StageError {
     /// A slab's channels could not be read or derived (a run by slabs).
     #[error("{0}")]
     Channels(#[from] crate::blocks::ChannelError),
+    /// The memory budget cannot hold the smallest piece of a run by slabs.
+    #[error("{0}")]
+    Budget(#[from] crate::blocks::BudgetError),
     /// A report could not be serialised.
     #[error("{0}")]
     Json(#[from] serde_json::Error),

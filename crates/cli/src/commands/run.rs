@@ -58,7 +58,7 @@ fn print_plan(args: &RunArgs, pipeline: &Pipeline, opts: &RunOptions, progress: 
         if let Some(size) = slab_size(args, pipeline, opts, progress)
             && plan.fields.is_empty()
         {
-            println!("{}", mdtf_pipeline::blocks::sizing(pipeline, &geo, size).map_err(anyhow::Error::msg)?);
+            println!("{}", mdtf_pipeline::blocks::sizing(pipeline, &geo, size)?);
         }
         return Ok(());
     };
@@ -67,7 +67,7 @@ fn print_plan(args: &RunArgs, pipeline: &Pipeline, opts: &RunOptions, progress: 
     crate::input::print_plan(&args.pipeline.display().to_string(), "a grid of --dims", &geo, &plan);
     let usable = mdtf_pipeline::blocks::usable_memory(mdtf_volume::available_memory());
     let size = given_slab_size(args).unwrap_or(SlabSize::Budget(usable));
-    let sizing = mdtf_pipeline::blocks::sizing(pipeline, &geo, size).map_err(anyhow::Error::msg)?;
+    let sizing = mdtf_pipeline::blocks::sizing(pipeline, &geo, size)?;
     println!("{sizing}");
     progress.note("timing the pipeline by slabs on two small phantoms for the time per voxel ...");
     let timed = crate::commands::run_timing::time_per_voxel(pipeline, opts)?;

@@ -91,6 +91,43 @@ fn derived_components(plan: &Plan) -> u64 {
     plan.derive.iter().map(|i| i.components().len() as u64).sum()
 }
 
+/// Why a memory budget cannot hold the smallest piece of a run.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum BudgetError {
+    /// A slab of one plane with its halo needs more than the budget.
+    #[error(
+        "a memory budget of {} is too small for planes of {} x {}: a slab of one plane with its halo needs {}",
+        human(.budget), .plane[0], .plane[1], human(.needs)
+    )]
+    Slab {
+        /// The budget, bytes.
+        budget: u64,
+        /// The planes' size (x, y voxels).
+        plane: [usize; 2],
+        /// What one plane with its halo needs, bytes.
+        needs: u64,
+    },
+    /// The tracing's block of one plane and one row with its halo needs more than the budget.
+    #[error(
+        "a memory budget of {} is too small for the tracing of planes of {} x {}: a block of one plane and one \
+         row with its halo needs {}",
+        human(.budget), .plane[0], .plane[1], human(.needs)
+    )]
+    Trace {
+        /// The budget, bytes.
+        budget: u64,
+        /// The planes' size (x, y voxels).
+        plane: [usize; 2],
+        /// What the smallest block needs, bytes.
+        needs: u64,
+    },
+}
+
+/// Bytes as a person reads them ("1.5 GiB").
+fn human(bytes: &u64) -> String {
+    human_bytes(u128::from(*bytes))
+}
+
 /// The slab height of a run within `budget`, with the histogram volume's
 /// counts when `hvol`. With `trace_in_strips` the tracing's cost is left to
 /// [`fit_trace`].
@@ -100,14 +137,14 @@ pub fn fit_slabs(
     plan: &Plan,
     hvol: bool,
     trace_in_strips: bool,
-) -> Result<usize, String> {
+) -> Result<usize, BudgetError> {
     slab_height_with(budget, geometry, plan, hvol, !trace_in_strips)
 }
 
 /// The tallest slab (planes, at most the volume's) whose passes fit in
 /// `budget` bytes with the plan's halos and the histogram volume's counts
 /// when `hvol`, the tracing's on whole planes, or why none does.
-pub fn slab_height(budget: u64, geometry: &Geometry, plan: &Plan, hvol: bool) -> Result<usize, String> {
+pub fn slab_height(budget: u64, geometry: &Geometry, plan: &Plan, hvol: bool) -> Result<usize, BudgetError> {
     slab_height_with(budget, geometry, plan, hvol, true)
 }
 
@@ -118,19 +155,13 @@ fn slab_height_with(
     plan: &Plan,
     hvol: bool,
     trace_whole_planes: bool,
-) -> Result<usize, String> {
+) -> Result<usize, BudgetError> {
     let plane_bytes = (geometry.dims[0] * geometry.dims[1] * 4) as u64;
     let fixed = fixed_bytes(hvol, geometry.voxel_count() as u64);
     let cost = |h: u64| fixed + pass_planes(h, plan, trace_whole_planes) * plane_bytes;
     let nz = geometry.dims[2] as u64;
     if cost(1) > budget {
-        return Err(format!(
-            "a memory budget of {} is too small for planes of {} x {}: a slab of one plane with its halo needs {}",
-            human_bytes(budget as u128),
-            geometry.dims[0],
-            geometry.dims[1],
-            human_bytes(cost(1) as u128)
-        ));
+        return Err(BudgetError::Slab { budget, plane: [geometry.dims[0], geometry.dims[1]], needs: cost(1) });
     }
     // cost grows with h: the tallest that fits, by bisection
     let (mut lo, mut hi) = (1u64, nz.max(1));
@@ -176,7 +207,7 @@ pub fn fit_trace(
     planes: usize,
     threads: usize,
     strips_allowed: bool,
-) -> Result<TraceBlocks, String> {
+) -> Result<TraceBlocks, BudgetError> {
     let [_, ny, nz] = geometry.dims;
     let fits = |h: usize, r: usize| BASE_BYTES + trace_bytes(h, r, geometry, plan) <= budget;
     if !plan.trace || !strips_allowed || fits(planes, ny) {
@@ -202,15 +233,10 @@ pub fn fit_trace(
             lowest = Some(TraceBlocks { planes: h, rows: r });
         }
     }
-    lowest.ok_or_else(|| {
-        format!(
-            "a memory budget of {} is too small for the tracing of planes of {} x {}: a block of one plane and one \
-             row with its halo needs {}",
-            human_bytes(budget as u128),
-            geometry.dims[0],
-            ny,
-            human_bytes((BASE_BYTES + trace_bytes(1, 1, geometry, plan)) as u128)
-        )
+    lowest.ok_or_else(|| BudgetError::Trace {
+        budget,
+        plane: [geometry.dims[0], ny],
+        needs: BASE_BYTES + trace_bytes(1, 1, geometry, plan),
     })
 }
 
@@ -280,6 +306,8 @@ mod tests {
         assert!(pass_planes(h, &plan, true) >= 6 * (h + 2 * t + 2 * k) + 5 * h);
         assert_eq!(slabs(10, 4), vec![0..4, 4..8, 8..10]);
         let e = slab_height(1 << 20, &geo, &plan, false).unwrap_err();
+        assert!(matches!(e, BudgetError::Slab { budget: 1048576, plane: [256, 256], needs } if needs > 1 << 20), "{e}");
+        let e = e.to_string();
         assert!(e.contains("too small") && e.contains("1.0 MiB"), "{e}");
         assert_eq!(slab_height(1 << 40, &geo, &plan, true).unwrap(), 256, "a large budget: one slab");
         // the histogram volume's counts come off the slabs' share, once whatever its lanes
@@ -333,6 +361,8 @@ mod tests {
         assert_eq!(fit_trace(64 * gib, &geo, &plan, 9, 2, true).unwrap(), TraceBlocks { planes: 9, rows: 1024 });
         assert_eq!(fit_trace(gib, &geo, &plan, h, 2, false).unwrap(), TraceBlocks { planes: h, rows: 1024 });
         let e = fit_trace(50 << 20, &geo, &plan, 1, 2, true).unwrap_err();
+        assert!(matches!(e, BudgetError::Trace { needs, .. } if needs > 50 << 20), "{e}");
+        let e = e.to_string();
         assert!(e.contains("too small") && e.contains("tracing"), "{e}");
     }
 

@@ -100,7 +100,7 @@ pub fn derive_item_files(
     let plan = Plan::for_channels(&names, &["v".to_string()], &geo, chain).map_err(at("plan"))?;
     let nz = geo.dims[2];
     let height = match size {
-        SlabSize::Budget(b) => slab_height(b, &geo, &plan, false).map_err(fail("plan"))?,
+        SlabSize::Budget(b) => slab_height(b, &geo, &plan, false).map_err(at("plan"))?,
         SlabSize::Planes(h) | SlabSize::Strips { planes: h, .. } => h.clamp(1, nz.max(1)),
     };
     let cut = slabs(nz, height);

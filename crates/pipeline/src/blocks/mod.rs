@@ -72,14 +72,15 @@ mod trace_files;
 
 use crate::inputs::InputMeta;
 pub use budget::{
-    TraceBlocks, automatic_budget, automatic_file_budget, fit_slabs, fit_trace, slab_height, slabs, usable_memory,
+    BudgetError, TraceBlocks, automatic_budget, automatic_file_budget, fit_slabs, fit_trace, slab_height, slabs,
+    usable_memory,
 };
 pub use item_files::{ItemFiles, automatic_item_budget, derive_item_files, items_unsupported};
 pub use partials::{SlabPartial, TracePartial};
 pub use pool::SamplePool;
 pub use remote::{Prefilter, SlabJob, SlabPass, SlabTasks};
 pub use resume::WrittenPiece;
-pub use sizing::{PassSize, Sizing, sizing};
+pub use sizing::{PassSize, Sizing, SizingError, sizing};
 pub use slab_channels::{ChannelError, SlabChannels, by_name, channels_named};
 pub use slab_histograms::{HistogramAxes, HistogramCounts};
 pub use store::{ChannelStore, StoreWriter};
@@ -228,7 +229,7 @@ pub(crate) fn cut(
     geometry: &Geometry,
     plan: &crate::plan::Plan,
     hvol: bool,
-) -> Result<(usize, TraceBlocks), String> {
+) -> Result<(usize, TraceBlocks), BudgetError> {
     let [_, ny, nz] = geometry.dims;
     Ok(match size {
         SlabSize::Budget(b) => {

@@ -52,12 +52,26 @@ pub struct Sizing {
     pub kept_bytes: u64,
 }
 
+/// Why a run cannot be sized by slabs.
+#[derive(Debug, thiserror::Error)]
+pub enum SizingError {
+    /// The run does not go slab by slab (why not).
+    #[error("{0}")]
+    NotBySlabs(String),
+    /// The plan cannot be made.
+    #[error("{0}")]
+    Plan(#[from] crate::plan::PlanError),
+    /// The budget cannot hold a slab or the tracing's smallest block.
+    #[error("{0}")]
+    Budget(#[from] super::BudgetError),
+}
+
 /// `p`'s run on `geometry` (one field) with slabs of `size`, sized.
-pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizing, String> {
+pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizing, SizingError> {
     if let Some(why) = super::unsupported(p, 1) {
-        return Err(why);
+        return Err(SizingError::NotBySlabs(why));
     }
-    let plan = Plan::resolve(p, &[], geometry).map_err(|e| e.to_string())?;
+    let plan = Plan::resolve(p, &[], geometry)?;
     let hvol = super::slab_histograms::counts_hvol(p, p.pack.tf.is_some());
     let (height, trace) = cut(size, geometry, &plan, hvol)?;
     let [nx, ny, nz] = geometry.dims;

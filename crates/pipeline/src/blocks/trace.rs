@@ -4,9 +4,9 @@
 //! (or derived), and only the slab's own planes come out.
 
 use super::slab_channels::BlockRange;
-use super::{ChannelStore, SlabChannels, grown};
+use super::{ChannelError, ChannelStore, SlabChannels, grown};
 use crate::channel::Channel;
-use crate::run::{RunError, at, fail};
+use crate::run::{RunError, at};
 use mdtf_bilateral::BilateralParams;
 use mdtf_boundary::{BlockTrace, BoundaryInput, BoundaryParams, VolumeStats};
 use mdtf_volume::{MultiField, Volume};
@@ -69,7 +69,7 @@ pub(super) fn trace_slab(
     // the derivatives over the block as derived (its planes and rows beyond the halo are never reached)
     let read_rows = grown(rows, setup.halo_rows, 1, chans.ny());
     let (place, out) = chans.derive_block(read.clone(), read_rows).map_err(at("boundary"))?;
-    let block = TraceBlock::of(place, out).map_err(fail("boundary"))?;
+    let block = TraceBlock::of(place, out).map_err(at("boundary"))?;
     let block = match setup.prefiltered {
         false => block,
         true => block.with_stored(&mut chans.store, setup.g, setup.f2).map_err(at("boundary"))?,
@@ -122,20 +122,20 @@ struct TraceBlock {
 
 impl TraceBlock {
     /// The block of a derive output over `at` holding g, f'' and the normal.
-    fn of(at: BlockRange, out: mdtf_derive::DeriveOutput) -> Result<TraceBlock, String> {
+    fn of(at: BlockRange, out: mdtf_derive::DeriveOutput) -> Result<TraceBlock, ChannelError> {
         use mdtf_derive::Item;
         let order: Vec<Item> = out.items.iter().map(|(i, _)| *i).collect();
         let (mut g, mut f2, mut normal) = (None, None, None);
         for (item, mf) in out.items {
             match item {
-                Item::G => g = Some(mf.into_scalar().map_err(|e| e.to_string())?),
-                Item::F2 => f2 = Some(mf.into_scalar().map_err(|e| e.to_string())?),
+                Item::G => g = Some(mf.into_scalar()?),
+                Item::F2 => f2 = Some(mf.into_scalar()?),
                 Item::Normal => normal = Some(mf),
                 _ => {}
             }
         }
         let (Some(g), Some(f2), Some(normal)) = (g, f2, normal) else {
-            return Err("the tracing needs g, f2 and the normal from one derive pass".into());
+            return Err(ChannelError::Missing("the tracing needs g, f2 and the normal from one derive pass"));
         };
         Ok(TraceBlock { at, g, f2, normal, order: Some(order) })
     }

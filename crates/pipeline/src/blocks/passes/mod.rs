@@ -18,7 +18,7 @@ use crate::file::Pipeline;
 use crate::plan::Plan;
 use crate::progress::Progress;
 use crate::report::Stages;
-use crate::run::{RunError, RunOptions, at, fail};
+use crate::run::{RunError, RunOptions, at};
 use mdtf_derive::{DeriveParams, Item};
 use mdtf_pack::{Profile, TfFile};
 use mdtf_volume::{Geometry, KeyBuckets, overlapped};
@@ -172,7 +172,7 @@ impl<'a> SlabPasses<'a> {
         let tf = crate::inputs::read_tf(p, &base)?;
         let hvol_asked = p.histogram.as_ref().is_some_and(|h| h.hvol);
         let hvol_needed = packs && super::slab_histograms::counts_hvol(p, tf.is_some());
-        let (height, trace_blocks) = super::cut(size, &geo, &plan, hvol_needed).map_err(fail("plan"))?;
+        let (height, trace_blocks) = super::cut(size, &geo, &plan, hvol_needed).map_err(at("plan"))?;
         let slabs = slabs(nz, height);
         progress.stage(&format!("input: {} slabs of {height} planes", slabs.len()))?;
         let (mut store, token) = open_store(dir, resumed, &geo, opts.tasks.is_some())?;
