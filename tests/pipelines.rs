@@ -4,7 +4,7 @@
 //! accuracy plus one quantisation step), not just exist.
 
 use mdtf_datagen::{MultiFieldPhantom, RadialPhantom, erf_sphere, min_extent, voxel_position};
-use mdtf_e2e::{mdtf_ok, nrrd_f32, pipelines_dir, shipped_pipeline};
+use mdtf_e2e::{mdtf_err, mdtf_ok, nrrd_f32, pipelines_dir, shipped_pipeline};
 use mdtf_pipeline::file::{PhantomKind, Pipeline, parse};
 use mdtf_volume::Geometry;
 use serde_json::Value;
@@ -433,4 +433,8 @@ fn a_run_at_4096_cubed_is_sized_on_paper_before_it_runs() {
     let per_voxel = raw as f64 / (24.0 * 24.0 * 24.0);
     assert_eq!(bytes_on(&plan, "pack textures", 2), per_voxel * voxels, "{plan}");
     assert!(plan.contains("us of one core per voxel") && plan.contains("core-hours"), "{plan}");
+    // a budget that cannot hold one plane is said once, with what one plane needs
+    let small = mdtf_err(&["run", p.to_str().unwrap(), "--plan", "--dims", "4096", "--memory-budget", "100MiB"]);
+    assert_eq!(small.matches("too small for planes of 4096 x 4096").count(), 1, "{small}");
+    assert!(small.contains("a slab of one plane with its halo needs"), "{small}");
 }

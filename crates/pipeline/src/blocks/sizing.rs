@@ -59,10 +59,10 @@ pub enum SizingError {
     #[error("{0}")]
     NotBySlabs(String),
     /// The plan cannot be made.
-    #[error("{0}")]
+    #[error(transparent)]
     Plan(#[from] crate::plan::PlanError),
     /// The budget cannot hold a slab or the tracing's smallest block.
-    #[error("{0}")]
+    #[error(transparent)]
     Budget(#[from] super::BudgetError),
 }
 
