@@ -105,6 +105,8 @@ def test_histogram_equals_the_command(mdtf_bin: Path, sphere: Path, tmp_path: Pa
     got = mdtf.histogram({"v": vol.data, "g": g}, bins={"v": 64, "g": 32})
     counts, _ = nrrd.read(str(tmp_path / "h" / "hist_v_g.nrrd"), index_order="C")
     np.testing.assert_array_equal(got.counts, counts)
+    # counts are 64-bit in memory; the file stays uint32 while every count fits
+    assert got.counts.dtype == np.uint64 and counts.dtype == np.uint32
     meta = json.loads((tmp_path / "h" / "hist_v_g.json").read_text())
     for (name, lo, hi, bins), axis in zip(got.axes, meta["axes"]):
         assert (name, lo, hi, bins) == (axis["name"], axis["min"], axis["max"], axis["bins"])

@@ -299,7 +299,8 @@ def boundary(
 class Histogram:
     """Integer counts over 1 to 3 axes.
 
-    ``counts`` has shape (bins of the last axis, ..., bins of the first), as
+    ``counts`` (uint64: a bin of a large volume holds more than 2^32 voxels)
+    has shape (bins of the last axis, ..., bins of the first), as
     mdtf's NRRD counts files store them (first axis fastest); ``axes`` lists
     (name, min, max, bins); bin b of an axis spans
     [min + b (max - min) / bins, min + (b + 1) (max - min) / bins).
