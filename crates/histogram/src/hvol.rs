@@ -217,8 +217,17 @@ impl HvolAccumulator {
 #[derive(Serialize, Deserialize)]
 struct StoredAccumulator {
     axes: HvolAxes,
+    #[serde(with = "crate::packed")]
     counts: Vec<(u32, u64)>,
-    parts: Vec<(usize, Vec<StoredSums>)>,
+    parts: Vec<StoredPart>,
+}
+
+/// One fixed part's non-zero (v, g) sums.
+#[derive(Serialize, Deserialize)]
+struct StoredPart {
+    part: usize,
+    #[serde(with = "crate::packed")]
+    sums: Vec<StoredSums>,
 }
 
 /// One non-zero (v, g) bin of a part's sums: its index, voxel count, g sum and f'' sum.
@@ -240,7 +249,7 @@ impl From<&HvolAccumulator> for StoredAccumulator {
             .iter()
             .map(|(p, s)| {
                 let kept = (0..s.c_vg.len()).filter(|&i| s.c_vg[i] > 0);
-                (*p, kept.map(|i| (i as u32, s.c_vg[i], s.g_vg[i], s.h_vg[i])).collect())
+                StoredPart { part: *p, sums: kept.map(|i| (i as u32, s.c_vg[i], s.g_vg[i], s.h_vg[i])).collect() }
             })
             .collect();
         StoredAccumulator { counts: acc.counts.nonzero(), parts, axes: acc.axes.clone() }
@@ -267,7 +276,7 @@ impl HvolAccumulator {
         if let Some((bin, _)) = stored.counts.iter().find(|(b, _)| *b as usize >= bins) {
             return Err(HistogramError::Geometry(format!("bin {bin} of a histogram volume of {bins} bins")));
         }
-        for (p, sums) in &stored.parts {
+        for StoredPart { part: p, sums } in &stored.parts {
             if *p >= HVOL_PARTS || self.sums.0.iter().any(|(q, _)| q == p) {
                 return Err(HistogramError::Geometry(format!("part {p} twice, or not one of {HVOL_PARTS}")));
             }
@@ -276,7 +285,7 @@ impl HvolAccumulator {
             }
         }
         self.counts.add_counts(&stored.counts);
-        for (p, sums) in stored.parts {
+        for StoredPart { part: p, sums } in stored.parts {
             let s = self.sums.of(p, &stored.axes);
             for (i, c, g, h) in sums {
                 let i = i as usize;

@@ -16,6 +16,7 @@ mod files;
 mod hvol;
 mod image;
 mod materials;
+mod packed;
 mod percentile;
 mod rgb;
 

@@ -189,13 +189,53 @@ pub(super) fn written_ranges(job: &SlabJob, z: &Range<usize>) -> Vec<(PathBuf, R
     }
 }
 
-/// The pieces the task of `job` on planes `z` wrote, each hashed as the files hold it now.
-pub(super) fn hash_written(job: &SlabJob, z: &Range<usize>) -> Result<Vec<WrittenPiece>, RunError> {
+/// The hashes of what a task wrote, taken from its bytes as it wrote them:
+/// per file, one range written in order from its start (a file written
+/// out of order, as a tracing strip by strip writes, is read back instead).
+#[derive(Default)]
+pub(super) struct WriteHashes(Vec<(PathBuf, Range<u64>, XxHash3_128)>);
+
+impl WriteHashes {
+    /// Takes in `bytes` written at offset `at` of `file`.
+    pub(super) fn add(&mut self, file: &Path, at: u64, bytes: &[u8]) {
+        let end = at + bytes.len() as u64;
+        match self.0.iter_mut().find(|(f, ..)| f == file) {
+            Some((_, range, h)) if range.end == at => {
+                h.write(bytes);
+                range.end = end;
+            }
+            // out of order: no range matches it any more
+            Some((_, range, _)) => range.end = u64::MAX,
+            None => {
+                let mut h = XxHash3_128::new();
+                h.write(bytes);
+                self.0.push((file.to_path_buf(), at..end, h));
+            }
+        }
+    }
+
+    /// XXH3-128 (hex) of exactly `range` of `file`, if it was written so.
+    fn of(&self, file: &Path, range: &Range<u64>) -> Option<String> {
+        let (_, _, h) = self.0.iter().find(|(f, r, _)| f == file && r == range)?;
+        Some(format!("{:032x}", h.finish_128()))
+    }
+}
+
+/// The pieces the task of `job` on planes `z` wrote, each hashed: from
+/// `hashed` where it hashed the piece as it wrote it, else as the file holds it now.
+pub(super) fn hash_written(
+    job: &SlabJob,
+    z: &Range<usize>,
+    hashed: &WriteHashes,
+) -> Result<Vec<WrittenPiece>, RunError> {
     let stage = job.pass.stage();
     written_ranges(job, z)
         .into_iter()
         .map(|(file, bytes)| {
-            let xxh3 = hash_range(&file, &bytes).map_err(|e| fail(stage)(format!("{}: {e}", file.display())))?;
+            let xxh3 = match hashed.of(&file, &bytes) {
+                Some(h) => h,
+                None => hash_range(&file, &bytes).map_err(|e| fail(stage)(format!("{}: {e}", file.display())))?,
+            };
             Ok(WrittenPiece { file, bytes, xxh3 })
         })
         .collect()
@@ -246,6 +286,22 @@ mod tests {
         assert_eq!(hash_range(&file, &(3..bytes.len() as u64)).unwrap(), whole);
         let end = bytes.len() as u64;
         assert!(hash_range(&file, &(end - 4..end + 1)).is_err(), "a file too short is not a written range");
+    }
+
+    #[test]
+    fn a_range_hashed_as_written_equals_the_files_and_one_written_out_of_order_is_not_taken() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("f");
+        let bytes: Vec<u8> = (0..50_000).map(|i| (i * 13 % 251) as u8).collect();
+        std::fs::write(&file, &bytes).unwrap();
+        let mut hashed = WriteHashes::default();
+        hashed.add(&file, 100, &bytes[100..7_000]);
+        hashed.add(&file, 7_000, &bytes[7_000..40_000]);
+        let range = 100..40_000;
+        assert_eq!(hashed.of(&file, &range), Some(hash_range(&file, &range).unwrap()));
+        assert_eq!(hashed.of(&file, &(100..7_000)), None, "only the whole range written");
+        hashed.add(&file, 45_000, &bytes[45_000..]);
+        assert_eq!(hashed.of(&file, &range), None, "a gap: the file is read back");
     }
 
     #[test]

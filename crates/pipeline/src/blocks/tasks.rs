@@ -7,7 +7,7 @@
 use super::budget::slabs;
 use super::partials::{SlabPartial, TraceSums};
 use super::remote::{Prefilter, SlabJob, SlabPass};
-use super::resume;
+use super::resume::{self, WriteHashes};
 use super::slab_histograms::{HistogramAxes, HistogramCounts};
 use super::trace::{TraceSetup, prefilter_slab, trace_slab};
 use super::{ChannelStore, SlabChannels};
@@ -17,7 +17,9 @@ use crate::pre_detect::VgCounts;
 use crate::run::{RunError, at, fail};
 use mdtf_histogram::Axis;
 use mdtf_pack::TextureTarget;
+use mdtf_volume::Volume;
 use mdtf_volume::{NanPolicy, PlaneReader, ReadOptions};
+use std::cell::RefCell;
 use std::ops::Range;
 use std::path::Path;
 use std::sync::{Mutex, PoisonError};
@@ -52,7 +54,7 @@ pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<TaskOutcome, RunError>
         .open(&attempts)
         .and_then(|mut f| std::io::Write::write_all(&mut f, b"."));
     counted.map_err(|e| fail(stage)(format!("{}: {e}", attempts.display())))?;
-    let task = Task { job, z, voxels: job.geometry.voxel_count() };
+    let task = Task { job, z, voxels: job.geometry.voxel_count(), hashed: RefCell::default() };
     let partial = match &job.pass {
         SlabPass::Input { input, level, nan, padding } => task.input(input, *level, *nan, *padding)?,
         SlabPass::Derive { summarise, store } => task.derive(summarise, store)?,
@@ -63,8 +65,8 @@ pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<TaskOutcome, RunError>
             task.pack(textures, histograms.as_ref(), read, *height)?
         }
     };
-    let partial =
-        SlabPartial { job: resume::job_digest(job)?, written: resume::hash_written(job, &task.z)?, ..partial };
+    let written = resume::hash_written(job, &task.z, &task.hashed.borrow())?;
+    let partial = SlabPartial { job: resume::job_digest(job)?, written, ..partial };
     // the last check: a task the run no longer waits for publishes nothing
     resume::check_token(job)?;
     partial.write(&job.store, job.pass.name(), task.z.start)?;
@@ -90,12 +92,30 @@ struct Task<'j> {
     z: Range<usize>,
     /// Voxels of the whole volume.
     voxels: usize,
+    /// What it wrote, hashed as it wrote it (for its partial).
+    hashed: RefCell<WriteHashes>,
 }
 
 impl Task<'_> {
     /// The run's channel store, with the channels `reads` adopted.
     fn open(&self, reads: &[Channel]) -> Result<ChannelStore, RunError> {
         ChannelStore::open(self.job.store.clone(), self.job.geometry.clone(), reads).map_err(at("input"))
+    }
+
+    /// Writes rows `rows` of the slab's planes of channel `c` (all rows: the
+    /// whole slab) into `out`, the bytes hashed as they go.
+    fn put(&self, out: &mut ChannelStore, c: Channel, rows: Range<usize>, v: &Volume) -> Result<(), RunError> {
+        let stage = self.job.pass.stage();
+        out.put_rows(c, self.z.start, rows.clone(), v).map_err(at(stage))?;
+        let [nx, ny, _] = self.job.geometry.dims;
+        let at_byte = ((self.z.start * ny + rows.start) * nx * 4) as u64;
+        let file = self.job.store.join(super::store::file_name(c));
+        // a strip of rows lies in pieces in the file: only a whole slab is one range
+        match rows == (0..ny) {
+            true => self.hashed.borrow_mut().add(&file, at_byte, bytemuck::cast_slice(v.samples())),
+            false => self.hashed.borrow_mut().add(&file, u64::MAX, &[]),
+        }
+        Ok(())
     }
 
     /// The channels the store holds, and the derivation of the others:
@@ -141,7 +161,7 @@ impl Task<'_> {
             return Err(fail("input")(format!("{}: {dims:?} voxels, the run planned {planned:?}", input.display())));
         }
         let v = reader.read(self.z.clone()).map_err(at("input"))?;
-        self.open(&[])?.put_volume(Channel::Value, self.z.start, &v).map_err(at("input"))?;
+        self.put(&mut self.open(&[])?, Channel::Value, 0..dims[1], &v)?;
         let mut partial = SlabPartial::default();
         partial.summarise(Channel::Value, v.samples(), self.voxels);
         if let Some(range) = padding {
@@ -160,7 +180,7 @@ impl Task<'_> {
         let mut partial = SlabPartial::default();
         for (c, v) in chans.volumes(self.z.clone(), &channels).map_err(at("derive"))? {
             if store.contains(&c) {
-                out.put_volume(c, self.z.start, &v).map_err(at("derive"))?;
+                self.put(&mut out, c, 0..self.job.geometry.dims[1], &v)?;
             }
             if !summarise.contains(&c) {
                 continue;
@@ -184,7 +204,7 @@ impl Task<'_> {
         let mut partial = SlabPartial::default();
         for f in filters {
             let own = prefilter_slab(&mut chans, f.input, &f.params, &self.z, halo)?;
-            out.put_volume(f.output, self.z.start, &own).map_err(at("prefilter"))?;
+            self.put(&mut out, f.output, 0..self.job.geometry.dims[1], &own)?;
             partial.summarise(f.output, own.samples(), self.voxels);
             // the first pass of its median's select, when it is the g traced
             if f.output == Channel::GPrefiltered {
@@ -253,7 +273,7 @@ impl Task<'_> {
             let b = &slab.trace;
             for &c in stores {
                 if let Some(v) = b.traced(c) {
-                    out.put_rows(c, self.z.start, strip.clone(), v).map_err(at("boundary"))?;
+                    self.put(&mut out, c, strip.clone(), v)?;
                 }
             }
             partial.summarise(Channel::GHit, b.g_hit.samples(), self.voxels);
@@ -287,6 +307,8 @@ impl Task<'_> {
             }
             for (t, bytes) in textures.iter().zip(&mut bytes) {
                 t.write_planes(planes.clone(), &slab, bytes).map_err(at("pack"))?;
+                let at_byte = (t.plane_bytes() * planes.start) as u64;
+                self.hashed.borrow_mut().add(&t.file, at_byte, bytes);
             }
             chans.give_back(slab);
         }

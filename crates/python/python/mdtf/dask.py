@@ -346,6 +346,20 @@ class _PassProgress:
             print(("\r" if self.live else "") + line, file=sys.stderr, flush=True)
 
 
+def _all_done(futures: list[Any], within: float) -> bool:
+    """Whether every future has finished, waiting at most ``within``
+    seconds: it returns as soon as the last one finishes (the next pass
+    starts without a polling delay)."""
+    from distributed import TimeoutError as NotYet
+    from distributed import wait
+
+    try:
+        wait(futures, timeout=within)
+    except NotYet:
+        return False
+    return True
+
+
 def _executing(dask_worker: Any) -> int:
     """How many tasks a worker is running (for ``client.run``)."""
     return len(dask_worker.state.executing)
@@ -432,7 +446,7 @@ def run(
         threads = [task_threads] * len(slabs)
         futures = client.map(_slab_task, [job] * len(slabs), starts, ends, threads, pure=False, retries=retries)
         # Ctrl-C in the caller sets cancelled(): the tasks are dropped and the run ends as cancelled
-        while not all(f.done() for f in futures):
+        while not _all_done(futures, 0.25):
             if cancelled():
                 client.cancel(futures)
                 # a task already running cannot be stopped: the run removes its store only after
@@ -442,7 +456,6 @@ def run(
                     time.sleep(0.05)
                 return
             shown.update(sum(f.done() for f in futures))
-            time.sleep(0.05)
         shown.finished(client.gather(futures))
 
     return _run(pipeline, output, input, _overrides(settings, overrides), memory_budget, slab_planes, submit, resume)
