@@ -96,7 +96,7 @@ pub fn gaussians(
 /// The median of `values` over the samples whose gradient `g` exceeds twice
 /// the gradient's median (over all samples when fewer than 1 % do): the
 /// centre of the paper's default TGTF. None without a finite value.
-fn median_at_large_g(values: &[f32], g: &[f32]) -> Option<f32> {
+pub(crate) fn median_at_large_g(values: &[f32], g: &[f32]) -> Option<f32> {
     let g_cut = 2.0 * mdtf_volume::median(g).unwrap_or(0.0);
     let structured = g.iter().filter(|&&x| x > g_cut).count();
     if structured * 100 < g.len() {

@@ -218,6 +218,12 @@ fn on_pure_noise_gaussian_tf_takes_the_median_default_slab_by_slab_as_whole() {
     let p = parse("[histogram]\njoint = true\n[pack]\nprofile = \"gaussian-tf\"\n", &[]).unwrap();
     let sizes = [SlabSize::Planes(1), SlabSize::Planes(7), SlabSize::Planes(33)];
     assert_slab_runs_equal_the_whole("gaussian-tf", &p, Some(input.clone()), &sizes);
+    // as tasks, whose select passes after the pack's take the medians: g's (its second pass), then v's
+    // over the voxels above twice it (both passes)
+    let tasks = Arc::new(ThreadTasks::default());
+    assert_runs_equal_the_whole("gaussian-tf", &p, Some(input.clone()), &[SlabSize::Planes(7)], Some(tasks.clone()));
+    let passes: Vec<String> = tasks.ran.lock().unwrap().iter().map(|(p, _)| p.clone()).collect();
+    assert_eq!(passes, ["Derive", "Pack", "Select", "Select", "Select"].map(String::from));
     let out = dir.path().join("check");
     let opts = RunOptions {
         pipeline_path: pipelines_dir().join("gaussian-tf.toml"),
@@ -369,9 +375,14 @@ fn runs_whose_passes_go_to_tasks_give_the_same_files() {
         assert!(compared >= 15, "{name}: {compared} files compared");
         let ran = tasks.ran.lock().unwrap().clone();
         let passes: Vec<&str> = ran.iter().map(|(p, _)| p.as_str()).collect();
-        let traced = name == "distance-tf";
-        let want = if traced { vec!["Derive", "Prefilter", "Select", "Trace", "Pack"] } else { vec!["Derive", "Pack"] };
-        assert_eq!(passes, want);
+        let want = match name {
+            // the select: the second pass of the traced g's median, with the detection's (v, g) counts
+            "distance-tf" => vec!["Derive", "Prefilter", "Select", "Trace", "Pack"],
+            // the (v, 1/g) axis: the second pass of g's median, then both of the median above twice it
+            "peak-finding" => vec!["Derive", "Select", "Select", "Select", "Pack"],
+            _ => vec!["Derive", "Pack"],
+        };
+        assert_eq!(passes, want, "{name}");
         // one task per slab, the first twice; the pack's one per fixed part of the histogram volume when it counts it
         let slabs = 48usize.div_ceil(7) + 1;
         let parts = mdtf_histogram::HVOL_PARTS + 1;
@@ -478,9 +489,9 @@ fn a_task_whose_slab_is_done_does_nothing_and_one_whose_bytes_were_damaged_is_ru
     assert_runs_equal_the_whole("distance-tf", &p, None, &[size], Some(Arc::new(DamagingTasks)));
     let passes: Vec<(String, u64, usize)> =
         task_passes(&p, Arc::new(DamagingTasks), size).into_iter().map(|t| (t.pass, t.retries, t.reused)).collect();
-    // the select pass writes no planes: nothing to damage
+    // the select pass, and the derive pass of a run that keeps no derived channel, write no planes: nothing to damage
     let want: Vec<(String, u64, usize)> =
-        [("derive", 1), ("prefilter", 1), ("select", 0), ("boundary", 1), ("pack", 1)]
+        [("derive", 0), ("prefilter", 1), ("select", 0), ("boundary", 1), ("pack", 1)]
             .into_iter()
             .map(|(p, r)| (p.to_string(), r, 0))
             .collect();

@@ -76,6 +76,7 @@ pub use budget::{
     usable_memory,
 };
 pub use item_files::{ItemFiles, automatic_item_budget, derive_item_files, items_unsupported};
+pub use medians::{SelectCounts, SelectPass};
 pub use partials::{SlabPartial, TracePartial};
 pub use pool::SamplePool;
 pub use remote::{Prefilter, SlabJob, SlabPass, SlabTasks};

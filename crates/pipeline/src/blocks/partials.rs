@@ -9,6 +9,7 @@
 //! Binary (CBOR): every float bit is kept, infinities included, which JSON
 //! cannot hold.
 
+use super::medians::SelectCounts;
 use super::reductions::Stats;
 use super::resume::WrittenPiece;
 use super::slab_histograms::HistogramCounts;
@@ -30,8 +31,8 @@ pub struct SlabPartial {
     /// The first radix pass of the traced g's median over the slab (derive,
     /// when g is summarised; pre-filter, of the pre-filtered g).
     pub g_buckets: Option<KeyBuckets>,
-    /// The second pass (select): the slab's samples in one upper bucket.
-    pub g_lower: Option<KeyBuckets>,
+    /// A median's select pass over the slab (select).
+    pub selected: Option<SelectCounts>,
     /// The smallest positive 1/g of the slab (derive; infinite without one).
     pub smallest_inv_g: Option<f32>,
     /// Samples of the slab in the scanner padding's range (input).

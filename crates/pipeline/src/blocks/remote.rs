@@ -13,6 +13,7 @@
 //! report. The task bodies are in [`super::tasks`].
 
 use super::ChannelStore;
+use super::medians::SelectPass;
 use super::partials::SlabPartial;
 use super::slab_histograms::HistogramAxes;
 use crate::channel::Channel;
@@ -118,13 +119,13 @@ pub enum SlabPass {
         /// Planes the filter reads on each side of the slab.
         halo: usize,
     },
-    /// Counts what the tracing's whole-volume statistics need from the
-    /// slab: the second pass of the select for the median of the traced g
-    /// (its samples in one upper bucket of the first pass), and the (v, g)
-    /// counts of the detection before the tracing.
+    /// Counts what a whole-volume median needs from the slab (one pass of
+    /// its radix select: the tracing's noise floor, the (v, 1/g) axis,
+    /// gaussian-tf's default) and the (v, g) counts of the detection before
+    /// the tracing.
     Select {
-        /// The channel whose median is taken and the upper bucket counted (None: no median).
-        median: Option<(Channel, usize)>,
+        /// The select's pass (None: no median).
+        select: Option<SelectPass>,
         /// The (v, g) axes of the detection, when it runs.
         detect: Option<(Axis, Axis)>,
     },

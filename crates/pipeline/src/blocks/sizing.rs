@@ -85,7 +85,7 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
     if hvol {
         derived.extend([Channel::G, Channel::F2]);
     }
-    let stored_derived = stored_for_the_run(p, &plan, p.pack.tf.is_some(), &derived);
+    let stored_derived = stored_for_the_run(p, &derived);
     let mut passes = vec![
         PassSize { pass: "input", tasks: slabs, memory: memory(2 * h), read: h * plane, written: h * plane },
         PassSize {

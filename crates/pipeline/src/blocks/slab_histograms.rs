@@ -4,8 +4,8 @@
 //! whole fixed parts of the histogram volume's slices and hand back their
 //! counts ([`HistogramCounts`]), merged exactly.
 
+use super::SlabChannels;
 use super::reductions::Stats;
-use super::{SlabChannels, medians};
 use crate::channel::Channel;
 use crate::file::Pipeline;
 use crate::hist_files::Counted;
@@ -14,7 +14,7 @@ use mdtf_histogram::{
     Axis, AxisSpec, Histogram, HistogramError, HvolAccumulator, HvolAxes, HvolBySlabs, HvolParams, HvolPart, count,
     hit_mask,
 };
-use mdtf_volume::{KeyBuckets, Volume};
+use mdtf_volume::Volume;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 
@@ -153,9 +153,8 @@ pub(super) struct SlabHistograms {
 impl SlabHistograms {
     /// Empty histograms of `p` (with the histogram volume when `hvol`,
     /// counted on a lane per thread) over the axes of `stats`, for
-    /// the `slabs` of a volume of `n` voxels. Peak finding's (v, 1/g) axis
-    /// takes its own passes over `chans` (one fewer with `g_buckets`, the
-    /// first radix pass over g).
+    /// the `slabs` of a volume of `n` voxels; the (v, 1/g) histogram over
+    /// the axis `inverse_gradient`, when given (see [`Self::counts_inverse_gradient`]).
     pub(super) fn new(
         p: &Pipeline,
         chans: &mut SlabChannels,
@@ -163,7 +162,7 @@ impl SlabHistograms {
         slabs: &[Range<usize>],
         n: usize,
         hvol: bool,
-        g_buckets: Option<&KeyBuckets>,
+        inverse_gradient: Option<Axis>,
     ) -> Result<SlabHistograms, RunError> {
         let joint = p.histogram.as_ref().is_some_and(|h| h.joint);
         let stretched =
@@ -189,14 +188,14 @@ impl SlabHistograms {
             }
             None => None,
         };
-        let inv_g = match joint && chans.has(Channel::InvG) {
-            true => medians::inverse_gradient_axis(chans, slabs, g_buckets)
-                .map_err(at("histogram"))?
-                .map(|ia| vec![axes[0].clone(), ia]),
-            false => None,
-        };
+        let inv_g = inverse_gradient.map(|ia| vec![axes[0].clone(), ia]);
         let axes = HistogramAxes { joint, stretched, axes, stretched_axes, hvol: hvol_axes, inv_g };
         Ok(SlabHistograms { axes, hvol: by_slabs, hvol_tasks: None, counts: HistogramCounts::default(), voxels: n })
+    }
+
+    /// Whether the histograms of `p` count (v, 1/g) over the channels of `chans`.
+    pub(super) fn counts_inverse_gradient(p: &Pipeline, chans: &SlabChannels) -> bool {
+        p.histogram.as_ref().is_some_and(|h| h.joint) && chans.has(Channel::InvG)
     }
 
     /// What each slab is counted over.

@@ -5,6 +5,7 @@
 //! the stored value, as the run's own passes do.
 
 use super::budget::slabs;
+use super::medians::{SelectCounts, SelectPass};
 use super::partials::{SlabPartial, TraceSums};
 use super::remote::{Prefilter, SlabJob, SlabPass};
 use super::resume::{self, WriteHashes};
@@ -59,7 +60,7 @@ pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<TaskOutcome, RunError>
         SlabPass::Input { input, level, nan, padding } => task.input(input, *level, *nan, *padding)?,
         SlabPass::Derive { summarise, store } => task.derive(summarise, store)?,
         SlabPass::Prefilter { filters, halo } => task.prefilter(filters, *halo)?,
-        SlabPass::Select { median, detect } => task.select(median.as_ref(), detect.as_ref())?,
+        SlabPass::Select { select, detect } => task.select(select.as_ref(), detect.as_ref())?,
         SlabPass::Trace { .. } => task.trace()?,
         SlabPass::Pack { textures, histograms, read, height } => {
             task.pack(textures, histograms.as_ref(), read, *height)?
@@ -215,27 +216,28 @@ impl Task<'_> {
         Ok(partial)
     }
 
-    /// The slab's part of the tracing's statistics: its samples of the
-    /// median's channel in the upper bucket `median` names, and its (v, g)
-    /// counts over the axes `detect`.
-    fn select(
-        &self,
-        median: Option<&(Channel, usize)>,
-        detect: Option<&(Axis, Axis)>,
-    ) -> Result<SlabPartial, RunError> {
+    /// The slab's part of whole-volume medians and of the tracing's
+    /// statistics: the pass `select` of a median's radix select, and its
+    /// (v, g) counts over the axes `detect`.
+    fn select(&self, select: Option<&SelectPass>, detect: Option<&(Axis, Axis)>) -> Result<SlabPartial, RunError> {
         let mut chans = self.channels()?;
-        // each channel read once (the median's is g itself without the pre-filter)
-        let mut channels: Vec<Channel> = median.iter().map(|&&(c, _)| c).collect();
+        // each channel read once
+        let mut channels: Vec<Channel> = select.map(SelectPass::reads).unwrap_or_default();
         if detect.is_some() {
-            channels.extend([Channel::Value, Channel::G].into_iter().filter(|&c| median.is_none_or(|&(m, _)| m != c)));
+            for c in [Channel::Value, Channel::G] {
+                if !channels.contains(&c) {
+                    channels.push(c);
+                }
+            }
         }
         let slab = chans.volumes(self.z.clone(), &channels).map_err(at("boundary"))?;
         let samples = |c: Channel| slab.iter().find(|(n, _)| *n == c).map(|(_, v)| v.samples()).unwrap_or_default();
         let mut partial = SlabPartial::default();
-        if let Some(&(channel, within)) = median {
-            let mut lower = mdtf_volume::KeyBuckets::new();
-            lower.add_within(within, samples(channel));
-            partial.g_lower = Some(lower);
+        if let Some(pass) = select {
+            let mut counts = SelectCounts::default();
+            let mask = pass.above.map(|(m, _)| samples(m)).unwrap_or_default();
+            pass.count(samples(pass.channel), mask, &mut counts);
+            partial.selected = Some(counts);
         }
         if let Some((v_axis, g_axis)) = detect {
             let mut counts = VgCounts::new(v_axis.clone(), g_axis.clone());

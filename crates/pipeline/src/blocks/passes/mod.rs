@@ -8,6 +8,7 @@
 mod packing;
 mod tracing;
 
+use super::medians::{SelectCounts, SelectPass};
 use super::partials::SlabPartial;
 use super::remote::{self, Derivation, SlabPass, SlabTasks};
 use super::slab_channels::made_by;
@@ -20,7 +21,7 @@ use crate::progress::Progress;
 use crate::report::Stages;
 use crate::run::{RunError, RunOptions, at};
 use mdtf_derive::{DeriveParams, Item};
-use mdtf_pack::{Profile, TfFile};
+use mdtf_pack::TfFile;
 use mdtf_volume::{Geometry, KeyBuckets, overlapped};
 use reductions::Stats;
 use std::ops::Range;
@@ -239,6 +240,22 @@ impl<'a> SlabPasses<'a> {
         Ok(parts)
     }
 
+    /// Pass `pass` of a whole-volume median's select over every slab: as
+    /// tasks on a run with them, else here from `chans`.
+    fn select(&mut self, chans: &mut SlabChannels, pass: SelectPass) -> Result<SelectCounts, RunError> {
+        let Some(tasks) = self.tasks else {
+            return super::medians::select_here(chans, &self.slabs, &pass).map_err(at("histogram"));
+        };
+        let mut counts = SelectCounts::default();
+        let job = SlabPass::Select { select: Some(pass), detect: None };
+        for part in self.on_tasks(tasks, job, &mut chans.store, &self.slabs.clone())? {
+            if let Some(c) = &part.selected {
+                counts.merge(c);
+            }
+        }
+        Ok(counts)
+    }
+
     /// Whether a killed or failed run could be resumed: its tasks' outputs
     /// stay in the store until the run ends (a task whose outputs are gone
     /// would run again), as the plan on paper's store at its fullest counts them.
@@ -340,7 +357,7 @@ impl<'a> SlabPasses<'a> {
     /// pass, which its derive tasks store ([`stored_for_the_run`]).
     fn read_later(&self, groups: &[DeriveParams]) -> Vec<Channel> {
         let derived: Vec<Channel> = groups.iter().flat_map(|d| d.items.iter()).flat_map(|&i| made_by(i)).collect();
-        stored_for_the_run(self.p, &self.plan, self.tf.is_some(), &derived)
+        stored_for_the_run(self.p, &derived)
     }
 
     /// The derive groups of the whole run: the plan's items (with g and f''
@@ -383,21 +400,11 @@ impl<'a> SlabPasses<'a> {
 }
 
 /// The derived channels (of `derived`) a run of `p` on tasks reads itself
-/// after its derive pass, which its derive tasks store (the tasks remake
-/// every other channel): the kept ones, and g where the run takes a median
-/// of it (the tracing's noise floor and the detection before it, the
-/// (v, 1/g) axis, gaussian-tf's default without a TF file, `tf_given`).
-pub(super) fn stored_for_the_run(p: &Pipeline, plan: &Plan, tf_given: bool, derived: &[Channel]) -> Vec<Channel> {
+/// after its derive pass, which its derive tasks store: the kept ones (the
+/// tasks remake every other channel, and take the medians' passes themselves).
+pub(super) fn stored_for_the_run(p: &Pipeline, derived: &[Channel]) -> Vec<Channel> {
     let kept = p.keep.iter().filter_map(|c| Channel::of_store(c));
-    let mut store: Vec<Channel> = kept.filter(|c| derived.contains(c)).collect();
-    let joint = p.histogram.as_ref().is_some_and(|h| h.joint);
-    let medians_of_g = plan.trace
-        || (joint && derived.contains(&Channel::InvG))
-        || (p.pack.profile == Profile::GaussianTf && !tf_given);
-    if medians_of_g && derived.contains(&Channel::G) && !store.contains(&Channel::G) {
-        store.push(Channel::G);
-    }
-    store
+    kept.filter(|c| derived.contains(c)).collect()
 }
 
 /// Copies the input's value slab by slab into `store`, taking its

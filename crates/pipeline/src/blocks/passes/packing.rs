@@ -78,8 +78,15 @@ impl SlabPasses<'_> {
         let n = self.geo.voxel_count();
         let mut histograms = match counting {
             true => {
-                let g_buckets = derived.g_buckets.as_ref();
-                Some(SlabHistograms::new(self.p, chans, &self.stats, &self.slabs, n, self.hvol_needed, g_buckets)?)
+                let inv_g = match SlabHistograms::counts_inverse_gradient(self.p, chans) {
+                    true => medians::inverse_gradient_axis(
+                        &mut |pass| self.select(chans, pass),
+                        derived.g_buckets.as_ref(),
+                    )?,
+                    false => None,
+                };
+                let (stats, slabs, hvol) = (&self.stats, &self.slabs, self.hvol_needed);
+                Some(SlabHistograms::new(self.p, chans, stats, slabs, n, hvol, inv_g)?)
             }
             false => None,
         };
@@ -210,7 +217,7 @@ impl SlabPasses<'_> {
     /// the histogram volume shows, else the paper's median default; written
     /// into the pack and returned.
     fn write_gaussians(
-        &self,
+        &mut self,
         chans: &mut SlabChannels,
         derived: &Derived,
         hvol: Option<&mdtf_histogram::HistogramVolume>,
@@ -222,7 +229,10 @@ impl SlabPasses<'_> {
                 match arches.is_empty() {
                     false => crate::gaussians::boundary_tgtfs(&arches, &self.geo),
                     true => {
-                        vec![medians::median_tgtf(chans, &self.slabs, derived.g_buckets.as_ref()).map_err(at("pack"))?]
+                        let n = self.geo.voxel_count();
+                        let mut run = |pass| self.select(chans, pass);
+                        let tgtf = medians::median_tgtf(&mut run, derived.g_buckets.as_ref(), n)?;
+                        vec![tgtf.ok_or_else(|| fail("pack")("channel 'v' has no finite sample".into()))?]
                     }
                 }
             }

@@ -2,6 +2,7 @@
 //! itself, in this process or as tasks.
 
 use super::{Derived, SlabPasses, io};
+use crate::blocks::medians::SelectPass;
 use crate::blocks::partials::{TracePartial, TraceSums};
 use crate::blocks::remote::{Prefilter, SlabPass, SlabTasks};
 use crate::blocks::trace::{self, SlabTrace, TraceSetup};
@@ -124,10 +125,11 @@ impl SlabPasses<'_> {
         let detect = if self.plan.detects_before_tracing() { detection_axes(chans, &self.stats) } else { None };
         let (mut lower, mut vg) = (KeyBuckets::new(), None::<VgCounts>);
         if within.is_some() || detect.is_some() {
-            let pass = SlabPass::Select { median: within.map(|hi| (g, hi)), detect };
+            let select = within.map(|b| SelectPass { channel: g, above: None, within: Some(b) });
+            let pass = SlabPass::Select { select, detect };
             for part in self.on_tasks(tasks, pass, &mut chans.store, &self.slabs.clone())? {
-                if let Some(b) = &part.g_lower {
-                    lower.merge(b);
+                if let Some(c) = &part.selected {
+                    lower.merge(&c.buckets);
                 }
                 match (&mut vg, part.vg) {
                     (Some(all), Some(slab)) => all.merge(&slab).map_err(at("boundary"))?,
