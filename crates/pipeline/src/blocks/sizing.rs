@@ -125,6 +125,8 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
         passes.push(PassSize { pass: "boundary", tasks, memory, read, written });
         stored.extend(traced);
     }
+    let value_and_g = memory(2 * h + 2 * k);
+    passes.extend(median_passes(p, &derived, slabs, value_and_g, (h + 2 * k) * plane));
     let texel = texel_bytes(p);
     let pack_planes = if hvol { nz.div_ceil(mdtf_histogram::HVOL_PARTS) as u64 } else { h };
     let pack_tasks = if hvol { mdtf_histogram::HVOL_PARTS.min(nz) } else { slabs };
@@ -146,6 +148,18 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
         pack_bytes: voxels * texel,
         kept_bytes,
     })
+}
+
+/// The select passes of the whole-volume medians of g a run of `p` takes
+/// (`derived`: the channels it derives), as one line of `slabs` tasks a
+/// round, each holding `memory` and reading `read` bytes (the value over
+/// its slab, to derive g): three rounds for the (v, 1/g) axis, and up to
+/// three for gaussian-tf's default TGTF (when it finds no boundary).
+fn median_passes(p: &Pipeline, derived: &[Channel], slabs: usize, memory: u64, read: u64) -> Option<PassSize> {
+    let inverse_gradient = p.histogram.as_ref().is_some_and(|h| h.joint) && derived.contains(&Channel::InvG);
+    let default_tgtf = p.pack.profile == mdtf_pack::Profile::GaussianTf && p.pack.tf.is_none();
+    let rounds = 3 * (usize::from(inverse_gradient) + usize::from(default_tgtf));
+    (rounds > 0).then_some(PassSize { pass: "medians", tasks: rounds * slabs, memory, read, written: 0 })
 }
 
 /// Bytes a voxel of `p`'s pack textures takes.
@@ -197,8 +211,8 @@ impl fmt::Display for Sizing {
         }
         write!(
             f,
-            "  the calling process merges the tasks' partial sums and writes the kept volumes, histograms and \
-             tables (peak-finding's (v, 1/g) axis and gaussian-tf's default TGTF read g there too)"
+            "  the calling process merges the tasks' partial sums and writes the histograms, the tables and the \
+             kept volumes (these it reads from the channel store)"
         )
     }
 }

@@ -203,8 +203,7 @@ impl Task<'_> {
         // the outputs through their own handles: the channels kept for the next task hold only the stored ones
         let mut out = self.open(&[])?;
         let mut partial = SlabPartial::default();
-        for f in filters {
-            let own = prefilter_slab(&mut chans, f.input, &f.params, &self.z, halo)?;
+        for (f, own) in filters.iter().zip(prefilter_slab(&mut chans, filters, &self.z, halo)?) {
             self.put(&mut out, f.output, 0..self.job.geometry.dims[1], &own)?;
             partial.summarise(f.output, own.samples(), self.voxels);
             // the first pass of its median's select, when it is the g traced

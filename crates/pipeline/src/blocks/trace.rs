@@ -3,28 +3,33 @@
 //! ([`super::remote`]): the slab's planes grown by the pass's halo are read
 //! (or derived), and only the slab's own planes come out.
 
+use super::remote::Prefilter;
 use super::slab_channels::BlockRange;
 use super::{ChannelError, ChannelStore, SlabChannels, grown};
 use crate::channel::Channel;
 use crate::run::{RunError, at};
-use mdtf_bilateral::BilateralParams;
 use mdtf_boundary::{BlockTrace, BoundaryInput, BoundaryParams, VolumeStats};
 use mdtf_volume::{MultiField, Volume};
 use std::ops::Range;
 
-/// Channel `channel` pre-filtered with `params` on the planes of `z`,
-/// from its planes grown by the filter's `halo`.
+/// Each of `filters` on the planes of `z`: its input channel pre-filtered,
+/// from its planes grown by the filter's `halo` (the inputs read, or
+/// derived together, once), in the order of `filters`.
 pub(super) fn prefilter_slab(
     chans: &mut SlabChannels,
-    channel: Channel,
-    params: &BilateralParams,
+    filters: &[Prefilter],
     z: &Range<usize>,
     halo: usize,
-) -> Result<Volume, RunError> {
+) -> Result<Vec<Volume>, RunError> {
     let read = grown(z, halo, 1, chans.nz());
-    let v = chans.volumes(read.clone(), &[channel]).map_err(at("prefilter"))?.remove(0).1;
-    let filtered = mdtf_bilateral::run(&v, params).map_err(at("prefilter"))?;
-    Ok(filtered.z_slab(z.start - read.start..z.end - read.start))
+    let inputs: Vec<Channel> = filters.iter().map(|f| f.input).collect();
+    let grown = chans.volumes(read.clone(), &inputs).map_err(at("prefilter"))?;
+    let own = z.start - read.start..z.end - read.start;
+    filters
+        .iter()
+        .zip(grown)
+        .map(|(f, (_, v))| Ok(mdtf_bilateral::run(&v, &f.params).map_err(at("prefilter"))?.z_slab(own.clone())))
+        .collect()
 }
 
 /// What a tracing pass reads and how.

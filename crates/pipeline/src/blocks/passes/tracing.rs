@@ -216,10 +216,9 @@ impl SlabPasses<'_> {
                 self.prefiltered_buckets = Some(buckets);
             }
             None => {
-                for f in &filters {
-                    for (k, z) in self.slabs.iter().enumerate() {
-                        self.progress.slab(k + 1, self.slabs.len())?;
-                        let own = trace::prefilter_slab(chans, f.input, &f.params, z, halo)?;
+                for (k, z) in self.slabs.iter().enumerate() {
+                    self.progress.slab(k + 1, self.slabs.len())?;
+                    for (f, own) in filters.iter().zip(trace::prefilter_slab(chans, &filters, z, halo)?) {
                         chans.store.put_volume(f.output, z.start, &own).map_err(io("prefilter"))?;
                         self.stats.add(f.output, own.samples());
                     }
