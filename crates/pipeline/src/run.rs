@@ -10,6 +10,7 @@ use crate::plan::Plan;
 use crate::progress::Progress;
 use mdtf_pack::Profile;
 use mdtf_volume::{OutputFolder, write_file_atomically};
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -89,21 +90,30 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &(dyn Fn(&str) + Sync)) ->
 }
 
 /// Writes the channels `p` keeps into the staging folder's `volumes/`,
-/// each by `write(channel, file)` (None: the run did not make that
-/// channel), and `volumes/channels.json`: each file's channel, meaning,
+/// each by `write(channel, file)`, side by side (None: the run did not
+/// make that channel), and `volumes/channels.json`: each file's channel, meaning,
 /// units and producing stage from the channel table (`fields`: the input's
 /// field names, empty for one field); the files written, relative to `dir`.
-pub(crate) fn write_kept<W>(p: &Pipeline, fields: &[String], dir: &Path, mut write: W) -> Result<Vec<String>, RunError>
+pub(crate) fn write_kept<W>(p: &Pipeline, fields: &[String], dir: &Path, write: W) -> Result<Vec<String>, RunError>
 where
-    W: FnMut(&str, &Path) -> Option<Result<(), RunError>>,
+    W: Fn(&str, &Path) -> Option<Result<(), RunError>> + Sync,
 {
     let kdir = dir.join("volumes");
     std::fs::create_dir_all(&kdir).map_err(at("keep"))?;
+    // the files are encoded (and compressed) side by side; the first error in the list's order is told
+    let wrote: Vec<Result<(), RunError>> = p
+        .keep
+        .par_iter()
+        .map(|c| {
+            write(c, &kdir.join(p.keep_format.file_name(c)))
+                .unwrap_or_else(|| Err(fail("keep")(format!("no channel '{c}' was computed"))))
+        })
+        .collect();
+    wrote.into_iter().collect::<Result<(), RunError>>()?;
     let mut written = Vec::with_capacity(p.keep.len() + 1);
     let mut listed = Vec::with_capacity(p.keep.len());
     for c in &p.keep {
         let name = p.keep_format.file_name(c);
-        write(c, &kdir.join(&name)).ok_or_else(|| fail("keep")(format!("no channel '{c}' was computed")))??;
         let text = Channel::named(c, fields).map_err(|e| fail("keep")(e.to_string()))?.text(!fields.is_empty());
         listed.push(serde_json::json!({
             "channel": c,

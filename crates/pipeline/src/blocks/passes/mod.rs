@@ -386,10 +386,25 @@ impl<'a> SlabPasses<'a> {
         }
         self.progress.stage("keep")?;
         let t = Instant::now();
-        let (geo, slabs) = (&self.geo, &self.slabs);
+        let (geo, slabs, f32) = (&self.geo, &self.slabs, mdtf_volume::SampleType::F32);
+        let store_dir = chans.store.dir().to_path_buf();
+        let stored = chans.store.channels();
+        let derived_here = std::sync::Mutex::new(&mut *chans);
         let written = crate::run::write_kept(self.p, &self.plan.fields, &self.dir, |c, file| {
-            let c = Channel::of_store(c).filter(|&c| chans.has(c))?;
-            let f32 = mdtf_volume::SampleType::F32;
+            let c = Channel::of_store(c)?;
+            if stored.contains(&c) {
+                // a stored channel through a handle of its own: the kept files are written side by side
+                let mut store = match ChannelStore::open(store_dir.clone(), geo.clone(), &[c]) {
+                    Ok(store) => store,
+                    Err(e) => return Some(Err(at("keep")(e))),
+                };
+                let mut slab = |z, out: &mut Vec<f32>| store.samples_into(c, z, out);
+                return Some(mdtf_volume::write_slabs(file, geo, f32, slabs, &mut slab).map_err(at("keep")));
+            }
+            let mut chans = derived_here.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            if !chans.has(c) {
+                return None;
+            }
             let mut slab = |z, out: &mut Vec<f32>| chans.samples_into(c, z, out).map_err(std::io::Error::other);
             Some(mdtf_volume::write_slabs(file, geo, f32, slabs, &mut slab).map_err(at("keep")))
         })?;
