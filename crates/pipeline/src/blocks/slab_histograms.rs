@@ -37,18 +37,18 @@ pub struct HistogramAxes {
 
 impl HistogramAxes {
     /// The channels each slab's counting reads.
-    pub fn channels(&self) -> Vec<&'static str> {
-        let mut names = vec!["v", "g"];
+    pub fn channels(&self) -> Vec<Channel> {
+        let mut read = vec![Channel::Value, Channel::G];
         if self.hvol.is_some() {
-            names.push("f2");
+            read.push(Channel::F2);
         }
         if self.stretched {
-            names.extend(["g_hit", "hit"]);
+            read.extend([Channel::GHit, Channel::Hit]);
         }
         if self.inv_g.is_some() {
-            names.push("inv_g");
+            read.push(Channel::InvG);
         }
-        names
+        read
     }
 
     /// Whether the histogram volume is counted.
@@ -75,20 +75,20 @@ pub struct HistogramCounts {
 impl HistogramCounts {
     /// Counts a slab's channels (at least [`HistogramAxes::channels`]) into
     /// every histogram but the histogram volume.
-    fn add(&mut self, axes: &HistogramAxes, slab: &[(String, Volume)]) -> Result<(), RunError> {
+    fn add(&mut self, axes: &HistogramAxes, slab: &[(Channel, Volume)]) -> Result<(), RunError> {
         let err = at::<HistogramError>("histogram");
-        let (v, g) = (channel(slab, "v")?, channel(slab, "g")?);
+        let (v, g) = (channel(slab, Channel::Value)?, channel(slab, Channel::G)?);
         if axes.joint {
             add(&mut self.joint, count(&[v, g], axes.axes.clone(), None).map_err(err)?);
         }
         if let Some(ia) = &axes.inv_g {
-            add(&mut self.inv_g, count(&[v, channel(slab, "inv_g")?], ia.clone(), None).map_err(err)?);
+            add(&mut self.inv_g, count(&[v, channel(slab, Channel::InvG)?], ia.clone(), None).map_err(err)?);
         }
         if axes.stretched {
-            let traced = hit_mask(channel(slab, "hit")?);
+            let traced = hit_mask(channel(slab, Channel::Hit)?);
             let pair = &mut self.stretched;
             add(&mut pair.0, count(&[v, g], axes.axes.clone(), Some(&traced)).map_err(err)?);
-            let g_hit = channel(slab, "g_hit")?;
+            let g_hit = channel(slab, Channel::GHit)?;
             add(&mut pair.1, count(&[v, g_hit], axes.stretched_axes.clone(), Some(&traced)).map_err(err)?);
         }
         Ok(())
@@ -102,7 +102,7 @@ impl HistogramCounts {
         axes: &HistogramAxes,
         z: &Range<usize>,
         nz: usize,
-        slab: &[(String, Volume)],
+        slab: &[(Channel, Volume)],
     ) -> Result<(), RunError> {
         self.add(axes, slab)?;
         if let Some(hv_axes) = &axes.hvol {
@@ -110,7 +110,7 @@ impl HistogramCounts {
                 Some(acc) => acc,
                 None => self.counting.insert(HvolAccumulator::new(hv_axes).map_err(at("histogram"))?),
             };
-            let (v, g, f2) = (channel(slab, "v")?, channel(slab, "g")?, channel(slab, "f2")?);
+            let (v, g, f2) = (channel(slab, Channel::Value)?, channel(slab, Channel::G)?, channel(slab, Channel::F2)?);
             let plane = v.len() / z.len().max(1);
             for (i, k) in z.clone().enumerate() {
                 let at = i * plane..(i + 1) * plane;
@@ -135,8 +135,9 @@ pub(super) fn counts_hvol(p: &Pipeline, tf_given: bool) -> bool {
 }
 
 /// Channel `c`'s samples in `slab`.
-fn channel<'s>(slab: &'s [(String, Volume)], c: &str) -> Result<&'s [f32], RunError> {
-    slab.iter().find(|(n, _)| n == c).map(|(_, v)| v.samples()).ok_or_else(|| fail("histogram")(format!("{c} missing")))
+fn channel(slab: &[(Channel, Volume)], c: Channel) -> Result<&[f32], RunError> {
+    let missing = || fail("histogram")(format!("{} missing", c.name(&[])));
+    slab.iter().find(|(n, _)| *n == c).map(|(_, v)| v.samples()).ok_or_else(missing)
 }
 
 /// The histograms of the pipeline counted slab by slab (see the module docs).
@@ -205,9 +206,9 @@ impl SlabHistograms {
 
     /// Counts the slab of planes from `first` on, whose channels are `slab`
     /// (at least [`HistogramAxes::channels`]); slabs come in order.
-    pub(super) fn add(&mut self, first: usize, slab: &[(String, Volume)]) -> Result<(), RunError> {
+    pub(super) fn add(&mut self, first: usize, slab: &[(Channel, Volume)]) -> Result<(), RunError> {
         if let Some(acc) = &mut self.hvol {
-            let (v, g, f2) = (channel(slab, "v")?, channel(slab, "g")?, channel(slab, "f2")?);
+            let (v, g, f2) = (channel(slab, Channel::Value)?, channel(slab, Channel::G)?, channel(slab, Channel::F2)?);
             acc.add_slab(first, v, g, f2).map_err(at("histogram"))?;
         }
         self.counts.add(&self.axes, slab)

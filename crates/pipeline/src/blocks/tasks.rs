@@ -302,10 +302,11 @@ impl Task<'_> {
         let nz = self.job.geometry.dims[2];
         for planes in slabs(self.z.len(), height.max(1)) {
             let planes = self.z.start + planes.start..self.z.start + planes.end;
-            let slab = super::by_name(chans.volumes(planes.clone(), read).map_err(at("pack"))?);
+            let slab = chans.volumes(planes.clone(), read).map_err(at("pack"))?;
             if let Some(axes) = histograms {
                 counts.of_task_slab(axes, &planes, nz, &slab)?;
             }
+            let slab = super::by_name(slab);
             for (t, bytes) in textures.iter().zip(&mut bytes) {
                 t.write_planes(planes.clone(), &slab, bytes).map_err(at("pack"))?;
                 let at_byte = (t.plane_bytes() * planes.start) as u64;

@@ -91,13 +91,13 @@ impl SlabPasses<'_> {
             false => None,
         };
         let layouts = mdtf_pack::texture_layouts(params);
-        let mut names: Vec<&str> = histograms.as_ref().map(|h| h.axes().channels()).unwrap_or_default();
-        for c in layouts.iter().flat_map(|l| l.components.iter().flatten()) {
-            if !names.contains(&c.as_str()) {
-                names.push(c);
+        let components: Vec<&String> = layouts.iter().flat_map(|l| l.components.iter().flatten()).collect();
+        let mut read: Vec<Channel> = histograms.as_ref().map(|h| h.axes().channels()).unwrap_or_default();
+        for c in channels_named(&components).map_err(at("pack"))? {
+            if !read.contains(&c) {
+                read.push(c);
             }
         }
-        let read = channels_named(&names).map_err(at("pack"))?;
         if let Some(tasks) = self.tasks {
             let targets = writer.task_textures(&layouts, self.resumed).map_err(at("pack"))?;
             let axes = histograms.as_ref().map(|h| h.axes().clone());
@@ -126,14 +126,13 @@ impl SlabPasses<'_> {
             let slab = chans
                 .volumes(z.clone(), &read)
                 .map_err(|e| mdtf_pack::PackError::Io(mdtf_volume::VolumeError::Fields(e.to_string())))?;
-            let slab = by_name(slab);
             if let Some(h) = &mut histograms
                 && let Err(e) = h.add(z.start, &slab)
             {
                 counting_failed = Some(e);
                 return Err(mdtf_pack::PackError::Geometry("the histograms could not count a slab".into()));
             }
-            Ok(slab)
+            Ok(by_name(slab))
         });
         if let Some(e) = counting_failed {
             return Err(e);
