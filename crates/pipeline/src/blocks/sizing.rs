@@ -100,15 +100,8 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
     if plan.trace {
         let pf = if plan.prefilter { plan.reach.prefilter[2] as u64 } else { 0 };
         if plan.prefilter {
-            let read = (h + 2 * (k + pf)) * plane;
-            let pass = PassSize {
-                pass: "prefilter",
-                tasks: slabs,
-                memory: memory(by_pass.prefilter),
-                read,
-                written: 2 * h * plane,
-            };
-            passes.push(pass);
+            let (read, memory) = ((h + 2 * (k + pf)) * plane, memory(by_pass.prefilter));
+            passes.push(PassSize { pass: "prefilter", tasks: slabs, memory, read, written: 2 * h * plane });
             stored.extend([Channel::GPrefiltered, Channel::F2Prefiltered]);
         }
         // the select round reads the traced g (and v and g for the detection) over each slab
