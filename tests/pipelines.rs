@@ -412,11 +412,12 @@ fn a_run_at_4096_cubed_is_sized_on_paper_before_it_runs() {
         assert!(bytes_on(&plan, pass, 2) <= 8.0 * 1024f64.powi(3), "{pass}: {plan}");
     }
     // the store holds v, the pre-filtered g and f'' and the three traced outputs the run reads
-    // (distance, g_hit, hit: not dot), 4 bytes a voxel each; not g, whose median the tasks take
+    // (distance, g_hit, hit: not dot), 4 bytes a voxel each but the hit codes' one; not g, whose
+    // median the tasks take
     let voxels = 4096f64.powi(3);
-    // (6 x 4 x 2^36 bytes = 1.5 TiB, printed to a tenth)
+    // (21 x 2^36 bytes = 1.3125 TiB, printed to a tenth)
     let store = bytes_on(&plan, "channel store", 5);
-    assert!((store - 6.0 * 4.0 * voxels).abs() < 0.06 * 1024f64.powi(4), "{plan}");
+    assert!((store - 21.0 * voxels).abs() < 0.06 * 1024f64.powi(4), "{plan}");
     // kept: distance and g_hit as f32 before compression
     assert_eq!(bytes_on(&plan, "kept volumes", 4), 2.0 * 4.0 * voxels, "{plan}");
     // the textures' bytes a voxel are those of a real pack of this pipeline

@@ -179,13 +179,17 @@ pub(super) fn job_digest(job: &SlabJob) -> Result<String, RunError> {
 
 /// The byte ranges of files the task of `job` on planes `z` writes.
 pub(super) fn written_ranges(job: &SlabJob, z: &Range<usize>) -> Vec<(PathBuf, Range<u64>)> {
-    let plane = (job.geometry.dims[0] * job.geometry.dims[1] * 4) as u64;
+    let plane = (job.geometry.dims[0] * job.geometry.dims[1]) as u64;
     let planes = |bytes_per_plane: u64| bytes_per_plane * z.start as u64..bytes_per_plane * z.end as u64;
     match &job.pass {
         SlabPass::Pack { textures, .. } => {
             textures.iter().map(|t| (t.file.clone(), planes(t.plane_bytes() as u64))).collect()
         }
-        pass => pass.outputs().iter().map(|c| (job.store.join(store::file_name(*c)), planes(plane))).collect(),
+        pass => pass
+            .outputs()
+            .iter()
+            .map(|&c| (job.store.join(store::file_name(c)), planes(plane * store::stored_type(c).size() as u64)))
+            .collect(),
     }
 }
 

@@ -114,7 +114,8 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
         let tasks = nz.div_ceil(trace.planes.max(1));
         let memory = trace_block_bytes(trace.planes, trace.rows, geometry, &plan);
         let traced = plan.traced_stored();
-        let written = traced.len() as u64 * tp * plane;
+        let bytes: usize = traced.iter().map(|&c| super::store::stored_type(c).size()).sum();
+        let written = bytes as u64 * tp * plane / 4;
         passes.push(PassSize { pass: "boundary", tasks, memory, read, written });
         stored.extend(traced);
     }
@@ -175,7 +176,8 @@ fn pack_bytes(planes: u64, h: u64, k: u64, plane: u64, stored: &[Channel], texel
 impl Sizing {
     /// Bytes of the run's channel store at its fullest.
     pub fn store_bytes(&self) -> u64 {
-        self.stored.len() as u64 * self.geometry.voxel_count() as u64 * 4
+        let bytes: usize = self.stored.iter().map(|&c| super::store::stored_type(c).size()).sum();
+        bytes as u64 * self.geometry.voxel_count() as u64
     }
 }
 

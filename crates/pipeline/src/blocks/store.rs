@@ -1,13 +1,15 @@
 //! Where a slab-by-slab run keeps its channels between passes: each channel
-//! a file of f32 samples (x-fastest, the writer's byte order: the run's own
-//! processes read them, on machines of one kind) in a folder inside the
+//! a file of f32 samples (the hit codes, 0 to 3, of one byte each; x-fastest,
+//! the writer's byte order: the run's own processes read them, on machines
+//! of one kind) in a folder inside the
 //! run's staging folder, written and read by z-planes. Only the planes a
 //! pass asks for are ever in memory; the files go with the staging folder.
 //! Tasks of a run spread over processes ([`super::remote`]) open the same
 //! folder ([`ChannelStore::open`]) and each writes only its own planes.
 
 use crate::channel::Channel;
-use mdtf_volume::{Geometry, Volume};
+use mdtf_volume::{Geometry, SampleType, Volume};
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom, Write};
@@ -17,9 +19,27 @@ use std::path::PathBuf;
 /// The store's folder inside a run's staging folder.
 pub(crate) const STORE_DIR: &str = ".slabs";
 
-/// The file in the store folder holding channel `c`.
+/// How channel `c` is kept in its file: the hit codes (small integers) as
+/// u8, every other channel as f32.
+pub(crate) fn stored_type(c: Channel) -> SampleType {
+    match c {
+        Channel::Hit => SampleType::U8,
+        _ => SampleType::F32,
+    }
+}
+
+/// The file in the store folder holding channel `c` (e.g. `g.f32`, `hit.u8`).
 pub(crate) fn file_name(c: Channel) -> String {
-    format!("{}.f32", c.name(&[]))
+    format!("{}.{}", c.name(&[]), stored_type(c).name())
+}
+
+/// The bytes channel `c`'s `samples` take in its file.
+pub(crate) fn stored_bytes(c: Channel, samples: &[f32]) -> Cow<'_, [u8]> {
+    match stored_type(c) {
+        SampleType::F32 => Cow::Borrowed(bytemuck::cast_slice(samples)),
+        // the hit codes are exact small integers
+        _ => Cow::Owned(samples.iter().map(|&x| x as u8).collect()),
+    }
 }
 
 /// The channels of a run, on disk (see the module docs).
@@ -100,14 +120,10 @@ impl ChannelStore {
     /// planes), creating the channel on its first write (or taking the file
     /// another task of the run created).
     pub fn put(&mut self, c: Channel, first: usize, samples: &[f32]) -> std::io::Result<()> {
-        self.write_at(c, (first * self.plane_len() * 4) as u64, samples)
-    }
-
-    /// Writes `samples` at byte `offset` of channel `c`'s file, creating it on the first write.
-    fn write_at(&mut self, c: Channel, offset: u64, samples: &[f32]) -> std::io::Result<()> {
+        let offset = (first * self.plane_len() * stored_type(c).size()) as u64;
         self.create_channel(c)?;
         let Some(file) = self.files.get_mut(&c) else { return Err(missing(c)) };
-        write_sparse(file, offset, bytemuck::cast_slice(samples))
+        write_sparse(file, offset, &stored_bytes(c, samples))
     }
 
     /// Writes a volume of planes `first..` of channel `c`.
@@ -120,7 +136,7 @@ impl ChannelStore {
     pub fn put_rows(&mut self, c: Channel, first: usize, rows: Range<usize>, v: &Volume) -> std::io::Result<()> {
         self.create_channel(c)?;
         let Some(file) = self.files.get_mut(&c) else { return Err(missing(c)) };
-        write_rows(file, &self.geometry, first, rows, v)
+        write_rows(file, c, &self.geometry, first, rows, v)
     }
 
     /// A writer of channels `channels` (created here when new) that works
@@ -178,13 +194,22 @@ impl ChannelStore {
             return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, what));
         }
         let Some(file) = self.files.get_mut(&c) else { return Err(missing(c)) };
+        let size = stored_type(c).size();
+        let mut read = |offset: usize, out: &mut [f32]| -> std::io::Result<()> {
+            file.seek(SeekFrom::Start((offset * size) as u64))?;
+            if size == 4 {
+                return file.read_exact(bytemuck::cast_slice_mut(out));
+            }
+            let mut bytes = vec![0u8; out.len()];
+            file.read_exact(&mut bytes)?;
+            out.iter_mut().zip(&bytes).for_each(|(o, &b)| *o = f32::from(b));
+            Ok(())
+        };
         if rows.start == 0 && rows.end == ny {
-            file.seek(SeekFrom::Start((z.start * chunk * 4) as u64))?;
-            return file.read_exact(bytemuck::cast_slice_mut(samples));
+            return read(z.start * chunk, samples);
         }
         for (k, plane) in samples.chunks_mut(chunk.max(1)).enumerate() {
-            file.seek(SeekFrom::Start((((z.start + k) * ny + rows.start) * nx * 4) as u64))?;
-            file.read_exact(bytemuck::cast_slice_mut(plane))?;
+            read(((z.start + k) * ny + rows.start) * nx, plane)?;
         }
         Ok(())
     }
@@ -238,24 +263,27 @@ impl StoreWriter {
     /// [`ChannelStore::put_rows`], for one of the writer's channels.
     pub fn put_rows(&mut self, c: Channel, first: usize, rows: Range<usize>, v: &Volume) -> std::io::Result<()> {
         let Some(file) = self.files.get_mut(&c) else { return Err(missing(c)) };
-        write_rows(file, &self.geometry, first, rows, v)
+        write_rows(file, c, &self.geometry, first, rows, v)
     }
 }
 
-/// Writes `v`, rows `rows` of planes `first..` of a channel on `geometry`, into its `file`.
+/// Writes `v`, rows `rows` of planes `first..` of channel `c` on `geometry`, into its `file`.
 fn write_rows(
     file: &mut File,
+    c: Channel,
     geometry: &Geometry,
     first: usize,
     rows: Range<usize>,
     v: &Volume,
 ) -> std::io::Result<()> {
     let [nx, ny, _] = geometry.dims;
+    let size = stored_type(c).size();
     if rows.start == 0 && rows.end == ny {
-        return write_sparse(file, (first * nx * ny * 4) as u64, bytemuck::cast_slice(v.samples()));
+        return write_sparse(file, (first * nx * ny * size) as u64, &stored_bytes(c, v.samples()));
     }
     for (k, plane) in v.samples().chunks((nx * rows.len()).max(1)).enumerate() {
-        write_sparse(file, (((first + k) * ny + rows.start) * nx * 4) as u64, bytemuck::cast_slice(plane))?;
+        let offset = (((first + k) * ny + rows.start) * nx * size) as u64;
+        write_sparse(file, offset, &stored_bytes(c, plane))?;
     }
     Ok(())
 }
@@ -353,9 +381,31 @@ mod tests {
         tail[10] = 1.0;
         let mut longer = ChannelStore::create(dir.path().join("t"), Geometry::new([256, 256, 10], [1.0; 3])).unwrap();
         longer.put(Channel::Hit, 8, &tail).unwrap();
-        assert_eq!(std::fs::metadata(dir.path().join("t/hit.f32")).unwrap().len(), (10 * plane * 4) as u64);
+        // the hit codes take one byte a voxel
+        assert_eq!(std::fs::metadata(dir.path().join("t/hit.u8")).unwrap().len(), (10 * plane) as u64);
         assert_eq!(longer.samples(Channel::Hit, 8..10).unwrap(), tail);
         assert!(longer.samples(Channel::Hit, 0..8).unwrap().iter().all(|&v| v == 0.0));
+    }
+
+    #[test]
+    fn hit_codes_come_back_from_their_bytes_by_strips_of_rows() {
+        let dir = tempfile::tempdir().unwrap();
+        let geo = Geometry::new([4, 6, 3], [1.0; 3]);
+        let mut s = ChannelStore::create(dir.path().join("s"), geo.clone()).unwrap();
+        let codes: Vec<f32> = (0..4 * 6 * 3).map(|i| ((i * 7) % 4) as f32).collect();
+        let strip = |rows: std::ops::Range<usize>| -> Vec<f32> {
+            (0..3).flat_map(|z| codes[(z * 6 + rows.start) * 4..(z * 6 + rows.end) * 4].to_vec()).collect()
+        };
+        for rows in [0..2, 2..6] {
+            let v = Volume::from_samples(Geometry::new([4, rows.len(), 3], [1.0; 3]), strip(rows.clone())).unwrap();
+            s.put_rows(Channel::Hit, 0, rows, &v).unwrap();
+        }
+        assert_eq!(s.samples(Channel::Hit, 0..3).unwrap(), codes);
+        let mut part = Vec::new();
+        s.rows_into(Channel::Hit, 1..3, 3..5, &mut part).unwrap();
+        let want: Vec<f32> = (1..3).flat_map(|z| codes[(z * 6 + 3) * 4..(z * 6 + 5) * 4].to_vec()).collect();
+        assert_eq!(part, want);
+        assert_eq!(std::fs::metadata(dir.path().join("s/hit.u8")).unwrap().len(), 4 * 6 * 3);
     }
 
     #[test]

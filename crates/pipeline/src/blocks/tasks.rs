@@ -109,11 +109,11 @@ impl Task<'_> {
         let stage = self.job.pass.stage();
         out.put_rows(c, self.z.start, rows.clone(), v).map_err(at(stage))?;
         let [nx, ny, _] = self.job.geometry.dims;
-        let at_byte = ((self.z.start * ny + rows.start) * nx * 4) as u64;
+        let at_byte = ((self.z.start * ny + rows.start) * nx * super::store::stored_type(c).size()) as u64;
         let file = self.job.store.join(super::store::file_name(c));
         // a strip of rows lies in pieces in the file: only a whole slab is one range
         match rows == (0..ny) {
-            true => self.hashed.borrow_mut().add(&file, at_byte, bytemuck::cast_slice(v.samples())),
+            true => self.hashed.borrow_mut().add(&file, at_byte, &super::store::stored_bytes(c, v.samples())),
             false => self.hashed.borrow_mut().add(&file, u64::MAX, &[]),
         }
         Ok(())
