@@ -208,14 +208,20 @@ impl WriteHashes {
                 h.write(bytes);
                 range.end = end;
             }
-            // out of order: no range matches it any more
-            Some((_, range, _)) => range.end = u64::MAX,
+            Some(_) => self.unordered(file),
             None => {
                 let mut h = XxHash3_128::new();
                 h.write(bytes);
                 self.0.push((file.to_path_buf(), at..end, h));
             }
         }
+    }
+
+    /// Marks `file` written out of order (or in pieces): no range of it is
+    /// taken from here, so it is read back for its hash.
+    pub(super) fn unordered(&mut self, file: &Path) {
+        self.0.retain(|(f, ..)| f != file);
+        self.0.push((file.to_path_buf(), u64::MAX..u64::MAX, XxHash3_128::new()));
     }
 
     /// XXH3-128 (hex) of exactly `range` of `file`, if it was written so.
@@ -306,6 +312,11 @@ mod tests {
         assert_eq!(hashed.of(&file, &(100..7_000)), None, "only the whole range written");
         hashed.add(&file, 45_000, &bytes[45_000..]);
         assert_eq!(hashed.of(&file, &range), None, "a gap: the file is read back");
+        let mut strips = WriteHashes::default();
+        strips.add(&file, 0, &bytes[..100]);
+        strips.unordered(&file);
+        strips.add(&file, 100, &bytes[100..200]);
+        assert_eq!(strips.of(&file, &(0..200)), None, "written in pieces: read back");
     }
 
     #[test]

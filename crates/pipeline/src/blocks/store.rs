@@ -120,10 +120,16 @@ impl ChannelStore {
     /// planes), creating the channel on its first write (or taking the file
     /// another task of the run created).
     pub fn put(&mut self, c: Channel, first: usize, samples: &[f32]) -> std::io::Result<()> {
+        self.put_stored_bytes(c, first, &stored_bytes(c, samples))
+    }
+
+    /// [`ChannelStore::put`] of samples already in their file's form
+    /// ([`stored_bytes`]), for a writer that also hashes them.
+    pub fn put_stored_bytes(&mut self, c: Channel, first: usize, bytes: &[u8]) -> std::io::Result<()> {
         let offset = (first * self.plane_len() * stored_type(c).size()) as u64;
         self.create_channel(c)?;
         let Some(file) = self.files.get_mut(&c) else { return Err(missing(c)) };
-        write_sparse(file, offset, &stored_bytes(c, samples))
+        write_sparse(file, offset, bytes)
     }
 
     /// Writes a volume of planes `first..` of channel `c`.

@@ -107,15 +107,19 @@ impl Task<'_> {
     /// whole slab) into `out`, the bytes hashed as they go.
     fn put(&self, out: &mut ChannelStore, c: Channel, rows: Range<usize>, v: &Volume) -> Result<(), RunError> {
         let stage = self.job.pass.stage();
-        out.put_rows(c, self.z.start, rows.clone(), v).map_err(at(stage))?;
         let [nx, ny, _] = self.job.geometry.dims;
-        let at_byte = ((self.z.start * ny + rows.start) * nx * super::store::stored_type(c).size()) as u64;
         let file = self.job.store.join(super::store::file_name(c));
-        // a strip of rows lies in pieces in the file: only a whole slab is one range
-        match rows == (0..ny) {
-            true => self.hashed.borrow_mut().add(&file, at_byte, &super::store::stored_bytes(c, v.samples())),
-            false => self.hashed.borrow_mut().add(&file, u64::MAX, &[]),
+        if rows != (0..ny) {
+            // a strip of rows lies in pieces in the file: it is read back for its hash
+            out.put_rows(c, self.z.start, rows, v).map_err(at(stage))?;
+            self.hashed.borrow_mut().unordered(&file);
+            return Ok(());
         }
+        // the bytes written are the bytes hashed, made once
+        let bytes = super::store::stored_bytes(c, v.samples());
+        out.put_stored_bytes(c, self.z.start, &bytes).map_err(at(stage))?;
+        let at_byte = (self.z.start * ny * nx * super::store::stored_type(c).size()) as u64;
+        self.hashed.borrow_mut().add(&file, at_byte, &bytes);
         Ok(())
     }
 
