@@ -216,6 +216,9 @@ pub const TABLE: [Row; 25] = [
     ),
 ];
 
+/// The unit normal's components, x first.
+pub const NORMAL: [Channel; 3] = [Channel::Nx, Channel::Ny, Channel::Nz];
+
 /// The channels the tracing makes, in table order (distance, g_hit, hit,
 /// dot): the rows whose producer is the tracing. Where each is in the
 /// tracing's output: [`crate::boundary_chain::TracedVolumes`].

@@ -167,8 +167,11 @@ fn execute(
             v.ok_or_else(|| ChainError::Unknown(format!("derive gave no {c}")))
         };
         let (g, f2) = (take("g")?, take("f2")?);
-        let normal: Vec<(String, Volume)> =
-            ["nx", "ny", "nz"].into_iter().map(|c| take(c).map(|v| (c.to_string(), v))).collect::<Result<_, _>>()?;
+        let normal: Vec<(String, Volume)> = crate::channel::NORMAL
+            .map(|c| c.name(&[]))
+            .into_iter()
+            .map(|c| take(&c).map(|v| (c, v)))
+            .collect::<Result<_, _>>()?;
         let normal = MultiField::from_volumes(normal).map_err(|e| ChainError::Unknown(e.to_string()))?;
         let out = boundary_chain::trace_derived(g, f2, normal, value_range, chain)?;
         let report = out.boundary.report(&out.g);

@@ -40,6 +40,9 @@ pub enum StageError {
     /// A slab's channels could not be read or derived (a run by slabs).
     #[error("{0}")]
     Channels(#[from] crate::blocks::ChannelError),
+    /// A task of a run on a cluster failed for good.
+    #[error("{0}")]
+    Task(#[from] crate::blocks::TaskFailed),
     /// The memory budget cannot hold the smallest piece of a run by slabs.
     #[error("{0}")]
     Budget(#[from] crate::blocks::BudgetError),

@@ -34,6 +34,7 @@ pub(crate) mod progress;
 pub mod report;
 pub mod report_page;
 pub mod run;
+pub mod settings;
 pub mod stages;
 pub mod validate;
 mod whole;

@@ -14,7 +14,7 @@
 #![doc = include_str!("plans.md")]
 
 use crate::channel::{Channel, Producer, Reach, UnknownChannel};
-use crate::file::Pipeline;
+use crate::settings::{Histograms, Settings};
 use mdtf_bilateral::BilateralParams;
 use mdtf_boundary::BoundaryParams;
 use mdtf_derive::{Item, Kernel};
@@ -131,17 +131,18 @@ pub enum PlanError {
 }
 
 impl Plan {
-    /// Resolves the plan of `p` on an input with these `fields` (empty or
-    /// one: a scalar) on `geometry`.
-    pub fn resolve(p: &Pipeline, fields: &[String], geometry: &Geometry) -> Result<Plan, PlanError> {
+    /// Resolves the plan of a run of `s` on an input with these `fields`
+    /// (empty or one: a scalar) on `geometry`.
+    pub fn resolve(s: &Settings, fields: &[String], geometry: &Geometry) -> Result<Plan, PlanError> {
+        let out = &s.outputs;
         let fields: Vec<String> = if fields.len() > 1 { fields.to_vec() } else { Vec::new() };
         let multi = !fields.is_empty();
-        let profile = p.pack.profile;
+        let profile = out.pack.profile;
         let mut pack = BTreeSet::new();
         for name in profile.channels(&fields) {
             pack.insert(Channel::named(&name, &fields).map_err(PlanError::Pack)?);
         }
-        if profile == Profile::Slicer3dtf && p.pack.tf.is_none() {
+        if profile == Profile::Slicer3dtf && out.pack.tf.is_none() {
             pack.insert(Channel::F2);
         }
         if profile == Profile::ProjectedTetrahedra {
@@ -149,11 +150,12 @@ impl Plan {
             pack.insert(Channel::Value);
         }
         let mut keep = BTreeSet::new();
-        for name in &p.keep {
+        for name in &out.keep {
             keep.insert(Channel::named(name, &fields).map_err(PlanError::Keep)?);
         }
         let mut hist = BTreeSet::new();
-        if let Some(h) = &p.histogram {
+        let h = &out.histograms;
+        if h.counted {
             hist.extend([Channel::Value, Channel::G]);
             if h.joint {
                 hist.extend((0..fields.len().min(crate::figures::MAX_PAIRED_FIELDS)).map(Channel::Field));
@@ -169,18 +171,18 @@ impl Plan {
             }
         }
         let wanted: BTreeSet<Channel> = pack.iter().chain(&keep).chain(&hist).copied().collect();
-        let normals = [Channel::Nx, Channel::Ny, Channel::Nz];
+        let normals = crate::channel::NORMAL;
         let wants_normals = normals.iter().any(|c| wanted.contains(c));
         let kept_normal = normals.iter().any(|c| keep.contains(c));
         let defer_normals =
             wants_normals && !traces(&wanted, multi) && !kept_normal && profile != Profile::ProjectedTetrahedra;
-        let how = Making { kernel: p.derive.kernel, prefilter: p.prefilter.as_ref(), boundary: &p.boundary };
+        let how = Making::of(&s.chain);
         let mut plan = Plan::making(fields, wanted, defer_normals, &how, geometry);
         let steps = &mut plan.steps;
         if !keep.is_empty() {
             steps.push(PlannedStep { step: Step::Keep, reads: keep, makes: BTreeSet::new() });
         }
-        if p.histogram.is_some() {
+        if h.counted {
             steps.push(PlannedStep { step: Step::Histogram, reads: hist, makes: BTreeSet::new() });
         }
         // the deferred normals are made inside the pack step, from the value
@@ -193,13 +195,13 @@ impl Plan {
         }
         steps.push(PlannedStep { step: Step::Pack, reads: pack_reads, makes: pack_makes });
         if profile == Profile::ProjectedTetrahedra {
-            plan.mesh = Some(mesh_words(geometry, &p.tetra));
+            plan.mesh = Some(mesh_words(geometry, &out.tetra));
         }
         let steps = &mut plan.steps;
-        if p.preview {
+        if out.preview {
             steps.push(PlannedStep { step: Step::Preview, reads: BTreeSet::new(), makes: BTreeSet::new() });
         }
-        let later = pipeline_reductions(p, &plan.steps, plan.detects_before_tracing());
+        let later = pipeline_reductions(&out.histograms, &plan.steps, plan.detects_before_tracing());
         plan.reductions.extend(later);
         Ok(plan)
     }
@@ -220,7 +222,7 @@ impl Plan {
         for name in names {
             wanted.insert(Channel::named(name, &fields).map_err(PlanError::Channel)?);
         }
-        let how = Making { kernel: chain.kernel, prefilter: chain.prefilter.as_ref(), boundary: &chain.boundary };
+        let how = Making::of(chain);
         let mut plan = Plan::making(fields, wanted.clone(), false, &how, geometry);
         plan.steps.push(PlannedStep { step: Step::Keep, reads: wanted, makes: BTreeSet::new() });
         Ok(plan)
@@ -316,7 +318,7 @@ fn channel_steps(
     trace: Option<&BTreeSet<Channel>>,
 ) -> Vec<PlannedStep> {
     let multi = !fields.is_empty();
-    let normals = [Channel::Nx, Channel::Ny, Channel::Nz];
+    let normals = crate::channel::NORMAL;
     let made_by = |item: &Item, fields_pass: bool| -> Vec<Channel> {
         let want = if fields_pass { Producer::DeriveFields(*item) } else { Producer::Derive(*item) };
         let jacobian = (0..fields.len()).flat_map(|field| (0..3).map(move |axis| Channel::Jacobian { field, axis }));
@@ -362,6 +364,13 @@ struct Making<'a> {
     /// The tracing's parameters (d_max, world units, None: the tracing's
     /// default for the grid; g_min, None: from the data's noise floor).
     boundary: &'a BoundaryParams,
+}
+
+impl Making<'_> {
+    /// How `chain` makes its channels.
+    fn of(chain: &crate::boundary_chain::BoundaryChainParams) -> Making<'_> {
+        Making { kernel: chain.kernel, prefilter: chain.prefilter.as_ref(), boundary: &chain.boundary }
+    }
 }
 
 /// Whether some of the `wanted` channels come from the tracing.
@@ -410,7 +419,7 @@ pub fn derive_items(
     defer_normals: bool,
 ) -> (Vec<Item>, Vec<Item>) {
     let wants = |c: Channel| wanted.contains(&c);
-    let wants_normals = [Channel::Nx, Channel::Ny, Channel::Nz].into_iter().any(wants);
+    let wants_normals = crate::channel::NORMAL.into_iter().any(wants);
     let mut derive = Vec::new();
     if trace || wants(Channel::G) {
         derive.push(Item::G);
@@ -437,7 +446,7 @@ fn wanted_from(wanted: &BTreeSet<Channel>, multi: bool, producer: Producer) -> b
 /// The whole-volume reductions the steps of a pipeline's plan wait for
 /// beyond those of the steps that make its channels (`detects_before_tracing`:
 /// [`Plan::detects_before_tracing`]).
-fn pipeline_reductions(p: &Pipeline, steps: &[PlannedStep], detects_before_tracing: bool) -> Vec<Reduction> {
+fn pipeline_reductions(histograms: &Histograms, steps: &[PlannedStep], detects_before_tracing: bool) -> Vec<Reduction> {
     let mut out = Vec::new();
     let mut add = |what: &str, before: Step| {
         if steps.iter().any(|x| x.step == before) {
@@ -447,10 +456,10 @@ fn pipeline_reductions(p: &Pipeline, steps: &[PlannedStep], detects_before_traci
     if detects_before_tracing {
         add("(v, g) counts and their boundaries (g_hit_min's cap, the Fig. 2 range)", Step::Trace);
     }
-    if p.histogram.is_some() {
+    if histograms.counted {
         add("exact percentiles of g (the histogram's g axis, as Teem's qbert clips it)", Step::Histogram);
     }
-    if p.histogram.as_ref().is_some_and(|h| h.hvol) {
+    if histograms.hvol {
         add("histogram volume (v, g, f'') counts and sums (boundaries, default opacity)", Step::Pack);
     }
     add("finite range of every packed channel (its quantisation)", Step::Pack);
@@ -572,7 +581,7 @@ mod tests {
         let text = std::fs::read_to_string(&path).unwrap();
         let p = crate::file::parse(&text, &[]).unwrap();
         let fields: Vec<String> = fields.iter().map(|f| f.to_string()).collect();
-        Plan::resolve(&p, &fields, &Geometry::new([64; 3], [1.0; 3])).unwrap()
+        Plan::resolve(&Settings::new(&p, &Default::default()), &fields, &Geometry::new([64; 3], [1.0; 3])).unwrap()
     }
 
     fn steps(plan: &Plan) -> Vec<&'static str> {
@@ -646,11 +655,15 @@ mod tests {
     fn an_unknown_kept_channel_is_refused_when_planning() {
         let text = "keep = [\"g\", \"distanse\"]\n[pack]\nprofile = \"slicer-3dtf\"\n";
         let p = crate::file::parse(text, &[]).unwrap();
-        let e = Plan::resolve(&p, &[], &Geometry::new([8; 3], [1.0; 3])).unwrap_err().to_string();
+        let e = Plan::resolve(&Settings::new(&p, &Default::default()), &[], &Geometry::new([8; 3], [1.0; 3]))
+            .unwrap_err()
+            .to_string();
         assert!(e.starts_with("keep: unknown channel 'distanse'") && e.contains("distance"), "{e}");
         let with_prefilter = "[prefilter]\nsigma_d = 2.0\nsigma_r = 0.1\n[pack]\nprofile = \"distance-tf\"\n";
         let p = crate::file::parse(with_prefilter, &[]).unwrap();
-        let plan = Plan::resolve(&p, &[], &Geometry::new([64, 64, 64], [1.0, 1.0, 2.0])).unwrap();
+        let plan =
+            Plan::resolve(&Settings::new(&p, &Default::default()), &[], &Geometry::new([64, 64, 64], [1.0, 1.0, 2.0]))
+                .unwrap();
         // pre-filter box ceil(2.5 x 2 / s): 5, 5, 3; rays of 15 mm: 15 + 2, 15 + 2, 8 + 2
         assert_eq!((plan.reach.prefilter, plan.halo), ([5, 5, 3], [2 + 5 + 17, 2 + 5 + 17, 2 + 3 + 10]));
         assert!(plan.to_string().contains("halo of a block: x 24, y 24, z 15 voxels"), "{plan}");

@@ -5,7 +5,6 @@
 //! as it was.
 
 use crate::channel::Channel;
-use crate::file::Pipeline;
 use crate::plan::Plan;
 use crate::progress::Progress;
 use mdtf_pack::Profile;
@@ -16,10 +15,11 @@ use std::time::Instant;
 
 pub use crate::error::RunError;
 pub(crate) use crate::error::{at, fail};
+pub use crate::inputs::plan;
 use crate::inputs::{load_input, run_inputs};
-pub use crate::inputs::{plan, resolved_settings};
 use crate::report::Stages;
 pub use crate::report::{BoundarySummary, RunReport, SlabRun, StageReport};
+use crate::settings::{Outputs, Settings};
 use crate::whole::WholeRun;
 
 /// Where a run reads from and writes to.
@@ -56,25 +56,21 @@ impl RunOptions {
     }
 }
 
-/// Runs `p`; `on_stage(name)` is called as each stage starts.
-pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &(dyn Fn(&str) + Sync)) -> Result<RunReport, RunError> {
+/// Runs the pipeline of settings `s` (made from `opts`'s pipeline file)
+/// into `opts.output`; `on_stage(name)` is called as each stage starts.
+pub fn run(s: &Settings, opts: &RunOptions, on_stage: &(dyn Fn(&str) + Sync)) -> Result<RunReport, RunError> {
     let start = Instant::now();
-    let base = opts.base();
-    let out = OutputFolder::begin(&opts.output, &run_inputs(p, opts, &base)).map_err(at("output"))?;
+    let out = OutputFolder::begin(&opts.output, &run_inputs(s)).map_err(at("output"))?;
     let progress = Progress::new(opts, on_stage, &|_, _| {});
     progress.stage("input")?;
     let t = Instant::now();
-    let input = load_input(p, opts, &base)?;
+    let input = load_input(&s.input)?;
     // what the outputs need: derive items, tracing, when each channel is freed
     let field_names: Vec<String> = input.0.fields.iter().map(|f| f.name.clone()).collect();
     let geo = input.0.geometry.clone();
-    let plan = Plan::resolve(p, &field_names, &geo).map_err(at("plan"))?;
-    let mut run = WholeRun::new(p, opts, plan, input, t, out.path().to_path_buf(), progress)?;
-    run.derive()?;
-    let traced = run.trace()?;
-    run.keep()?;
-    let (hists, field_pair_hists) = run.histograms()?;
-    let packed = run.pack(opts, &traced, hists, &field_pair_hists)?;
+    let plan = Plan::resolve(s, &field_names, &geo).map_err(at("plan"))?;
+    let mut run = WholeRun::new(s, plan, input, t, out.path().to_path_buf(), progress)?;
+    let (traced, packed) = run.run_steps()?;
     let report = RunReport {
         fields: run.fields().to_vec(),
         value_range: run.finite_range,
@@ -86,34 +82,34 @@ pub fn run(p: &Pipeline, opts: &RunOptions, on_stage: &(dyn Fn(&str) + Sync)) ->
         units: run.units,
         ..RunReport::of(opts, run.input_name, &geo)
     };
-    finish(p, opts, out, report, &packed.table_names, start, &run.progress)
+    finish(s, opts, out, report, &packed.table_names, start, &run.progress)
 }
 
-/// Writes the channels `p` keeps into the staging folder's `volumes/`,
+/// Writes the channels the run keeps (`outputs`) into the staging folder's `volumes/`,
 /// each by `write(channel, file)`, side by side (None: the run did not
 /// make that channel), and `volumes/channels.json`: each file's channel, meaning,
 /// units and producing stage from the channel table (`fields`: the input's
 /// field names, empty for one field); the files written, relative to `dir`.
-pub(crate) fn write_kept<W>(p: &Pipeline, fields: &[String], dir: &Path, write: W) -> Result<Vec<String>, RunError>
+pub(crate) fn write_kept<W>(outputs: &Outputs, fields: &[String], dir: &Path, write: W) -> Result<Vec<String>, RunError>
 where
     W: Fn(&str, &Path) -> Option<Result<(), RunError>> + Sync,
 {
     let kdir = dir.join("volumes");
     std::fs::create_dir_all(&kdir).map_err(at("keep"))?;
     // the files are encoded (and compressed) side by side; the first error in the list's order is told
-    let wrote: Vec<Result<(), RunError>> = p
+    let wrote: Vec<Result<(), RunError>> = outputs
         .keep
         .par_iter()
         .map(|c| {
-            write(c, &kdir.join(p.keep_format.file_name(c)))
+            write(c, &kdir.join(outputs.keep_format.file_name(c)))
                 .unwrap_or_else(|| Err(fail("keep")(format!("no channel '{c}' was computed"))))
         })
         .collect();
     wrote.into_iter().collect::<Result<(), RunError>>()?;
-    let mut written = Vec::with_capacity(p.keep.len() + 1);
-    let mut listed = Vec::with_capacity(p.keep.len());
-    for c in &p.keep {
-        let name = p.keep_format.file_name(c);
+    let mut written = Vec::with_capacity(outputs.keep.len() + 1);
+    let mut listed = Vec::with_capacity(outputs.keep.len());
+    for c in &outputs.keep {
+        let name = outputs.keep_format.file_name(c);
         let text = Channel::named(c, fields).map_err(|e| fail("keep")(e.to_string()))?.text(!fields.is_empty());
         listed.push(serde_json::json!({
             "channel": c,
@@ -137,7 +133,7 @@ where
 /// run_report.json (`report` gets the preview's stage and the total time
 /// since `start`), report.html, and the output folder published.
 pub(crate) fn finish(
-    p: &Pipeline,
+    s: &Settings,
     opts: &RunOptions,
     out: OutputFolder,
     mut report: RunReport,
@@ -147,7 +143,7 @@ pub(crate) fn finish(
 ) -> Result<RunReport, RunError> {
     let dir = out.path();
     let pdir = dir.join("pack");
-    let previewable = match p.pack.profile {
+    let previewable = match s.profile() {
         Profile::Slicer3dtf | Profile::DistanceTf => true,
         Profile::GaussianTf => true,
         // with a TF, or the default one from the boundaries found
@@ -155,7 +151,7 @@ pub(crate) fn finish(
         // the mesh resampled onto a grid, with the TF of its gaussians.json
         Profile::ProjectedTetrahedra => true,
     };
-    if p.preview && previewable {
+    if s.outputs.preview && previewable {
         progress.stage("preview")?;
         let t = Instant::now();
         let cam = mdtf_preview::Camera::default();
@@ -174,12 +170,11 @@ pub(crate) fn finish(
     }
     report.total_seconds = start.elapsed().as_secs_f64();
     report.peak_mib = crate::report::peak_mib();
-    report.settings = resolved_settings(p, opts).map_err(fail("report"))?;
+    report.settings = s.to_table().map_err(fail("report"))?;
     let json = serde_json::to_string_pretty(&report).map_err(at("report"))?;
     write_file_atomically(&dir.join("run_report.json"), |w| w.write_all(json.as_bytes())).map_err(at("report"))?;
     write_report_page(&report, dir).map_err(fail("report"))?;
-    let base = opts.base();
-    out.publish(&run_inputs(p, opts, &base)).map_err(at("output"))?;
+    out.publish(&run_inputs(s)).map_err(at("output"))?;
     Ok(report)
 }
 

@@ -6,12 +6,11 @@
 
 use crate::channel::Channel;
 use crate::error::{RunError, at, fail};
-use crate::file::Pipeline;
 use crate::hist_files::{Counted, Written};
 use crate::plan::{Plan, Step};
 use crate::progress::Progress;
 use crate::report::{BoundarySummary, Stages, Traced};
-use crate::run::RunOptions;
+use crate::settings::{Histograms, Settings};
 use mdtf_boundary::BoundaryInput;
 use mdtf_derive::{DeriveParams, Item};
 use mdtf_histogram::{Axis, AxisSpec, Histogram, HvolParams, count, histogram_volume, hit_mask};
@@ -23,9 +22,7 @@ use std::time::Instant;
 
 /// A whole-volume run between its input and its end.
 pub(crate) struct WholeRun<'a> {
-    p: &'a Pipeline,
-    /// The pipeline file's folder (relative paths in it start there).
-    base: PathBuf,
+    s: &'a Settings,
     /// The staging output folder.
     dir: PathBuf,
     geo: Geometry,
@@ -43,6 +40,8 @@ pub(crate) struct WholeRun<'a> {
     chans: BTreeMap<Channel, Volume>,
     /// The normal, until the tracing has read it.
     normal: Option<MultiField>,
+    /// The pre-filtered g and f'', until the tracing has read them.
+    prefiltered: Option<(Volume, Volume)>,
     /// The value as derive's input; its volume moves into the channels, or
     /// stays here while the deferred normals still need it.
     value: MultiField,
@@ -63,13 +62,12 @@ pub(crate) struct Packed {
 }
 
 impl<'a> WholeRun<'a> {
-    /// The run of `p` on the `input` it read (with its name and the
+    /// The run of `s` on the `input` it read (with its name and the
     /// reader's warnings, as [`crate::inputs::load_input`] gives them; read
     /// from `started` on), planned as `plan`, writing into the staging
     /// folder `dir`: records the input stage.
     pub(crate) fn new(
-        p: &'a Pipeline,
-        opts: &RunOptions,
+        s: &'a Settings,
         plan: Plan,
         (input, meta): (MultiField, crate::inputs::InputMeta),
         started: Instant,
@@ -86,7 +84,7 @@ impl<'a> WholeRun<'a> {
         let padding_note = meta.padding_note(padded, geo.voxel_count());
         let mut warnings = meta.warnings;
         warnings.extend(padding_note);
-        warnings.extend(first_field_note(p.pack.profile, &plan.fields));
+        warnings.extend(first_field_note(s.profile(), &plan.fields));
         let (value, input) = if plan.fields.is_empty() {
             (input.into_scalar().map_err(at("input"))?, None)
         } else {
@@ -94,14 +92,13 @@ impl<'a> WholeRun<'a> {
             (value, Some(input))
         };
         Ok(WholeRun {
-            p,
-            base: opts.base(),
+            s,
             dir,
             finite_range: value.finite_range().map(|(lo, hi)| [lo as f64, hi as f64]),
             geo,
             plan,
             derive: DeriveParams {
-                kernel: p.derive.kernel,
+                kernel: s.chain.kernel,
                 padding: meta.padding.map(|r| r.map(|x| x as f32)),
                 ..Default::default()
             },
@@ -112,6 +109,7 @@ impl<'a> WholeRun<'a> {
             warnings,
             chans: BTreeMap::new(),
             normal: None,
+            prefiltered: None,
             // the value volume goes into derive as a one-field MultiField and comes back out: no copy
             value: MultiField::from(value),
             input,
@@ -141,10 +139,37 @@ impl<'a> WholeRun<'a> {
         self.geo.voxel_count()
     }
 
-    /// The derive stage (only the items the later stages use): the value's
-    /// derivatives, then those of all fields together; the input's fields
-    /// and the value then move into the channels the plan wants.
-    pub(crate) fn derive(&mut self) -> Result<(), RunError> {
+    /// Runs the plan's steps in their order, from the derivatives to the
+    /// pack (the input is read before, the preview rendered at the run's
+    /// end); what the pack and the tracing leave for the report.
+    pub(crate) fn run_steps(&mut self) -> Result<(Traced, Packed), RunError> {
+        let steps: Vec<Step> = self.plan.steps.iter().map(|s| s.step).collect();
+        let (mut traced, mut packed) = (Traced::default(), None);
+        let mut hists = (Written::default(), Vec::new());
+        let mut settled = false;
+        for step in steps {
+            // every step after the derivatives reads the channels as the plan wants them
+            if !settled && step > Step::DeriveFields {
+                self.settle_derived();
+                settled = true;
+            }
+            match step {
+                Step::Input | Step::Preview => {}
+                Step::Derive => self.derive_value()?,
+                Step::DeriveFields => self.derive_fields()?,
+                Step::Prefilter => self.prefilter()?,
+                Step::Trace => traced = self.trace()?,
+                Step::Keep => self.keep()?,
+                Step::Histogram => hists = self.histograms()?,
+                Step::Pack => packed = Some(self.pack(&traced, std::mem::take(&mut hists.0), &hists.1)?),
+            }
+        }
+        let packed = packed.ok_or_else(|| fail("plan")("the plan has no pack step".into()))?;
+        Ok((traced, packed))
+    }
+
+    /// The derive step over the value (only the items the later steps use).
+    fn derive_value(&mut self) -> Result<(), RunError> {
         let items = self.plan.derive.clone();
         if !items.is_empty() {
             self.progress.stage("derive")?;
@@ -160,6 +185,11 @@ impl<'a> WholeRun<'a> {
             }
             self.stages.done("derive", t, self.voxels(), vec![]);
         }
+        Ok(())
+    }
+
+    /// The derive step over all fields together (gnorm, inv_g, the Jacobian's components).
+    fn derive_fields(&mut self) -> Result<(), RunError> {
         let multi_items = self.plan.derive_fields.clone();
         if let Some(mf) = &self.input
             && !multi_items.is_empty()
@@ -172,6 +202,13 @@ impl<'a> WholeRun<'a> {
             self.take_named(out.items.into_iter().flat_map(|(_, m)| m.into_volumes()).collect());
             self.stages.done("derive (multi-field)", t, self.voxels(), vec![]);
         }
+        Ok(())
+    }
+
+    /// After the derivatives: the input's fields and the value move into
+    /// the channels the plan wants, and without a tracing (which reads the
+    /// normal first) the normal's components too.
+    fn settle_derived(&mut self) {
         // the input's fields move into the channels once the multi-field derive is done with them
         if let Some(mf) = self.input.take() {
             for (k, f) in mf.fields.into_iter().enumerate() {
@@ -188,39 +225,51 @@ impl<'a> WholeRun<'a> {
             // nothing reads the value volume from here on unless it is a channel
             self.value.fields.clear();
         }
-        Ok(())
+        if !self.plan.trace {
+            self.settle_normals();
+        }
     }
 
-    /// The pre-filter and the tracing, when planned; then the normals join
-    /// the channels the plan wants.
-    pub(crate) fn trace(&mut self) -> Result<Traced, RunError> {
-        let value_range = self.finite_range.map_or(0.0, |[lo, hi]| hi - lo);
-        let traced = if self.plan.trace { self.prefilter_and_trace(value_range)? } else { Traced::default() };
+    /// The normal's components join the channels the plan wants.
+    fn settle_normals(&mut self) {
         let normals = self.normal.take().map(MultiField::into_volumes).unwrap_or_default();
         self.take_named(
             normals.into_iter().filter(|(n, _)| Channel::of_store(n).is_some_and(|c| self.needs(c))).collect(),
         );
+    }
+
+    /// The pre-filter step: g and f'' filtered for the tracing.
+    fn prefilter(&mut self) -> Result<(), RunError> {
+        let (Some(pf), Some(g), Some(f2)) =
+            (&self.s.chain.prefilter, self.chans.get(&Channel::G), self.chans.get(&Channel::F2))
+        else {
+            return Err(fail("prefilter")("the pre-filter's parameters or derivatives are missing".into()));
+        };
+        self.progress.stage("prefilter")?;
+        let t = Instant::now();
+        let filter = |v: &Volume| crate::boundary_chain::prefilter(v, pf).map_err(at("prefilter"));
+        self.prefiltered = Some((filter(g)?, filter(f2)?));
+        self.stages.done("prefilter", t, self.voxels(), vec![]);
+        Ok(())
+    }
+
+    /// The tracing step (of the pre-filtered g and f'' when the plan
+    /// pre-filters); then the normal's components join the channels.
+    fn trace(&mut self) -> Result<Traced, RunError> {
+        let value_range = self.finite_range.map_or(0.0, |[lo, hi]| hi - lo);
+        let traced = self.trace_derived(value_range)?;
+        self.settle_normals();
         Ok(traced)
     }
 
-    fn prefilter_and_trace(&mut self, value_range: f64) -> Result<Traced, RunError> {
+    fn trace_derived(&mut self, value_range: f64) -> Result<Traced, RunError> {
         let n = self.voxels();
         let (Some(g0), Some(f20), Some(nm)) =
             (self.chans.get(&Channel::G), self.chans.get(&Channel::F2), self.normal.as_ref())
         else {
             return Err(fail("boundary")("derivatives missing".into()));
         };
-        let filtered = match &self.p.prefilter {
-            Some(pf) => {
-                self.progress.stage("prefilter")?;
-                let t = Instant::now();
-                let filter = |v: &Volume| crate::boundary_chain::prefilter(v, pf).map_err(at("prefilter"));
-                let pair = (filter(g0)?, filter(f20)?);
-                self.stages.done("prefilter", t, n, vec![]);
-                Some(pair)
-            }
-            None => None,
-        };
+        let filtered = self.prefiltered.take();
         let (g, f2) = match &filtered {
             Some((g, f2)) => (g, f2),
             None => (g0, f20),
@@ -234,7 +283,7 @@ impl<'a> WholeRun<'a> {
             _ => mdtf_boundary::Detected::default(),
         };
         let input = BoundaryInput { g, f2, normal: nm, value_range };
-        let mut out = mdtf_boundary::run_detected(&input, &self.p.boundary, &detected).map_err(at("boundary"))?;
+        let mut out = mdtf_boundary::run_detected(&input, &self.s.chain.boundary, &detected).map_err(at("boundary"))?;
         self.warnings.extend(out.warnings.iter().map(|w| format!("boundary: {w}")));
         let traced = Traced {
             d_max: Some(out.resolved.d_max),
@@ -260,14 +309,14 @@ impl<'a> WholeRun<'a> {
     }
 
     /// The kept channels, written as volumes.
-    pub(crate) fn keep(&mut self) -> Result<(), RunError> {
-        if self.p.keep.is_empty() {
+    fn keep(&mut self) -> Result<(), RunError> {
+        if self.s.outputs.keep.is_empty() {
             return Ok(());
         }
         self.progress.stage("keep")?;
         let t = Instant::now();
         let (chans, fields) = (&self.chans, &self.plan.fields);
-        let written = crate::run::write_kept(self.p, fields, &self.dir, |c, file| {
+        let written = crate::run::write_kept(&self.s.outputs, fields, &self.dir, |c, file| {
             let v = chans.get(&Channel::parse(c, fields)?)?;
             Some(mdtf_volume::write_volume(file, v, &WriteOptions::default(), &[]).map_err(at("keep")))
         })?;
@@ -279,14 +328,17 @@ impl<'a> WholeRun<'a> {
     /// pack's default opacity; it comes first so that the boundaries it
     /// shows are drawn on the others), and the field pairs' joint
     /// histograms, which the Gaussian TF figures draw over.
-    pub(crate) fn histograms(&mut self) -> Result<(Written, Vec<Histogram>), RunError> {
-        let Some(h) = &self.p.histogram else { return Ok((Written::default(), Vec::new())) };
+    fn histograms(&mut self) -> Result<(Written, Vec<Histogram>), RunError> {
+        let h = self.s.outputs.histograms;
+        if !h.counted {
+            return Ok((Written::default(), Vec::new()));
+        }
         self.progress.stage("histogram")?;
         let t = Instant::now();
         let hdir = self.dir.join("histogram");
         std::fs::create_dir_all(&hdir).map_err(at("histogram"))?;
         let err = |e: String| fail("histogram")(e);
-        let mut counted = self.count(h)?;
+        let mut counted = self.count(&h)?;
         counted.set_units(&self.units);
         // the default TF's histogram volume is an output only when the histograms ask for it
         let default_hvol = if h.hvol { None } else { counted.hvol.take() };
@@ -309,7 +361,7 @@ impl<'a> WholeRun<'a> {
     }
 
     /// The counts the histogram section `h` asks for.
-    fn count(&self, h: &crate::file::HistogramSection) -> Result<Counted, RunError> {
+    fn count(&self, h: &Histograms) -> Result<Counted, RunError> {
         let get = |c: Channel| self.chans.get(&c);
         let (Some(v), Some(g)) = (get(Channel::Value), get(Channel::G)) else {
             return Err(fail("histogram")("v and g missing".into()));
@@ -324,7 +376,7 @@ impl<'a> WholeRun<'a> {
         let mut counted = Counted { voxels: self.voxels(), without_g, ..Default::default() };
         // asked for, or read by the default TF (no TF file given); once the
         // tracing has freed f'', of v derived again, as the pack would
-        if h.hvol || self.p.pack.tf.is_none() {
+        if h.hvol || self.s.outputs.pack.tf.is_none() {
             counted.hvol = Some(match get(Channel::F2) {
                 Some(f2) => histogram_volume(
                     v.samples(),
@@ -371,22 +423,16 @@ impl<'a> WholeRun<'a> {
 
     /// The pack (for meshes: the tetra stage, which writes the pack itself),
     /// from the histograms' outputs `hists` and `field_pair_hists`.
-    pub(crate) fn pack(
-        &mut self,
-        opts: &RunOptions,
-        traced: &Traced,
-        hists: Written,
-        field_pair_hists: &[Histogram],
-    ) -> Result<Packed, RunError> {
+    fn pack(&mut self, traced: &Traced, hists: Written, field_pair_hists: &[Histogram]) -> Result<Packed, RunError> {
         let Written { boundaries, arches, figure_hists, hvol, .. } = hists;
-        let profile = self.p.pack.profile;
+        let profile = self.s.profile();
         let stage = if profile == Profile::ProjectedTetrahedra { "tetra + pack" } else { "pack" };
         self.progress.stage(stage)?;
         let t = Instant::now();
-        let tf = crate::inputs::read_tf(self.p, &self.base)?;
+        let tf = crate::inputs::read_tf(&self.s.outputs.pack)?;
         let pdir = self.dir.join("pack");
         std::fs::create_dir_all(&pdir).map_err(at("pack"))?;
-        let provenance = crate::inputs::provenance(self.p, opts, &self.base, self.geo.dims, &self.units);
+        let provenance = crate::inputs::provenance(self.s, self.geo.dims, &self.units);
         let mut table_names = Vec::new();
         let mut outputs: Vec<String> = vec!["pack/manifest.json".into()];
         let hvol = hvol.as_ref();
@@ -447,7 +493,7 @@ impl<'a> WholeRun<'a> {
     ) -> Result<Vec<GaussianPrimitive>, RunError> {
         let pdir = self.dir.join("pack");
         let value = self.chans.get(&Channel::Value).ok_or_else(|| fail("pack")("no value volume".into()))?;
-        let tetra = &self.p.tetra;
+        let tetra = &self.s.outputs.tetra;
         let (mesh, grid, coarsened) =
             mdtf_tetra::tetrahedralise_within(value, tetra.tets, tetra.max_tetrahedra, "v").map_err(at("pack"))?;
         let every_voxel = "--set tetra.max_tetrahedra=0 meshes every voxel";
@@ -478,7 +524,7 @@ impl<'a> WholeRun<'a> {
         traced: &Traced,
         provenance: Provenance,
     ) -> Result<(Vec<Lut>, Option<Vec<GaussianPrimitive>>), RunError> {
-        let profile = self.p.pack.profile;
+        let profile = self.s.profile();
         let pdir = self.dir.join("pack");
         let fields = &self.plan.fields;
         let mut pack_chans: Vec<(String, Volume)> = profile
@@ -487,19 +533,24 @@ impl<'a> WholeRun<'a> {
             .filter_map(|name| Channel::parse(&name, fields).and_then(|c| self.chans.remove(&c)).map(|v| (name, v)))
             .collect();
         let ranges = crate::pack_inputs::ranges(&pack_chans, &BTreeMap::new(), traced.d_max).map_err(at("pack"))?;
-        let alpha = self.p.pack.alpha;
+        let alpha = self.s.outputs.pack.alpha;
         let luts = crate::pack_inputs::luts(profile, tf, &alpha, &pack_chans, &ranges, hvol, &self.derive)
             .map_err(at("pack"))?;
         let gaussians = self.gaussians(tf, hvol, &pack_chans)?;
-        let params =
-            PackParams { profile, ranges, fields: self.plan.fields.clone(), dtype: None, nifti: self.p.pack.nifti };
+        let params = PackParams {
+            profile,
+            ranges,
+            fields: self.plan.fields.clone(),
+            dtype: None,
+            nifti: self.s.outputs.pack.nifti,
+        };
         let sources = BTreeMap::new();
         let layouts = mdtf_pack::texture_layouts(&params);
         let mut writer = PackWriter::new(&pdir, &params, self.geo.clone(), &sources);
         let mut normals_pending = self.plan.defer_normals;
         for (i, layout) in layouts.iter().enumerate() {
             let uses = |l: &mdtf_pack::TextureLayout, c: &str| l.components.iter().flatten().any(|x| x == c);
-            if normals_pending && ["nx", "ny", "nz"].iter().any(|c| uses(layout, c)) {
+            if normals_pending && crate::channel::NORMAL.iter().any(|c| uses(layout, &c.name(&[]))) {
                 // the value volume is in the pack's channels, the others, or still in derive's input
                 let taken = pack_chans.iter().position(|(c, _)| c == "v").map(|k| pack_chans.remove(k).1);
                 let value = match taken.or_else(|| self.chans.remove(&Channel::Value)) {
@@ -531,14 +582,13 @@ impl<'a> WholeRun<'a> {
         hvol: Option<&mdtf_histogram::HistogramVolume>,
         pack_chans: &[(String, Volume)],
     ) -> Result<Option<Vec<GaussianPrimitive>>, RunError> {
-        if self.p.pack.profile != Profile::GaussianTf {
+        if self.s.profile() != Profile::GaussianTf {
             return Ok(None);
         }
         let err = |e: String| fail("pack")(e);
-        let mask = match &self.p.pack.gtf_from_mask {
-            Some(m) => {
-                let path = self.base.join(m);
-                let v = mdtf_volume::read_scalar(&path, &mdtf_volume::ReadOptions::default())
+        let mask = match &self.s.outputs.pack.gtf_from_mask {
+            Some(path) => {
+                let v = mdtf_volume::read_scalar(path, &mdtf_volume::ReadOptions::default())
                     .map_err(|e| err(format!("gtf_from_mask {}: {e}", path.display())))?;
                 Some(v)
             }

@@ -9,14 +9,31 @@
 //! order, on several threads, one of them twice, each from the job's JSON,
 //! as `mdtf.dask` hands them to a cluster).
 
-use mdtf_pipeline::blocks::{SlabJob, SlabPass, SlabSize, SlabTasks, TaskOutcome, run as run_blocks, run_task};
+use mdtf_pipeline::blocks::{SlabJob, SlabPass, SlabSize, SlabTasks, TaskFailed, TaskOutcome, run_task};
 use mdtf_pipeline::file::{Pipeline, parse};
-use mdtf_pipeline::run::{RunOptions, run as run_whole};
+use mdtf_pipeline::run::{RunError, RunOptions, RunReport};
+use mdtf_pipeline::settings::Settings;
 use mdtf_volume::{Geometry, SampleType, Volume, WriteOptions, write_volume};
 use std::collections::BTreeMap;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
+
+/// The whole-volume run of `p` with `opts`.
+fn run_whole(p: &Pipeline, opts: &RunOptions, on_stage: &(dyn Fn(&str) + Sync)) -> Result<RunReport, RunError> {
+    mdtf_pipeline::run::run(&Settings::new(p, opts), opts, on_stage)
+}
+
+/// The run of `p` with `opts` by slabs of `size`.
+fn run_blocks(
+    p: &Pipeline,
+    opts: &RunOptions,
+    size: SlabSize,
+    on_stage: &(dyn Fn(&str) + Sync),
+    on_slab: &(dyn Fn(usize, usize) + Sync),
+) -> Result<RunReport, RunError> {
+    mdtf_pipeline::blocks::run(&Settings::new(p, opts), opts, size, on_stage, on_slab)
+}
 
 fn pipelines_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pipelines")
@@ -159,7 +176,7 @@ fn the_shipped_pipelines_give_the_same_files_slab_by_slab() {
 fn the_budget_sets_the_slab_height_and_a_budget_too_small_is_refused_before_any_output() {
     let p = distance_tf_for_clean_data(&["input.size=64"]);
     let geo = Geometry::new([64; 3], [1.0; 3]);
-    let plan = mdtf_pipeline::plan::Plan::resolve(&p, &[], &geo).unwrap();
+    let plan = mdtf_pipeline::plan::Plan::resolve(&Settings::new(&p, &Default::default()), &[], &geo).unwrap();
     let h = mdtf_pipeline::blocks::slab_height(EIGHT_SLAB_BUDGET, &geo, &plan, true).unwrap();
     assert_eq!(h, 8, "8 slabs of 64 planes");
     let dir = tempfile::tempdir().unwrap();
@@ -328,7 +345,7 @@ struct ThreadTasks {
 }
 
 impl SlabTasks for ThreadTasks {
-    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
+    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), TaskFailed> {
         let (pass, ran) = run_on_threads(job, slabs)?;
         let first = slabs.first().cloned().unwrap_or(0..0);
         std::fs::remove_file(job.partial_file(first.start)).map_err(|e| e.to_string())?;
@@ -344,7 +361,7 @@ impl SlabTasks for ThreadTasks {
 
 /// Runs `job`'s tasks of `slabs` on threads, the last slab first, each
 /// from the job's JSON: the pass's name in the JSON and the tasks run.
-fn run_on_threads(job: &SlabJob, slabs: &[Range<usize>]) -> Result<(String, usize), String> {
+fn run_on_threads(job: &SlabJob, slabs: &[Range<usize>]) -> Result<(String, usize), TaskFailed> {
     let json = serde_json::to_string(job).map_err(|e| e.to_string())?;
     let value: serde_json::Value = serde_json::from_str(&json).map_err(|e| e.to_string())?;
     let pass = value["pass"].as_object().and_then(|o| o.keys().next().cloned()).unwrap_or_default();
@@ -470,7 +487,7 @@ fn tracing_tasks_cut_their_slabs_in_strips_of_rows_with_the_same_files() {
 struct DamagingTasks;
 
 impl SlabTasks for DamagingTasks {
-    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
+    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), TaskFailed> {
         run_on_threads(job, slabs)?;
         let written = job.partial(slabs[0].start).map_err(|e| e.to_string())?.written;
         if let Some(piece) = written.first() {
@@ -503,7 +520,7 @@ fn a_task_whose_slab_is_done_does_nothing_and_one_whose_bytes_were_damaged_is_ru
 struct PlainTasks;
 
 impl SlabTasks for PlainTasks {
-    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
+    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), TaskFailed> {
         run_on_threads(job, slabs).map(drop)
     }
 }
@@ -514,7 +531,7 @@ impl SlabTasks for PlainTasks {
 struct DyingTasks;
 
 impl SlabTasks for DyingTasks {
-    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
+    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), TaskFailed> {
         if matches!(job.pass, SlabPass::Trace { .. }) {
             run_on_threads(job, &slabs[..slabs.len() / 2])?;
             std::process::abort();
@@ -605,9 +622,9 @@ struct FailingPackTasks {
 }
 
 impl SlabTasks for FailingPackTasks {
-    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
+    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), TaskFailed> {
         if matches!(job.pass, SlabPass::Pack { .. }) && !self.healed.load(std::sync::atomic::Ordering::Relaxed) {
-            return Err("a task failed: KilledWorker: the worker ran out of memory".into());
+            return Err(TaskFailed("KilledWorker: the worker ran out of memory".into()));
         }
         run_on_threads(job, slabs).map(drop)
     }
@@ -656,10 +673,10 @@ fn a_resumable_run_whose_tasks_failed_keeps_what_they_did_for_the_rerun() {
 struct FailingTasks;
 
 impl SlabTasks for FailingTasks {
-    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
+    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), TaskFailed> {
         let mut job = job.clone();
         job.store = job.store.join("gone");
-        run_task(&job, slabs[0].clone()).map(drop).map_err(|e| format!("a task failed: {e}"))
+        run_task(&job, slabs[0].clone()).map(drop).map_err(|e| TaskFailed(e.to_string()))
     }
 }
 
@@ -702,7 +719,7 @@ struct OrphanTasks {
 }
 
 impl SlabTasks for OrphanTasks {
-    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
+    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), TaskFailed> {
         let orphan = SlabJob { token: format!("{}-before", job.token), ..job.clone() };
         let e = run_task(&orphan, slabs[0].clone()).expect_err("an orphaned task is refused");
         // it published nothing: the slab is not done

@@ -31,7 +31,8 @@ fn differing(whole: &Volume, slab: &Volume, interior: std::ops::Range<usize>, sl
 /// The plan of a pipeline file's text on `v`'s grid.
 fn plan(toml: &str, v: &Volume) -> Plan {
     let p = parse(toml, &[]).unwrap();
-    Plan::resolve(&p, &[], &v.geometry).unwrap()
+    let settings = mdtf_pipeline::settings::Settings::new(&p, &Default::default());
+    Plan::resolve(&settings, &[], &v.geometry).unwrap()
 }
 
 /// Derive items of `v` with a fixed epsilon (the whole volume's, a pass-1 reduction).

@@ -43,7 +43,7 @@ fn rendered() -> String {
     for f in files {
         let p = parse(&std::fs::read_to_string(&f).unwrap(), &[]).unwrap();
         let opts = RunOptions { pipeline_path: f.clone(), ..Default::default() };
-        let (plan, input, geo) = plan(&p, &opts).unwrap();
+        let (plan, input, geo) = plan(&mdtf_pipeline::settings::Settings::new(&p, &opts)).unwrap();
         let name = f.file_name().unwrap().to_string_lossy();
         let [nx, ny, nz] = geo.dims;
         page += &format!("\n### `{name}` ({input}, {nx} x {ny} x {nz})\n\n```text\n{plan}\n```\n");

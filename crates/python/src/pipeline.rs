@@ -5,9 +5,10 @@
 
 use crate::call::run_released;
 use crate::error::{mdtf_error, value_error};
-use mdtf_pipeline::blocks::{SlabJob, SlabSize, SlabTasks};
+use mdtf_pipeline::blocks::{SlabJob, SlabTasks, TaskFailed};
 use mdtf_pipeline::file::Pipeline;
 use mdtf_pipeline::run::RunOptions;
+use mdtf_pipeline::settings::{Settings, SlabRequest};
 use pyo3::prelude::*;
 use pyo3::types::PyCFunction;
 use std::ops::Range;
@@ -52,24 +53,16 @@ pub fn run(
     let tasks = submit.map(|submit| Arc::new(PythonTasks { submit, cancel: cancel.clone() }) as Arc<dyn SlabTasks>);
     let by_tasks = tasks.is_some();
     let opts = RunOptions { pipeline_path: pipeline, input, output, cancel: Some(cancel.clone()), tasks, resume };
+    let settings = Settings::new(&p, &opts);
     let report = run_released(py, Some(&cancel), || {
-        let size = match (memory_budget, slab_planes) {
-            (Some(b), _) => Some(SlabSize::Budget(b)),
-            (None, Some(h)) => Some(SlabSize::Planes(h.max(1))),
-            (None, None) if by_tasks => Some(SlabSize::Planes(DEFAULT_TASK_PLANES)),
-            (None, None) => mdtf_pipeline::blocks::automatic(&p, &opts).map(|(b, _)| SlabSize::Budget(b)),
-        };
-        match size {
-            Some(size) => mdtf_pipeline::blocks::run(&p, &opts, size, &|_| {}, &|_, _| {}),
-            None => mdtf_pipeline::run::run(&p, &opts, &|_| {}),
+        match settings.slabs(SlabRequest { memory_budget, slab_planes }, by_tasks) {
+            Some(slabs) => mdtf_pipeline::blocks::run(&settings, &opts, slabs.size(), &|_| {}, &|_, _| {}),
+            None => mdtf_pipeline::run::run(&settings, &opts, &|_| {}),
         }
     })?
     .map_err(mdtf_error)?;
     serde_json::to_string_pretty(&report).map_err(mdtf_error)
 }
-
-/// z-planes per task of a [`run`] with `submit` when neither a budget nor a height is given.
-const DEFAULT_TASK_PLANES: usize = 64;
 
 /// The plan of the pipeline file on its input (or `input`): its text as
 /// `mdtf run --plan` prints it, and the halo a block needs, (z, y, x) voxels.
@@ -83,7 +76,8 @@ pub fn plan(
 ) -> PyResult<(String, (usize, usize, usize))> {
     let p = load(&pipeline, &overrides)?;
     let opts = RunOptions { pipeline_path: pipeline, input, ..Default::default() };
-    let (plan, _, _) = run_released(py, None, || mdtf_pipeline::run::plan(&p, &opts))?.map_err(mdtf_error)?;
+    let settings = Settings::new(&p, &opts);
+    let (plan, _, _) = run_released(py, None, || mdtf_pipeline::run::plan(&settings))?.map_err(mdtf_error)?;
     let [x, y, z] = plan.halo;
     Ok((plan.to_string(), (z, y, x)))
 }
@@ -105,8 +99,8 @@ impl std::fmt::Debug for PythonTasks {
 }
 
 impl SlabTasks for PythonTasks {
-    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String> {
-        let json = serde_json::to_string(job).map_err(|e| e.to_string())?;
+    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), TaskFailed> {
+        let json = serde_json::to_string(job).map_err(|e| TaskFailed(format!("the job is not JSON: {e}")))?;
         let slabs: Vec<(usize, usize)> = slabs.iter().map(|z| (z.start, z.end)).collect();
         let cancel = self.cancel.clone();
         Python::attach(|py| {
@@ -115,7 +109,7 @@ impl SlabTasks for PythonTasks {
             })?;
             self.submit.call1(py, (json, slabs, cancelled)).map(drop)
         })
-        .map_err(|e| format!("a task failed: {e}"))
+        .map_err(|e| TaskFailed(e.to_string()))
     }
 }
 

@@ -21,7 +21,7 @@ pub enum NanPolicy {
 }
 
 /// Options common to every reader.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct ReadOptions {
     /// Policy for NaN / infinite samples.
     pub nan: NanPolicy,

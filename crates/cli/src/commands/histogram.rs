@@ -5,6 +5,7 @@ use crate::input::{read_input, read_options};
 use crate::progress::Progress;
 use anyhow::{Context, Result, bail};
 use mdtf_pipeline::boundary_chain::BoundaryChainParams;
+use mdtf_pipeline::channel::Channel;
 use mdtf_pipeline::channels;
 use mdtf_pipeline::stages::derive::DeriveParams;
 use mdtf_pipeline::stages::histogram::{
@@ -73,9 +74,10 @@ pub fn run(args: &HistogramArgs, progress: &Progress) -> Result<()> {
 /// The channels the histograms read: the axes, and v, g, g_hit and hit for the stretched pair.
 fn wanted(args: &HistogramArgs) -> Vec<String> {
     let mut wanted: Vec<String> = args.axes.clone();
-    for extra in [&["v", "g"][..], &["g_hit", "hit"][..]].into_iter().filter(|_| args.stretched).flatten() {
-        if !wanted.iter().any(|w| w == extra) {
-            wanted.push(extra.to_string());
+    let stretched_pair = [Channel::Value, Channel::G, Channel::GHit, Channel::Hit];
+    for extra in stretched_pair.into_iter().filter(|_| args.stretched).map(|c| c.name(&[])) {
+        if !wanted.contains(&extra) {
+            wanted.push(extra);
         }
     }
     wanted

@@ -4,8 +4,9 @@ use crate::args::RunArgs;
 use crate::progress::Progress;
 use anyhow::{Context, Result};
 use mdtf_pipeline::blocks::SlabSize;
-use mdtf_pipeline::file::{Pipeline, parse};
+use mdtf_pipeline::file::parse;
 use mdtf_pipeline::run::{RunOptions, RunReport, plan as plan_pipeline, run as run_pipeline};
+use mdtf_pipeline::settings::{Settings, SlabRequest, Slabs};
 use std::sync::Mutex;
 use std::time::Instant;
 
@@ -20,19 +21,20 @@ pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
         output: args.output.clone(),
         ..Default::default()
     };
+    let settings = Settings::new(&pipeline, &opts);
     if args.print_settings {
-        let settings = mdtf_pipeline::run::resolved_settings(&pipeline, &opts).map_err(anyhow::Error::msg)?;
-        print!("{}", mdtf_pipeline::file::to_toml(&settings).map_err(anyhow::Error::msg)?);
+        let table = settings.to_table().map_err(anyhow::Error::msg)?;
+        print!("{}", mdtf_pipeline::file::to_toml(&table).map_err(anyhow::Error::msg)?);
         return Ok(());
     }
     if args.plan {
-        return print_plan(args, &pipeline, &opts, progress);
+        return print_plan(args, &settings, &opts, progress);
     }
     let lines = StageLines { progress, current: Mutex::new(None) };
     let on_stage = |stage: &str| lines.next(Some(stage));
-    let report = match slab_size(args, &pipeline, &opts, progress) {
-        Some(size) => mdtf_pipeline::blocks::run(&pipeline, &opts, size, &on_stage, &|k, n| lines.slab(k, n)),
-        None => run_pipeline(&pipeline, &opts, &on_stage),
+    let report = match slab_size(args, &settings, progress) {
+        Some(size) => mdtf_pipeline::blocks::run(&settings, &opts, size, &on_stage, &|k, n| lines.slab(k, n)),
+        None => run_pipeline(&settings, &opts, &on_stage),
     };
     lines.next(None);
     let report = report?;
@@ -50,27 +52,30 @@ pub fn run(args: &RunArgs, progress: &Progress) -> Result<()> {
 
 /// Prints the plan of the run (`--plan`): what it would do, writing
 /// nothing; with `--dims` on that grid, sized for a run by slabs or tasks.
-fn print_plan(args: &RunArgs, pipeline: &Pipeline, opts: &RunOptions, progress: &Progress) -> Result<()> {
+fn print_plan(args: &RunArgs, settings: &Settings, opts: &RunOptions, progress: &Progress) -> Result<()> {
     let Some(dims) = &args.dims else {
-        let (plan, input, geo) = plan_pipeline(pipeline, opts)?;
+        let (plan, input, geo) = plan_pipeline(settings)?;
         crate::input::print_plan(&args.pipeline.display().to_string(), &input, &geo, &plan);
         // a run by slabs asked for: sized too
-        if let Some(size) = slab_size(args, pipeline, opts, progress)
+        if let Some(size) = slab_size(args, settings, progress)
             && plan.fields.is_empty()
         {
-            println!("{}", mdtf_pipeline::blocks::sizing(pipeline, &geo, size)?);
+            println!("{}", mdtf_pipeline::blocks::sizing(settings, &geo, size)?);
         }
         return Ok(());
     };
     let geo = mdtf_volume::Geometry::new(crate::input::parse_dims(dims, "--dims")?, [1.0; 3]);
-    let plan = mdtf_pipeline::plan::Plan::resolve(pipeline, &[], &geo)?;
+    let plan = mdtf_pipeline::plan::Plan::resolve(settings, &[], &geo)?;
     crate::input::print_plan(&args.pipeline.display().to_string(), "a grid of --dims", &geo, &plan);
     let usable = mdtf_pipeline::blocks::usable_memory(mdtf_volume::available_memory());
-    let size = given_slab_size(args).unwrap_or(SlabSize::Budget(usable));
-    let sizing = mdtf_pipeline::blocks::sizing(pipeline, &geo, size)?;
+    let size = match settings.slabs(slab_request(args), false) {
+        Some(Slabs::Asked(size)) => size,
+        _ => SlabSize::Budget(usable),
+    };
+    let sizing = mdtf_pipeline::blocks::sizing(settings, &geo, size)?;
     println!("{sizing}");
     progress.note("timing the pipeline by slabs on two small phantoms for the time per voxel ...");
-    let timed = crate::commands::run_timing::time_per_voxel(pipeline, opts)?;
+    let timed = crate::commands::run_timing::time_per_voxel(settings, opts)?;
     println!("{}", timed.describe(geo.voxel_count() as u64));
     Ok(())
 }
@@ -78,20 +83,18 @@ fn print_plan(args: &RunArgs, pipeline: &Pipeline, opts: &RunOptions, progress: 
 /// The slabs of the run: `--memory-budget`, `--slab-planes`, or a budget
 /// of their own when the whole volume would not fit in memory (said in a
 /// note); None for a whole-volume run.
-fn slab_size(args: &RunArgs, pipeline: &Pipeline, opts: &RunOptions, progress: &Progress) -> Option<SlabSize> {
-    given_slab_size(args).or_else(|| {
-        let auto = mdtf_pipeline::blocks::automatic(pipeline, opts);
-        crate::input::announce_slabs(progress, "running", auto).map(SlabSize::Budget)
-    })
+fn slab_size(args: &RunArgs, settings: &Settings, progress: &Progress) -> Option<SlabSize> {
+    match settings.slabs(slab_request(args), false)? {
+        Slabs::TooLarge { budget, geometry } => {
+            crate::input::announce_slabs(progress, "running", Some((budget, geometry))).map(SlabSize::Budget)
+        }
+        slabs => Some(slabs.size()),
+    }
 }
 
-/// The slabs `--memory-budget` or `--slab-planes` asks for, if either.
-fn given_slab_size(args: &RunArgs) -> Option<SlabSize> {
-    match (args.memory_budget, args.slab_planes) {
-        (Some(b), _) => Some(SlabSize::Budget(b)),
-        (None, Some(h)) => Some(SlabSize::Planes(h as usize)),
-        (None, None) => None,
-    }
+/// The slabs `--memory-budget` or `--slab-planes` asks for.
+fn slab_request(args: &RunArgs) -> SlabRequest {
+    SlabRequest { memory_budget: args.memory_budget, slab_planes: args.slab_planes.map(|h| h as usize) }
 }
 
 /// One line per stage: the spinner names the running stage (and slab), and

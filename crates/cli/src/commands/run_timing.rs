@@ -6,8 +6,9 @@
 
 use anyhow::{Context, Result};
 use mdtf_pipeline::blocks::SlabSize;
-use mdtf_pipeline::file::{PhantomKind, Pipeline};
+use mdtf_pipeline::file::PhantomKind;
 use mdtf_pipeline::run::RunOptions;
+use mdtf_pipeline::settings::{InputSource, Settings};
 
 /// Edges of the phantoms timed, voxels.
 const PHANTOMS: [usize; 2] = [64, 128];
@@ -20,20 +21,17 @@ pub struct Timing {
     threads: usize,
 }
 
-/// Times `p` by slabs (16 planes) on 64^3 and 128^3 erf spheres with
+/// Times a run of `s` by slabs (16 planes) on 64^3 and 128^3 erf spheres with
 /// noise, its input replaced, its preview off, in a temporary folder.
-pub fn time_per_voxel(p: &Pipeline, opts: &RunOptions) -> Result<Timing> {
+pub fn time_per_voxel(s: &Settings, opts: &RunOptions) -> Result<Timing> {
     let dir = tempfile::tempdir().context("a temporary folder for the timing runs")?;
     let mut runs = Vec::with_capacity(PHANTOMS.len());
     for n in PHANTOMS {
-        let mut p = p.clone();
-        p.input.file = None;
-        p.input.phantom = PhantomKind::ErfSphere;
-        p.input.size = n;
-        p.input.noise = 2.0;
-        p.preview = false;
+        let mut s = s.clone();
+        s.input.source = InputSource::Phantom { kind: PhantomKind::ErfSphere, size: n, sigma: 3.0, noise: 2.0 };
+        s.outputs.preview = false;
         let opts = RunOptions { input: None, output: dir.path().join(format!("timed{n}")), ..opts.clone() };
-        let report = mdtf_pipeline::blocks::run(&p, &opts, SlabSize::Planes(16), &|_| {}, &|_, _| {})
+        let report = mdtf_pipeline::blocks::run(&s, &opts, SlabSize::Planes(16), &|_| {}, &|_, _| {})
             .with_context(|| format!("the timing run on a {n}^3 phantom"))?;
         runs.push(report.stages);
     }

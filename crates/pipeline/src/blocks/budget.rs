@@ -290,12 +290,13 @@ pub fn slabs(nz: usize, h: usize) -> Vec<std::ops::Range<usize>> {
 mod tests {
     use super::*;
     use crate::file::parse;
+    use crate::settings::Settings;
 
     #[test]
     fn the_slab_fits_the_budget_and_one_more_plane_would_not() {
         let geo = Geometry::new([256; 3], [1.0; 3]);
         let text = "[derive]\nkernel = \"central4\"\n[pack]\nprofile = \"distance-tf\"\n";
-        let plan = Plan::resolve(&parse(text, &[]).unwrap(), &[], &geo).unwrap();
+        let plan = Plan::resolve(&Settings::new(&parse(text, &[]).unwrap(), &Default::default()), &[], &geo).unwrap();
         let plane = 256 * 256 * 4;
         let budget = 256u64 << 20;
         let h = slab_height(budget, &geo, &plan, false).unwrap() as u64;
@@ -327,7 +328,7 @@ mod tests {
         let geo = Geometry::new([256; 3], [1.0; 3]);
         let plan_of = |keep: &str| {
             let text = format!("keep = [{keep}]\n[derive]\nkernel = \"central4\"\n[pack]\nprofile = \"distance-tf\"\n");
-            Plan::resolve(&parse(&text, &[]).unwrap(), &[], &geo).unwrap()
+            Plan::resolve(&Settings::new(&parse(&text, &[]).unwrap(), &Default::default()), &[], &geo).unwrap()
         };
         let plain = plan_of("");
         // g, f'', three normals, three gradient and six Hessian components, the Laplacian
@@ -346,7 +347,7 @@ mod tests {
     fn the_tracing_goes_by_strips_of_rows_only_when_whole_planes_do_not_fit() {
         let geo = Geometry::new([1024; 3], [1.0; 3]);
         let text = "[derive]\nkernel = \"central4\"\n[pack]\nprofile = \"distance-tf\"\n";
-        let plan = Plan::resolve(&parse(text, &[]).unwrap(), &[], &geo).unwrap();
+        let plan = Plan::resolve(&Settings::new(&parse(text, &[]).unwrap(), &Default::default()), &[], &geo).unwrap();
         let gib = 1u64 << 30;
         // 1 GiB: the other passes' slabs fit, the tracing's halo on whole planes does not
         let h = fit_slabs(gib, &geo, &plan, true, true).unwrap();

@@ -79,7 +79,7 @@ pub use item_files::{ItemFiles, automatic_item_budget, derive_item_files, items_
 pub use medians::{SelectCounts, SelectPass};
 pub use partials::{SlabPartial, TracePartial};
 pub use pool::SamplePool;
-pub use remote::{Prefilter, SlabJob, SlabPass, SlabTasks};
+pub use remote::{Prefilter, SlabJob, SlabPass, SlabTasks, TaskFailed};
 pub use resume::WrittenPiece;
 pub use sizing::{PassSize, Sizing, SizingError, sizing};
 pub use slab_channels::{ChannelError, SlabChannels, by_name, channels_named};
@@ -88,12 +88,12 @@ pub use store::{ChannelStore, StoreWriter};
 pub use tasks::{TaskOutcome, run_task};
 pub use trace_files::{TracedFiles, automatic_trace_budget, trace_files};
 
-use crate::file::Pipeline;
 use crate::progress::{Progress, cancelled};
 use crate::run::{RunError, RunOptions, RunReport, at, fail};
+use crate::settings::{InputSettings, Settings};
 use mdtf_pack::Profile;
 use mdtf_volume::{Geometry, OutputFolder, PlaneReader, Volume};
-use passes::SlabPasses;
+use passes::{SlabPasses, SlabWork};
 use std::ops::Range;
 use std::path::Path;
 use std::time::Instant;
@@ -101,40 +101,44 @@ use std::time::Instant;
 /// f32 volumes the preview decodes from a pack at most (value, g, f'', three normals).
 const PREVIEW_CHANNELS: usize = 6;
 
-/// Why `p` cannot run slab by slab on an input with `fields`, if it cannot.
-pub fn unsupported(p: &Pipeline, fields: usize) -> Option<String> {
-    if fields > 1 {
-        return Some(format!("the input has {fields} fields; slab-by-slab runs take one-field inputs"));
+/// Why a slab-by-slab run cannot take an input with `fields`, if it cannot.
+fn unsupported_fields(fields: usize) -> Option<String> {
+    (fields > 1).then(|| format!("the input has {fields} fields; slab-by-slab runs take one-field inputs"))
+}
+
+/// Why a run of `s` cannot go slab by slab on an input with `fields`, if it cannot.
+pub fn unsupported(s: &Settings, fields: usize) -> Option<String> {
+    if let Some(why) = unsupported_fields(fields) {
+        return Some(why);
     }
-    if p.pack.profile == Profile::ProjectedTetrahedra {
+    let (pack, keep) = (&s.outputs.pack, &s.outputs.keep);
+    if pack.profile == Profile::ProjectedTetrahedra {
         return Some("the projected-tetrahedra profile does not run slab by slab: it meshes the whole volume".into());
     }
-    if p.pack.gtf_from_mask.is_some() {
+    if pack.gtf_from_mask.is_some() {
         return Some("a Gaussian fitted to a mask (pack.gtf_from_mask) reads the whole mask and its voxels".into());
     }
-    if p.keep.iter().any(|c| c == "shade") {
+    if keep.iter().any(|c| c == "shade") {
         return Some("the shading weight (keep = [\"shade\"]) divides by the largest g of the whole volume".into());
     }
-    if p.pack.nifti {
+    if pack.nifti {
         return Some("NIfTI copies of the textures (pack.nifti) need each whole texture".into());
     }
     None
 }
 
-/// The budget a run of `p` without `--memory-budget` takes (see
+/// The budget a run of `s` without `--memory-budget` takes (see
 /// [`automatic_budget`]) and the whole run's grid, when the run would not
 /// fit in memory as a whole and can go by slabs: its input is a one-field
 /// file read by planes (its header tells the grid without reading the
 /// samples) and its profile runs by slabs. None otherwise.
-pub fn automatic(p: &Pipeline, opts: &RunOptions) -> Option<(u64, Geometry)> {
-    let base = opts.base();
-    if unsupported(p, 1).is_some() {
+pub fn automatic(s: &Settings) -> Option<(u64, Geometry)> {
+    if unsupported(s, 1).is_some() {
         return None;
     }
-    let file = crate::inputs::input_file(p, opts, &base)?;
-    let reader = PlaneReader::open(&file, &crate::inputs::read_options(p)).ok()??;
+    let reader = PlaneReader::open(s.input.file()?, &s.input.read).ok()??;
     let geo = reader.geometry().clone();
-    let budget = automatic_budget(p.pack.profile, geo.voxel_count() as u64, mdtf_volume::available_memory())?;
+    let budget = automatic_budget(s.profile(), geo.voxel_count() as u64, mdtf_volume::available_memory())?;
     Some((budget, geo))
 }
 
@@ -170,19 +174,21 @@ impl Source {
     }
 }
 
-/// The input of `p` as a [`Source`], with its name, its reader's warnings and its units.
-fn open_source(p: &Pipeline, opts: &RunOptions, base: &Path) -> Result<(Source, InputMeta), RunError> {
-    if let Some(f) = crate::inputs::input_file(p, opts, base)
-        && p.input.series.is_none()
-        && let Some(r) = PlaneReader::open(&f, &crate::inputs::read_options(p)).map_err(at("input"))?
+/// The `input` of a run of `s` (None: the tracing alone) as a [`Source`],
+/// with its name, its reader's warnings and its units.
+fn open_source(input: &InputSettings, s: Option<&Settings>) -> Result<(Source, InputMeta), RunError> {
+    if let Some(f) = input.file()
+        && input.read.dicom.series.is_none()
+        && let Some(r) = PlaneReader::open(f, &input.read).map_err(at("input"))?
     {
-        let (padding, padding_source) = crate::inputs::padding_of(p, None);
+        let (padding, padding_source) = crate::inputs::padding_of(input, None);
         let units = r.units().clone();
         let meta = InputMeta { name: f.display().to_string(), warnings: Vec::new(), units, padding, padding_source };
         return Ok((Source::Planes(r), meta));
     }
-    let (mf, meta) = crate::inputs::load_input(p, opts, base)?;
-    if let Some(why) = unsupported(p, mf.fields.len()) {
+    let (mf, meta) = crate::inputs::load_input(input)?;
+    let fields = mf.fields.len();
+    if let Some(why) = s.map_or_else(|| unsupported_fields(fields), |s| unsupported(s, fields)) {
         return Err(fail("plan")(why));
     }
     let v = mf.into_scalar().map_err(at("input"))?;
@@ -248,37 +254,36 @@ pub(crate) fn cut(
     })
 }
 
-/// Runs `p` slab by slab, slabs of `size`; `on_stage(name)` is called as
-/// each pass starts, `on_slab(k, slabs)` as it starts its slab k (from 1).
-/// The outputs equal [`run`](crate::run::run)'s.
+/// Runs the pipeline of settings `s` slab by slab, slabs of `size`;
+/// `on_stage(name)` is called as each pass starts, `on_slab(k, slabs)` as
+/// it starts its slab k (from 1). The outputs equal [`run`](crate::run::run)'s.
 pub fn run(
-    p: &Pipeline,
+    s: &Settings,
     opts: &RunOptions,
     size: SlabSize,
     on_stage: &(dyn Fn(&str) + Sync),
     on_slab: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<RunReport, RunError> {
     // a cancelled run fails wherever it noticed (a slab's read fails first): it ends as cancelled
-    run_slabs(p, opts, size, on_stage, on_slab).map_err(|e| if opts.is_cancelled() { cancelled() } else { e })
+    run_slabs(s, opts, size, on_stage, on_slab).map_err(|e| if opts.is_cancelled() { cancelled() } else { e })
 }
 
 /// [`run`], with whatever error stopped it: the passes in order.
 fn run_slabs(
-    p: &Pipeline,
+    s: &Settings,
     opts: &RunOptions,
     size: SlabSize,
     on_stage: &(dyn Fn(&str) + Sync),
     on_slab: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<RunReport, RunError> {
     let start = Instant::now();
-    if let Some(why) = unsupported(p, 1) {
+    if let Some(why) = unsupported(s, 1) {
         return Err(fail("plan")(why));
     }
-    let base = opts.base();
-    let inputs = crate::inputs::run_inputs(p, opts, &base);
+    let inputs = crate::inputs::run_inputs(s);
     let resumable = opts.tasks.is_some() && opts.resume;
     let out = match resumable {
-        true => OutputFolder::begin_resumable(&opts.output, &inputs, &resume::resume_key(p, opts, size)?),
+        true => OutputFolder::begin_resumable(&opts.output, &inputs, &resume::resume_key(s, size)?),
         false => OutputFolder::begin(&opts.output, &inputs),
     }
     .map_err(at("output"))?;
@@ -286,19 +291,19 @@ fn run_slabs(
         resume::keep_task_outputs(out.path())?;
     }
     let progress = Progress::new(opts, on_stage, on_slab);
-    match run_passes(p, opts, size, &out, progress) {
-        Ok(done) => crate::run::finish(&done.pipeline, opts, out, done.report, &done.tables, start, &done.progress),
+    match run_passes(s, opts, size, &out, progress) {
+        Ok(done) => crate::run::finish(&done.settings, opts, out, done.report, &done.tables, start, &done.progress),
         // a failed task (a worker out of memory, a full disk) need not cost the tasks done: a rerun resumes
         Err(e) if resumable && !opts.is_cancelled() && resume::some_task_done(out.path()) => Err(resume::kept(out, e)),
         Err(e) => Err(e),
     }
 }
 
-/// What the passes of a run leave for its end: the pipeline as it
+/// What the passes of a run leave for its end: the settings as it
 /// finishes (without an unaffordable preview), the report, the pack's
 /// tables and the progress.
 struct Passed<'a> {
-    pipeline: Pipeline,
+    settings: Settings,
     report: RunReport,
     tables: Vec<String>,
     progress: Progress<'a>,
@@ -306,19 +311,20 @@ struct Passed<'a> {
 
 /// The passes of [`run`] in order, into the staging folder `out`.
 fn run_passes<'a>(
-    p: &'a Pipeline,
+    s: &'a Settings,
     opts: &'a RunOptions,
     size: SlabSize,
     out: &OutputFolder,
     progress: Progress<'a>,
 ) -> Result<Passed<'a>, RunError> {
-    let (mut run, store) = SlabPasses::read_input(p, opts, size, (out.path(), out.resumed()), progress, true)?;
+    let work = SlabWork::Pipeline(s);
+    let (mut run, store) = SlabPasses::read_input(work, opts, size, (out.path(), out.resumed()), progress)?;
     let (mut chans, derived) = run.derive(store)?;
     let traced = run.trace(&mut chans, &derived)?;
     run.keep(&mut chans)?;
     let (table_names, boundaries) = run.pack(&mut chans, &derived, &traced)?;
     chans.store.clear();
-    let finishing = without_unaffordable_preview(p, opts, size, &run.geo, &mut run.warnings);
+    let finishing = without_unaffordable_preview(s, opts, size, &run.geo, &mut run.warnings);
     let report = RunReport {
         value_range: run.finite_range(),
         boundary: traced.boundary,
@@ -338,26 +344,26 @@ fn run_passes<'a>(
         ..RunReport::of(opts, run.input_name.clone(), &run.geo)
     };
     let report = RunReport { warnings: run.warnings, stages: run.stages.0, ..report };
-    Ok(Passed { pipeline: finishing, report, tables: table_names, progress: run.progress })
+    Ok(Passed { settings: finishing, report, tables: table_names, progress: run.progress })
 }
 
-/// `p` without its preview when the memory it may take (a `size` budget,
+/// `s` without its preview when the memory it may take (a `size` budget,
 /// else three quarters of the available memory: slabs of a given height
 /// are no budget, and a cluster run's pack can be any size) cannot hold the
 /// pack decoded at full resolution (`mdtf preview` renders it where there
 /// is the memory), with a warning saying so.
 fn without_unaffordable_preview(
-    p: &Pipeline,
+    s: &Settings,
     opts: &RunOptions,
     size: SlabSize,
     geo: &Geometry,
     warnings: &mut Vec<String>,
-) -> Pipeline {
-    let mut finishing = p.clone();
+) -> Settings {
+    let mut finishing = s.clone();
     if let Some(why) = preview_unaffordable(size, geo, mdtf_volume::available_memory())
-        && p.preview
+        && s.outputs.preview
     {
-        finishing.preview = false;
+        finishing.outputs.preview = false;
         let pack = opts.output.join("pack");
         warnings.push(format!(
             "preview: not rendered: {why}; `mdtf preview {}` renders it where there is the memory",

@@ -18,7 +18,7 @@ use super::partials::SlabPartial;
 use super::slab_histograms::HistogramAxes;
 use crate::channel::Channel;
 use crate::report::TaskPass;
-use crate::run::{RunError, at, fail};
+use crate::run::{RunError, at};
 use mdtf_bilateral::BilateralParams;
 use mdtf_boundary::{BoundaryParams, VolumeStats};
 use mdtf_derive::DeriveParams;
@@ -34,7 +34,19 @@ use std::path::{Path, PathBuf};
 /// failed for good).
 pub trait SlabTasks: Send + Sync + std::fmt::Debug {
     /// Runs `job` on each of `slabs` (z-plane ranges of the whole volume).
-    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), String>;
+    fn run(&self, job: &SlabJob, slabs: &[Range<usize>]) -> Result<(), TaskFailed>;
+}
+
+/// A task of a pass failed for good (after the runner's retries), with the
+/// runner's message (e.g. Dask's `KilledWorker: ...`).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("a task failed: {0}")]
+pub struct TaskFailed(pub String);
+
+impl From<String> for TaskFailed {
+    fn from(message: String) -> TaskFailed {
+        TaskFailed(message)
+    }
 }
 
 /// One pass of a run, as its tasks need it (serialisable: it goes to them as JSON).
@@ -240,7 +252,7 @@ pub(super) fn run_pass(
     let dir = store.dir().to_path_buf();
     let runs = |z: &Range<usize>| std::fs::metadata(attempts_path(&dir, name, z.start)).map_or(0, |m| m.len());
     let before: Vec<u64> = slabs.iter().map(runs).collect();
-    tasks.run(&job, slabs).map_err(fail(stage))?;
+    tasks.run(&job, slabs).map_err(at(stage))?;
     for &c in &outputs {
         store.adopt(c).map_err(at(stage))?;
     }

@@ -23,8 +23,8 @@
 use super::partials::SlabPartial;
 use super::remote::{SlabJob, SlabPass};
 use super::{SlabSize, store};
-use crate::file::Pipeline;
-use crate::run::{RunError, RunOptions, fail};
+use crate::run::{RunError, fail};
+use crate::settings::Settings;
 use mdtf_volume::output::remove_any;
 use serde::{Deserialize, Serialize};
 use std::io::{Read, Seek, SeekFrom};
@@ -49,17 +49,17 @@ pub struct WrittenPiece {
     pub xxh3: String,
 }
 
-/// The key of a run of `p` with `opts` cut by `size`: mdtf's version, the
+/// The key of a run of `s` cut by `size`: mdtf's version, the
 /// run's settings with every default filled in, the input's files (names,
 /// lengths and modification times: an input rewritten since is another
 /// input) and the slab size, hashed (XXH3-128, hex). Two runs of one key
 /// make the same tasks with the same outputs.
-pub(super) fn resume_key(p: &Pipeline, opts: &RunOptions, size: SlabSize) -> Result<String, RunError> {
-    let settings = crate::inputs::resolved_settings(p, opts).map_err(fail("plan"))?;
+pub(super) fn resume_key(s: &Settings, size: SlabSize) -> Result<String, RunError> {
+    let settings = s.to_table().map_err(fail("plan"))?;
     let mut h = XxHash3_128::new();
     h.write(format!("mdtf {}\n{settings}\n{size:?}\n", env!("CARGO_PKG_VERSION")).as_bytes());
-    if let Some(input) = crate::inputs::input_file(p, opts, &opts.base()) {
-        let input = std::path::absolute(&input).unwrap_or(input);
+    if let Some(input) = s.input.file() {
+        let input = std::path::absolute(input).unwrap_or_else(|_| input.to_path_buf());
         h.write(format!("input {}\n", input.display()).as_bytes());
         for (name, len, modified) in files_of(&input) {
             h.write(format!("{name} {len} {modified}\n").as_bytes());

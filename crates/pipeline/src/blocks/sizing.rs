@@ -9,8 +9,8 @@ use super::passes::stored_for_the_run;
 use super::slab_channels::made_by;
 use super::{SlabSize, TraceBlocks, cut};
 use crate::channel::Channel;
-use crate::file::Pipeline;
 use crate::plan::Plan;
+use crate::settings::Settings;
 use mdtf_pack::{PackParams, texture_layouts};
 use mdtf_volume::{Geometry, human_bytes};
 use std::fmt;
@@ -66,13 +66,13 @@ pub enum SizingError {
     Budget(#[from] super::BudgetError),
 }
 
-/// `p`'s run on `geometry` (one field) with slabs of `size`, sized.
-pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizing, SizingError> {
-    if let Some(why) = super::unsupported(p, 1) {
+/// A run of `s` on `geometry` (one field) with slabs of `size`, sized.
+pub fn sizing(s: &Settings, geometry: &Geometry, size: SlabSize) -> Result<Sizing, SizingError> {
+    if let Some(why) = super::unsupported(s, 1) {
         return Err(SizingError::NotBySlabs(why));
     }
-    let plan = Plan::resolve(p, &[], geometry)?;
-    let hvol = super::slab_histograms::counts_hvol(p, p.pack.tf.is_some());
+    let plan = Plan::resolve(s, &[], geometry)?;
+    let hvol = super::slab_histograms::counts_hvol(s, s.outputs.pack.tf.is_some());
     let (height, trace) = cut(size, geometry, &plan, hvol)?;
     let [nx, ny, nz] = geometry.dims;
     let plane = (nx * ny * 4) as u64;
@@ -85,7 +85,7 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
     if hvol {
         derived.extend([Channel::G, Channel::F2]);
     }
-    let stored_derived = stored_for_the_run(p, &derived);
+    let stored_derived = stored_for_the_run(&s.outputs.keep, &derived);
     let mut passes = vec![
         PassSize { pass: "input", tasks: slabs, memory: memory(2 * h), read: h * plane, written: h * plane },
         PassSize {
@@ -120,8 +120,8 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
         stored.extend(traced);
     }
     let value_and_g = memory(2 * h + 2 * k);
-    passes.extend(median_passes(p, &derived, slabs, value_and_g, (h + 2 * k) * plane));
-    let texel = texel_bytes(p);
+    passes.extend(median_passes(s, &derived, slabs, value_and_g, (h + 2 * k) * plane));
+    let texel = texel_bytes(s);
     let pack_planes = if hvol { nz.div_ceil(mdtf_histogram::HVOL_PARTS) as u64 } else { h };
     let pack_tasks = if hvol { mdtf_histogram::HVOL_PARTS.min(nz) } else { slabs };
     let (read, written) = pack_bytes(pack_planes, h, k, plane, &stored, (nx * ny) as u64 * texel);
@@ -131,7 +131,7 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
         SlabSize::Budget(b) => Some(b),
         _ => None,
     };
-    let kept_bytes = p.keep.len() as u64 * voxels * 4;
+    let kept_bytes = s.outputs.keep.len() as u64 * voxels * 4;
     Ok(Sizing {
         geometry: geometry.clone(),
         budget,
@@ -144,22 +144,22 @@ pub fn sizing(p: &Pipeline, geometry: &Geometry, size: SlabSize) -> Result<Sizin
     })
 }
 
-/// The select passes of the whole-volume medians of g a run of `p` takes
+/// The select passes of the whole-volume medians of g a run of `s` takes
 /// (`derived`: the channels it derives), as one line of `slabs` tasks a
 /// round, each holding `memory` and reading `read` bytes (the value over
 /// its slab, to derive g): three rounds for the (v, 1/g) axis, and up to
 /// three for gaussian-tf's default TGTF (when it finds no boundary).
-fn median_passes(p: &Pipeline, derived: &[Channel], slabs: usize, memory: u64, read: u64) -> Option<PassSize> {
-    let inverse_gradient = p.histogram.as_ref().is_some_and(|h| h.joint) && derived.contains(&Channel::InvG);
-    let default_tgtf = p.pack.profile == mdtf_pack::Profile::GaussianTf && p.pack.tf.is_none();
+fn median_passes(s: &Settings, derived: &[Channel], slabs: usize, memory: u64, read: u64) -> Option<PassSize> {
+    let inverse_gradient = s.outputs.histograms.joint && derived.contains(&Channel::InvG);
+    let default_tgtf = s.profile() == mdtf_pack::Profile::GaussianTf && s.outputs.pack.tf.is_none();
     let rounds = 3 * (usize::from(inverse_gradient) + usize::from(default_tgtf));
     (rounds > 0).then_some(PassSize { pass: "medians", tasks: rounds * slabs, memory, read, written: 0 })
 }
 
-/// Bytes a voxel of `p`'s pack textures takes.
-fn texel_bytes(p: &Pipeline) -> u64 {
+/// Bytes a voxel of the pack textures of a run of `s` takes.
+fn texel_bytes(s: &Settings) -> u64 {
     let params =
-        PackParams { profile: p.pack.profile, ranges: Default::default(), fields: vec![], dtype: None, nifti: false };
+        PackParams { profile: s.profile(), ranges: Default::default(), fields: vec![], dtype: None, nifti: false };
     texture_layouts(&params).iter().map(|l| (l.components.len() * l.dtype.size()) as u64).sum()
 }
 

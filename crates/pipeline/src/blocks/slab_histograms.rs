@@ -7,9 +7,9 @@
 use super::SlabChannels;
 use super::reductions::Stats;
 use crate::channel::Channel;
-use crate::file::Pipeline;
 use crate::hist_files::Counted;
 use crate::run::{RunError, at, fail};
+use crate::settings::{Histograms, Settings};
 use mdtf_histogram::{
     Axis, AxisSpec, Histogram, HistogramError, HvolAccumulator, HvolAxes, HvolBySlabs, HvolParams, HvolPart, count,
     hit_mask,
@@ -128,10 +128,10 @@ impl HistogramCounts {
     }
 }
 
-/// Whether a run of `p` counts the histogram volume: its histograms ask for
+/// Whether a run of `s` counts the histogram volume: its histograms ask for
 /// it, or its default TF reads it (no TF file, `tf_given`).
-pub(super) fn counts_hvol(p: &Pipeline, tf_given: bool) -> bool {
-    p.histogram.as_ref().is_some_and(|h| h.hvol) || !tf_given
+pub(super) fn counts_hvol(s: &Settings, tf_given: bool) -> bool {
+    s.outputs.histograms.hvol || !tf_given
 }
 
 /// Channel `c`'s samples in `slab`.
@@ -152,12 +152,12 @@ pub(super) struct SlabHistograms {
 }
 
 impl SlabHistograms {
-    /// Empty histograms of `p` (with the histogram volume when `hvol`,
+    /// Empty `histograms` (with the histogram volume when `hvol`,
     /// counted on a lane per thread) over the axes of `stats`, for
     /// the `slabs` of a volume of `n` voxels; the (v, 1/g) histogram over
     /// the axis `inverse_gradient`, when given (see [`Self::counts_inverse_gradient`]).
     pub(super) fn new(
-        p: &Pipeline,
+        histograms: &Histograms,
         chans: &mut SlabChannels,
         stats: &Stats,
         slabs: &[Range<usize>],
@@ -165,9 +165,8 @@ impl SlabHistograms {
         hvol: bool,
         inverse_gradient: Option<Axis>,
     ) -> Result<SlabHistograms, RunError> {
-        let joint = p.histogram.as_ref().is_some_and(|h| h.joint);
-        let stretched =
-            p.histogram.as_ref().is_some_and(|h| h.stretched) && chans.has(Channel::GHit) && chans.has(Channel::Hit);
+        let joint = histograms.joint;
+        let stretched = histograms.stretched && chans.has(Channel::GHit) && chans.has(Channel::Hit);
         let axes =
             vec![stats.axis(&AxisSpec::qbert("v"), Channel::Value)?, stats.axis(&AxisSpec::qbert("g"), Channel::G)?];
         let mut stretched_axes = axes.clone();
@@ -194,9 +193,9 @@ impl SlabHistograms {
         Ok(SlabHistograms { axes, hvol: by_slabs, hvol_tasks: None, counts: HistogramCounts::default(), voxels: n })
     }
 
-    /// Whether the histograms of `p` count (v, 1/g) over the channels of `chans`.
-    pub(super) fn counts_inverse_gradient(p: &Pipeline, chans: &SlabChannels) -> bool {
-        p.histogram.as_ref().is_some_and(|h| h.joint) && chans.has(Channel::InvG)
+    /// Whether the `histograms` count (v, 1/g) over the channels of `chans`.
+    pub(super) fn counts_inverse_gradient(histograms: &Histograms, chans: &SlabChannels) -> bool {
+        histograms.joint && chans.has(Channel::InvG)
     }
 
     /// What each slab is counted over.

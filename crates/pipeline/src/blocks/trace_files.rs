@@ -3,20 +3,19 @@
 //! whole-volume tracing's files, whatever the slab height.
 //!
 //! It runs the input, derive, pre-filter and tracing passes of a
-//! slab-by-slab pipeline run ([`SlabPasses`]) with a pipeline made of the
-//! chain's settings whose later passes (pack, histograms, preview) are
-//! never run, then writes the traced channels from the store slab by slab,
-//! with the flipped distance and the alpha maps made from them.
+//! slab-by-slab run ([`SlabPasses`]) planned to make every traced channel
+//! ([`SlabWork::Traced`]), then writes the traced channels from the store
+//! slab by slab, with the flipped distance and the alpha maps made from them.
 
 use super::SlabSize;
-use super::passes::SlabPasses;
+use super::passes::{SlabPasses, SlabWork};
 use crate::boundary_chain::BoundaryChainParams;
 use crate::channel::Channel;
 use crate::error::{RunError, at, fail};
-use crate::file::{DeriveSection, InputSection, PackSection, Pipeline};
 use crate::progress::Progress;
 use crate::report::BoundarySummary;
 use crate::run::RunOptions;
+use crate::settings::InputSettings;
 use mdtf_volume::{ReadOptions, SampleType, SlabWriter};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -55,39 +54,6 @@ pub fn automatic_trace_budget(
     super::automatic_file_budget(input, read, WHOLE_TRACE_BYTES_PER_VOXEL, available)
 }
 
-/// The pipeline whose first passes are the chain's tracing of `input`:
-/// `chain`'s kernel, pre-filter and tracing parameters, every traced
-/// channel kept (so the tracing stores dot as well). Its pack section only
-/// makes the plan trace (distance-tf packs distance and g_hit); it never runs.
-fn tracing_pipeline(input: &Path, read: &ReadOptions, chain: &BoundaryChainParams) -> Pipeline {
-    Pipeline {
-        description: String::new(),
-        input: InputSection {
-            file: Some(input.to_path_buf()),
-            series: read.dicom.series.clone(),
-            resample: read.dicom.resample,
-            level: read.level,
-            nan: read.nan,
-            ..InputSection::default()
-        },
-        derive: DeriveSection { kernel: chain.kernel },
-        prefilter: chain.prefilter.clone(),
-        boundary: chain.boundary.clone(),
-        histogram: None,
-        pack: PackSection {
-            profile: mdtf_pack::Profile::DistanceTf,
-            tf: None,
-            alpha: Default::default(),
-            gtf_from_mask: None,
-            nifti: false,
-        },
-        tetra: Default::default(),
-        keep: crate::channel::traced_names(),
-        keep_format: Default::default(),
-        preview: false,
-    }
-}
-
 /// Traces the one-field volume in `input` (read by planes where its format
 /// allows, else whole) as `chain` says (kernel, pre-filter, tracing
 /// parameters; its border and epsilon are the defaults), slab by slab in
@@ -112,10 +78,11 @@ pub fn trace_files(
     }
     // a format that cannot be written by slabs is refused before any work
     mdtf_volume::SlabWriter::check_format(&dir.join(format!("distance{ext}"))).map_err(at("write"))?;
-    let p = tracing_pipeline(input, read, chain);
+    let input = InputSettings::of_file(input, read);
     let opts = RunOptions { output: dir.to_path_buf(), ..RunOptions::default() };
     let progress = Progress::new(&opts, on_stage, on_slab);
-    let (mut run, store) = SlabPasses::read_input(&p, &opts, size, (dir, false), progress, false)?;
+    let work = SlabWork::Traced { input: &input, chain };
+    let (mut run, store) = SlabPasses::read_input(work, &opts, size, (dir, false), progress)?;
     let (mut chans, derived) = run.derive(store)?;
     let traced = run.trace(&mut chans, &derived)?;
     // the passes write the report into the run's folder (`dir`/boundary, made by them); it is returned instead

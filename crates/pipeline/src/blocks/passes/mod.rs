@@ -14,12 +14,13 @@ use super::remote::{self, Derivation, SlabPass, SlabTasks};
 use super::slab_channels::made_by;
 use super::{ChannelStore, SlabChannels, SlabSize, Source, open_source};
 use super::{TraceBlocks, reductions, slabs};
+use crate::boundary_chain::BoundaryChainParams;
 use crate::channel::Channel;
-use crate::file::Pipeline;
 use crate::plan::Plan;
 use crate::progress::Progress;
 use crate::report::Stages;
 use crate::run::{RunError, RunOptions, at};
+use crate::settings::{Histograms, InputSettings, Settings};
 use mdtf_derive::{DeriveParams, Item};
 use mdtf_pack::TfFile;
 use mdtf_volume::{Geometry, KeyBuckets, overlapped};
@@ -66,12 +67,53 @@ fn input_by_tasks(
     Ok((padded, ran))
 }
 
+/// What a slab-by-slab run makes.
+#[derive(Clone, Copy)]
+pub(in crate::blocks) enum SlabWork<'a> {
+    /// A pipeline's outputs.
+    Pipeline(&'a Settings),
+    /// The tracing of `chain` on `input` alone, its channels left in the
+    /// store (`mdtf boundary`'s slab tracing: the run stops after it).
+    Traced {
+        /// The input.
+        input: &'a InputSettings,
+        /// Kernel, pre-filter and tracing parameters.
+        chain: &'a BoundaryChainParams,
+    },
+}
+
+impl<'a> SlabWork<'a> {
+    /// The run's input.
+    fn input(self) -> &'a InputSettings {
+        match self {
+            SlabWork::Pipeline(s) => &s.input,
+            SlabWork::Traced { input, .. } => input,
+        }
+    }
+
+    /// Kernel, pre-filter and tracing parameters.
+    fn chain(self) -> &'a BoundaryChainParams {
+        match self {
+            SlabWork::Pipeline(s) => &s.chain,
+            SlabWork::Traced { chain, .. } => chain,
+        }
+    }
+
+    /// The plan on `geo`: the pipeline's, or the steps that make every traced channel.
+    fn plan(self, geo: &Geometry) -> Result<Plan, crate::plan::PlanError> {
+        match self {
+            SlabWork::Pipeline(s) => Plan::resolve(s, &[], geo),
+            SlabWork::Traced { chain, .. } => Plan::for_channels(&crate::channel::traced_names(), &[], geo, chain),
+        }
+    }
+}
+
 /// What a slab-by-slab run hands from pass to pass.
 pub(super) struct SlabPasses<'a> {
-    p: &'a Pipeline,
+    work: SlabWork<'a>,
     opts: &'a RunOptions,
-    /// The pipeline file's folder (relative paths in it start there).
-    base: PathBuf,
+    /// The histograms the run makes (none for the tracing alone).
+    histograms: Histograms,
     /// The staging output folder.
     pub(super) dir: PathBuf,
     pub(super) geo: Geometry,
@@ -147,32 +189,56 @@ impl<'a> SlabPasses<'a> {
     /// Whether the histogram step looks for boundaries: it runs, and the
     /// histogram volume is counted (asked for, or for the default TF).
     pub(super) fn detected(&self) -> bool {
-        self.hvol_needed && self.p.histogram.is_some()
+        self.hvol_needed && self.histograms.counted
+    }
+
+    /// The pipeline's settings (a run that only traces has none: it never packs).
+    fn settings(&self) -> Result<&'a Settings, RunError> {
+        match self.work {
+            SlabWork::Pipeline(s) => Ok(s),
+            SlabWork::Traced { .. } => {
+                Err(crate::run::fail("plan")("the tracing alone keeps and packs nothing".into()))
+            }
+        }
+    }
+
+    /// The channels the run keeps as volumes, by name.
+    fn kept(&self) -> &'a [String] {
+        match self.work {
+            SlabWork::Pipeline(s) => &s.outputs.keep,
+            SlabWork::Traced { .. } => &[],
+        }
     }
 
     /// The input pass: opens the input, plans the run and sizes its slabs
     /// (`size`), and copies the value slab by slab into a channel store in
-    /// `dir`, taking its statistics. Without `packs` the run stops after its
-    /// tracing and kept volumes (no histogram volume is counted or budgeted).
+    /// `dir`, taking its statistics. A run of `work` that only traces stops
+    /// after its tracing (no histogram volume is counted or budgeted).
     /// `resumed`: `dir` is a killed run's, whose store the run takes over.
     pub(super) fn read_input(
-        p: &'a Pipeline,
+        work: SlabWork<'a>,
         opts: &'a RunOptions,
         size: SlabSize,
         (dir, resumed): (&Path, bool),
         progress: Progress<'a>,
-        packs: bool,
     ) -> Result<(SlabPasses<'a>, ChannelStore), RunError> {
-        let base = opts.base();
         progress.stage("input")?;
         let t = Instant::now();
-        let (mut source, meta) = open_source(p, opts, &base)?;
+        let settings = match work {
+            SlabWork::Pipeline(s) => Some(s),
+            SlabWork::Traced { .. } => None,
+        };
+        let (mut source, meta) = open_source(work.input(), settings)?;
         let geo = source.geometry().clone();
         let nz = geo.dims[2];
-        let plan = Plan::resolve(p, &[], &geo).map_err(at("plan"))?;
-        let tf = crate::inputs::read_tf(p, &base)?;
-        let hvol_asked = p.histogram.as_ref().is_some_and(|h| h.hvol);
-        let hvol_needed = packs && super::slab_histograms::counts_hvol(p, tf.is_some());
+        let plan = work.plan(&geo).map_err(at("plan"))?;
+        let tf = match settings {
+            Some(s) => crate::inputs::read_tf(&s.outputs.pack)?,
+            None => None,
+        };
+        let histograms = settings.map(|s| s.outputs.histograms).unwrap_or_default();
+        let hvol_asked = histograms.hvol;
+        let hvol_needed = settings.is_some_and(|s| super::slab_histograms::counts_hvol(s, tf.is_some()));
         let (height, trace_blocks) = super::cut(size, &geo, &plan, hvol_needed).map_err(at("plan"))?;
         let slabs = slabs(nz, height);
         progress.stage(&format!("input: {} slabs of {height} planes", slabs.len()))?;
@@ -184,7 +250,8 @@ impl<'a> SlabPasses<'a> {
             (Some(tasks), Source::Planes(reader)) if reader.reads_any_planes() => {
                 progress.stage("input (tasks)")?;
                 let input = std::path::absolute(reader.path()).map_err(io("input"))?;
-                let pass = SlabPass::Input { input, level: p.input.level, nan: p.input.nan, padding: meta.padding };
+                let read = &work.input().read;
+                let pass = SlabPass::Input { input, level: read.level, nan: read.nan, padding: meta.padding };
                 let (padded, ran) = input_by_tasks(tasks, pass, &mut store, &slabs, &token, &mut stats)?;
                 task_passes.push(ran);
                 padded
@@ -196,9 +263,9 @@ impl<'a> SlabPasses<'a> {
         let mut warnings = meta.warnings.clone();
         warnings.extend(meta.padding_note(padded, geo.voxel_count()));
         let run = SlabPasses {
-            p,
+            work,
             opts,
-            base,
+            histograms,
             dir: dir.to_path_buf(),
             geo,
             plan,
@@ -339,7 +406,7 @@ impl<'a> SlabPasses<'a> {
         let span = self.stats.range(Channel::Value).map_or(0.0, |(lo, hi)| hi - lo);
         DeriveParams {
             items: Vec::new(),
-            kernel: self.p.derive.kernel,
+            kernel: self.work.chain().kernel,
             epsilon: Some(mdtf_derive::default_epsilon(span, self.geo.min_spacing())),
             border: mdtf_derive::Border::Clamp,
             padding: self.padding.map(|r| r.map(|x| x as f32)),
@@ -357,7 +424,7 @@ impl<'a> SlabPasses<'a> {
     /// pass, which its derive tasks store ([`stored_for_the_run`]).
     fn read_later(&self, groups: &[DeriveParams]) -> Vec<Channel> {
         let derived: Vec<Channel> = groups.iter().flat_map(|d| d.items.iter()).flat_map(|&i| made_by(i)).collect();
-        stored_for_the_run(self.p, &derived)
+        stored_for_the_run(self.kept(), &derived)
     }
 
     /// The derive groups of the whole run: the plan's items (with g and f''
@@ -381,16 +448,17 @@ impl<'a> SlabPasses<'a> {
 
     /// The kept channels, written slab by slab as volumes.
     pub(super) fn keep(&mut self, chans: &mut SlabChannels) -> Result<(), RunError> {
-        if self.p.keep.is_empty() {
+        if self.kept().is_empty() {
             return Ok(());
         }
+        let outputs = &self.settings()?.outputs;
         self.progress.stage("keep")?;
         let t = Instant::now();
         let (geo, slabs, f32) = (&self.geo, &self.slabs, mdtf_volume::SampleType::F32);
         let store_dir = chans.store.dir().to_path_buf();
         let stored = chans.store.channels();
         let derived_here = std::sync::Mutex::new(&mut *chans);
-        let written = crate::run::write_kept(self.p, &self.plan.fields, &self.dir, |c, file| {
+        let written = crate::run::write_kept(outputs, &self.plan.fields, &self.dir, |c, file| {
             let c = Channel::of_store(c)?;
             if stored.contains(&c) {
                 // a stored channel through a handle of its own: the kept files are written side by side
@@ -414,11 +482,11 @@ impl<'a> SlabPasses<'a> {
     }
 }
 
-/// The derived channels (of `derived`) a run of `p` on tasks reads itself
-/// after its derive pass, which its derive tasks store: the kept ones (the
+/// The derived channels (of `derived`) a run on tasks reads itself after
+/// its derive pass, which its derive tasks store: the `kept` ones (the
 /// tasks remake every other channel, and take the medians' passes themselves).
-pub(super) fn stored_for_the_run(p: &Pipeline, derived: &[Channel]) -> Vec<Channel> {
-    let kept = p.keep.iter().filter_map(|c| Channel::of_store(c));
+pub(super) fn stored_for_the_run(kept: &[String], derived: &[Channel]) -> Vec<Channel> {
+    let kept = kept.iter().filter_map(|c| Channel::of_store(c));
     kept.filter(|c| derived.contains(c)).collect()
 }
 

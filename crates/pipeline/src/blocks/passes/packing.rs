@@ -21,7 +21,7 @@ impl SlabPasses<'_> {
     /// to the pack's own measure (the value) get their finite range here,
     /// since no slab sees the whole channel.
     fn pack_params(&self, derived: &Derived, traced: &Traced) -> Result<PackParams, RunError> {
-        let profile = self.p.pack.profile;
+        let profile = self.settings()?.profile();
         let mut ranges = BTreeMap::new();
         for name in &profile.channels(&[]) {
             let unknown = || fail("pack")(format!("the {profile} pack reads an unknown channel '{name}'"));
@@ -72,13 +72,13 @@ impl SlabPasses<'_> {
         params: &PackParams,
         writer: &mut PackWriter,
     ) -> Result<Written, RunError> {
-        let counting = self.p.histogram.is_some() || self.hvol_needed;
+        let counting = self.histograms.counted || self.hvol_needed;
         let what = if counting { "histogram and pack" } else { "pack" };
         self.progress.stage(&format!("{what}{}", if self.tasks.is_some() { " (tasks)" } else { "" }))?;
         let n = self.geo.voxel_count();
         let mut histograms = match counting {
             true => {
-                let inv_g = match SlabHistograms::counts_inverse_gradient(self.p, chans) {
+                let inv_g = match SlabHistograms::counts_inverse_gradient(&self.histograms, chans) {
                     true => medians::inverse_gradient_axis(
                         &mut |pass| self.select(chans, pass),
                         derived.g_buckets.as_ref(),
@@ -86,7 +86,7 @@ impl SlabPasses<'_> {
                     false => None,
                 };
                 let (stats, slabs, hvol) = (&self.stats, &self.slabs, self.hvol_needed);
-                Some(SlabHistograms::new(self.p, chans, stats, slabs, n, hvol, inv_g)?)
+                Some(SlabHistograms::new(&self.histograms, chans, stats, slabs, n, hvol, inv_g)?)
             }
             false => None,
         };
@@ -155,7 +155,7 @@ impl SlabPasses<'_> {
         // the default TF's histogram volume is an output only when the histograms ask for it
         let default_hvol = if self.hvol_asked { None } else { counted.hvol.take() };
         let mut hists = Written::default();
-        if self.p.histogram.is_some() {
+        if self.histograms.counted {
             let hdir = self.dir.join("histogram");
             std::fs::create_dir_all(&hdir).map_err(io("histogram"))?;
             hists =
@@ -185,12 +185,13 @@ impl SlabPasses<'_> {
         // the tables read the channels' names and grid (their data only without a histogram volume)
         let stubs: Vec<(String, Volume)> =
             profile.channels(&[]).into_iter().map(|c| (c, Volume::zeros(self.geo.z_slab(0..1)))).collect();
-        let alpha = self.p.pack.alpha;
+        let s = self.settings()?;
+        let alpha = s.outputs.pack.alpha;
         let tf = self.tf.as_ref();
         let luts =
             crate::pack_inputs::luts(profile, tf, &alpha, &stubs, &params.ranges, hvol.as_ref(), &derived.derive)
                 .map_err(at("pack"))?;
-        let provenance = crate::inputs::provenance(self.p, self.opts, &self.base, self.geo.dims, &self.units);
+        let provenance = crate::inputs::provenance(s, self.geo.dims, &self.units);
         writer.finish(&luts, provenance).map_err(at("pack"))?;
         let mut outputs: Vec<String> = vec!["pack/manifest.json".into()];
         if profile == Profile::GaussianTf {

@@ -24,7 +24,7 @@ impl SlabPasses<'_> {
         if !self.plan.trace {
             return Ok(Traced::default());
         }
-        let (g, f2, prefiltered) = match (self.plan.prefilter, &self.p.prefilter) {
+        let (g, f2, prefiltered) = match (self.plan.prefilter, &self.work.chain().prefilter) {
             (true, Some(pf)) => {
                 self.prefilter(chans, pf)?;
                 (Channel::GPrefiltered, Channel::F2Prefiltered, true)
@@ -43,7 +43,7 @@ impl SlabPasses<'_> {
         let mut sums = TraceSums::default();
         match self.tasks {
             Some(tasks) => {
-                let (params, [_, halo_rows, halo]) = (self.p.boundary.clone(), self.plan.reach.trace);
+                let (params, [_, halo_rows, halo]) = (self.work.chain().boundary.clone(), self.plan.reach.trace);
                 let (rows, stores) = (self.trace_blocks.rows, self.plan.traced_stored());
                 let pass =
                     SlabPass::Trace { g, f2, prefiltered, params, stats, halo, halo_rows, rows, value_range, stores };
@@ -55,12 +55,12 @@ impl SlabPasses<'_> {
                 }
             }
             None => {
-                let p = self.p;
+                let chain = self.work.chain();
                 let setup = TraceSetup {
                     g,
                     f2,
                     prefiltered,
-                    params: &p.boundary,
+                    params: &chain.boundary,
                     stats: &stats,
                     halo: self.plan.reach.trace[2],
                     halo_rows: self.plan.reach.trace[1],
