@@ -394,7 +394,8 @@ fn runs_whose_passes_go_to_tasks_give_the_same_files() {
         let passes: Vec<&str> = ran.iter().map(|(p, _)| p.as_str()).collect();
         let want = match name {
             // the select: the second pass of the traced g's median, with the detection's (v, g) counts
-            "distance-tf" => vec!["Derive", "Prefilter", "Select", "Trace", "Pack"],
+            // then the kept distance and g_hit, written by the tasks
+            "distance-tf" => vec!["Derive", "Prefilter", "Select", "Trace", "Keep", "Pack"],
             // the (v, 1/g) axis: the second pass of g's median, then both of the median above twice it
             "peak-finding" => vec!["Derive", "Select", "Select", "Select", "Pack"],
             _ => vec!["Derive", "Pack"],
@@ -418,7 +419,8 @@ fn runs_whose_passes_go_to_tasks_give_the_same_files() {
     let tasks = Arc::new(ThreadTasks::default());
     assert_runs_equal_the_whole("distance-tf", &p, Some(input), &[SlabSize::Planes(5)], Some(tasks.clone()));
     let passes: Vec<String> = tasks.ran.lock().unwrap().iter().map(|(p, _)| p.clone()).collect();
-    assert_eq!(passes, ["Derive", "Prefilter", "Select", "Trace", "Pack"]);
+    // the kept g is remade from the value by the keep tasks, not stored by the derive tasks
+    assert_eq!(passes, ["Derive", "Prefilter", "Select", "Trace", "Keep", "Pack"]);
 }
 
 #[test]
@@ -437,7 +439,7 @@ fn a_zarr_input_is_read_by_the_tasks_with_the_same_files() {
     let tasks = Arc::new(ThreadTasks::default());
     assert_runs_equal_the_whole("distance-tf", &p, Some(input), &[SlabSize::Planes(5)], Some(tasks.clone()));
     let passes: Vec<String> = tasks.ran.lock().unwrap().iter().map(|(p, _)| p.clone()).collect();
-    assert_eq!(passes, ["Input", "Derive", "Prefilter", "Select", "Trace", "Pack"]);
+    assert_eq!(passes, ["Input", "Derive", "Prefilter", "Select", "Trace", "Keep", "Pack"]);
     // the padding the tasks counted is in the report the runs agree on
     let out = dir.path().join("whole");
     let opts = RunOptions { input: Some(dir.path().join("tooth.ome.zarr")), output: out.clone(), ..Default::default() };
@@ -472,6 +474,7 @@ fn tracing_tasks_cut_their_slabs_in_strips_of_rows_with_the_same_files() {
         ("prefilter", slabs),
         ("select", slabs),
         ("boundary", slabs),
+        ("keep", slabs),
         ("pack", mdtf_histogram::HVOL_PARTS),
     ]
     .into_iter()
@@ -508,7 +511,7 @@ fn a_task_whose_slab_is_done_does_nothing_and_one_whose_bytes_were_damaged_is_ru
         task_passes(&p, Arc::new(DamagingTasks), size).into_iter().map(|t| (t.pass, t.retries, t.reused)).collect();
     // the select pass, and the derive pass of a run that keeps no derived channel, write no planes: nothing to damage
     let want: Vec<(String, u64, usize)> =
-        [("derive", 0), ("prefilter", 1), ("select", 0), ("boundary", 1), ("pack", 1)]
+        [("derive", 0), ("prefilter", 1), ("select", 0), ("boundary", 1), ("keep", 1), ("pack", 1)]
             .into_iter()
             .map(|(p, r)| (p.to_string(), r, 0))
             .collect();
@@ -585,6 +588,7 @@ fn a_killed_run_resumes_running_only_its_unfinished_tasks_with_the_same_files() 
         ("prefilter", n, n),
         ("select", n, n),
         ("boundary", n, n / 2),
+        ("keep", n, 0),
         ("pack", mdtf_histogram::HVOL_PARTS, 0),
     ]
     .into_iter()
@@ -657,9 +661,10 @@ fn a_resumable_run_whose_tasks_failed_keeps_what_they_did_for_the_rerun() {
     let slabs = run_blocks(&p, &opts, size, &|_| {}, &|_, _| {}).unwrap().slabs.unwrap();
     let reused: Vec<(String, usize)> = slabs.tasks.into_iter().map(|t| (t.pass, t.reused)).collect();
     let n = 28usize.div_ceil(6);
-    let want: Vec<(String, usize)> = [("derive", n), ("prefilter", n), ("select", n), ("boundary", n), ("pack", 0)]
-        .map(|(p, k)| (p.to_string(), k))
-        .into();
+    let want: Vec<(String, usize)> =
+        [("derive", n), ("prefilter", n), ("select", n), ("boundary", n), ("keep", n), ("pack", 0)]
+            .map(|(p, k)| (p.to_string(), k))
+            .into();
     assert!(slabs.resumed);
     assert_eq!(reused, want);
     let resumed = files(&out);

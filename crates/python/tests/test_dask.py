@@ -180,7 +180,8 @@ def test_a_pipeline_run_on_the_cluster_writes_mdtf_runs_files(
     assert {k: slabs[k] for k in ("planes", "count", "budget")} == {"planes": 13, "count": 4, "budget": None}
     # every pass ran on the cluster, the store read by the tasks, none rerun
     passes = [t["pass"] for t in slabs["tasks"]]
-    traced = ["prefilter", "select", "boundary"] if name == "distance-tf" else []
+    # distance-tf: the tracing, then its kept distance and g_hit written by the tasks
+    traced = ["prefilter", "select", "boundary", "keep"] if name == "distance-tf" else []
     assert passes == ["input", "derive", *traced, "pack"], slabs["tasks"]
     assert all(t["retries"] == 0 for t in slabs["tasks"]), slabs["tasks"]
     # each pass said how far its tasks got
@@ -270,7 +271,7 @@ def test_a_run_whose_driver_was_killed_resumes_with_the_same_files(
     slabs = report["slabs"]
     assert slabs["resumed"] is True
     tasks = {t["pass"]: t for t in slabs["tasks"]}
-    assert list(tasks) == ["derive", "prefilter", "select", "boundary", "pack"]
+    assert list(tasks) == ["derive", "prefilter", "select", "boundary", "keep", "pack"]
     # the passes that had finished ran no task again; the rest did
     assert all(tasks[p]["reused"] == tasks[p]["tasks"] for p in ("derive", "prefilter", "select")), tasks
     assert sum(t["tasks"] - t["reused"] for t in tasks.values()) > 0, tasks

@@ -6,6 +6,9 @@
 //! NIfTI stores several fields one after another, so the first field goes
 //! straight into the file and the others wait in partial files beside it
 //! (removed on any failure or signal), appended when the last slab is in.
+//! A `.nii.gz` is written as gzip members, one a plane, as the whole
+//! writer writes it ([`crate::gz_members`]): each slab's planes compress
+//! side by side.
 //! NRRD interleaves the fields per voxel and OME-Zarr chunks them, so both
 //! take each slab as it comes.
 
@@ -35,7 +38,8 @@ pub struct SlabWriter {
 
 /// Where the samples go, by format.
 enum Sink {
-    /// The first field into the file, the others into partial files (encoded) until the end.
+    /// The first field into the file, the others into partial files
+    /// (encoded, and compressed as the file is) until the end.
     Nifti { out: Stream, rest: Vec<(StagedFile, BufWriter<std::fs::File>)> },
     /// Fields interleaved per voxel, after the header.
     Nrrd(Stream),
@@ -43,37 +47,42 @@ enum Sink {
     Zarr { writer: Box<ZarrWriter>, folder: OutputFolder },
 }
 
-/// A file's bytes, plain or gzip-compressed on their way in.
-enum Stream {
-    Plain(AtomicWriter),
-    Gz(flate2::write::GzEncoder<AtomicWriter>),
+/// A file's bytes, as they are or as gzip members, on their way in.
+struct Stream {
+    out: AtomicWriter,
+    /// Written as gzip members: the header one, then one a plane.
+    gz: bool,
 }
 
 impl Stream {
-    /// A stream into `path`, gzip-compressed when `gz` (as the whole writers compress).
+    /// A stream into `path`, gzip members when `gz` (as the whole writers compress).
     fn create(path: &Path, gz: bool) -> Result<Stream> {
-        let w = AtomicWriter::create(path)?;
-        Ok(if gz {
-            Stream::Gz(flate2::write::GzEncoder::new(w, flate2::Compression::fast()))
-        } else {
-            Stream::Plain(w)
-        })
+        Ok(Stream { out: AtomicWriter::create(path)?, gz })
     }
 
     /// Puts the file in place with every byte written.
-    fn publish(self, path: &Path) -> Result<()> {
-        let w = match self {
-            Stream::Plain(w) => w,
-            Stream::Gz(gz) => gz.finish().map_err(|e| VolumeError::io(path, e))?,
-        };
-        w.publish()
+    fn publish(self) -> Result<()> {
+        self.out.publish()
+    }
+
+    /// Writes the file's header (one member of its own when compressed).
+    fn header(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+        match self.gz {
+            true => self.out.write_all(&crate::gz_members::member(bytes)),
+            false => self.out.write_all(bytes),
+        }
     }
 
     fn writer(&mut self) -> &mut dyn Write {
-        match self {
-            Stream::Plain(w) => w,
-            Stream::Gz(gz) => gz,
-        }
+        &mut self.out
+    }
+}
+
+/// Writes one field's planes (`plane` samples each) as `ty`, as gzip members when `gz`.
+fn put_field(w: &mut dyn Write, samples: &[f32], plane: usize, ty: SampleType, gz: bool) -> std::io::Result<()> {
+    match gz {
+        true => crate::gz_members::plane_members(samples, plane, ty).iter().try_for_each(|m| w.write_all(m)),
+        false => write_fields(w, &[samples], FieldAxis::Slowest, ty),
     }
 }
 
@@ -90,7 +99,7 @@ impl SlabWriter {
             Some(Format::Nifti | Format::NiftiGz) => {
                 let header = crate::nifti::header_of(path, geometry, names.len(), ty)?;
                 let mut out = Stream::create(path, gz)?;
-                out.writer().write_all(&header).map_err(|e| VolumeError::io(path, e))?;
+                out.header(&header).map_err(|e| VolumeError::io(path, e))?;
                 let rest = (1..names.len())
                     .map(|k| {
                         let (staged, file) = StagedFile::open(&field_file(path, k))?;
@@ -102,7 +111,7 @@ impl SlabWriter {
             Some(Format::Nrrd) => {
                 let header = crate::nrrd::header_of(geometry, names, ty);
                 let mut out = Stream::create(path, false)?;
-                out.writer().write_all(header.as_bytes()).map_err(|e| VolumeError::io(path, e))?;
+                out.header(header.as_bytes()).map_err(|e| VolumeError::io(path, e))?;
                 Sink::Nrrd(out)
             }
             Some(Format::OmeZarr) => {
@@ -156,9 +165,10 @@ impl SlabWriter {
         let io = |e| VolumeError::io(&self.path, e);
         match &mut self.sink {
             Sink::Nifti { out, rest } => {
-                write_fields(out.writer(), &fields[..1], FieldAxis::Slowest, self.ty).map_err(io)?;
+                let gz = out.gz;
+                put_field(out.writer(), fields[0], plane, self.ty, gz).map_err(io)?;
                 for ((_, w), f) in rest.iter_mut().zip(&fields[1..]) {
-                    write_fields(w, &[f], FieldAxis::Slowest, self.ty).map_err(io)?;
+                    put_field(w, f, plane, self.ty, gz).map_err(io)?;
                 }
             }
             Sink::Nrrd(out) => write_fields(out.writer(), fields, FieldAxis::Fastest, self.ty).map_err(io)?,
@@ -183,9 +193,9 @@ impl SlabWriter {
                     let mut field = std::fs::File::open(staged.partial()).map_err(|e| VolumeError::io(&path, e))?;
                     std::io::copy(&mut field, out.writer()).map_err(|e| VolumeError::io(&path, e))?;
                 }
-                out.publish(&path)
+                out.publish()
             }
-            Sink::Nrrd(out) => out.publish(&path),
+            Sink::Nrrd(out) => out.publish(),
             Sink::Zarr { writer, folder } => {
                 drop(writer);
                 folder.publish(&Inputs::new())

@@ -168,6 +168,18 @@ pub enum SlabPass {
         /// The traced channels stored (those the run reads later).
         stores: Vec<Channel>,
     },
+    /// Writes the slab's planes of each kept channel (stored, or remade
+    /// from the value) as gzip members, one a plane, into a part file of
+    /// its own ([`kept_part`]): the run puts the parts of each `.nii.gz`
+    /// together after its header, with no sample passing through it.
+    Keep {
+        /// The kept channels.
+        channels: Vec<Channel>,
+        /// The folder of the part files.
+        parts: PathBuf,
+        /// Planes read at a time (the run's slab height).
+        height: usize,
+    },
     /// Counts the slab's histograms and writes its planes of every pack
     /// texture, a sub-slab at a time; a pack pass counting the histogram
     /// volume gives each task whole fixed parts of its slices.
@@ -202,6 +214,7 @@ impl SlabPass {
             SlabPass::Derive { .. } => "derive",
             SlabPass::Prefilter { .. } => "prefilter",
             SlabPass::Select { .. } | SlabPass::Trace { .. } => "boundary",
+            SlabPass::Keep { .. } => "keep",
             SlabPass::Pack { .. } => "pack",
         }
     }
@@ -221,7 +234,7 @@ impl SlabPass {
             SlabPass::Derive { store, .. } => store.clone(),
             SlabPass::Prefilter { filters, .. } => filters.iter().map(|f| f.output).collect(),
             SlabPass::Trace { stores, .. } => stores.clone(),
-            SlabPass::Select { .. } | SlabPass::Pack { .. } => Vec::new(),
+            SlabPass::Select { .. } | SlabPass::Keep { .. } | SlabPass::Pack { .. } => Vec::new(),
         }
     }
 }
@@ -265,6 +278,12 @@ pub(super) fn run_pass(
     }
     let partials = slabs.iter().map(|z| SlabPartial::read(store.dir(), name, z.start)).collect::<Result<_, _>>()?;
     Ok((partials, TaskPass { pass: name.into(), tasks: slabs.len(), retries, reused }))
+}
+
+/// The part file of kept channel `c` a keep task for the slab from plane
+/// `first` writes in the folder `parts`.
+pub(super) fn kept_part(parts: &Path, c: Channel, first: usize) -> PathBuf {
+    parts.join(format!("{}-{first}.gz", super::store::file_name(c)))
 }
 
 /// The file a task of pass `name` for the slab from plane `first` adds a

@@ -185,6 +185,15 @@ pub(super) fn written_ranges(job: &SlabJob, z: &Range<usize>) -> Vec<(PathBuf, R
         SlabPass::Pack { textures, .. } => {
             textures.iter().map(|t| (t.file.clone(), planes(t.plane_bytes() as u64))).collect()
         }
+        // compressed: each part is the whole of its file, as long as it is
+        SlabPass::Keep { channels, parts, .. } => channels
+            .iter()
+            .map(|&c| super::remote::kept_part(parts, c, z.start))
+            .map(|file| {
+                let len = std::fs::metadata(&file).map_or(0, |m| m.len());
+                (file, 0..len)
+            })
+            .collect(),
         pass => pass
             .outputs()
             .iter()

@@ -85,7 +85,7 @@ pub fn sizing(s: &Settings, geometry: &Geometry, size: SlabSize) -> Result<Sizin
     if hvol {
         derived.extend([Channel::G, Channel::F2]);
     }
-    let stored_derived = stored_for_the_run(&s.outputs.keep, &derived);
+    let stored_derived = stored_for_the_run(&s.outputs.keep, s.outputs.keep_format, &derived);
     let mut passes = vec![
         PassSize { pass: "input", tasks: slabs, memory: memory(2 * h), read: h * plane, written: h * plane },
         PassSize {
@@ -118,6 +118,12 @@ pub fn sizing(s: &Settings, geometry: &Geometry, size: SlabSize) -> Result<Sizin
         let written = bytes as u64 * tp * plane / 4;
         passes.push(PassSize { pass: "boundary", tasks, memory, read, written });
         stored.extend(traced);
+    }
+    if !s.outputs.keep.is_empty() && s.outputs.keep_format == crate::file::KeepFormat::NiiGz {
+        // each kept channel over the slab, read or remade from the value; at most its f32 bytes written
+        let kept = s.outputs.keep.len() as u64;
+        let (read, written) = ((h + 2 * k) * plane + kept * h * plane, kept * h * plane);
+        passes.push(PassSize { pass: "keep", tasks: slabs, memory: memory(by_pass.derive + kept * h), read, written });
     }
     let value_and_g = memory(2 * h + 2 * k);
     passes.extend(median_passes(s, &derived, slabs, value_and_g, (h + 2 * k) * plane));

@@ -19,7 +19,7 @@ use crate::run::{RunError, at, fail};
 use mdtf_histogram::Axis;
 use mdtf_pack::TextureTarget;
 use mdtf_volume::Volume;
-use mdtf_volume::{NanPolicy, PlaneReader, ReadOptions};
+use mdtf_volume::{NanPolicy, PlaneReader, ReadOptions, SampleType};
 use std::cell::RefCell;
 use std::ops::Range;
 use std::path::Path;
@@ -62,6 +62,7 @@ pub fn run_task(job: &SlabJob, z: Range<usize>) -> Result<TaskOutcome, RunError>
         SlabPass::Prefilter { filters, halo } => task.prefilter(filters, *halo)?,
         SlabPass::Select { select, detect } => task.select(select.as_ref(), detect.as_ref())?,
         SlabPass::Trace { .. } => task.trace()?,
+        SlabPass::Keep { channels, parts, height } => task.kept_parts(channels, parts, *height)?,
         SlabPass::Pack { textures, histograms, read, height } => {
             task.pack(textures, histograms.as_ref(), read, *height)?
         }
@@ -288,6 +289,38 @@ impl Task<'_> {
         partial.trace = sums.0;
         self.keep(chans);
         Ok(partial)
+    }
+
+    /// Writes the slab's planes of the `kept` channels as gzip members into
+    /// their part files in `parts`, `height` planes at a time.
+    fn kept_parts(&self, kept: &[Channel], parts: &Path, height: usize) -> Result<SlabPartial, RunError> {
+        let mut chans = self.channels()?;
+        let [nx, ny, _] = self.job.geometry.dims;
+        let mut files = Vec::with_capacity(kept.len());
+        for &c in kept {
+            let path = super::remote::kept_part(parts, c, self.z.start);
+            let file = std::fs::File::create(&path).map_err(|e| fail("keep")(format!("{}: {e}", path.display())))?;
+            files.push((c, path, std::io::BufWriter::new(file), 0u64));
+        }
+        for planes in slabs(self.z.len(), height.max(1)) {
+            let planes = self.z.start + planes.start..self.z.start + planes.end;
+            let slab = chans.volumes(planes, kept).map_err(at("keep"))?;
+            for (c, path, file, written) in &mut files {
+                let v = slab.iter().find(|(k, _)| k == c).map(|(_, v)| v);
+                let v = v.ok_or_else(|| fail("keep")(format!("no channel {} to keep", c.name(&[]))))?;
+                let bytes = mdtf_volume::gz_members::plane_members(v.samples(), nx * ny, SampleType::F32).concat();
+                std::io::Write::write_all(file, &bytes)
+                    .map_err(|e| fail("keep")(format!("{}: {e}", path.display())))?;
+                self.hashed.borrow_mut().add(path, *written, &bytes);
+                *written += bytes.len() as u64;
+            }
+            chans.give_back(slab);
+        }
+        for (_, path, file, _) in files {
+            file.into_inner().map_err(|e| fail("keep")(format!("{}: {}", path.display(), e.error())))?;
+        }
+        self.keep(chans);
+        Ok(SlabPartial::default())
     }
 
     /// Counts the slab's histograms and writes its planes of every texture,

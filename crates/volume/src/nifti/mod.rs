@@ -22,7 +22,7 @@ use crate::samples::{
 };
 use crate::volume::{Field, MultiField};
 use header::{Header, Kind, NIFTI2_BYTES};
-use std::io::{Read, Write};
+use std::io::Read;
 use std::path::Path;
 
 pub use header::NIFTI1_MAX_AXIS;
@@ -236,6 +236,14 @@ pub(crate) fn header_of(path: &Path, geometry: &Geometry, fields: usize, ty: Sam
     })
 }
 
+/// The first gzip member of the `.nii.gz` that [`write_nifti`] writes to
+/// `path` for `fields` fields on `geometry` stored as `ty`: the header. The
+/// planes' members follow ([`crate::gz_members::plane_members`]), field
+/// after field, so that a file's parts can be made apart and put together.
+pub fn nifti_gz_header(path: &Path, geometry: &Geometry, fields: usize, ty: SampleType) -> Result<Vec<u8>> {
+    Ok(crate::gz_members::member(&header_of(path, geometry, fields, ty)?))
+}
+
 /// The NIfTI version mdtf writes for `geometry` with `fields` fields: 1, or
 /// 2 when an axis exceeds NIfTI-1's 16-bit dims.
 pub fn nifti_version_for(geometry: &Geometry, fields: usize) -> u8 {
@@ -250,7 +258,9 @@ pub fn nifti_version_for(geometry: &Geometry, fields: usize) -> u8 {
 /// u16 or i16). One field gives a 3D file, several a 4D file with one volume
 /// per field. NIfTI-1, or NIfTI-2 where an axis exceeds 32767 voxels
 /// ([`nifti_version_for`]). Integer targets require exactly representable
-/// values. Streams the samples (no copy of the volume) and is atomic: each
+/// values. A `.nii.gz` holds one gzip member for the header and one per
+/// plane of each field ([`crate::gz_members`]), compressed side by side.
+/// Streams the samples (no copy of the volume) and is atomic: each
 /// file appears only when complete (a pair: its `.img`, then its `.hdr`).
 pub fn write_nifti(path: &Path, mf: &MultiField, ty: SampleType) -> Result<()> {
     for f in &mf.fields {
@@ -264,13 +274,12 @@ pub fn write_nifti(path: &Path, mf: &MultiField, ty: SampleType) -> Result<()> {
         return pair::write(path, &header, |w| write_fields(w, &fields, FieldAxis::Slowest, ty));
     }
     let gz = path.to_string_lossy().to_ascii_lowercase().ends_with(".gz");
+    let plane = mf.geometry.dims[0] * mf.geometry.dims[1];
     write_file_atomically(path, |w| {
         if gz {
-            let mut enc = flate2::write::GzEncoder::new(w, flate2::Compression::fast());
-            enc.write_all(&header)?;
-            write_fields(&mut enc, &fields, FieldAxis::Slowest, ty)?;
-            enc.finish()?;
-            Ok(())
+            // one gzip member for the header, then one a plane (see `gz_members`)
+            w.write_all(&crate::gz_members::member(&header))?;
+            fields.iter().try_for_each(|f| crate::gz_members::write_plane_members(w, f, plane, ty))
         } else {
             w.write_all(&header)?;
             write_fields(w, &fields, FieldAxis::Slowest, ty)

@@ -16,6 +16,7 @@ use super::{ChannelStore, SlabChannels, SlabSize, Source, open_source};
 use super::{TraceBlocks, reductions, slabs};
 use crate::boundary_chain::BoundaryChainParams;
 use crate::channel::Channel;
+use crate::file::KeepFormat;
 use crate::plan::Plan;
 use crate::progress::Progress;
 use crate::report::Stages;
@@ -424,7 +425,8 @@ impl<'a> SlabPasses<'a> {
     /// pass, which its derive tasks store ([`stored_for_the_run`]).
     fn read_later(&self, groups: &[DeriveParams]) -> Vec<Channel> {
         let derived: Vec<Channel> = groups.iter().flat_map(|d| d.items.iter()).flat_map(|&i| made_by(i)).collect();
-        stored_for_the_run(self.kept(), &derived)
+        let format = self.settings().map_or(KeepFormat::NiiGz, |s| s.outputs.keep_format);
+        stored_for_the_run(self.kept(), format, &derived)
     }
 
     /// The derive groups of the whole run: the plan's items (with g and f''
@@ -452,8 +454,16 @@ impl<'a> SlabPasses<'a> {
             return Ok(());
         }
         let outputs = &self.settings()?.outputs;
-        self.progress.stage("keep")?;
         let t = Instant::now();
+        if let Some(tasks) = self.tasks
+            && outputs.keep_format == KeepFormat::NiiGz
+        {
+            self.progress.stage("keep (tasks)")?;
+            let written = self.keep_by_tasks(tasks, chans, outputs)?;
+            self.stages.done("keep", t, self.geo.voxel_count(), written);
+            return Ok(());
+        }
+        self.progress.stage("keep")?;
         let (geo, slabs, f32) = (&self.geo, &self.slabs, mdtf_volume::SampleType::F32);
         let store_dir = chans.store.dir().to_path_buf();
         let stored = chans.store.channels();
@@ -482,10 +492,53 @@ impl<'a> SlabPasses<'a> {
     }
 }
 
+impl SlabPasses<'_> {
+    /// The kept `.nii.gz` volumes written by tasks: each writes its slab's
+    /// planes of every kept channel as gzip members, and each file is its
+    /// header and the parts put together in z order (the bytes of the whole
+    /// run's file). The files written, relative to the output folder.
+    fn keep_by_tasks(
+        &mut self,
+        tasks: &dyn SlabTasks,
+        chans: &mut SlabChannels,
+        outputs: &crate::settings::Outputs,
+    ) -> Result<Vec<String>, RunError> {
+        let mut channels = Vec::with_capacity(outputs.keep.len());
+        for name in &outputs.keep {
+            match Channel::of_store(name).filter(|&c| chans.has(c)) {
+                Some(c) => channels.push(c),
+                None => return Err(crate::run::fail("keep")(format!("no channel '{name}' was computed"))),
+            }
+        }
+        let parts = chans.store.dir().join("keep");
+        std::fs::create_dir_all(&parts).map_err(io("keep"))?;
+        let pass = SlabPass::Keep { channels, parts: parts.clone(), height: self.height };
+        let slabs = self.slabs.clone();
+        self.on_tasks(tasks, pass, &mut chans.store, &slabs)?;
+        let geo = &self.geo;
+        crate::run::write_kept(outputs, &self.plan.fields, &self.dir, |name, file| {
+            let c = Channel::of_store(name)?;
+            let header = mdtf_volume::nifti_gz_header(file, geo, 1, mdtf_volume::SampleType::F32);
+            let put_together = |w: &mut dyn std::io::Write| {
+                w.write_all(&header.map_err(std::io::Error::other)?)?;
+                for z in &slabs {
+                    std::io::copy(&mut std::fs::File::open(remote::kept_part(&parts, c, z.start))?, w)?;
+                }
+                Ok(())
+            };
+            Some(mdtf_volume::write_file_atomically(file, put_together).map_err(at("keep")))
+        })
+    }
+}
+
 /// The derived channels (of `derived`) a run on tasks reads itself after
-/// its derive pass, which its derive tasks store: the `kept` ones (the
-/// tasks remake every other channel, and take the medians' passes themselves).
-pub(super) fn stored_for_the_run(kept: &[String], derived: &[Channel]) -> Vec<Channel> {
+/// its derive pass, which its derive tasks store: the `kept` ones when
+/// they are written as OME-Zarr (the tasks remake every other channel, take
+/// the medians' passes themselves and write the kept `.nii.gz` volumes).
+pub(super) fn stored_for_the_run(kept: &[String], format: KeepFormat, derived: &[Channel]) -> Vec<Channel> {
+    if format == KeepFormat::NiiGz {
+        return Vec::new();
+    }
     let kept = kept.iter().filter_map(|c| Channel::of_store(c));
     kept.filter(|c| derived.contains(c)).collect()
 }
