@@ -408,7 +408,7 @@ fn a_run_at_4096_cubed_is_sized_on_paper_before_it_runs() {
     assert!(!plan.contains("REFUSED"), "{plan}");
     let tasks: usize = line("derive ")[1].parse().unwrap();
     assert_eq!(tasks, 4096usize.div_ceil(slab_planes), "{plan}");
-    for pass in ["input ", "derive ", "prefilter ", "boundary ", "pack "] {
+    for pass in ["input ", "derive ", "prefilter ", "boundary ", "keep ", "pack "] {
         assert!(bytes_on(&plan, pass, 2) <= 8.0 * 1024f64.powi(3), "{pass}: {plan}");
     }
     // the store holds v, the pre-filtered g and f'' and the three traced outputs the run reads

@@ -210,10 +210,12 @@ impl fmt::Display for Sizing {
         if self.kept_bytes > 0 {
             writeln!(f, "    kept volumes: up to {} before compression", b(self.kept_bytes))?;
         }
-        write!(
-            f,
-            "  the calling process merges the tasks' partial sums and writes the histograms, the tables and the \
-             kept volumes (these it reads from the channel store)"
-        )
+        let kept = match (self.kept_bytes > 0, self.passes.iter().any(|p| p.pass == "keep")) {
+            (false, _) => "",
+            // the keep tasks compress the planes; the parts are copied, not decompressed
+            (true, true) => "; it puts each kept volume's compressed parts together",
+            (true, false) => " and the kept volumes (these it reads from the channel store)",
+        };
+        write!(f, "  the calling process merges the tasks' partial sums and writes the histograms and the tables{kept}")
     }
 }
