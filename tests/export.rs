@@ -207,8 +207,11 @@ fn a_wrong_y_axis_scaling_is_caught_by_the_same_comparison() {
     );
 }
 
-/// pvbatch (Debian's python3-paraview) and xvfb-run, which tests/run.sh installs as root.
-fn pvbatch() -> Command {
+/// pvbatch (Debian's python3-paraview) and xvfb-run, which tests/run.sh
+/// installs as root; attempt `attempt` looks for a free X display from a
+/// number of its own (this process's and the attempt's), so that two test
+/// runs on one machine do not race for display 99.
+fn pvbatch(attempt: u32) -> Command {
     let found = |tool: &str| Command::new("sh").args(["-c", &format!("command -v {tool}")]).output();
     for tool in ["pvbatch", "xvfb-run"] {
         assert!(
@@ -218,7 +221,8 @@ fn pvbatch() -> Command {
         );
     }
     let mut c = Command::new("xvfb-run");
-    c.args(["-a", "-s", "-screen 0 1024x768x24", "pvbatch"]);
+    let first_display = 100 + (std::process::id() % 300) * 3 + attempt;
+    c.args(["-a", "-n", &first_display.to_string(), "-s", "-screen 0 1024x768x24", "pvbatch"]);
     c
 }
 
@@ -230,12 +234,12 @@ fn paraview_renders_the_exported_pack_as_mdtf_preview_does() {
         let size = PIXELS.to_string();
         let args = ["open_in_paraview.py", "--screenshot", out.to_str().unwrap(), "--size", &size];
         // xvfb-run -a can lose the race for a display number to another X server starting: try again
-        let mut run = pvbatch().args(args).current_dir(p.export(case)).output().expect("run pvbatch");
-        for _ in 0..2 {
+        let mut run = pvbatch(0).args(args).current_dir(p.export(case)).output().expect("run pvbatch");
+        for attempt in 1..3 {
             if run.status.success() || !String::from_utf8_lossy(&run.stderr).contains("bad X server connection") {
                 break;
             }
-            run = pvbatch().args(args).current_dir(p.export(case)).output().expect("run pvbatch");
+            run = pvbatch(attempt).args(args).current_dir(p.export(case)).output().expect("run pvbatch");
         }
         assert!(
             run.status.success(),

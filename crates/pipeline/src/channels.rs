@@ -160,27 +160,9 @@ fn execute(
         derived.extend(out.items.into_iter().flat_map(|(_, mf)| mf.into_volumes()));
     }
     let mut traced: BTreeMap<String, Volume> = BTreeMap::new();
-    let tracing = if plan.trace {
-        // the tracing consumes g, f'' and the normal: copied only if they are asked for too
-        let mut take = |c: &str| {
-            let v = if needs(c) { derived.get(c).cloned() } else { derived.remove(c) };
-            v.ok_or_else(|| ChainError::Unknown(format!("derive gave no {c}")))
-        };
-        let (g, f2) = (take("g")?, take("f2")?);
-        let normal: Vec<(String, Volume)> = crate::channel::NORMAL
-            .map(|c| c.name(&[]))
-            .into_iter()
-            .map(|c| take(&c).map(|v| (c, v)))
-            .collect::<Result<_, _>>()?;
-        let normal = MultiField::from_volumes(normal).map_err(|e| ChainError::Unknown(e.to_string()))?;
-        let out = boundary_chain::trace_derived(g, f2, normal, value_range, chain)?;
-        let report = out.boundary.report(&out.g);
-        let mut b = out.boundary;
-        traced.extend(boundary_chain::take_traced(&mut b));
-        let summary = BoundarySummary { resolved: b.resolved, counts: b.counts, lost: b.lost };
-        Some(Tracing { summary, warnings: b.warnings, flipped: b.flipped, alpha: b.alpha, report })
-    } else {
-        None
+    let tracing = match plan.trace {
+        true => Some(trace(&mut derived, &needs, value_range, chain, &mut traced)?),
+        false => None,
     };
     // a several-field input's fields by name (one field is "v": its name is not a channel's)
     let fields = &plan.fields;
@@ -202,6 +184,34 @@ fn execute(
         channels.push((name.clone(), v));
     }
     Ok(Computed { channels, tracing })
+}
+
+/// Traces the `derived` g, f'' and normal (taken out of it unless `needs`
+/// them as channels too) as `chain` says, its volumes into `traced` by name.
+fn trace(
+    derived: &mut BTreeMap<String, Volume>,
+    needs: &dyn Fn(&str) -> bool,
+    value_range: f64,
+    chain: &BoundaryChainParams,
+    traced: &mut BTreeMap<String, Volume>,
+) -> Result<Tracing, ChainError> {
+    let mut take = |c: &str| {
+        let v = if needs(c) { derived.get(c).cloned() } else { derived.remove(c) };
+        v.ok_or_else(|| ChainError::Unknown(format!("derive gave no {c}")))
+    };
+    let (g, f2) = (take("g")?, take("f2")?);
+    let normal: Vec<(String, Volume)> = crate::channel::NORMAL
+        .map(|c| c.name(&[]))
+        .into_iter()
+        .map(|c| take(&c).map(|v| (c, v)))
+        .collect::<Result<_, _>>()?;
+    let normal = MultiField::from_volumes(normal).map_err(|e| ChainError::Unknown(e.to_string()))?;
+    let out = boundary_chain::trace_derived(g, f2, normal, value_range, chain)?;
+    let report = out.boundary.report(&out.g);
+    let mut b = out.boundary;
+    traced.extend(boundary_chain::take_traced(&mut b));
+    let summary = BoundarySummary { resolved: b.resolved, counts: b.counts, lost: b.lost };
+    Ok(Tracing { summary, warnings: b.warnings, flipped: b.flipped, alpha: b.alpha, report })
 }
 
 #[cfg(test)]

@@ -119,12 +119,7 @@ pub fn sizing(s: &Settings, geometry: &Geometry, size: SlabSize) -> Result<Sizin
         passes.push(PassSize { pass: "boundary", tasks, memory, read, written });
         stored.extend(traced);
     }
-    if !s.outputs.keep.is_empty() && s.outputs.keep_format == crate::file::KeepFormat::NiiGz {
-        // each kept channel over the slab, read or remade from the value; at most its f32 bytes written
-        let kept = s.outputs.keep.len() as u64;
-        let (read, written) = ((h + 2 * k) * plane + kept * h * plane, kept * h * plane);
-        passes.push(PassSize { pass: "keep", tasks: slabs, memory: memory(by_pass.derive + kept * h), read, written });
-    }
+    passes.extend(keep_pass(s, slabs, (h, k, plane), memory(by_pass.derive)));
     let value_and_g = memory(2 * h + 2 * k);
     passes.extend(median_passes(s, &derived, slabs, value_and_g, (h + 2 * k) * plane));
     let texel = texel_bytes(s);
@@ -160,6 +155,20 @@ fn median_passes(s: &Settings, derived: &[Channel], slabs: usize, memory: u64, r
     let default_tgtf = s.profile() == mdtf_pack::Profile::GaussianTf && s.outputs.pack.tf.is_none();
     let rounds = 3 * (usize::from(inverse_gradient) + usize::from(default_tgtf));
     (rounds > 0).then_some(PassSize { pass: "medians", tasks: rounds * slabs, memory, read, written: 0 })
+}
+
+/// The keep pass of a run of `s` whose tasks write its kept `.nii.gz`
+/// volumes, in `slabs` tasks of `h` planes of `plane` bytes with the
+/// kernel's halo `k`, each holding what a derive task holds (`derive_memory`)
+/// and its kept channels: it reads the value and the stored kept channels
+/// and writes at most their f32 bytes. None without such volumes.
+fn keep_pass(s: &Settings, slabs: usize, (h, k, plane): (u64, u64, u64), derive_memory: u64) -> Option<PassSize> {
+    let kept = s.outputs.keep.len() as u64;
+    if kept == 0 || s.outputs.keep_format != crate::file::KeepFormat::NiiGz {
+        return None;
+    }
+    let (read, written) = ((h + 2 * k) * plane + kept * h * plane, kept * h * plane);
+    Some(PassSize { pass: "keep", tasks: slabs, memory: derive_memory + kept * h * plane, read, written })
 }
 
 /// Bytes a voxel of the pack textures of a run of `s` takes.

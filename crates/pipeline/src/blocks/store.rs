@@ -206,9 +206,15 @@ impl ChannelStore {
             if size == 4 {
                 return file.read_exact(bytemuck::cast_slice_mut(out));
             }
-            let mut bytes = vec![0u8; out.len()];
-            file.read_exact(&mut bytes)?;
-            out.iter_mut().zip(&bytes).for_each(|(o, &b)| *o = f32::from(b));
+            // one-byte codes read into the samples' own memory and widened from the
+            // last, so that no code is overwritten before it is read
+            let n = out.len();
+            let bytes: &mut [u8] = bytemuck::cast_slice_mut(out);
+            file.read_exact(&mut bytes[..n])?;
+            for i in (0..n).rev() {
+                let sample = f32::from(bytes[i]).to_ne_bytes();
+                bytes[4 * i..4 * i + 4].copy_from_slice(&sample);
+            }
             Ok(())
         };
         if rows.start == 0 && rows.end == ny {
