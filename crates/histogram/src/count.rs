@@ -66,6 +66,29 @@ impl Histogram {
     }
 }
 
+/// The stretched histogram's pair over the voxels whose tracing kept a hit
+/// (`hit` code 1, and `mask` true where given): the (v, g) histogram over
+/// `axes` and the (v, g_hit) one over the same axes, the second named
+/// `g_hit` (one g axis, so that the two compare bin for bin).
+pub fn stretched_pair(
+    [v, g, g_hit]: [&[f32]; 3],
+    hit: &[f32],
+    axes: &[Axis],
+    mask: Option<&[bool]>,
+) -> Result<(Histogram, Histogram), HistogramError> {
+    let mut traced = crate::hit_mask(hit);
+    if let Some(m) = mask {
+        traced.iter_mut().zip(m).for_each(|(t, &m)| *t &= m);
+    }
+    let normal = count(&[v, g], axes.to_vec(), Some(&traced))?;
+    let mut stretched_axes = axes.to_vec();
+    if let Some(a) = stretched_axes.get_mut(1) {
+        a.name = "g_hit".into();
+    }
+    let stretched = count(&[v, g_hit], stretched_axes, Some(&traced))?;
+    Ok((normal, stretched))
+}
+
 /// Counts the voxels of `channels` (one slice per axis, all the same length)
 /// into `axes`; voxels outside any axis range, or where `mask` is false, are
 /// not counted.
@@ -360,6 +383,28 @@ fn count_n<const N: usize, F: FnMut(usize, u32)>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_stretched_pair_counts_only_the_hits_in_the_mask_each_on_its_own_channel() {
+        // 4 x 4 bins over [0, 4); hit codes 0 (none), 1 (hit), 2 (lost to a threshold)
+        let v = [0.5f32, 1.5, 2.5, 3.5, 0.5, 1.5];
+        let g = [0.5f32, 0.5, 1.5, 1.5, 2.5, 3.5];
+        let g_hit = [3.5f32, 2.5, 2.5, 0.5, 0.5, 1.5];
+        let hit = [1.0f32, 1.0, 0.0, 1.0, 2.0, 1.0];
+        let mask = [true, true, true, true, true, false];
+        let axes = vec![Axis::new("v", 0.0, 4.0, 4).unwrap(), Axis::new("g", 0.0, 4.0, 4).unwrap()];
+        let (normal, stretched) = stretched_pair([&v, &g, &g_hit], &hit, &axes, Some(&mask)).unwrap();
+        // brute force: voxels 0, 1 and 3 are hits inside the mask
+        let mut want_normal = vec![0u64; 16];
+        let mut want_stretched = vec![0u64; 16];
+        for i in [0, 1, 3] {
+            want_normal[g[i] as usize * 4 + v[i] as usize] += 1;
+            want_stretched[g_hit[i] as usize * 4 + v[i] as usize] += 1;
+        }
+        assert_eq!(normal.counts, want_normal);
+        assert_eq!(stretched.counts, want_stretched);
+        assert_eq!((stretched.axes[1].name.as_str(), normal.axes[1].name.as_str()), ("g_hit", "g"));
+    }
 
     #[test]
     fn a_bin_holds_more_than_2_to_the_32_voxels_merged_from_tables() {

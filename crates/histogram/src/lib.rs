@@ -30,7 +30,7 @@ pub use clusters::{
     CLUSTER_BINS, CLUSTER_MASK, CORE_BIT, CORE_DENSITY, Cluster, JointClusters, MAX_CLUSTERS, MERGE_RATIO,
     MIN_CLUSTER_SHARE, NO_CLUSTER, TOP_BIT, TOP_DENSITY, joint_clusters,
 };
-pub use count::{Histogram, count};
+pub use count::{Histogram, count, stretched_pair};
 pub use figure::{
     ArchMark, FIGURE_SIZE, Labels, Overlay, PLOT_PIXELS, PROJECTIONS_SIZE, SIDE_BY_SIDE_SIZE, axis_label,
     axis_label_of, count_colour,

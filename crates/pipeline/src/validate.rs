@@ -4,7 +4,7 @@
 
 use mdtf_boundary::{BoundaryParams, HitCode};
 use mdtf_datagen::erf_sphere;
-use mdtf_histogram::{Axis, HvolParams, Scale, count, histogram_volume, hit_mask, write_hvol, write_stretched};
+use mdtf_histogram::{Axis, HvolParams, Scale, histogram_volume, write_hvol, write_stretched};
 use mdtf_pack::{Dtype, GaussianPrimitive, Tf1d, decode_for, preintegration_table, segment, segment_by_midpoint};
 use mdtf_volume::{Geometry, MultiField, Volume};
 use serde::Serialize;
@@ -216,16 +216,13 @@ impl Sphere {
 
     /// The (v, g) and (v, g_hit) histograms of the traced voxels, as a picture in `hdir`.
     fn write_stretched(&self, hdir: &Path) -> Result<(), String> {
-        let traced = hit_mask(self.hit.samples());
         let axes = vec![
             Axis::new("v", 0.0, 255.0, 256).map_err(|e| e.to_string())?,
             Axis::new("g", 0.0, 1.05 * self.a, 256).map_err(|e| e.to_string())?,
         ];
-        let v = self.value.samples();
-        let normal = count(&[v, self.g.samples()], axes.clone(), Some(&traced)).map_err(|e| e.to_string())?;
-        let mut sa = axes;
-        sa[1].name = "g_hit".into();
-        let stretched = count(&[v, self.g_hit.samples()], sa, Some(&traced)).map_err(|e| e.to_string())?;
+        let channels = [self.value.samples(), self.g.samples(), self.g_hit.samples()];
+        let (normal, stretched) =
+            mdtf_histogram::stretched_pair(channels, self.hit.samples(), &axes, None).map_err(|e| e.to_string())?;
         write_stretched(hdir, &normal, &stretched, Scale::Log, "the validation erf sphere", &[])
             .map_err(|e| e.to_string())
     }

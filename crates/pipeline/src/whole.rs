@@ -13,7 +13,7 @@ use crate::report::{BoundarySummary, Stages, Traced};
 use crate::settings::{Histograms, Settings};
 use mdtf_boundary::BoundaryInput;
 use mdtf_derive::{DeriveParams, Item};
-use mdtf_histogram::{Axis, AxisSpec, Histogram, HvolParams, count, histogram_volume, hit_mask};
+use mdtf_histogram::{Axis, AxisSpec, Histogram, HvolParams, count, histogram_volume, stretched_pair};
 use mdtf_pack::{GaussianPrimitive, Lut, PackParams, PackWriter, Profile, Provenance, TfFile};
 use mdtf_volume::{Geometry, MultiField, Volume, WriteOptions};
 use std::collections::BTreeMap;
@@ -411,12 +411,9 @@ impl<'a> WholeRun<'a> {
         if h.stretched
             && let (Some(g_hit), Some(hit)) = (get(Channel::GHit), get(Channel::Hit))
         {
-            let traced = hit_mask(hit.samples());
-            let normal = count(&[v.samples(), g.samples()], axes.clone(), Some(&traced)).map_err(at("histogram"))?;
-            let mut sa = axes.clone();
-            sa[1].name = "g_hit".into();
-            let stretched = count(&[v.samples(), g_hit.samples()], sa, Some(&traced)).map_err(at("histogram"))?;
-            counted.stretched = Some((normal, stretched));
+            let channels = [v.samples(), g.samples(), g_hit.samples()];
+            let pair = stretched_pair(channels, hit.samples(), &axes, None).map_err(at("histogram"))?;
+            counted.stretched = Some(pair);
         }
         Ok(counted)
     }

@@ -9,7 +9,7 @@ use mdtf_pipeline::channel::Channel;
 use mdtf_pipeline::channels;
 use mdtf_pipeline::stages::derive::DeriveParams;
 use mdtf_pipeline::stages::histogram::{
-    Axis, AxisSpec, HvolParams, Scale, count, hit_mask, write_histogram, write_hvol, write_stretched,
+    Axis, AxisSpec, HvolParams, Scale, count, stretched_pair, write_histogram, write_hvol, write_stretched,
 };
 use mdtf_volume::{Inputs, MultiField, OutputFolder, Volume};
 use std::path::{Path, PathBuf};
@@ -157,15 +157,9 @@ impl Counting<'_> {
         let (Some(v), Some(g), Some(g_hit), Some(hit)) = (v, g, g_hit, hit) else {
             bail!("stretched histogram: missing channels")
         };
-        let mut traced = hit_mask(hit.samples());
-        if let Some(m) = &self.mask {
-            traced.iter_mut().zip(m).for_each(|(t, &m)| *t &= m);
-        }
         let shared = self.axes_of(&["v".to_string(), "g".to_string()])?;
-        let normal = count(&[v.samples(), g.samples()], shared.clone(), Some(&traced))?;
-        let mut stretched_axes = shared;
-        stretched_axes[1].name = "g_hit".into();
-        let stretched = count(&[v.samples(), g_hit.samples()], stretched_axes, Some(&traced))?;
+        let channels = [v.samples(), g.samples(), g_hit.samples()];
+        let (normal, stretched) = stretched_pair(channels, hit.samples(), &shared, self.mask.as_deref())?;
         write_stretched(self.out, &normal, &stretched, self.scale, &self.title, &[])?;
         Ok(())
     }

@@ -12,7 +12,7 @@ use crate::run::{RunError, at, fail};
 use crate::settings::{Histograms, Settings};
 use mdtf_histogram::{
     Axis, AxisSpec, Histogram, HistogramError, HvolAccumulator, HvolAxes, HvolBySlabs, HvolParams, HvolPart, count,
-    hit_mask,
+    stretched_pair,
 };
 use mdtf_volume::Volume;
 use serde::{Deserialize, Serialize};
@@ -26,9 +26,8 @@ pub struct HistogramAxes {
     joint: bool,
     /// The stretched pair is counted.
     stretched: bool,
-    /// The (v, g) axes; the stretched pair's second is g_hit.
+    /// The (v, g) axes; the stretched pair's second is g_hit on g's axis.
     axes: Vec<Axis>,
-    stretched_axes: Vec<Axis>,
     /// The histogram volume's axes, when it is counted.
     hvol: Option<HvolAxes>,
     /// Peak finding's TF domain (v, 1/g), over the whole g's axis.
@@ -85,11 +84,10 @@ impl HistogramCounts {
             add(&mut self.inv_g, count(&[v, channel(slab, Channel::InvG)?], ia.clone(), None).map_err(err)?);
         }
         if axes.stretched {
-            let traced = hit_mask(channel(slab, Channel::Hit)?);
-            let pair = &mut self.stretched;
-            add(&mut pair.0, count(&[v, g], axes.axes.clone(), Some(&traced)).map_err(err)?);
-            let g_hit = channel(slab, Channel::GHit)?;
-            add(&mut pair.1, count(&[v, g_hit], axes.stretched_axes.clone(), Some(&traced)).map_err(err)?);
+            let (hit, g_hit) = (channel(slab, Channel::Hit)?, channel(slab, Channel::GHit)?);
+            let (normal, stretched) = stretched_pair([v, g, g_hit], hit, &axes.axes, None).map_err(err)?;
+            add(&mut self.stretched.0, normal);
+            add(&mut self.stretched.1, stretched);
         }
         Ok(())
     }
@@ -169,8 +167,6 @@ impl SlabHistograms {
         let stretched = histograms.stretched && chans.has(Channel::GHit) && chans.has(Channel::Hit);
         let axes =
             vec![stats.axis(&AxisSpec::qbert("v"), Channel::Value)?, stats.axis(&AxisSpec::qbert("g"), Channel::G)?];
-        let mut stretched_axes = axes.clone();
-        stretched_axes[1].name = "g_hit".into();
         let bins = HvolParams::default().bins;
         let nz = slabs.last().map_or(0, |z| z.end);
         let hvol_axes = match hvol {
@@ -189,7 +185,7 @@ impl SlabHistograms {
             None => None,
         };
         let inv_g = inverse_gradient.map(|ia| vec![axes[0].clone(), ia]);
-        let axes = HistogramAxes { joint, stretched, axes, stretched_axes, hvol: hvol_axes, inv_g };
+        let axes = HistogramAxes { joint, stretched, axes, hvol: hvol_axes, inv_g };
         Ok(SlabHistograms { axes, hvol: by_slabs, hvol_tasks: None, counts: HistogramCounts::default(), voxels: n })
     }
 
