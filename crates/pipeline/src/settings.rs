@@ -233,14 +233,13 @@ impl Settings {
     /// else by slabs under a budget of its own when the whole volume would
     /// not fit in memory ([`crate::blocks::automatic`]); None: whole.
     pub fn slabs(&self, asked: SlabRequest, tasks: bool) -> Option<Slabs> {
-        match (asked.memory_budget, asked.slab_planes) {
-            (Some(b), _) => Some(Slabs::Asked(SlabSize::Budget(b))),
-            (None, Some(h)) => Some(Slabs::Asked(SlabSize::Planes(h.max(1)))),
-            (None, None) if tasks => Some(Slabs::Tasks(SlabSize::Planes(DEFAULT_TASK_PLANES))),
-            (None, None) => {
-                crate::blocks::automatic(self).map(|(budget, geometry)| Slabs::TooLarge { budget, geometry })
-            }
+        if let Some(size) = asked.size() {
+            return Some(Slabs::Asked(size));
         }
+        if tasks {
+            return Some(Slabs::Tasks(SlabSize::Planes(DEFAULT_TASK_PLANES)));
+        }
+        crate::blocks::automatic(self).map(|(budget, geometry)| Slabs::TooLarge { budget, geometry })
     }
 }
 
@@ -260,6 +259,17 @@ pub struct SlabRequest {
     pub memory_budget: Option<u64>,
     /// Slabs of this many z-planes (taken when no budget is given).
     pub slab_planes: Option<usize>,
+}
+
+impl SlabRequest {
+    /// The slabs asked for, if any: the budget, else the height (at least 1).
+    pub fn size(self) -> Option<SlabSize> {
+        match (self.memory_budget, self.slab_planes) {
+            (Some(b), _) => Some(SlabSize::Budget(b)),
+            (None, Some(h)) => Some(SlabSize::Planes(h.max(1))),
+            (None, None) => None,
+        }
+    }
 }
 
 /// Why and how a run goes by slabs.

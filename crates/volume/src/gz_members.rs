@@ -15,8 +15,9 @@ use flate2::Compression;
 use rayon::prelude::*;
 use std::io::Write;
 
-/// Planes compressed at once by [`write_plane_members`] (bounds its memory).
-const PLANES_AT_ONCE: usize = 32;
+/// Planes compressed at once by [`write_plane_members`], per thread: enough
+/// to keep every core busy, few enough that memory holds a few planes.
+const PLANES_PER_THREAD: usize = 2;
 
 /// One gzip member holding `bytes`: deflate at the fast level, no file
 /// name, modification time 0 (so the bytes depend on `bytes` alone).
@@ -42,9 +43,10 @@ pub fn plane_members(samples: &[f32], plane: usize, ty: SampleType) -> Vec<Vec<u
 }
 
 /// Writes the planes of `samples` to `w` as [`plane_members`] makes them,
-/// a few dozen planes at a time.
+/// a few planes per thread at a time (the bytes do not depend on how many).
 pub fn write_plane_members(w: &mut dyn Write, samples: &[f32], plane: usize, ty: SampleType) -> std::io::Result<()> {
-    for batch in samples.chunks(plane.max(1) * PLANES_AT_ONCE) {
+    let at_once = PLANES_PER_THREAD * rayon::current_num_threads().max(1);
+    for batch in samples.chunks(plane.max(1) * at_once) {
         for m in plane_members(batch, plane, ty) {
             w.write_all(&m)?;
         }
@@ -76,11 +78,11 @@ mod tests {
         }
         assert_eq!(cut, file);
         // and `gzip -t` takes the file as it is
-        let path = std::env::temp_dir().join(format!("mdtf-members-{}.gz", std::process::id()));
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("members.gz");
         std::fs::write(&path, &file).unwrap();
         if let Ok(out) = std::process::Command::new("gzip").arg("-t").arg(&path).output() {
             assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
         }
-        let _ = std::fs::remove_file(&path);
     }
 }

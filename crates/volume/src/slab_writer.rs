@@ -40,48 +40,18 @@ pub struct SlabWriter {
 enum Sink {
     /// The first field into the file, the others into partial files
     /// (encoded, and compressed as the file is) until the end.
-    Nifti { out: Stream, rest: Vec<(StagedFile, BufWriter<std::fs::File>)> },
+    /// `gz`: the header and every plane a gzip member of its own, as the whole writer writes them.
+    Nifti { out: AtomicWriter, gz: bool, rest: Vec<(StagedFile, BufWriter<std::fs::File>)> },
     /// Fields interleaved per voxel, after the header.
-    Nrrd(Stream),
+    Nrrd(AtomicWriter),
     /// A store in a folder published whole.
     Zarr { writer: Box<ZarrWriter>, folder: OutputFolder },
-}
-
-/// A file's bytes, as they are or as gzip members, on their way in.
-struct Stream {
-    out: AtomicWriter,
-    /// Written as gzip members: the header one, then one a plane.
-    gz: bool,
-}
-
-impl Stream {
-    /// A stream into `path`, gzip members when `gz` (as the whole writers compress).
-    fn create(path: &Path, gz: bool) -> Result<Stream> {
-        Ok(Stream { out: AtomicWriter::create(path)?, gz })
-    }
-
-    /// Puts the file in place with every byte written.
-    fn publish(self) -> Result<()> {
-        self.out.publish()
-    }
-
-    /// Writes the file's header (one member of its own when compressed).
-    fn header(&mut self, bytes: &[u8]) -> std::io::Result<()> {
-        match self.gz {
-            true => self.out.write_all(&crate::gz_members::member(bytes)),
-            false => self.out.write_all(bytes),
-        }
-    }
-
-    fn writer(&mut self) -> &mut dyn Write {
-        &mut self.out
-    }
 }
 
 /// Writes one field's planes (`plane` samples each) as `ty`, as gzip members when `gz`.
 fn put_field(w: &mut dyn Write, samples: &[f32], plane: usize, ty: SampleType, gz: bool) -> std::io::Result<()> {
     match gz {
-        true => crate::gz_members::plane_members(samples, plane, ty).iter().try_for_each(|m| w.write_all(m)),
+        true => crate::gz_members::write_plane_members(w, samples, plane, ty),
         false => write_fields(w, &[samples], FieldAxis::Slowest, ty),
     }
 }
@@ -97,21 +67,24 @@ impl SlabWriter {
         let gz = path.to_string_lossy().to_ascii_lowercase().ends_with(".gz");
         let sink = match Format::from_path(path) {
             Some(Format::Nifti | Format::NiftiGz) => {
-                let header = crate::nifti::header_of(path, geometry, names.len(), ty)?;
-                let mut out = Stream::create(path, gz)?;
-                out.header(&header).map_err(|e| VolumeError::io(path, e))?;
+                let header = match gz {
+                    true => crate::nifti::nifti_gz_header(path, geometry, names.len(), ty)?,
+                    false => crate::nifti::header_of(path, geometry, names.len(), ty)?,
+                };
+                let mut out = AtomicWriter::create(path)?;
+                out.write_all(&header).map_err(|e| VolumeError::io(path, e))?;
                 let rest = (1..names.len())
                     .map(|k| {
                         let (staged, file) = StagedFile::open(&field_file(path, k))?;
                         Ok((staged, BufWriter::new(file)))
                     })
                     .collect::<Result<_>>()?;
-                Sink::Nifti { out, rest }
+                Sink::Nifti { out, gz, rest }
             }
             Some(Format::Nrrd) => {
                 let header = crate::nrrd::header_of(geometry, names, ty);
-                let mut out = Stream::create(path, false)?;
-                out.header(header.as_bytes()).map_err(|e| VolumeError::io(path, e))?;
+                let mut out = AtomicWriter::create(path)?;
+                out.write_all(header.as_bytes()).map_err(|e| VolumeError::io(path, e))?;
                 Sink::Nrrd(out)
             }
             Some(Format::OmeZarr) => {
@@ -164,14 +137,13 @@ impl SlabWriter {
         }
         let io = |e| VolumeError::io(&self.path, e);
         match &mut self.sink {
-            Sink::Nifti { out, rest } => {
-                let gz = out.gz;
-                put_field(out.writer(), fields[0], plane, self.ty, gz).map_err(io)?;
+            Sink::Nifti { out, gz, rest } => {
+                put_field(out, fields[0], plane, self.ty, *gz).map_err(io)?;
                 for ((_, w), f) in rest.iter_mut().zip(&fields[1..]) {
-                    put_field(w, f, plane, self.ty, gz).map_err(io)?;
+                    put_field(w, f, plane, self.ty, *gz).map_err(io)?;
                 }
             }
-            Sink::Nrrd(out) => write_fields(out.writer(), fields, FieldAxis::Fastest, self.ty).map_err(io)?,
+            Sink::Nrrd(out) => write_fields(out, fields, FieldAxis::Fastest, self.ty).map_err(io)?,
             Sink::Zarr { writer, .. } => writer.write_planes(first, fields)?,
         }
         self.next = first + planes;
@@ -186,12 +158,12 @@ impl SlabWriter {
             return Err(VolumeError::header(&path, what));
         }
         match sink {
-            Sink::Nifti { mut out, rest } => {
+            Sink::Nifti { mut out, rest, .. } => {
                 for (staged, w) in rest {
                     let file = w.into_inner().map_err(|e| VolumeError::io(&path, e.into_error()))?;
                     drop(file);
                     let mut field = std::fs::File::open(staged.partial()).map_err(|e| VolumeError::io(&path, e))?;
-                    std::io::copy(&mut field, out.writer()).map_err(|e| VolumeError::io(&path, e))?;
+                    std::io::copy(&mut field, &mut out).map_err(|e| VolumeError::io(&path, e))?;
                 }
                 out.publish()
             }

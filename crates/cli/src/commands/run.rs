@@ -68,10 +68,8 @@ fn print_plan(args: &RunArgs, settings: &Settings, opts: &RunOptions, progress: 
     let plan = mdtf_pipeline::plan::Plan::resolve(settings, &[], &geo)?;
     crate::input::print_plan(&args.pipeline.display().to_string(), "a grid of --dims", &geo, &plan);
     let usable = mdtf_pipeline::blocks::usable_memory(mdtf_volume::available_memory());
-    let size = match settings.slabs(slab_request(args), false) {
-        Some(Slabs::Asked(size)) => size,
-        _ => SlabSize::Budget(usable),
-    };
+    // a grid on paper: the input is not looked at for a budget of its own
+    let size = slab_request(args).size().unwrap_or(SlabSize::Budget(usable));
     let sizing = mdtf_pipeline::blocks::sizing(settings, &geo, size)?;
     println!("{sizing}");
     progress.note("timing the pipeline by slabs on two small phantoms for the time per voxel ...");

@@ -308,11 +308,12 @@ impl Task<'_> {
             for (c, path, file, written) in &mut files {
                 let v = slab.iter().find(|(k, _)| k == c).map(|(_, v)| v);
                 let v = v.ok_or_else(|| fail("keep")(format!("no channel {} to keep", c.name(&[]))))?;
-                let bytes = mdtf_volume::gz_members::plane_members(v.samples(), nx * ny, SampleType::F32).concat();
-                std::io::Write::write_all(file, &bytes)
-                    .map_err(|e| fail("keep")(format!("{}: {e}", path.display())))?;
-                self.hashed.borrow_mut().add(path, *written, &bytes);
-                *written += bytes.len() as u64;
+                for member in mdtf_volume::gz_members::plane_members(v.samples(), nx * ny, SampleType::F32) {
+                    let wrote = std::io::Write::write_all(file, &member);
+                    wrote.map_err(|e| fail("keep")(format!("{}: {e}", path.display())))?;
+                    self.hashed.borrow_mut().add(path, *written, &member);
+                    *written += member.len() as u64;
+                }
             }
             chans.give_back(slab);
         }

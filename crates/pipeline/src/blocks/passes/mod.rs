@@ -107,6 +107,14 @@ impl<'a> SlabWork<'a> {
             SlabWork::Traced { chain, .. } => Plan::for_channels(&crate::channel::traced_names(), &[], geo, chain),
         }
     }
+
+    /// The pipeline's settings (None for the tracing alone, which keeps and packs nothing).
+    fn settings(self) -> Option<&'a Settings> {
+        match self {
+            SlabWork::Pipeline(s) => Some(s),
+            SlabWork::Traced { .. } => None,
+        }
+    }
 }
 
 /// What a slab-by-slab run hands from pass to pass.
@@ -195,20 +203,13 @@ impl<'a> SlabPasses<'a> {
 
     /// The pipeline's settings (a run that only traces has none: it never packs).
     fn settings(&self) -> Result<&'a Settings, RunError> {
-        match self.work {
-            SlabWork::Pipeline(s) => Ok(s),
-            SlabWork::Traced { .. } => {
-                Err(crate::run::fail("plan")("the tracing alone keeps and packs nothing".into()))
-            }
-        }
+        let none = || crate::run::fail("plan")("the tracing alone keeps and packs nothing".into());
+        self.work.settings().ok_or_else(none)
     }
 
     /// The channels the run keeps as volumes, by name.
     fn kept(&self) -> &'a [String] {
-        match self.work {
-            SlabWork::Pipeline(s) => &s.outputs.keep,
-            SlabWork::Traced { .. } => &[],
-        }
+        self.work.settings().map_or(&[], |s| &s.outputs.keep)
     }
 
     /// The input pass: opens the input, plans the run and sizes its slabs
@@ -225,10 +226,7 @@ impl<'a> SlabPasses<'a> {
     ) -> Result<(SlabPasses<'a>, ChannelStore), RunError> {
         progress.stage("input")?;
         let t = Instant::now();
-        let settings = match work {
-            SlabWork::Pipeline(s) => Some(s),
-            SlabWork::Traced { .. } => None,
-        };
+        let settings = work.settings();
         let (mut source, meta) = open_source(work.input(), settings)?;
         let geo = source.geometry().clone();
         let nz = geo.dims[2];
