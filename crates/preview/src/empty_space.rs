@@ -57,6 +57,63 @@ pub(crate) fn block_at(nb: [usize; 3], p: [f64; 3]) -> usize {
     (b[2] * nb[1] + b[1]) * nb[0] + b[0]
 }
 
+/// The last sample, from sample `s` at voxel-space position `p` on a ray
+/// advancing `per_sample` voxels per sample, that certainly lies in the
+/// cube of blocks within `reach - 1` blocks (Chebyshev) of the block of `s`
+/// (of `nb` per axis, as [`block_at`] assigns them; reach 1: that block
+/// alone): the samples between lie in it too (a box is convex), so a ray
+/// may jump over them where those blocks are invisible. One sample short
+/// of the box's edge, for the rounding of the positions; `usize::MAX` when
+/// the ray never leaves the box.
+pub(crate) fn last_sample_in_reach(nb: [usize; 3], p: [f64; 3], per_sample: [f64; 3], s: usize, reach: u8) -> usize {
+    let r = usize::from(reach.max(1)) - 1;
+    let mut samples = f64::INFINITY;
+    for a in 0..3 {
+        let d = per_sample[a];
+        let b = ((p[a].max(0.0) as usize) / BLOCK).min(nb[a] - 1);
+        // the first and last blocks reach beyond the grid (block_at clamps)
+        let edge = match d {
+            d if d > 0.0 && b + r + 1 < nb[a] => ((b + r + 1) * BLOCK) as f64,
+            d if d < 0.0 && b > r => ((b - r) * BLOCK) as f64,
+            _ => continue,
+        };
+        // samples s + j with j < (edge - p) / d stay on this side of the edge
+        samples = samples.min((edge - p[a]) / d);
+    }
+    if samples.is_finite() { s + (samples.ceil() as usize).saturating_sub(2) } else { usize::MAX }
+}
+
+/// The largest reach of empty space this table records, blocks.
+const MAX_REACH: u8 = 8;
+
+/// Per block of `visible` (`nb` per axis): 0 where it is visible, else the
+/// largest k (up to [`MAX_REACH`]) such that every block of the grid within
+/// k - 1 blocks of it (Chebyshev) is invisible; from k - 1 erosions of the
+/// invisible blocks by the 3 x 3 x 3 cube, axis by axis.
+pub(crate) fn empty_reach(visible: &[bool], nb: [usize; 3]) -> Vec<u8> {
+    let mut empty: Vec<bool> = visible.iter().map(|v| !v).collect();
+    let mut reach: Vec<u8> = empty.iter().map(|&e| u8::from(e)).collect();
+    let strides = [1, nb[0], nb[0] * nb[1]];
+    for k in 2..=MAX_REACH {
+        for (a, &stride) in strides.iter().enumerate() {
+            let before = empty.clone();
+            for (b, e) in empty.iter_mut().enumerate() {
+                let i = (b / stride) % nb[a];
+                *e = before[b] && (i == 0 || before[b - stride]) && (i + 1 == nb[a] || before[b + stride]);
+            }
+        }
+        if !empty.iter().any(|&e| e) {
+            break;
+        }
+        for (r, &e) in reach.iter_mut().zip(&empty) {
+            if e {
+                *r = k;
+            }
+        }
+    }
+    reach
+}
+
 /// Edge of the blocks of empty-space skipping, voxels.
 const BLOCK: usize = 8;
 
@@ -67,13 +124,14 @@ const BLOCK: usize = 8;
 /// zero opacity is skipped without changing a pixel.
 fn visible_blocks(t: &Table, chans: &[Option<&[f32]>], dims: [usize; 3]) -> (Vec<bool>, [usize; 3]) {
     let opaque = OpaqueCells::new(t);
-    per_block(dims, |lo, hi| {
+    let ranges: Vec<Option<Vec<(f32, f32)>>> = chans.iter().map(|c| c.map(|d| block_ranges(d, dims))).collect();
+    per_block(dims, |b| {
         let cells: Vec<(usize, usize)> = t
             .axes
             .iter()
-            .enumerate()
-            .map(|(k, axis)| {
-                let (vmin, vmax) = chans[k].map_or((0.0, 0.0), |d| block_range(d, dims, lo, hi));
+            .zip(&ranges)
+            .map(|(axis, r)| {
+                let (vmin, vmax) = r.as_ref().map_or((0.0, 0.0), |r| r[b]);
                 (table_cell(axis, vmin), table_cell(axis, vmax))
             })
             .collect();
@@ -88,8 +146,9 @@ fn visible_blocks(t: &Table, chans: &[Option<&[f32]>], dims: [usize; 3]) -> (Vec
 /// cells, changes no pixel.
 fn visible_distance_blocks(alpha_d: &Table, distance: &[f32], dims: [usize; 3]) -> (Vec<bool>, [usize; 3]) {
     let opaque = OpaqueCells::new(alpha_d);
-    per_block(dims, |lo, hi| {
-        let (dmin, dmax) = block_range(distance, dims, lo, hi);
+    let ranges = block_ranges(distance, dims);
+    per_block(dims, |b| {
+        let (dmin, dmax) = ranges[b];
         let Some(axis) = alpha_d.axes.first() else { return true };
         dmax >= 0.0 && opaque.any(&[(table_cell(axis, dmin.max(0.0)), table_cell(axis, dmax))])
     })
@@ -118,8 +177,9 @@ fn gaussian_far_exponent(primitives: &[mdtf_pack::GaussianPrimitive], path: f64)
 fn visible_peak_blocks(peaks: &Table, preintegration: &Table, v: &[f32], dims: [usize; 3]) -> (Vec<bool>, [usize; 3]) {
     let opaque = OpaqueCells::new(preintegration);
     let peaked = OpaqueCells::marking(peaks, |cell| peaks.values[cell * peaks.components] >= 0.0);
-    per_block(dims, |lo, hi| {
-        let (vmin, vmax) = block_range(v, dims, lo, hi);
+    let ranges = block_ranges(v, dims);
+    per_block(dims, |b| {
+        let (vmin, vmax) = ranges[b];
         if vmin > vmax {
             return true;
         }
@@ -142,11 +202,12 @@ fn visible_gaussian_blocks(
     far: f64,
     dims: [usize; 3],
 ) -> (Vec<bool>, [usize; 3]) {
-    per_block(dims, |lo, hi| {
+    let ranges: Vec<Option<Vec<(f32, f32)>>> = chans.iter().map(|c| c.map(|d| block_ranges(d, dims))).collect();
+    per_block(dims, |block| {
         let mut low = Vec::with_capacity(chans.len());
         let mut high = Vec::with_capacity(chans.len());
-        for (k, c) in chans.iter().enumerate() {
-            let (mut a, mut b) = c.map_or((0.0, 0.0), |d| block_range(d, dims, lo, hi));
+        for (k, r) in ranges.iter().enumerate() {
+            let (mut a, mut b) = r.as_ref().map_or((0.0, 0.0), |r| r[block]);
             if a > b || a.is_nan() || b.is_nan() {
                 return true;
             }
@@ -160,33 +221,56 @@ fn visible_gaussian_blocks(
     })
 }
 
-/// `visible(lo, hi)` for every block of BLOCK^3 cells (voxel ranges lo..hi
-/// per axis, the next voxel included), in parallel; and the block counts.
-fn per_block(dims: [usize; 3], visible: impl Fn([usize; 3], [usize; 3]) -> bool + Sync) -> (Vec<bool>, [usize; 3]) {
-    let nb = dims.map(|n| n.saturating_sub(1).max(1).div_ceil(BLOCK));
+/// Blocks per axis of a grid of `dims`.
+fn block_counts(dims: [usize; 3]) -> [usize; 3] {
+    dims.map(|n| n.saturating_sub(1).max(1).div_ceil(BLOCK))
+}
+
+/// `visible(b)` for every block b of BLOCK^3 cells, in parallel; and the block counts.
+fn per_block(dims: [usize; 3], visible: impl Fn(usize) -> bool + Sync) -> (Vec<bool>, [usize; 3]) {
+    let nb = block_counts(dims);
     let mut out = vec![false; nb[0] * nb[1] * nb[2]];
-    out.par_iter_mut().enumerate().for_each(|(b, o)| {
-        let (bx, by, bz) = (b % nb[0], (b / nb[0]) % nb[1], b / (nb[0] * nb[1]));
-        let lo = [bx * BLOCK, by * BLOCK, bz * BLOCK];
-        let hi = [0, 1, 2].map(|a| ((lo[a] + BLOCK) + 1).min(dims[a]));
-        *o = visible(lo, hi);
-    });
+    out.par_iter_mut().enumerate().for_each(|(b, o)| *o = visible(b));
     (out, nb)
 }
 
-/// Smallest and largest sample of `d` in the voxel box lo..hi (NaN ignored).
-fn block_range(d: &[f32], dims: [usize; 3], lo: [usize; 3], hi: [usize; 3]) -> (f32, f32) {
-    let (mut vmin, mut vmax) = (f32::INFINITY, f32::NEG_INFINITY);
-    for z in lo[2]..hi[2] {
-        for y in lo[1]..hi[1] {
-            let row = (z * dims[1] + y) * dims[0];
-            for &v in &d[row + lo[0]..row + hi[0]] {
-                vmin = vmin.min(v);
-                vmax = vmax.max(v);
+/// The blocks (of `nb` along an axis) whose voxels (BLOCK + 1 of them: the
+/// corners of their cells) include voxel `i`: its own, and the one before
+/// on a block's edge.
+fn blocks_holding(i: usize, nb: usize) -> impl Iterator<Item = usize> {
+    let own = i / BLOCK;
+    let before = (i.is_multiple_of(BLOCK) && own > 0).then(|| own - 1);
+    (own < nb).then_some(own).into_iter().chain(before)
+}
+
+/// The smallest and largest sample of `d` (NaN ignored; infinity and minus
+/// infinity where a block holds no other) over each block's voxels, in
+/// block order: one pass over the samples, the z-rows of blocks in parallel.
+fn block_ranges(d: &[f32], dims: [usize; 3]) -> Vec<(f32, f32)> {
+    let nb = block_counts(dims);
+    let [nx, ny, nz] = dims;
+    let plane = nb[0] * nb[1];
+    let mut out = vec![(f32::INFINITY, f32::NEG_INFINITY); plane * nb[2]];
+    out.par_chunks_mut(plane).enumerate().for_each(|(bz, acc)| {
+        for z in bz * BLOCK..(bz * BLOCK + BLOCK + 1).min(nz) {
+            for y in 0..ny {
+                let row = &d[(z * ny + y) * nx..][..nx];
+                for bx in 0..nb[0] {
+                    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                    for &v in &row[bx * BLOCK..(bx * BLOCK + BLOCK + 1).min(nx)] {
+                        // comparisons are false for NaN: NaN is passed over
+                        lo = if v < lo { v } else { lo };
+                        hi = if v > hi { v } else { hi };
+                    }
+                    for by in blocks_holding(y, nb[1]) {
+                        let r = &mut acc[by * nb[0] + bx];
+                        *r = (r.0.min(lo), r.1.max(hi));
+                    }
+                }
             }
         }
-    }
-    (vmin, vmax)
+    });
+    out
 }
 
 /// The table cell of value x along `axis` (clamped, as [`lookup`] picks it).
@@ -276,6 +360,80 @@ mod tests {
         }
         let (lo, hi) = cells[axis];
         (lo..=hi).any(|i| walk(t, cells, axis + 1, offset + i * stride, stride * t.axes[axis].1))
+    }
+
+    #[test]
+    fn empty_reach_is_the_largest_cube_of_invisible_blocks() {
+        let nb = [9, 7, 5];
+        let n = nb[0] * nb[1] * nb[2];
+        let visible: Vec<bool> = (0..n).map(|b| (b * 7919) % 61 == 3).collect();
+        let reach = empty_reach(&visible, nb);
+        let at = |b: usize| [b % nb[0], (b / nb[0]) % nb[1], b / (nb[0] * nb[1])];
+        for b in 0..n {
+            // brute force: the largest k whose cube of radius k - 1 (within the grid) is all invisible
+            let clear = |r: usize| {
+                (0..n).all(|o| {
+                    let (p, q) = (at(b), at(o));
+                    (0..3).any(|a| p[a].abs_diff(q[a]) > r) || !visible[o]
+                })
+            };
+            let want = if visible[b] { 0 } else { (1..=MAX_REACH).take_while(|&k| clear(usize::from(k) - 1)).count() };
+            assert_eq!(usize::from(reach[b]), want, "block {:?}", at(b));
+        }
+        assert!(reach.iter().any(|&r| r >= 2), "the test has empty space wider than a block");
+    }
+
+    #[test]
+    fn a_jump_never_passes_a_block_beyond_the_reach() {
+        let nb = [6, 5, 7];
+        let mut state = 5u64;
+        let mut next = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..3000 {
+            let p = [0, 1, 2].map(|a| next() * (nb[a] * BLOCK) as f64);
+            let per_sample = [0, 1, 2].map(|_| (next() * 2.0 - 1.0) * 1.5);
+            let reach = 1 + (next() * 3.0) as u8;
+            let last = last_sample_in_reach(nb, p, per_sample, 0, reach);
+            let b0 = [0, 1, 2].map(|a| ((p[a].max(0.0) as usize) / BLOCK).min(nb[a] - 1));
+            for j in 0..=last.min(400) {
+                let q = [0, 1, 2].map(|a| p[a] + j as f64 * per_sample[a]);
+                let b = [0, 1, 2].map(|a| ((q[a].max(0.0) as usize) / BLOCK).min(nb[a] - 1));
+                let off = (0..3).map(|a| b[a].abs_diff(b0[a])).max().unwrap_or(0);
+                assert!(
+                    off < usize::from(reach),
+                    "{p:?} {per_sample:?} reach {reach}: sample {j} of {last} is {off} blocks off"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn block_ranges_are_each_blocks_voxels_min_and_max() {
+        for dims in [[20, 17, 9], [9, 1, 33], [1, 1, 1], [16, 8, 17]] {
+            let n = dims[0] * dims[1] * dims[2];
+            let d: Vec<f32> =
+                (0..n).map(|i| if i % 13 == 5 { f32::NAN } else { ((i * 7919) % 1000) as f32 - 500.0 }).collect();
+            let nb = block_counts(dims);
+            let got = block_ranges(&d, dims);
+            assert_eq!(got.len(), nb[0] * nb[1] * nb[2]);
+            for (b, &(lo, hi)) in got.iter().enumerate() {
+                let at = [b % nb[0], (b / nb[0]) % nb[1], b / (nb[0] * nb[1])];
+                // brute force: every voxel of the block's BLOCK + 1 per axis
+                let (mut want_lo, mut want_hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                for z in at[2] * BLOCK..(at[2] * BLOCK + BLOCK + 1).min(dims[2]) {
+                    for y in at[1] * BLOCK..(at[1] * BLOCK + BLOCK + 1).min(dims[1]) {
+                        for x in at[0] * BLOCK..(at[0] * BLOCK + BLOCK + 1).min(dims[0]) {
+                            let v = d[(z * dims[1] + y) * dims[0] + x];
+                            want_lo = want_lo.min(v);
+                            want_hi = want_hi.max(v);
+                        }
+                    }
+                }
+                assert_eq!((lo, hi), (want_lo, want_hi), "{dims:?} block {at:?}");
+            }
+        }
     }
 
     #[test]

@@ -149,13 +149,15 @@ fn chord_peak(
     let samples = ((cells / cells_per_sample).ceil() as usize).clamp(1, 4096);
     let mut best = eval(f1);
     let mut at = None;
-    let mut point = vec![0f32; f0.len()];
+    // (chords have 2 to 4 coordinates: no allocation per sample)
+    let mut point = [0f32; 4];
+    let point = &mut point[..f0.len()];
     for k in 0..samples {
         let s = k as f32 / samples as f32;
         for (p, (a, b)) in point.iter_mut().zip(f0.iter().zip(f1)) {
             *p = a + s * (b - a);
         }
-        let rgba = eval(&point);
+        let rgba = eval(point);
         if rgba[3] > best[3] {
             best = rgba;
             at = Some(s);
@@ -203,6 +205,33 @@ fn unpremultiplied([r, g, b, a]: [f32; 4]) -> ([f32; 3], f64) {
 }
 
 fn lookup(t: &Table, coords: &[f32]) -> [f32; 4] {
+    lookup_entry(t, table_index(t, coords))
+}
+
+/// RGBA of entry `idx` of `t` (white for a table of opacities).
+fn lookup_entry(t: &Table, idx: usize) -> [f32; 4] {
+    let c = t.components;
+    if c == 4 {
+        [t.values[idx * 4], t.values[idx * 4 + 1], t.values[idx * 4 + 2], t.values[idx * 4 + 3]]
+    } else {
+        [1.0, 1.0, 1.0, t.values[idx]]
+    }
+}
+
+/// The opacity of a table's entry (per voxel of path) corrected for a step
+/// of `step_vox` voxels: 1 - (1 - a)^step, with a capped at 0.999.
+fn corrected_opacity(a: f32, step_vox: f64) -> f64 {
+    1.0 - (1.0 - (a as f64).min(0.999)).powf(step_vox)
+}
+
+/// [`corrected_opacity`] of every entry of `t`, by entry index.
+fn corrected_opacities(t: &Table, step_vox: f64) -> Vec<f64> {
+    let alpha = |e: usize| if t.components == 4 { t.values[e * 4 + 3] } else { t.values[e] };
+    (0..t.values.len() / t.components.max(1)).map(|e| corrected_opacity(alpha(e), step_vox)).collect()
+}
+
+/// The index of the entry of `t` at `coords` (the nearest cell, clamped).
+fn table_index(t: &Table, coords: &[f32]) -> usize {
     let mut idx = 0usize;
     let mut stride = 1usize;
     for (k, (_, cells, min, max)) in t.axes.iter().enumerate() {
@@ -212,12 +241,7 @@ fn lookup(t: &Table, coords: &[f32]) -> [f32; 4] {
         idx += i * stride;
         stride *= cells;
     }
-    let c = t.components;
-    if c == 4 {
-        [t.values[idx * 4], t.values[idx * 4 + 1], t.values[idx * 4 + 2], t.values[idx * 4 + 3]]
-    } else {
-        [1.0, 1.0, 1.0, t.values[idx]]
-    }
+    idx
 }
 
 /// Where a sample falls in the grid: the base voxel and the weights along
@@ -263,19 +287,25 @@ impl Cell {
     }
 }
 
-/// The first sample index s (samples at origin + (s + 1/2) step dir) that
-/// can lie inside the box [0, ext]: one before the ray's entry by the slab
-/// test (the caller still tests every sample), 0 if it never enters.
-fn first_step(origin: [f64; 3], dir: [f64; 3], ext: &[f64], step: f64) -> usize {
-    let mut t_enter = 0.0f64;
+/// The samples s (at origin + (s + 1/2) step dir) that can lie inside the
+/// box [0, ext], by the slab test: from one before the ray's entry to one
+/// after its exit (the caller still tests every sample), none if it misses.
+fn sample_span(origin: [f64; 3], dir: [f64; 3], ext: &[f64], step: f64) -> std::ops::Range<usize> {
+    let (mut t_enter, mut t_exit) = (0.0f64, f64::INFINITY);
     for a in 0..3 {
         if dir[a] != 0.0 {
             let (t1, t2) = ((0.0 - origin[a]) / dir[a], (ext[a] - origin[a]) / dir[a]);
             t_enter = t_enter.max(t1.min(t2));
+            t_exit = t_exit.min(t1.max(t2));
+        } else if origin[a] < 0.0 || origin[a] > ext[a] {
+            return 0..0;
         }
     }
-    let s = (t_enter / step - 0.5).floor() - 1.0;
-    if s.is_finite() && s > 0.0 { s as usize } else { 0 }
+    let first = (t_enter / step - 0.5).floor() - 1.0;
+    let first = if first.is_finite() && first > 0.0 { first as usize } else { 0 };
+    let end = (t_exit / step - 0.5).ceil() + 2.0;
+    let end = if end.is_finite() { end.max(0.0) as usize } else { usize::MAX };
+    first..end.max(first)
 }
 
 /// Samples per ray allowed per voxel of the grid's diagonal and per unit of
@@ -394,11 +424,18 @@ fn render_impl(
     let hl = (half.iter().map(|x| x * x).sum::<f64>()).sqrt().max(1e-12);
     let half = half.map(|x| x / hl);
     let mut img = vec![0u8; cam.size * cam.size * 3];
+    // the LUT's opacities corrected for the step once, not at every sample
+    let lut_opacity = match classifier {
+        Classifier::Lut(t) => corrected_opacities(t, step_vox),
+        _ => Vec::new(),
+    };
     let skip = if skip_empty {
         empty_space::visible_blocks_of(classifier, &table_chans, distance, v_data, dims, steps as f64 * step_vox)
     } else {
         None
     };
+    // how far the empty space around each invisible block reaches, blocks
+    let reach = skip.as_ref().map_or(Vec::new(), |(visible, nb)| empty_space::empty_reach(visible, *nb));
     // the chord (or the peak segment) from the previous sample leaves a block's value box unless both samples are in it
     let chord_search = matches!(
         classifier,
@@ -417,6 +454,9 @@ fn render_impl(
         Classifier::Product { factors, .. } => product_lookup(factors, x),
         _ => [0.0; 4],
     };
+    // a sample's advance along the ray, voxels per axis
+    let per_sample = [0, 1, 2].map(|a| step_world * dir[a] / g.spacing[a]);
+    let nb_of = |skip: &Option<(Vec<bool>, [usize; 3])>| skip.as_ref().map_or([1; 3], |(_, nb)| *nb);
     img.par_chunks_mut(cam.size * 3).enumerate().for_each(|(row, out)| {
         for col in 0..cam.size {
             let (u, v) = (
@@ -424,6 +464,9 @@ fn render_impl(
                 (1.0 - (row as f64 + 0.5) / cam.size as f64 * 2.0) * radius,
             );
             let origin = [0, 1, 2].map(|a| centre[a] + u * right[a] + v * up[a] - radius * dir[a]);
+            // sample s's voxel-space position
+            let position =
+                |s: usize| [0, 1, 2].map(|a| (origin[a] + (s as f64 + 0.5) * step_world * dir[a]) / g.spacing[a]);
             let (mut rgb, mut alpha) = ([0f64; 3], 0f64);
             // the previous sample's TF coordinates (analytic Gaussian segments)
             // (two buffers swapped each sample: no allocation per sample)
@@ -436,8 +479,13 @@ fn render_impl(
             // the sample before this one was skipped: an analytic Gaussian segment starts there
             let mut skipped_before = false;
             let mut entered = false;
-            for s in first_step(origin, dir, &ext, step_world)..steps {
+            let span = sample_span(origin, dir, &ext, step_world);
+            let steps = steps.min(span.end);
+            let mut s = span.start;
+            while s < steps {
                 let pw = [0, 1, 2].map(|a| origin[a] + (s as f64 + 0.5) * step_world * dir[a]);
+                let this = s;
+                s += 1;
                 if (0..3).any(|a| pw[a] < 0.0 || pw[a] > ext[a]) {
                     // the samples inside the box are one run of s (it is convex,
                     // and pw is monotone in s per axis): once out, done
@@ -447,7 +495,7 @@ fn render_impl(
                     continue;
                 }
                 entered = true;
-                let p = [0, 1, 2].map(|a| pw[a] / g.spacing[a]);
+                let p = position(this);
                 let block = skip.as_ref().map_or(0, |(_, nb)| empty_space::block_at(*nb, p));
                 if let Some((visible, _)) = &skip
                     && !visible[block]
@@ -456,6 +504,9 @@ fn render_impl(
                     // (only the chord search reads the previous sample across a skip)
                     prev = None;
                     skipped_before = true;
+                    // the later samples in the empty space around would be skipped alike: past them at once
+                    s = empty_space::last_sample_in_reach(nb_of(&skip), p, per_sample, this, reach[block])
+                        .saturating_add(1);
                     continue;
                 }
                 let resumed = std::mem::take(&mut skipped_before);
@@ -466,6 +517,16 @@ fn render_impl(
                     && !visible[block]
                     && prev_here.is_none_or(|(_, pb, _)| pb == block)
                 {
+                    // the block's later samples would be skipped alike, each the next one's
+                    // previous sample: on to the last of them
+                    let last = empty_space::last_sample_in_reach(nb_of(&skip), p, per_sample, this, 1);
+                    if last > this && last < steps {
+                        let p_last = position(last);
+                        prev = Some((Cell::at(dims, p_last), block, p_last));
+                        s = last + 1;
+                    } else if last >= steps {
+                        s = steps;
+                    }
                     continue;
                 }
                 let sample = |d: Option<&[f32]>| d.map_or(0.0, |d| cell.sample(d));
@@ -473,9 +534,10 @@ fn render_impl(
                 let (mut shade, mut shade_at) = (cell, p);
                 let ([r, gr, b], a) = match classifier {
                     Classifier::Lut(t) => {
-                        let [r, gr, b, a] = lookup(t, &coords(&cell, &table_chans));
+                        let at = table_index(t, &coords(&cell, &table_chans));
+                        let [r, gr, b, _] = lookup_entry(t, at);
                         // opacity correction: the TF's opacity is per voxel (L_min) of path
-                        ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(step_vox))
+                        ([r, gr, b], lut_opacity[at])
                     }
                     Classifier::Distance { alpha_u, alpha_d } => {
                         let d = sample(distance);
@@ -483,7 +545,7 @@ fn render_impl(
                         let u = alpha_u
                             .as_ref()
                             .map_or([1.0, 1.0, 1.0, 1.0], |t| lookup(t, &[sample(v_data), sample(g_hit)]));
-                        ([u[0], u[1], u[2]], 1.0 - (1.0 - ((u[3] * ad) as f64).min(0.999)).powf(step_vox))
+                        ([u[0], u[1], u[2]], corrected_opacity(u[3] * ad, step_vox))
                     }
                     Classifier::Peak { peak_table, preintegration, find_peaks } => {
                         let v1 = sample(v_data);
@@ -536,7 +598,7 @@ fn render_impl(
                                 shade = Cell::at(dims, shade_at);
                                 ([r, gr, b], (a as f64).min(0.999))
                             }
-                            None => ([r, gr, b], 1.0 - (1.0 - (a as f64).min(0.999)).powf(step_vox)),
+                            None => ([r, gr, b], corrected_opacity(a, step_vox)),
                         }
                     }
                     Classifier::Gaussian { primitives, channels: _, analytic, sqrt_last } => {
@@ -627,6 +689,31 @@ fn render_impl(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_sample_span_holds_every_sample_inside_the_box() {
+        let mut state = 11u64;
+        let mut next = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let ext = [40.0, 17.0, 25.0];
+        for _ in 0..2000 {
+            let origin = [0, 1, 2].map(|a| (next() * 2.0 - 0.5) * ext[a]);
+            let mut dir = [0, 1, 2].map(|_| next() * 2.0 - 1.0);
+            // axis-parallel rays too
+            if next() < 0.2 {
+                dir[(next() * 3.0) as usize % 3] = 0.0;
+            }
+            let step = 0.1 + next();
+            let span = sample_span(origin, dir, &ext, step);
+            for s in 0..2000usize {
+                let p = [0, 1, 2].map(|a| origin[a] + (s as f64 + 0.5) * step * dir[a]);
+                let inside = (0..3).all(|a| p[a] >= 0.0 && p[a] <= ext[a]);
+                assert!(!inside || span.contains(&s), "{origin:?} {dir:?} {step}: sample {s} outside {span:?}");
+            }
+        }
+    }
 
     #[test]
     fn rays_take_the_asked_step_and_a_bounded_count_on_any_grid() {
