@@ -7,6 +7,7 @@
 
 use crate::load::Table;
 use crate::render::Classifier;
+use crate::samples::Samples;
 use rayon::prelude::*;
 
 /// Which blocks of the grid `dims` can show with `classifier`, and the block
@@ -16,9 +17,9 @@ use rayon::prelude::*;
 /// longest ray's length in voxels.
 pub(crate) fn visible_blocks_of(
     classifier: &Classifier,
-    table_chans: &[Option<&[f32]>],
-    distance: Option<&[f32]>,
-    v_data: Option<&[f32]>,
+    table_chans: &[Option<Samples>],
+    distance: Option<Samples>,
+    v_data: Option<Samples>,
     dims: [usize; 3],
     path_voxels: f64,
 ) -> Option<(Vec<bool>, [usize; 3])> {
@@ -122,7 +123,7 @@ const BLOCK: usize = 8;
 /// get a non-zero opacity. Interpolated values stay within the block's
 /// min..max of each channel, so a block whose box of LUT cells holds only
 /// zero opacity is skipped without changing a pixel.
-fn visible_blocks(t: &Table, chans: &[Option<&[f32]>], dims: [usize; 3]) -> (Vec<bool>, [usize; 3]) {
+fn visible_blocks(t: &Table, chans: &[Option<Samples>], dims: [usize; 3]) -> (Vec<bool>, [usize; 3]) {
     let opaque = OpaqueCells::new(t);
     let ranges: Vec<Option<Vec<(f32, f32)>>> = chans.iter().map(|c| c.map(|d| block_ranges(d, dims))).collect();
     per_block(dims, |b| {
@@ -144,7 +145,7 @@ fn visible_blocks(t: &Table, chans: &[Option<&[f32]>], dims: [usize; 3]) -> (Vec
 /// distance is negative (no boundary), so a block whose distances are all
 /// negative, or whose non-negative ones fall only on transparent alpha_d
 /// cells, changes no pixel.
-fn visible_distance_blocks(alpha_d: &Table, distance: &[f32], dims: [usize; 3]) -> (Vec<bool>, [usize; 3]) {
+fn visible_distance_blocks(alpha_d: &Table, distance: Samples, dims: [usize; 3]) -> (Vec<bool>, [usize; 3]) {
     let opaque = OpaqueCells::new(alpha_d);
     let ranges = block_ranges(distance, dims);
     per_block(dims, |b| {
@@ -174,7 +175,7 @@ fn gaussian_far_exponent(primitives: &[mdtf_pack::GaussianPrimitive], path: f64)
 /// a peak. The ray skips a sample of an invisible block only when the sample
 /// before was in the same block (a segment from another block may cross a
 /// peak), so the segment's values stay in the box.
-fn visible_peak_blocks(peaks: &Table, preintegration: &Table, v: &[f32], dims: [usize; 3]) -> (Vec<bool>, [usize; 3]) {
+fn visible_peak_blocks(peaks: &Table, preintegration: &Table, v: Samples, dims: [usize; 3]) -> (Vec<bool>, [usize; 3]) {
     let opaque = OpaqueCells::new(preintegration);
     let peaked = OpaqueCells::marking(peaks, |cell| peaks.values[cell * peaks.components] >= 0.0);
     let ranges = block_ranges(v, dims);
@@ -197,7 +198,7 @@ fn visible_peak_blocks(peaks: &Table, preintegration: &Table, v: &[f32], dims: [
 /// ([`gaussian_far_exponent`]) is skipped. A block holding NaN shows.
 fn visible_gaussian_blocks(
     primitives: &[mdtf_pack::GaussianPrimitive],
-    chans: &[Option<&[f32]>],
+    chans: &[Option<Samples>],
     sqrt_last: bool,
     far: f64,
     dims: [usize; 3],
@@ -246,7 +247,7 @@ fn blocks_holding(i: usize, nb: usize) -> impl Iterator<Item = usize> {
 /// The smallest and largest sample of `d` (NaN ignored; infinity and minus
 /// infinity where a block holds no other) over each block's voxels, in
 /// block order: one pass over the samples, the z-rows of blocks in parallel.
-fn block_ranges(d: &[f32], dims: [usize; 3]) -> Vec<(f32, f32)> {
+fn block_ranges(d: Samples, dims: [usize; 3]) -> Vec<(f32, f32)> {
     let nb = block_counts(dims);
     let [nx, ny, nz] = dims;
     let plane = nb[0] * nb[1];
@@ -254,10 +255,10 @@ fn block_ranges(d: &[f32], dims: [usize; 3]) -> Vec<(f32, f32)> {
     out.par_chunks_mut(plane).enumerate().for_each(|(bz, acc)| {
         for z in bz * BLOCK..(bz * BLOCK + BLOCK + 1).min(nz) {
             for y in 0..ny {
-                let row = &d[(z * ny + y) * nx..][..nx];
+                let row = (z * ny + y) * nx;
                 for bx in 0..nb[0] {
                     let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-                    for &v in &row[bx * BLOCK..(bx * BLOCK + BLOCK + 1).min(nx)] {
+                    for v in (row + bx * BLOCK..row + (bx * BLOCK + BLOCK + 1).min(nx)).map(|i| d.at(i)) {
                         // comparisons are false for NaN: NaN is passed over
                         lo = if v < lo { v } else { lo };
                         hi = if v > hi { v } else { hi };
@@ -416,7 +417,7 @@ mod tests {
             let d: Vec<f32> =
                 (0..n).map(|i| if i % 13 == 5 { f32::NAN } else { ((i * 7919) % 1000) as f32 - 500.0 }).collect();
             let nb = block_counts(dims);
-            let got = block_ranges(&d, dims);
+            let got = block_ranges(Samples::Floats(&d), dims);
             assert_eq!(got.len(), nb[0] * nb[1] * nb[2]);
             for (b, &(lo, hi)) in got.iter().enumerate() {
                 let at = [b % nb[0], (b / nb[0]) % nb[1], b / (nb[0] * nb[1])];

@@ -12,10 +12,13 @@ mod empty_space;
 mod load;
 mod mesh;
 mod render;
+mod samples;
 
+use load::pack_geometry;
 pub use load::{LoadedPack, Table, decode_channels, load, load_channels};
 pub use mesh::{MESH_GRID_MAX, mesh_channels, resample};
-pub use render::{Camera, Classifier, channels_read, render, render_without_skipping};
+pub use render::{Camera, Classifier, channels_read, render, render_samples, render_without_skipping};
+pub use samples::{PackTextures, Samples};
 
 use mdtf_volume::VolumeError;
 use std::path::Path;
@@ -158,15 +161,17 @@ pub fn preview_named(
     cam.check().map_err(PreviewError::BadView)?;
     mdtf_volume::Inputs::of(&[dir]).refuse_target(out)?;
     // the classifier comes from the tables; then only the channels it and the shading read are decoded
-    let mut pack = load_channels(dir, &|_| false)?;
+    let pack = load_channels(dir, &|_| false)?;
     let c = classifier(&pack, analytic)?;
     let read = channels_read(&c);
-    pack.channels = if pack.manifest.mesh.is_some() {
-        mesh_channels(dir, &pack.manifest, MESH_GRID_MAX)?
+    let img = if pack.manifest.mesh.is_some() {
+        render(&mesh_channels(dir, &pack.manifest, MESH_GRID_MAX)?, &c, cam)
     } else {
-        decode_channels(dir, &pack.manifest, &|n| read.iter().any(|r| r == n))?
+        // the textures read in place: the same pixels as decoding them, at a fraction of the memory
+        let g = pack_geometry(&pack.manifest)?;
+        let textures = PackTextures::read(dir, &pack.manifest, g.voxel_count(), &|n| read.iter().any(|r| r == n))?;
+        render_samples(&textures.samples(), &g, &c, cam)
     };
-    let img = render(&pack.channels, &c, cam);
     let text = format!(
         "mdtf preview of {} ({}), azimuth {} elevation {}, step {} voxel",
         shown_as.display(),

@@ -34,13 +34,9 @@ pub struct LoadedPack {
     pub gaussians: Option<Vec<mdtf_pack::GaussianPrimitive>>,
 }
 
-/// The channels of the pack in `dir` (described by `manifest`) that
-/// `wanted` accepts, decoded to f32 volumes.
-pub fn decode_channels(
-    dir: &Path,
-    manifest: &Manifest,
-    wanted: &dyn Fn(&str) -> bool,
-) -> Result<BTreeMap<String, Volume>, PreviewError> {
+/// The grid of a pack's textures, refused when it is degenerate, holds no
+/// voxel or more than this machine can count.
+pub(crate) fn pack_geometry(manifest: &Manifest) -> Result<Geometry, PreviewError> {
     let g = &manifest.geometry;
     let geometry = Geometry::from_affine(g.dims, [g.world_from_voxel[0], g.world_from_voxel[1], g.world_from_voxel[2]])
         .ok_or_else(|| PreviewError::Pack("manifest.json: degenerate world_from_voxel".into()))?;
@@ -50,6 +46,18 @@ pub fn decode_channels(
     if voxels == 0 {
         return Err(PreviewError::Pack(format!("manifest.json: dims {:?} hold no voxel", g.dims)));
     }
+    Ok(geometry)
+}
+
+/// The channels of the pack in `dir` (described by `manifest`) that
+/// `wanted` accepts, decoded to f32 volumes.
+pub fn decode_channels(
+    dir: &Path,
+    manifest: &Manifest,
+    wanted: &dyn Fn(&str) -> bool,
+) -> Result<BTreeMap<String, Volume>, PreviewError> {
+    let geometry = pack_geometry(manifest)?;
+    let voxels = geometry.voxel_count();
     let mut channels = BTreeMap::new();
     for tex in &manifest.textures {
         // each channel from the first texture that holds it

@@ -6,7 +6,8 @@
 
 use crate::empty_space;
 use crate::load::Table;
-use mdtf_volume::Volume;
+use crate::samples::Samples;
+use mdtf_volume::{Geometry, Volume};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 
@@ -275,14 +276,14 @@ impl Cell {
 
     /// Trilinear interpolation of `d` (x-fastest samples of the grid).
     #[inline(always)]
-    fn sample(&self, d: &[f32]) -> f32 {
+    fn sample(&self, d: Samples) -> f32 {
         let [sx, sy, sz] = self.stride;
         let b = self.base;
         let l = |a: f32, c: f32, t: f32| a + (c - a) * t;
-        let c00 = l(d[b], d[b + sx], self.t[0]);
-        let c10 = l(d[b + sy], d[b + sy + sx], self.t[0]);
-        let c01 = l(d[b + sz], d[b + sz + sx], self.t[0]);
-        let c11 = l(d[b + sz + sy], d[b + sz + sy + sx], self.t[0]);
+        let c00 = l(d.at(b), d.at(b + sx), self.t[0]);
+        let c10 = l(d.at(b + sy), d.at(b + sy + sx), self.t[0]);
+        let c01 = l(d.at(b + sz), d.at(b + sz + sx), self.t[0]);
+        let c11 = l(d.at(b + sz + sy), d.at(b + sz + sy + sx), self.t[0]);
         l(l(c00, c10, self.t[1]), l(c01, c11, self.t[1]), self.t[2])
     }
 }
@@ -340,12 +341,12 @@ fn dims_diagonal(dims: [usize; 3]) -> f64 {
 }
 
 /// The samples of the channels a table is indexed by (None: the pack lacks it, read as 0).
-fn table_channels<'a>(t: &Table, channels: &'a BTreeMap<String, Volume>) -> Vec<Option<&'a [f32]>> {
-    t.axes.iter().map(|(c, ..)| channels.get(c).map(|v| v.samples())).collect()
+fn table_channels<'a>(t: &Table, channels: &BTreeMap<String, Samples<'a>>) -> Vec<Option<Samples<'a>>> {
+    t.axes.iter().map(|(c, ..)| channels.get(c).copied()).collect()
 }
 
 /// Up to four table coordinates at `cell` (tables have at most 3 axes; the chord's 2 to 4).
-fn coords(cell: &Cell, chans: &[Option<&[f32]>]) -> [f32; 4] {
+fn coords(cell: &Cell, chans: &[Option<Samples>]) -> [f32; 4] {
     let mut out = [0f32; 4];
     for (o, c) in out.iter_mut().zip(chans) {
         *o = c.map_or(0.0, |d| cell.sample(d));
@@ -373,23 +374,39 @@ pub fn channels_read(classifier: &Classifier) -> Vec<String> {
 
 /// Renders `channels` (decoded or float, by name) with `classifier`; RGB8 pixels, rows from the top.
 pub fn render(channels: &BTreeMap<String, Volume>, classifier: &Classifier, cam: &Camera) -> Vec<u8> {
-    render_impl(channels, classifier, cam, true)
+    render_floats(channels, classifier, cam, true)
 }
 
 /// [`render`] without empty-space skipping: every sample classified (the
 /// reference the skipping is tested against; the same pixels, slower).
 pub fn render_without_skipping(channels: &BTreeMap<String, Volume>, classifier: &Classifier, cam: &Camera) -> Vec<u8> {
-    render_impl(channels, classifier, cam, false)
+    render_floats(channels, classifier, cam, false)
+}
+
+/// [`render`] of channels read in place (e.g. a pack's textures, see
+/// [`crate::PackTextures`]) on the grid `g`.
+pub fn render_samples(
+    channels: &BTreeMap<String, Samples>,
+    g: &Geometry,
+    classifier: &Classifier,
+    cam: &Camera,
+) -> Vec<u8> {
+    render_impl(channels, g, classifier, cam, true)
+}
+
+fn render_floats(channels: &BTreeMap<String, Volume>, classifier: &Classifier, cam: &Camera, skip: bool) -> Vec<u8> {
+    let Some(any) = channels.values().next() else { return vec![0; cam.size * cam.size * 3] };
+    let samples = channels.iter().map(|(n, v)| (n.clone(), Samples::Floats(v.samples()))).collect();
+    render_impl(&samples, &any.geometry, classifier, cam, skip)
 }
 
 fn render_impl(
-    channels: &BTreeMap<String, Volume>,
+    channels: &BTreeMap<String, Samples>,
+    g: &Geometry,
     classifier: &Classifier,
     cam: &Camera,
     skip_empty: bool,
 ) -> Vec<u8> {
-    let Some(any) = channels.values().next() else { return vec![0; cam.size * cam.size * 3] };
-    let g = &any.geometry;
     let ext: Vec<f64> = (0..3).map(|a| (g.dims[a] as f64 - 1.0) * g.spacing[a]).collect();
     let centre = [ext[0] / 2.0, ext[1] / 2.0, ext[2] / 2.0];
     let radius = (ext[0] * ext[0] + ext[1] * ext[1] + ext[2] * ext[2]).sqrt() / 2.0;
@@ -403,8 +420,7 @@ fn render_impl(
     ];
     let up = [-up[0], -up[1], -up[2]];
     let RaySteps { world: step_world, voxels: step_vox, count: steps } = ray_steps(g, radius, cam.step);
-    let get = |n: &str| channels.get(n);
-    let data = |n: &str| get(n).map(|v| v.samples());
+    let data = |n: &str| channels.get(n).copied();
     let (nx, ny, nz, gch) = (data("nx"), data("ny"), data("nz"), data("g"));
     let (v_data, distance, g_hit) = (data("v"), data("distance"), data("g_hit"));
     let dims = g.dims;
@@ -416,7 +432,7 @@ fn render_impl(
     };
     // what is shaded by its gradient where the pack has no normals: the value, else the TF's first channel
     let shading_scalar = v_data.or_else(|| table_chans.first().copied().flatten());
-    let g_max = get("g").and_then(|v| v.finite_range()).map_or(1.0, |r| r.1.max(1e-12) as f64);
+    let g_max = gch.and_then(|d| d.finite_max(g.voxel_count())).map_or(1.0, |m| m.max(1e-12) as f64);
     let light = [-dir[0] + 0.3 * up[0], -dir[1] + 0.3 * up[1], -dir[2] + 0.3 * up[2]];
     let ll = (light.iter().map(|x| x * x).sum::<f64>()).sqrt();
     let light = light.map(|x| x / ll);
@@ -481,11 +497,11 @@ fn render_impl(
             let mut entered = false;
             let span = sample_span(origin, dir, &ext, step_world);
             let steps = steps.min(span.end);
-            let mut s = span.start;
-            while s < steps {
+            let mut next = span.start;
+            while next < steps {
+                let s = next;
+                next += 1;
                 let pw = [0, 1, 2].map(|a| origin[a] + (s as f64 + 0.5) * step_world * dir[a]);
-                let this = s;
-                s += 1;
                 if (0..3).any(|a| pw[a] < 0.0 || pw[a] > ext[a]) {
                     // the samples inside the box are one run of s (it is convex,
                     // and pw is monotone in s per axis): once out, done
@@ -495,7 +511,7 @@ fn render_impl(
                     continue;
                 }
                 entered = true;
-                let p = position(this);
+                let p = position(s);
                 let block = skip.as_ref().map_or(0, |(_, nb)| empty_space::block_at(*nb, p));
                 if let Some((visible, _)) = &skip
                     && !visible[block]
@@ -505,7 +521,7 @@ fn render_impl(
                     prev = None;
                     skipped_before = true;
                     // the later samples in the empty space around would be skipped alike: past them at once
-                    s = empty_space::last_sample_in_reach(nb_of(&skip), p, per_sample, this, reach[block])
+                    next = empty_space::last_sample_in_reach(nb_of(&skip), p, per_sample, s, reach[block])
                         .saturating_add(1);
                     continue;
                 }
@@ -519,17 +535,17 @@ fn render_impl(
                 {
                     // the block's later samples would be skipped alike, each the next one's
                     // previous sample: on to the last of them
-                    let last = empty_space::last_sample_in_reach(nb_of(&skip), p, per_sample, this, 1);
-                    if last > this && last < steps {
+                    let last = empty_space::last_sample_in_reach(nb_of(&skip), p, per_sample, s, 1);
+                    if last > s && last < steps {
                         let p_last = position(last);
                         prev = Some((Cell::at(dims, p_last), block, p_last));
-                        s = last + 1;
+                        next = last + 1;
                     } else if last >= steps {
-                        s = steps;
+                        next = steps;
                     }
                     continue;
                 }
-                let sample = |d: Option<&[f32]>| d.map_or(0.0, |d| cell.sample(d));
+                let sample = |d: Option<Samples>| d.map_or(0.0, |d| cell.sample(d));
                 // where the sample is shaded: at the sample, or at a peak found between samples
                 let (mut shade, mut shade_at) = (cell, p);
                 let ([r, gr, b], a) = match classifier {

@@ -55,6 +55,17 @@ fn decoded_pack_renders_like_the_float_fields() {
     let some = mdtf_preview::load_channels(dir.path(), &|n| read.iter().any(|r| r == n)).unwrap();
     assert_eq!(some.channels.get("g"), loaded.channels.get("g"));
     assert_eq!(render(&some.channels, &c, &cam), from_pack);
+    // the textures read in place (codes looked up, as `preview` renders) give the decoded pack's pixels
+    let textures = mdtf_preview::PackTextures::read(dir.path(), &loaded.manifest, n * n * n, &|_| true).unwrap();
+    let geometry = &loaded.channels["v"].geometry;
+    assert_eq!(mdtf_preview::render_samples(&textures.samples(), geometry, &c, &cam), from_pack);
+    let png = dir.path().join("preview.png");
+    mdtf_preview::preview(dir.path(), &png, &cam, true).unwrap();
+    let mut reader =
+        png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap())).read_info().unwrap();
+    let mut pixels = vec![0; reader.output_buffer_size().unwrap()];
+    reader.next_frame(&mut pixels).unwrap();
+    assert_eq!(pixels, from_pack, "mdtf preview's picture is the decoded pack's");
 }
 
 #[test]
