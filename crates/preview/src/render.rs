@@ -133,10 +133,13 @@ pub enum Classifier {
 /// The highest-opacity RGBA of `eval` on the chord from `f0` to `f1` in the
 /// domain of `axes` (a table's, or a product's axes one after another),
 /// sampled every `cells_per_sample` cells (both ends included), and the chord
-/// parameter s in [0, 1) of that peak when it is not at `f1` (the sample itself).
+/// parameter s in [0, 1) of that peak when it is not at `f1` (the sample
+/// itself). `opacity` is `eval`'s opacity alone (what the search compares;
+/// the colour is looked up once, at the peak).
 fn chord_peak(
     axes: &[(String, usize, f64, f64)],
     eval: &dyn Fn(&[f32]) -> [f32; 4],
+    opacity: &dyn Fn(&[f32]) -> f32,
     f0: &[f32],
     f1: &[f32],
     cells_per_sample: f64,
@@ -148,23 +151,28 @@ fn chord_peak(
         .sum::<f64>()
         .sqrt();
     let samples = ((cells / cells_per_sample).ceil() as usize).clamp(1, 4096);
-    let mut best = eval(f1);
+    let mut best = opacity(f1);
     let mut at = None;
     // (chords have 2 to 4 coordinates: no allocation per sample)
     let mut point = [0f32; 4];
     let point = &mut point[..f0.len()];
+    let mut peak = [0f32; 4];
     for k in 0..samples {
         let s = k as f32 / samples as f32;
         for (p, (a, b)) in point.iter_mut().zip(f0.iter().zip(f1)) {
             *p = a + s * (b - a);
         }
-        let rgba = eval(point);
-        if rgba[3] > best[3] {
-            best = rgba;
+        let alpha = opacity(point);
+        if alpha > best {
+            best = alpha;
             at = Some(s);
+            peak[..point.len()].copy_from_slice(point);
         }
     }
-    (best, at)
+    match at {
+        Some(_) => (eval(&peak[..f0.len()]), at),
+        None => (eval(f1), None),
+    }
 }
 
 /// The peaks `pk` (v values in ray order, -1 for none) composited front to
@@ -465,6 +473,18 @@ fn render_impl(
         Classifier::Product { factors, .. } => factors.iter().flat_map(|t| t.axes.iter().cloned()).collect(),
         _ => Vec::new(),
     };
+    // the chord classifier's opacities alone, a quarter of its table's bytes for the search
+    let chord_alpha: Vec<f32> = match classifier {
+        Classifier::Chord { tf, find_peaks: true, .. } => {
+            (0..tf.values.len() / tf.components.max(1)).map(|e| lookup_entry(tf, e)[3]).collect()
+        }
+        _ => Vec::new(),
+    };
+    let chord_opacity = |x: &[f32]| match classifier {
+        Classifier::Chord { tf, .. } => chord_alpha[table_index(tf, x)],
+        Classifier::Product { factors, .. } => product_lookup(factors, x)[3],
+        _ => 0.0,
+    };
     let chord_eval = |x: &[f32]| match classifier {
         Classifier::Chord { tf, .. } => lookup(tf, x),
         Classifier::Product { factors, .. } => product_lookup(factors, x),
@@ -599,8 +619,14 @@ fn render_impl(
                         };
                         let ([r, gr, b, a], peak) = match f0 {
                             Some((f0, p0)) => {
-                                let (rgba, s) =
-                                    chord_peak(&chord_axes, &chord_eval, &f0[..n_axes], f1, *cells_per_sample);
+                                let (rgba, s) = chord_peak(
+                                    &chord_axes,
+                                    &chord_eval,
+                                    &chord_opacity,
+                                    &f0[..n_axes],
+                                    f1,
+                                    *cells_per_sample,
+                                );
                                 (rgba, s.map(|s| (s as f64, p0)))
                             }
                             None => (chord_eval(f1), None),
