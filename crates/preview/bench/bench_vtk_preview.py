@@ -30,12 +30,13 @@ from vtk.util import numpy_support
 
 
 def pack_value(pack: Path) -> tuple[np.ndarray, list[float]]:
-    """The pack's value channel v decoded (z, y, x) and its spacing."""
+    """The pack's value channel v (else its first channel: a multi-field
+    pack's first field) decoded (z, y, x), and its spacing."""
     manifest = json.loads((pack / "manifest.json").read_text())
     dims = manifest["geometry"]["dims"]
     w = manifest["geometry"]["world_from_voxel"]
     spacing = [float(np.linalg.norm([w[0][a], w[1][a], w[2][a]])) for a in range(3)]
-    entry = next(c for c in manifest["channels"] if c["name"] == "v")
+    entry = next((c for c in manifest["channels"] if c["name"] == "v"), manifest["channels"][0])
     tex = next(t for t in manifest["textures"] if t["name"] == entry["texture"])
     dtype = {"u8": np.uint8, "u16": np.uint16, "f16": np.float16, "f32": np.float32}[tex["dtype"]]
     raw = np.fromfile(pack / tex["data"], dtype=dtype).reshape(dims[2], dims[1], dims[0], tex["components"])
@@ -46,7 +47,18 @@ def pack_value(pack: Path) -> tuple[np.ndarray, list[float]]:
     return np.ascontiguousarray(codes), spacing
 
 
-def vtk_render(v: np.ndarray, spacing: list[float], size: int, reps: int) -> dict:
+def save_png(window: vtk.vtkRenderWindow, path: Path) -> None:
+    """The window's picture as a PNG (to look at beside mdtf's)."""
+    grab = vtk.vtkWindowToImageFilter()
+    grab.SetInput(window)
+    grab.Update()
+    writer = vtk.vtkPNGWriter()
+    writer.SetFileName(str(path))
+    writer.SetInputConnection(grab.GetOutputPort())
+    writer.Write()
+
+
+def vtk_render(v: np.ndarray, spacing: list[float], size: int, reps: int, png: Path | None = None) -> dict:
     """Best first-render and re-render times of VTK's fixed-point ray caster, seconds."""
     lo, hi = float(v.min()), float(v.max())
     image = vtk.vtkImageData()
@@ -95,6 +107,8 @@ def vtk_render(v: np.ndarray, spacing: list[float], size: int, reps: int) -> dic
         renderer.GetActiveCamera().Azimuth(1e-3)
         window.Render()
         best_again = min(best_again, time.perf_counter() - t)
+        if png is not None:
+            save_png(window, png)
         window.Finalize()
     return {"vtk_first_render_s": round(best_first, 3), "vtk_render_again_s": round(best_again, 3),
             "vtk_threads": vtk.vtkMultiThreader.GetGlobalDefaultNumberOfThreads()}
@@ -116,13 +130,20 @@ def main() -> None:
     ap.add_argument("--mdtf", type=Path, required=True)
     ap.add_argument("--size", type=int, default=512)
     ap.add_argument("--reps", type=int, default=3)
+    ap.add_argument("--pictures", type=Path, default=None, help="a folder for both pictures of each pack")
     ap.add_argument("packs", type=Path, nargs="+")
     args = ap.parse_args()
     for pack in args.packs:
         v, spacing = pack_value(pack)
         result = {"pack": str(pack), "dims": list(v.shape[::-1]), "size": args.size}
         result["mdtf_preview_s"] = round(mdtf_preview(args.mdtf.resolve(), pack, args.size, args.reps), 3)
-        result.update(vtk_render(v, spacing, args.size, args.reps))
+        png = None
+        if args.pictures:
+            args.pictures.mkdir(parents=True, exist_ok=True)
+            png = args.pictures / f"{pack.parent.name}-vtk.png"
+            subprocess.run([args.mdtf.resolve(), "-q", "preview", pack, "--size", str(args.size), "-o",
+                            args.pictures / f"{pack.parent.name}-mdtf.png"], check=True)
+        result.update(vtk_render(v, spacing, args.size, args.reps, png))
         result["vtk_first_over_mdtf"] = round(result["vtk_first_render_s"] / result["mdtf_preview_s"], 2)
         print(json.dumps(result), flush=True)
 

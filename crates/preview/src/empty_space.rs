@@ -274,6 +274,45 @@ fn block_ranges(d: Samples, dims: [usize; 3]) -> Vec<(f32, f32)> {
     out
 }
 
+/// For the chord search of the chord classifiers: whether some chord from
+/// f0 to f1 can meet a non-zero opacity, from the box of table cells the
+/// chord spans in each table (a product's factors each over their own
+/// coordinates; a product is 0 where one factor is).
+pub(crate) struct ChordBoxes {
+    /// Each table's opaque cells and its number of axes.
+    tables: Vec<(OpaqueCells, usize)>,
+    /// Each table's axes, one table after another.
+    axes: Vec<(String, usize, f64, f64)>,
+}
+
+impl ChordBoxes {
+    /// The boxes of the tables `tables` (a chord classifier's, or a product's factors).
+    pub(crate) fn new(tables: &[&Table]) -> ChordBoxes {
+        ChordBoxes {
+            tables: tables.iter().map(|t| (OpaqueCells::new(t), t.axes.len())).collect(),
+            axes: tables.iter().flat_map(|t| t.axes.iter().cloned()).collect(),
+        }
+    }
+
+    /// Whether every point of the chord from `f0` to `f1` (coordinates of
+    /// the tables one after another) has zero opacity: some table's box of
+    /// the cells between theirs, one cell wider on each side (the chord's
+    /// points are rounded), holds no opaque cell.
+    pub(crate) fn all_transparent(&self, f0: &[f32], f1: &[f32]) -> bool {
+        let mut at = 0;
+        self.tables.iter().any(|(opaque, n)| {
+            // (tables of up to 3 axes have counts; others always may show)
+            let mut cells = [(0, 0); 3];
+            for (c, k) in cells.iter_mut().zip(at..at + n) {
+                let (a, b) = (table_cell(&self.axes[k], f0[k]), table_cell(&self.axes[k], f1[k]));
+                *c = (a.min(b).saturating_sub(1), (a.max(b) + 1).min(self.axes[k].1 - 1));
+            }
+            at += n;
+            !opaque.any(&cells[..(*n).min(3)])
+        })
+    }
+}
+
 /// The table cell of value x along `axis` (clamped, as [`lookup`] picks it).
 fn table_cell((_, n, min, max): &(String, usize, f64, f64), x: f32) -> usize {
     ((x as f64 - min) / (max - min) * *n as f64).clamp(0.0, (*n - 1) as f64) as usize
@@ -408,6 +447,50 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn a_chord_found_transparent_meets_no_opacity() {
+        let mut state = 9u64;
+        let mut next = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        // a sparse 2D table over (0..10, -1..1) and a 1D factor over 0..4
+        let t2 = Table {
+            axes: vec![("a".into(), 40, 0.0, 10.0), ("b".into(), 30, -1.0, 1.0)],
+            components: 4,
+            values: (0..40 * 30 * 4).map(|i| if i % 4 == 3 && (i / 4) % 97 == 5 { 0.7 } else { 0.2 }).collect(),
+        };
+        let t1 = Table {
+            axes: vec![("c".into(), 16, 0.0, 4.0)],
+            components: 1,
+            values: (0..16).map(|i| if i == 11 { 0.5 } else { 0.0 }).collect(),
+        };
+        let alpha = |t: &Table, x: &[f32]| {
+            let e = (0..t.axes.len()).fold((0, 1), |(e, stride), k| {
+                let cell = table_cell(&t.axes[k], x[k]);
+                (e + cell * stride, stride * t.axes[k].1)
+            });
+            t.values[e.0 * t.components + t.components - 1]
+        };
+        let boxes = ChordBoxes::new(&[&t2, &t1]);
+        let mut transparent = 0;
+        for _ in 0..4000 {
+            let f0 = [next() * 12.0 - 1.0, next() * 2.4 - 1.2, next() * 5.0 - 0.5].map(|x| x as f32);
+            let f1 = [f0[0] + (next() as f32 - 0.5), f0[1] + (next() as f32 - 0.5) * 0.2, next() as f32 * 5.0 - 0.5];
+            if !boxes.all_transparent(&f0, &f1) {
+                continue;
+            }
+            transparent += 1;
+            // every point the chord search may visit has a zero product of opacities
+            for k in 0..=1000 {
+                let s = k as f32 / 1000.0;
+                let p: Vec<f32> = (0..3).map(|i| f0[i] + s * (f1[i] - f0[i])).collect();
+                assert_eq!(alpha(&t2, &p[..2]) * alpha(&t1, &p[2..]), 0.0, "{f0:?} -> {f1:?} at {s}");
+            }
+        }
+        assert!(transparent > 100, "{transparent} transparent chords");
     }
 
     #[test]

@@ -450,7 +450,7 @@ fn render_impl(
     let mut img = vec![0u8; cam.size * cam.size * 3];
     // the LUT's opacities corrected for the step once, not at every sample
     let lut_opacity = match classifier {
-        Classifier::Lut(t) => corrected_opacities(t, step_vox),
+        Classifier::Lut(t) | Classifier::Chord { tf: t, .. } => corrected_opacities(t, step_vox),
         _ => Vec::new(),
     };
     let skip = if skip_empty {
@@ -484,6 +484,14 @@ fn render_impl(
         Classifier::Chord { tf, .. } => chord_alpha[table_index(tf, x)],
         Classifier::Product { factors, .. } => product_lookup(factors, x)[3],
         _ => 0.0,
+    };
+    // where a chord can meet no opacity, the search is skipped (its answer is the sample's own)
+    let chord_boxes = match classifier {
+        Classifier::Chord { tf, .. } if skip_empty => Some(empty_space::ChordBoxes::new(&[tf])),
+        Classifier::Product { factors, .. } if skip_empty => {
+            Some(empty_space::ChordBoxes::new(&factors.iter().collect::<Vec<_>>()))
+        }
+        _ => None,
     };
     let chord_eval = |x: &[f32]| match classifier {
         Classifier::Chord { tf, .. } => lookup(tf, x),
@@ -618,6 +626,11 @@ fn render_impl(
                             None
                         };
                         let ([r, gr, b, a], peak) = match f0 {
+                            Some((f0, _))
+                                if chord_boxes.as_ref().is_some_and(|c| c.all_transparent(&f0[..n_axes], f1)) =>
+                            {
+                                (chord_eval(f1), None)
+                            }
                             Some((f0, p0)) => {
                                 let (rgba, s) = chord_peak(
                                     &chord_axes,
@@ -640,7 +653,11 @@ fn render_impl(
                                 shade = Cell::at(dims, shade_at);
                                 ([r, gr, b], (a as f64).min(0.999))
                             }
-                            None => ([r, gr, b], corrected_opacity(a, step_vox)),
+                            // (the sample's own entry: a single table's corrected once)
+                            None => match classifier {
+                                Classifier::Chord { tf, .. } => ([r, gr, b], lut_opacity[table_index(tf, f1)]),
+                                _ => ([r, gr, b], corrected_opacity(a, step_vox)),
+                            },
                         }
                     }
                     Classifier::Gaussian { primitives, channels: _, analytic, sqrt_last } => {
