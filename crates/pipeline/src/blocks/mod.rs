@@ -98,8 +98,10 @@ use std::ops::Range;
 use std::path::Path;
 use std::time::Instant;
 
-/// f32 volumes the preview decodes from a pack at most (value, g, f'', three normals).
-const PREVIEW_CHANNELS: usize = 6;
+/// Bytes per voxel of the textures the preview reads from a pack at most
+/// (it reads them in place: slicer-3dtf's two RGBA8 textures, gaussian-tf's
+/// RGBA16 fields; distance-tf's and peak-finding's are 6 and 4).
+const PREVIEW_BYTES_PER_VOXEL: usize = 8;
 
 /// Why a slab-by-slab run cannot take an input with `fields`, if it cannot.
 fn unsupported_fields(fields: usize) -> Option<String> {
@@ -350,8 +352,8 @@ fn run_passes<'a>(
 /// `s` without its preview when the memory it may take (a `size` budget,
 /// else three quarters of the available memory: slabs of a given height
 /// are no budget, and a cluster run's pack can be any size) cannot hold the
-/// pack decoded at full resolution (`mdtf preview` renders it where there
-/// is the memory), with a warning saying so.
+/// textures of the pack it reads (`mdtf preview` renders it where there is
+/// the memory), with a warning saying so.
 fn without_unaffordable_preview(
     s: &Settings,
     opts: &RunOptions,
@@ -376,7 +378,7 @@ fn without_unaffordable_preview(
 /// Why the preview of a run of slabs of `size` on `geo` would not fit, with
 /// `available` bytes of memory, if it would not.
 fn preview_unaffordable(size: SlabSize, geo: &Geometry, available: u64) -> Option<String> {
-    let preview_bytes = (PREVIEW_CHANNELS * geo.voxel_count() * 4) as u64;
+    let preview_bytes = (PREVIEW_BYTES_PER_VOXEL * geo.voxel_count()) as u64;
     let (limit, what) = match size {
         SlabSize::Budget(b) => (b, "the memory budget of"),
         SlabSize::Planes(_) | SlabSize::Strips { .. } => {
@@ -386,7 +388,7 @@ fn preview_unaffordable(size: SlabSize, geo: &Geometry, available: u64) -> Optio
     let human = |b: u64| mdtf_volume::human_bytes(b as u128);
     (preview_bytes > limit).then(|| {
         format!(
-            "it decodes the pack at full resolution (about {}), more than {what} {}",
+            "it reads the pack's textures at full resolution (about {}), more than {what} {}",
             human(preview_bytes),
             human(limit)
         )
@@ -399,11 +401,11 @@ mod tests {
 
     #[test]
     fn a_preview_larger_than_the_memory_it_may_take_is_skipped_whatever_cut_the_slabs() {
-        // 6 f32 volumes of 512^3 are 3 GiB
-        let (big, small) = (Geometry::new([512; 3], [1.0; 3]), Geometry::new([64; 3], [1.0; 3]));
+        // 8 bytes a voxel of 1024 x 512 x 512 are 2 GiB
+        let (big, small) = (Geometry::new([1024, 512, 512], [1.0; 3]), Geometry::new([64; 3], [1.0; 3]));
         let gib = 1u64 << 30;
         let why = preview_unaffordable(SlabSize::Planes(64), &big, 2 * gib).unwrap();
-        assert!(why.contains("three quarters of the available memory, 1.5 GiB") && why.contains("3.0 GiB"), "{why}");
+        assert!(why.contains("three quarters of the available memory, 1.5 GiB") && why.contains("2.0 GiB"), "{why}");
         assert!(preview_unaffordable(SlabSize::Strips { planes: 8, rows: 8 }, &big, 2 * gib).is_some());
         assert!(preview_unaffordable(SlabSize::Planes(64), &big, 8 * gib).is_none());
         assert!(preview_unaffordable(SlabSize::Planes(64), &small, 2 * gib).is_none());
