@@ -13,6 +13,7 @@ mod load;
 mod mesh;
 mod render;
 mod samples;
+mod tables;
 
 use load::pack_geometry;
 pub use load::{LoadedPack, Table, decode_channels, load, load_channels};

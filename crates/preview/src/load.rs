@@ -3,7 +3,8 @@
 //! table to its values.
 
 use crate::PreviewError;
-use mdtf_pack::{ChannelEntry, Dtype, Manifest, TextureEntry};
+use crate::samples::{CodeTable, check_components};
+use mdtf_pack::{ChannelEntry, Manifest, TextureEntry};
 use mdtf_volume::{Geometry, Volume};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
@@ -84,41 +85,6 @@ const TEXELS_PER_READ: usize = 1 << 20;
 /// Texels one thread decodes at a time.
 const TEXELS_PER_TASK: usize = 1 << 14;
 
-/// How one channel's codes become values: a table of every code's value
-/// for 8- and 16-bit codes (built once: the same `Decode::value` as per
-/// texel, so the same bits), the float itself for f32.
-enum CodeValues {
-    Table(Vec<f32>),
-    Float,
-}
-
-impl CodeValues {
-    fn of(ch: &ChannelEntry, dtype: Dtype) -> CodeValues {
-        let codes: u32 = match dtype {
-            Dtype::U8 => 1 << 8,
-            Dtype::U16 | Dtype::F16 => 1 << 16,
-            Dtype::F32 => return CodeValues::Float,
-        };
-        CodeValues::Table((0..codes).map(|code| ch.decode.value(code, dtype) as f32).collect())
-    }
-
-    /// The values of component `component` of `texels` (`texel` bytes
-    /// each, components of `size` bytes) into `out`.
-    fn decode(&self, texels: &[u8], texel: usize, component: usize, size: usize, out: &mut [f32]) {
-        let at = component * size;
-        let texels = texels.chunks_exact(texel).map(|t| &t[at..at + size]);
-        match (self, size) {
-            (CodeValues::Table(values), 1) => out.iter_mut().zip(texels).for_each(|(o, b)| *o = values[b[0] as usize]),
-            (CodeValues::Table(values), _) => {
-                out.iter_mut().zip(texels).for_each(|(o, b)| *o = values[u16::from_le_bytes([b[0], b[1]]) as usize])
-            }
-            (CodeValues::Float, _) => {
-                out.iter_mut().zip(texels).for_each(|(o, b)| *o = f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            }
-        }
-    }
-}
-
 /// Decodes the channels `entries` of texture `tex` (`n` texels, file `path`)
 /// to f32 values, reading the file in pieces.
 fn decode_texture(
@@ -127,18 +93,9 @@ fn decode_texture(
     entries: &[&ChannelEntry],
     n: usize,
 ) -> Result<Vec<(String, Vec<f32>)>, PreviewError> {
-    let size = match tex.dtype {
-        Dtype::U8 => 1,
-        Dtype::U16 | Dtype::F16 => 2,
-        Dtype::F32 => 4,
-    };
+    let size = tex.dtype.size();
     let texel = tex.components * size;
-    if let Some(ch) = entries.iter().find(|c| c.component >= tex.components) {
-        return Err(PreviewError::Pack(format!(
-            "channel {} is component {} of texture {}, which has {}",
-            ch.name, ch.component, tex.name, tex.components
-        )));
-    }
+    check_components(tex, entries)?;
     let fail = |e: std::io::Error| PreviewError::Pack(format!("{}: {e}", path.display()));
     let mut file = std::fs::File::open(path).map_err(fail)?;
     let len = file.metadata().map_err(fail)?.len();
@@ -149,7 +106,7 @@ fn decode_texture(
             tex.data
         )));
     }
-    let values: Vec<CodeValues> = entries.iter().map(|c| CodeValues::of(c, tex.dtype)).collect();
+    let tables: Vec<CodeTable> = entries.iter().map(|c| CodeTable::of(c, tex.dtype)).collect();
     let mut out: Vec<Vec<f32>> = entries.iter().map(|_| vec![0f32; n]).collect();
     let mut buf = vec![0u8; TEXELS_PER_READ.min(n) * texel];
     for start in (0..n).step_by(TEXELS_PER_READ) {
@@ -157,10 +114,11 @@ fn decode_texture(
         let piece = &mut buf[..count * texel];
         file.read_exact(piece).map_err(fail)?;
         let piece = &*piece;
-        for ((ch, values), data) in entries.iter().zip(&values).zip(out.iter_mut()) {
+        for ((ch, table), data) in entries.iter().zip(&tables).zip(out.iter_mut()) {
+            let samples = table.samples(&piece[ch.component * size..], texel);
             data[start..start + count].par_chunks_mut(TEXELS_PER_TASK).enumerate().for_each(|(k, o)| {
-                let texels = &piece[k * TEXELS_PER_TASK * texel..][..o.len() * texel];
-                values.decode(texels, texel, ch.component, size, o);
+                let first = k * TEXELS_PER_TASK;
+                o.iter_mut().enumerate().for_each(|(i, o)| *o = samples.at(first + i));
             });
         }
     }

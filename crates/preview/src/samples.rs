@@ -6,7 +6,7 @@
 
 use crate::PreviewError;
 use crate::load::pack_file;
-use mdtf_pack::{ChannelEntry, Dtype, Manifest};
+use mdtf_pack::{ChannelEntry, Dtype, Manifest, TextureEntry};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -68,12 +68,51 @@ impl Samples<'_> {
     }
 }
 
-/// The value of every code of a channel, as decoding gives it.
+/// How a channel's codes become values: for 8- and 16-bit codes a table
+/// of every code's value as decoding gives it (`Decode::value`, so the same
+/// bits), for f32 texels the float itself.
 #[derive(Debug, Clone)]
-enum CodeTable {
+pub(crate) enum CodeTable {
     Bits8(Box<[f32; 256]>),
     Bits16(Box<[f32; 65536]>),
     Float32,
+}
+
+impl CodeTable {
+    /// The table of channel `ch` of a texture of `dtype`.
+    pub(crate) fn of(ch: &ChannelEntry, dtype: Dtype) -> CodeTable {
+        let value = |code: u32| ch.decode.value(code, dtype) as f32;
+        match dtype {
+            Dtype::U8 => CodeTable::Bits8(Box::new(std::array::from_fn(|c| value(c as u32)))),
+            Dtype::U16 | Dtype::F16 => {
+                let mut values = Box::new([0f32; 65536]);
+                values.iter_mut().enumerate().for_each(|(c, v)| *v = value(c as u32));
+                CodeTable::Bits16(values)
+            }
+            Dtype::F32 => CodeTable::Float32,
+        }
+    }
+
+    /// The channel's samples in `bytes` (from its first code on, `texel`
+    /// bytes a texel).
+    pub(crate) fn samples<'a>(&'a self, bytes: &'a [u8], texel: usize) -> Samples<'a> {
+        match self {
+            CodeTable::Bits8(values) => Samples::Codes8 { bytes, texel, values },
+            CodeTable::Bits16(values) => Samples::Codes16 { bytes, texel, values },
+            CodeTable::Float32 => Samples::Float32 { bytes, texel },
+        }
+    }
+}
+
+/// Refuses channels `entries` of texture `tex` that name a component it lacks.
+pub(crate) fn check_components(tex: &TextureEntry, entries: &[&ChannelEntry]) -> Result<(), PreviewError> {
+    match entries.iter().find(|c| c.component >= tex.components) {
+        Some(ch) => Err(PreviewError::Pack(format!(
+            "channel {} is component {} of texture {}, which has {}",
+            ch.name, ch.component, tex.name, tex.components
+        ))),
+        None => Ok(()),
+    }
 }
 
 /// The textures of a pack that hold the channels a renderer reads, as
@@ -108,16 +147,11 @@ impl PackTextures {
             }
             let size = tex.dtype.size();
             let texel = tex.components * size;
-            if let Some(ch) = entries.iter().find(|c| c.component >= tex.components) {
-                return Err(PreviewError::Pack(format!(
-                    "channel {} is component {} of texture {}, which has {}",
-                    ch.name, ch.component, tex.name, tex.components
-                )));
-            }
+            check_components(tex, &entries)?;
             let path = pack_file(dir, &tex.data)?;
             let bytes = read_in_parallel(&path, voxels, texel, &tex.data)?;
             for ch in entries {
-                let table = code_table(ch, tex.dtype);
+                let table = CodeTable::of(ch, tex.dtype);
                 out.channels.insert(ch.name.clone(), (tex.name.clone(), ch.component * size, texel, table));
             }
             out.bytes.insert(tex.name.clone(), bytes);
@@ -130,29 +164,9 @@ impl PackTextures {
         let mut out = BTreeMap::new();
         for (name, (texture, first, texel, table)) in &self.channels {
             let Some(bytes) = self.bytes.get(texture) else { continue };
-            let (bytes, texel) = (&bytes[*first..], *texel);
-            let samples = match table {
-                CodeTable::Bits8(values) => Samples::Codes8 { bytes, texel, values },
-                CodeTable::Bits16(values) => Samples::Codes16 { bytes, texel, values },
-                CodeTable::Float32 => Samples::Float32 { bytes, texel },
-            };
-            out.insert(name.clone(), samples);
+            out.insert(name.clone(), table.samples(&bytes[*first..], *texel));
         }
         out
-    }
-}
-
-/// Every code's value of channel `ch` in a texture of `dtype`.
-fn code_table(ch: &ChannelEntry, dtype: Dtype) -> CodeTable {
-    let value = |code: u32| ch.decode.value(code, dtype) as f32;
-    match dtype {
-        Dtype::U8 => CodeTable::Bits8(Box::new(std::array::from_fn(|c| value(c as u32)))),
-        Dtype::U16 | Dtype::F16 => {
-            let mut values = Box::new([0f32; 65536]);
-            values.iter_mut().enumerate().for_each(|(c, v)| *v = value(c as u32));
-            CodeTable::Bits16(values)
-        }
-        Dtype::F32 => CodeTable::Float32,
     }
 }
 
